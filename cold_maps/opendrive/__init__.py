@@ -1,0 +1,1 @@
+"""OpenDRIVE reader and vectorised geometry (one module per OpenDRIVE element)."""

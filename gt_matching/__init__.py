@@ -1,0 +1,1 @@
+"""gt_matching package (see README)."""
