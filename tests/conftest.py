@@ -1,0 +1,37 @@
+"""Shared fixtures: paths of the bundled maps and of the CARLA towns in ../shared."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+BUNDLED_MAPS_DIR = PROJECT_ROOT / "maps"
+CARLA_MAPS_DIR = PROJECT_ROOT.parent / "shared" / "maps" / "carla"
+
+
+def carla_map(name: str) -> Path:
+    """Path of a CARLA town in ../shared/maps/carla; skips the test when it is absent."""
+    path = CARLA_MAPS_DIR / f"{name}.xodr"
+    if not path.is_file():
+        pytest.skip(f"CARLA map {path} not present (../shared/maps/carla is outside this clone)")
+    return path
+
+
+def bundled_map(name: str) -> Path:
+    """Path of a bundled map in maps/; skips the test when it has not been generated."""
+    path = BUNDLED_MAPS_DIR / f"{name}.xodr"
+    if not path.is_file():
+        pytest.skip(f"bundled map {path} not generated (run: make maps)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def town01_path() -> Path:
+    return carla_map("Town01")
+
+
+@pytest.fixture(scope="session")
+def town04_path() -> Path:
+    return carla_map("Town04")
