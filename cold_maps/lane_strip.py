@@ -1,0 +1,107 @@
+"""A lane followed along a route: centreline and borders indexed by station.
+
+Station = arc length along the centreline from the route start (m). The borders are
+index-aligned with the centreline (point i of each border lies on the lane's cross-section
+through centreline point i), so a station maps to one cross-section of the lane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+NDArrayFloat = npt.NDArray[np.float64]
+
+MIN_STATION_STEP_M: Final[float] = 1e-9
+
+
+def polyline_distance(points: NDArrayFloat) -> NDArrayFloat:
+    """(N,) cumulative arc length along an (N, 2) polyline (m), starting at 0."""
+    return np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
+
+
+def resample_polyline(points: NDArrayFloat, distance: NDArrayFloat, start: float, end: float, step: float) -> NDArrayFloat:
+    """Points every ``step`` m of arc length from ``start`` to ``end`` (end included).
+
+    ``distance`` is the polyline's cumulative arc length; the last interval is ≤ step.
+    """
+    count = max(int(np.ceil((end - start) / step - 1e-9)), 1)
+    samples = np.minimum(start + step * np.arange(count + 1), end)
+    return np.column_stack((np.interp(samples, distance, points[:, 0]), np.interp(samples, distance, points[:, 1])))
+
+
+@dataclass(frozen=True)
+class LaneStrip:
+    """A lane along a route, world frame (OpenDRIVE inertial), in driving direction.
+
+    Fields:
+        station: (N,) centreline arc length from the route start (m), strictly increasing.
+        centerline: (N, 2) centreline points x, y (m).
+        left: (N, 2) left border seen in driving direction (m), index-aligned.
+        right: (N, 2) right border seen in driving direction (m), index-aligned.
+        left_distance, right_distance: (N,) arc length along each border from its first
+            point (m).
+    """
+
+    station: NDArrayFloat
+    centerline: NDArrayFloat
+    left: NDArrayFloat
+    right: NDArrayFloat
+    left_distance: NDArrayFloat
+    right_distance: NDArrayFloat
+
+    @classmethod
+    def from_borders(cls, left: NDArrayFloat, right: NDArrayFloat) -> LaneStrip:
+        """Build from index-aligned left/right borders; the centreline is their midpoint.
+
+        Consecutive cross-sections whose centre points coincide (route joints) are merged.
+        Raises ValueError for mismatched shapes, non-finite values or fewer than 2 points.
+        """
+        left = np.asarray(left, dtype=np.float64)
+        right = np.asarray(right, dtype=np.float64)
+        if left.ndim != 2 or left.shape[1] != 2 or left.shape != right.shape:
+            raise ValueError(f"lane borders must be two (N, 2) arrays of equal N, got {left.shape} and {right.shape}")
+        if not (np.isfinite(left).all() and np.isfinite(right).all()):
+            raise ValueError("lane borders contain NaN or inf")
+        centre = 0.5 * (left + right)
+        step = np.hypot(*np.diff(centre, axis=0).T)
+        keep = np.concatenate(([True], step > MIN_STATION_STEP_M))
+        centre, left, right = centre[keep], left[keep], right[keep]
+        if len(centre) < 2:
+            raise ValueError("lane strip needs at least two distinct cross-sections")
+        return cls(
+            station=polyline_distance(centre),
+            centerline=centre,
+            left=left,
+            right=right,
+            left_distance=polyline_distance(left),
+            right_distance=polyline_distance(right),
+        )
+
+    @property
+    def length(self) -> float:
+        """Centreline length (m)."""
+        return float(self.station[-1])
+
+    def interpolate(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+        """Centreline, left and right points at the given stations (clamped to the strip)."""
+        stations = np.clip(np.asarray(stations, dtype=np.float64), 0.0, self.length)
+        index = np.clip(np.searchsorted(self.station, stations, side="right") - 1, 0, len(self.station) - 2)
+        span = self.station[index + 1] - self.station[index]
+        w = ((stations - self.station[index]) / span)[:, None]
+
+        def lerp(points: NDArrayFloat) -> NDArrayFloat:
+            return points[index] * (1.0 - w) + points[index + 1] * w
+
+        return lerp(self.centerline), lerp(self.left), lerp(self.right)
+
+    def pose(self, station: float) -> tuple[float, float, float]:
+        """Position (m) and heading (rad) of the centreline at a station."""
+        station = float(np.clip(station, 0.0, self.length))
+        index = int(np.clip(np.searchsorted(self.station, station, side="right") - 1, 0, len(self.station) - 2))
+        (centre,), _, _ = self.interpolate(np.array([station]))
+        dx, dy = self.centerline[index + 1] - self.centerline[index]
+        return float(centre[0]), float(centre[1]), float(np.arctan2(dy, dx))

@@ -1,0 +1,84 @@
+"""The generic lane sensor (paper sec. IV): the current lane's borders ahead of a vehicle.
+
+Like the paper's sensor in the RESIST framework, it reads the lane from the OpenDRIVE map
+(through a route's ``LaneStrip``), not from the Lanelet2 ground truth: each border is
+sampled every ``step_m`` of its own arc length, from the cross-section at the vehicle to
+the cross-section ``range_m`` ahead along the lane centreline, and returned in the
+vehicle frame (ISO 8855: x forward, y left).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from cold_maps.lane_strip import LaneStrip, NDArrayFloat, resample_polyline
+
+SENSOR_RANGE_M: Final[float] = 30.0
+SENSOR_STEP_M: Final[float] = 0.10
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One lane detection of one vehicle in one frame.
+
+    Fields:
+        x, y, yaw: the sensor pose in the world frame (m, m, rad).
+        left, right: (N, 2) borders in the vehicle frame (ISO 8855, m), driving order.
+        start_station, end_station: the route stations the detection spans (m).
+    """
+
+    x: float
+    y: float
+    yaw: float
+    left: NDArrayFloat
+    right: NDArrayFloat
+    start_station: float
+    end_station: float
+
+    def to_world(self) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """Left and right borders in the world frame (m)."""
+        return vehicle_to_world(self.left, self.x, self.y, self.yaw), vehicle_to_world(self.right, self.x, self.y, self.yaw)
+
+
+def world_to_vehicle(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
+    """World points (m) into the frame of a vehicle at (x, y, yaw)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    dx, dy = points[:, 0] - x, points[:, 1] - y
+    return np.column_stack((c * dx + s * dy, -s * dx + c * dy))
+
+
+def vehicle_to_world(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
+    """Vehicle-frame points (m) of a vehicle at (x, y, yaw) into the world frame."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.column_stack((x + c * points[:, 0] - s * points[:, 1], y + s * points[:, 0] + c * points[:, 1]))
+
+
+@dataclass(frozen=True)
+class LaneSensor:
+    """Generic lane sensor.
+
+    Fields:
+        range_m: perception range along the lane centreline (m); the paper's r_lane.
+        step_m: spacing of the border points along each border (m).
+    """
+
+    range_m: float = SENSOR_RANGE_M
+    step_m: float = SENSOR_STEP_M
+
+    def detect(self, strip: LaneStrip, station: float) -> Detection | None:
+        """The detection of a vehicle centred in the lane at ``station`` (m), or None
+        when less than one step of lane is left ahead on the strip."""
+        end = min(station + self.range_m, strip.length)
+        if end - station < self.step_m:
+            return None
+        x, y, yaw = strip.pose(station)
+        window = np.array([station, end])
+        borders = []
+        for points, distance in ((strip.left, strip.left_distance), (strip.right, strip.right_distance)):
+            start_d, end_d = np.interp(window, strip.station, distance)
+            world = resample_polyline(points, distance, float(start_d), float(end_d), self.step_m)
+            borders.append(world_to_vehicle(world, x, y, yaw))
+        return Detection(x=x, y=y, yaw=yaw, left=borders[0], right=borders[1], start_station=station, end_station=end)
