@@ -44,6 +44,8 @@ class LaneStrip:
         right: (N, 2) right border seen in driving direction (m), index-aligned.
         left_distance, right_distance: (N,) arc length along each border from its first
             point (m).
+        heading: (N,) unwrapped centreline heading (rad, counter-clockwise from x) from
+            central differences, exact at the vertices of a uniformly sampled arc.
     """
 
     station: NDArrayFloat
@@ -52,6 +54,7 @@ class LaneStrip:
     right: NDArrayFloat
     left_distance: NDArrayFloat
     right_distance: NDArrayFloat
+    heading: NDArrayFloat
 
     @classmethod
     def from_borders(cls, left: NDArrayFloat, right: NDArrayFloat) -> LaneStrip:
@@ -79,6 +82,7 @@ class LaneStrip:
             right=right,
             left_distance=polyline_distance(left),
             right_distance=polyline_distance(right),
+            heading=np.unwrap(np.arctan2(*np.gradient(centre, axis=0).T[::-1])),
         )
 
     @property
@@ -100,8 +104,6 @@ class LaneStrip:
 
     def pose(self, station: float) -> tuple[float, float, float]:
         """Position (m) and heading (rad) of the centreline at a station."""
-        station = float(np.clip(station, 0.0, self.length))
-        index = int(np.clip(np.searchsorted(self.station, station, side="right") - 1, 0, len(self.station) - 2))
         (centre,), _, _ = self.interpolate(np.array([station]))
-        dx, dy = self.centerline[index + 1] - self.centerline[index]
-        return float(centre[0]), float(centre[1]), float(np.arctan2(dy, dx))
+        yaw = float(np.interp(station, self.station, self.heading))
+        return float(centre[0]), float(centre[1]), float(np.arctan2(np.sin(yaw), np.cos(yaw)))
