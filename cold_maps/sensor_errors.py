@@ -1,0 +1,147 @@
+"""Error models of the generic lane sensor (the paper's "offset or noise", sec. IV).
+
+Every model is off by default and draws from a caller-owned ``numpy.random.Generator``,
+so a run is reproducible from its seed. Detections are perturbed in the vehicle frame
+(ISO 8855: x forward, y left); the sender's pose in the world frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import numpy.typing as npt
+
+NDArrayFloat = npt.NDArray[np.float64]
+
+
+def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFloat:
+    """``points`` as a finite ``(N, 2)`` float64 array with N >= ``min_points``.
+
+    Raises ValueError naming ``name`` otherwise.
+    """
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(f"{name}: expected an (N, 2) polyline, got shape {array.shape}")
+    if array.shape[0] < min_points:
+        raise ValueError(f"{name}: expected at least {min_points} points, got {array.shape[0]}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name}: polyline contains NaN or infinite coordinates")
+    return array
+
+
+def arc_length(points: NDArrayFloat) -> NDArrayFloat:
+    """Cumulative arc length (m) at each vertex of an ``(N, 2)`` polyline, starting at 0."""
+    return np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
+
+
+def left_normals(points: NDArrayFloat) -> NDArrayFloat:
+    """Unit normals pointing left of the driving direction at each vertex, ``(N, 2)``.
+
+    Tangents are central differences (one-sided at the ends), so on a uniformly sampled
+    circle the interior normals are exactly radial.
+    """
+    tangents = np.gradient(points, axis=0)
+    norms = np.hypot(tangents[:, 0], tangents[:, 1])
+    if np.any(norms == 0.0):
+        raise ValueError("polyline has repeated consecutive points: normal undefined")
+    tangents = tangents / norms[:, None]
+    return np.column_stack((-tangents[:, 1], tangents[:, 0]))
+
+
+def rotate(points: NDArrayFloat, angle_rad: float) -> NDArrayFloat:
+    """``points`` rotated by ``angle_rad`` (counter-clockwise) about the origin."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return points @ np.array([[c, s], [-s, c]])
+
+
+def truncate(points: NDArrayFloat, fraction: float) -> NDArrayFloat:
+    """The first ``fraction`` (0..1] of a polyline's arc length; the end point is interpolated."""
+    s = arc_length(points)
+    end = fraction * s[-1]
+    keep = int(np.searchsorted(s, end, side="right"))
+    head = points[:keep]
+    if keep < len(points) and end > s[keep - 1]:
+        t = (end - s[keep - 1]) / (s[keep] - s[keep - 1])
+        head = np.vstack((head, points[keep - 1] + t * (points[keep] - points[keep - 1])))
+    return head
+
+
+@dataclass(frozen=True, slots=True)
+class SensorErrorModel:
+    """Error models of the lane sensor; all zero (the default) is the exact identity.
+
+    Fields:
+        lateral_offset_m: constant shift of both borders along their local left normal
+            (m, vehicle frame; positive = to the left).
+        noise_sigma_m: σ of independent Gaussian noise on each point along its local
+            normal (m).
+        heading_bias_rad: rotation of the whole detection about the sensor origin
+            (rad, counter-clockwise).
+        range_jitter_sigma_m: σ of the detection's length error (m). Only truncates: the
+            detection loses |N(0, σ)| of its mean border length; both borders keep the
+            same fraction of their own arc length. A detection cut to nothing is dropped.
+        drop_probability: probability that a frame's detection is lost (0..1).
+        pose_sigma_xy_m: σ of the localisation error on the sender's x and y (m, world).
+        pose_sigma_yaw_rad: σ of the localisation error on the sender's yaw (rad).
+    """
+
+    lateral_offset_m: float = 0.0
+    noise_sigma_m: float = 0.0
+    heading_bias_rad: float = 0.0
+    range_jitter_sigma_m: float = 0.0
+    drop_probability: float = 0.0
+    pose_sigma_xy_m: float = 0.0
+    pose_sigma_yaw_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"SensorErrorModel.{field.name}: expected a finite number, got {value!r}")
+            if field.name not in ("lateral_offset_m", "heading_bias_rad") and value < 0:
+                raise ValueError(f"SensorErrorModel.{field.name}: must be >= 0, got {value!r}")
+        if self.drop_probability > 1:
+            raise ValueError(f"SensorErrorModel.drop_probability: must be <= 1, got {self.drop_probability!r}")
+
+    def apply(
+        self, left: NDArrayFloat, right: NDArrayFloat, rng: np.random.Generator
+    ) -> tuple[NDArrayFloat, NDArrayFloat] | None:
+        """The perturbed ``(left, right)`` borders (vehicle frame, m), or None when dropped.
+
+        Order: drop, range truncation, lateral offset and noise along the normals of the
+        truncated borders, heading rotation. Only enabled models draw from ``rng``.
+        """
+        borders = [check_polyline("left", left), check_polyline("right", right)]
+        if self.drop_probability > 0 and rng.random() < self.drop_probability:
+            return None
+        if self.range_jitter_sigma_m > 0:
+            cut = abs(rng.normal(0.0, self.range_jitter_sigma_m))
+            mean_length = 0.5 * (arc_length(borders[0])[-1] + arc_length(borders[1])[-1])
+            fraction = 1.0 - cut / mean_length
+            if fraction <= 0:
+                return None
+            borders = [truncate(border, fraction) for border in borders]
+            if min(len(border) for border in borders) < 2:
+                return None
+        if self.lateral_offset_m != 0 or self.noise_sigma_m > 0:
+            shifted = []
+            for border in borders:
+                along = np.full(len(border), self.lateral_offset_m)
+                if self.noise_sigma_m > 0:
+                    along = along + rng.normal(0.0, self.noise_sigma_m, len(border))
+                shifted.append(border + along[:, None] * left_normals(border))
+            borders = shifted
+        if self.heading_bias_rad != 0:
+            borders = [rotate(border, self.heading_bias_rad) for border in borders]
+        return borders[0], borders[1]
+
+    def perturb_pose(self, x: float, y: float, yaw: float, rng: np.random.Generator) -> tuple[float, float, float]:
+        """The sender's pose ``(x m, y m, yaw rad)`` (world frame) with localisation error."""
+        if self.pose_sigma_xy_m > 0:
+            dx, dy = rng.normal(0.0, self.pose_sigma_xy_m, 2)
+            x, y = x + float(dx), y + float(dy)
+        if self.pose_sigma_yaw_rad > 0:
+            yaw = yaw + float(rng.normal(0.0, self.pose_sigma_yaw_rad))
+        return x, y, yaw
