@@ -1,0 +1,431 @@
+"""OpenDRIVE 1.4-1.8 reader: hardened XML in, immutable ``OpenDriveMap`` out.
+
+The tree is walked once, child by child; elements the model does not need (objects,
+signals, road marks, userData, lateral profile, surface, railroad, controllers, ...)
+are skipped. Invalid input raises ``OpenDriveError`` naming the file, the element and
+its source line.
+
+Errors: malformed XML, entity declarations, wrong root, no header or roads, missing or
+non-numeric (NaN, inf) required attributes, unknown enumeration values, geometry length
+<= 0, negative road length, a ``<geometry>`` without a known kind, lane ids that are not
+consecutive from the reference line, a lane section starting after the road end,
+duplicate road or junction ids, road links and junction connections to ids that do not
+exist.
+Tolerated: a geometry ``s`` that differs from the running sum of lengths, records out
+of order (they are sorted by s), ``contactPoint`` on a link to a junction (dropped: the
+model has none for junctions), a missing road ``junction`` attribute ("-1"),
+``<border>`` records next to ``<width>`` records (widths win, see ``Lane``), a road
+length that differs from the sum of its geometry lengths.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Final, Iterable
+
+from lxml import etree
+
+from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.model import (
+    Connection,
+    CubicPoly,
+    GeoReference,
+    Geometry,
+    Header,
+    Junction,
+    Lane,
+    LaneLink,
+    LaneSection,
+    OpenDriveMap,
+    Road,
+    RoadLink,
+)
+from cold_maps.opendrive.xml_safety import parse_xml
+
+MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
+"""Default input size limit (bytes) of ``load_opendrive``."""
+
+S_TOLERANCE_M: Final[float] = 1e-6
+"""A lane section may start this far (m) past the road length before it is an error."""
+
+_GEOMETRY_KINDS: Final[frozenset[str]] = frozenset({"line", "arc", "spiral", "poly3", "paramPoly3"})
+_CONTACT_POINTS: Final[tuple[str, ...]] = ("start", "end")
+_RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
+_P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
+_LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
+_BOOLEANS: Final[dict[str, bool]] = {"true": True, "1": True, "false": False, "0": False}
+
+
+def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) -> OpenDriveMap:
+    """Read and parse the OpenDRIVE file at ``path``.
+
+    Files larger than ``max_bytes`` are rejected before they are read (size from
+    ``os.stat``, and the read itself stops at ``max_bytes + 1``). Unreadable files and
+    invalid content raise ``OpenDriveError``.
+    """
+    name = os.fspath(path)
+    try:
+        size = os.stat(name).st_size
+        if size > max_bytes:
+            raise OpenDriveError(f"file is {size} bytes, more than the limit of {max_bytes} bytes", path=name)
+        with open(name, "rb") as stream:
+            data = stream.read(max_bytes + 1)
+    except OSError as exc:
+        raise OpenDriveError(f"cannot read file: {exc.strerror or exc}", path=name) from None
+    if len(data) > max_bytes:
+        raise OpenDriveError(f"file is more than the limit of {max_bytes} bytes", path=name)
+    return parse_opendrive(data, path=name)
+
+
+def parse_opendrive(data: bytes, *, path: str = "") -> OpenDriveMap:
+    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map."""
+    root = parse_xml(data, path=path)
+    return _Reader(path).read_map(root)
+
+
+def _strip_namespaces(root: etree._Element) -> None:
+    """Replace namespaced tags by their local names (rare: OpenDRIVE has no namespace)."""
+    for element in root.iter():
+        tag = element.tag
+        if isinstance(tag, str) and tag.startswith("{"):
+            element.tag = tag.split("}", 1)[1]
+
+
+class _Reader:
+    """Converts the element tree of one file into the model; knows the file name."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    # -- attribute access -------------------------------------------------------------
+
+    def error(self, reason: str, element: etree._Element) -> OpenDriveError:
+        tag = element.tag if isinstance(element.tag, str) else ""
+        return OpenDriveError(reason, path=self.path, element=tag, line=element.sourceline)
+
+    def required(self, element: etree._Element, name: str) -> str:
+        value = element.get(name)
+        if value is None:
+            raise self.error(f"missing required attribute '{name}'", element)
+        return value
+
+    def number(self, element: etree._Element, name: str, default: float | None = None) -> float:
+        """A finite float attribute; ``default`` when absent (required when None)."""
+        text = element.get(name)
+        if text is None:
+            if default is None:
+                raise self.error(f"missing required attribute '{name}'", element)
+            return default
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if "_" in text or not math.isfinite(value):
+            raise self.error(f"attribute '{name}' is not a finite number: {text[:40]!r}", element)
+        return value
+
+    def integer(self, element: etree._Element, name: str) -> int:
+        text = self.required(element, name)
+        try:
+            return int(text)
+        except ValueError:
+            raise self.error(f"attribute '{name}' is not an integer: {text[:40]!r}", element) from None
+
+    def flag(self, element: etree._Element, name: str) -> bool:
+        text = element.get(name)
+        if text is None:
+            return False
+        value = _BOOLEANS.get(text.strip().lower())
+        if value is None:
+            raise self.error(f"attribute '{name}' is not a boolean: {text[:40]!r}", element)
+        return value
+
+    def choice(self, element: etree._Element, name: str, allowed: tuple[str, ...], default: str | None = None) -> str:
+        """One of ``allowed`` (matched case-insensitively, returned as spelled there)."""
+        text = element.get(name)
+        if text is None:
+            if default is None:
+                raise self.error(f"missing required attribute '{name}'", element)
+            return default
+        folded = text.strip().lower()
+        for option in allowed:
+            if option.lower() == folded:
+                return option
+        raise self.error(f"attribute '{name}' is {text[:40]!r}, expected one of {', '.join(allowed)}", element)
+
+    def cubic(self, element: etree._Element, s_name: str) -> CubicPoly:
+        number = self.number
+        return CubicPoly(
+            number(element, s_name),
+            number(element, "a"),
+            number(element, "b"),
+            number(element, "c"),
+            number(element, "d"),
+        )
+
+    def cubics(self, elements: Iterable[etree._Element], s_name: str) -> tuple[CubicPoly, ...]:
+        return tuple(sorted((self.cubic(e, s_name) for e in elements), key=_by_s0))
+
+    # -- elements -----------------------------------------------------------------------
+
+    def read_map(self, root: etree._Element) -> OpenDriveMap:
+        if isinstance(root.tag, str) and root.tag.startswith("{"):
+            _strip_namespaces(root)
+        if root.tag != "OpenDRIVE":
+            raise self.error("root element is not <OpenDRIVE>", root)
+        header: Header | None = None
+        roads: dict[str, Road] = {}
+        junctions: dict[str, Junction] = {}
+        links: list[tuple[str, str, etree._Element]] = []
+        for child in root:
+            tag = child.tag
+            if tag == "road":
+                road = self.road(child, links)
+                if road.id in roads:
+                    raise self.error(f"duplicate road id {road.id!r}", child)
+                roads[road.id] = road
+            elif tag == "junction":
+                junction = self.junction(child, links)
+                if junction.id in junctions:
+                    raise self.error(f"duplicate junction id {junction.id!r}", child)
+                junctions[junction.id] = junction
+            elif tag == "header":
+                if header is not None:
+                    raise self.error("more than one <header>", child)
+                header = self.header(child)
+        if header is None:
+            raise self.error("no <header>", root)
+        if not roads:
+            raise self.error("the map has no <road>", root)
+        for element_type, element_id, element in links:
+            known = roads if element_type == "road" else junctions
+            if element_id not in known:
+                raise self.error(f"links to {element_type} {element_id!r}, which does not exist", element)
+        return OpenDriveMap(path=self.path, header=header, roads=roads, junctions=junctions)
+
+    def header(self, element: etree._Element) -> Header:
+        rev_major = self.integer(element, "revMajor")
+        rev_minor = self.integer(element, "revMinor")
+        if rev_major != 1:
+            raise self.error(f"unsupported OpenDRIVE revision {rev_major}.{rev_minor}", element)
+        proj = ""
+        offset = (0.0, 0.0, 0.0, 0.0)
+        for child in element:
+            if child.tag == "geoReference":
+                proj = (child.text or "").strip()
+            elif child.tag == "offset":
+                offset = tuple(self.number(child, name) for name in ("x", "y", "z", "hdg"))
+        nan = math.nan
+        return Header(
+            rev_major=rev_major,
+            rev_minor=rev_minor,
+            name=element.get("name", ""),
+            vendor=element.get("vendor", ""),
+            north=self.number(element, "north", nan),
+            south=self.number(element, "south", nan),
+            east=self.number(element, "east", nan),
+            west=self.number(element, "west", nan),
+            geo_reference=GeoReference(proj, *offset),
+        )
+
+    def road(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Road:
+        road_id = self.required(element, "id")
+        length = self.number(element, "length")
+        if length < 0.0:
+            raise self.error(f"road {road_id!r} has negative length {length}", element)
+        junction = element.get("junction", "-1")
+        if junction != "-1":
+            links.append(("junction", junction, element))
+        predecessor: RoadLink | None = None
+        successor: RoadLink | None = None
+        plan_view: list[Geometry] = []
+        elevation: tuple[CubicPoly, ...] = ()
+        lane_offsets: tuple[CubicPoly, ...] = ()
+        sections: list[LaneSection] = []
+        for child in element:
+            tag = child.tag
+            if tag == "planView":
+                plan_view.extend(self.geometry(g) for g in child if g.tag == "geometry")
+            elif tag == "lanes":
+                lane_offsets = self.cubics((e for e in child if e.tag == "laneOffset"), "s")
+                sections = self.lane_sections(child, road_id, length)
+            elif tag == "elevationProfile":
+                elevation = self.cubics((e for e in child if e.tag == "elevation"), "s")
+            elif tag == "link":
+                for link in child:
+                    if link.tag == "predecessor":
+                        if predecessor is not None:
+                            raise self.error("more than one road predecessor", link)
+                        predecessor = self.road_link(link, links)
+                    elif link.tag == "successor":
+                        if successor is not None:
+                            raise self.error("more than one road successor", link)
+                        successor = self.road_link(link, links)
+        if not plan_view:
+            raise self.error(f"road {road_id!r} has no <planView> geometry", element)
+        if not sections:
+            raise self.error(f"road {road_id!r} has no <laneSection>", element)
+        plan_view.sort(key=_by_s)
+        return Road(
+            id=road_id,
+            name=element.get("name", ""),
+            length=length,
+            junction=junction,
+            rule=self.choice(element, "rule", _RULES, "RHT"),
+            predecessor=predecessor,
+            successor=successor,
+            plan_view=tuple(plan_view),
+            elevation=elevation,
+            lane_offsets=lane_offsets,
+            lane_sections=tuple(sections),
+            line=element.sourceline or 0,
+        )
+
+    def road_link(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> RoadLink:
+        element_type = self.choice(element, "elementType", ("road", "junction"))
+        element_id = self.required(element, "elementId")
+        links.append((element_type, element_id, element))
+        if element_type == "junction":
+            return RoadLink("junction", element_id, None)
+        return RoadLink("road", element_id, self.choice(element, "contactPoint", _CONTACT_POINTS))
+
+    def geometry(self, element: etree._Element) -> Geometry:
+        number = self.number
+        length = number(element, "length")
+        if length <= 0.0:
+            raise self.error(f"geometry length must be > 0, got {length}", element)
+        start = (number(element, "s"), number(element, "x"), number(element, "y"), number(element, "hdg"), length)
+        shapes = [child for child in element if child.tag in _GEOMETRY_KINDS]
+        if len(shapes) != 1:
+            found = "no known kind" if not shapes else f"{len(shapes)} kinds"
+            raise self.error(f"geometry has {found} (expected exactly one of {', '.join(sorted(_GEOMETRY_KINDS))})", element)
+        shape = shapes[0]
+        kind = shape.tag
+        if kind == "line":
+            return Geometry("line", *start)
+        if kind == "arc":
+            return Geometry("arc", *start, curvature=number(shape, "curvature"))
+        if kind == "spiral":
+            return Geometry("spiral", *start, curv_start=number(shape, "curvStart"), curv_end=number(shape, "curvEnd"))
+        if kind == "poly3":
+            a, b, c, d = (number(shape, name) for name in ("a", "b", "c", "d"))
+            return Geometry("poly3", *start, a=a, b=b, c=c, d=d)
+        au, bu, cu, du, av, bv, cv, dv = (
+            number(shape, name) for name in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")
+        )
+        return Geometry(
+            "paramPoly3", *start,
+            au=au, bu=bu, cu=cu, du=du, av=av, bv=bv, cv=cv, dv=dv,
+            p_range=self.choice(shape, "pRange", _P_RANGES, "normalized"),
+        )  # fmt: skip
+
+    def lane_sections(self, lanes: etree._Element, road_id: str, length: float) -> list[LaneSection]:
+        parsed = sorted(
+            (self.lane_section(child) for child in lanes if child.tag == "laneSection"), key=lambda p: p[0]
+        )
+        sections = []
+        for index, (s, single_side, left, center, right, element) in enumerate(parsed):
+            if s > length + S_TOLERANCE_M:
+                raise self.error(f"lane section starts at s={s}, after the end of road {road_id!r} ({length})", element)
+            s_end = parsed[index + 1][0] if index + 1 < len(parsed) else max(length, s)
+            sections.append(LaneSection(s, s_end, single_side, left, center, right))
+        return sections
+
+    def lane_section(
+        self, element: etree._Element
+    ) -> tuple[float, bool, tuple[Lane, ...], Lane, tuple[Lane, ...], etree._Element]:
+        s = self.number(element, "s")
+        if s < 0.0:
+            raise self.error(f"lane section starts at negative s={s}", element)
+        left: list[Lane] = []
+        center: list[Lane] = []
+        right: list[Lane] = []
+        for side in element:
+            target = {"left": left, "center": center, "right": right}.get(side.tag)
+            if target is not None:
+                target.extend(self.lane(lane) for lane in side if lane.tag == "lane")
+        left.sort(key=_by_id)
+        right.sort(key=_by_id, reverse=True)
+        self.check_lane_ids(left, 1, "left", element)
+        self.check_lane_ids(right, -1, "right", element)
+        if len(center) != 1 or center[0].id != 0:
+            found = ", ".join(str(lane.id) for lane in center) or "none"
+            raise self.error(f"lane section needs exactly one <center> lane with id 0, found: {found}", element)
+        return s, self.flag(element, "singleSide"), tuple(left), center[0], tuple(right), element
+
+    def check_lane_ids(self, lanes: list[Lane], sign: int, side: str, section: etree._Element) -> None:
+        ids = [lane.id for lane in lanes]
+        expected = [sign * (index + 1) for index in range(len(lanes))]
+        if ids != expected:
+            raise self.error(
+                f"{side} lane ids must be {', '.join(map(str, expected))} (consecutive from the reference line), "
+                f"found {', '.join(map(str, ids))}",
+                section,
+            )
+
+    def lane(self, element: etree._Element) -> Lane:
+        lane_id = self.integer(element, "id")
+        widths: list[etree._Element] = []
+        borders: list[etree._Element] = []
+        predecessors: list[int] = []
+        successors: list[int] = []
+        for child in element:
+            tag = child.tag
+            if tag == "width":
+                widths.append(child)
+            elif tag == "border":
+                borders.append(child)
+            elif tag == "link":
+                for link in child:
+                    if link.tag == "predecessor":
+                        predecessors.append(self.integer(link, "id"))
+                    elif link.tag == "successor":
+                        successors.append(self.integer(link, "id"))
+        return Lane(
+            id=lane_id,
+            type=self.required(element, "type"),
+            level=self.flag(element, "level"),
+            widths=self.cubics(widths, "sOffset"),
+            borders=self.cubics(borders, "sOffset"),
+            predecessors=tuple(predecessors),
+            successors=tuple(successors),
+            direction=self.choice(element, "direction", _LANE_DIRECTIONS, ""),
+        )
+
+    def junction(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Junction:
+        connections = []
+        for child in element:
+            if child.tag != "connection":
+                continue
+            incoming = self.required(child, "incomingRoad")
+            connecting = child.get("connectingRoad") or child.get("linkedRoad")
+            if connecting is None:
+                raise self.error("missing required attribute 'connectingRoad'", child)
+            links.append(("road", incoming, child))
+            links.append(("road", connecting, child))
+            lane_links = tuple(
+                LaneLink(self.integer(link, "from"), self.integer(link, "to")) for link in child if link.tag == "laneLink"
+            )
+            connections.append(
+                Connection(
+                    id=self.required(child, "id"),
+                    incoming_road=incoming,
+                    connecting_road=connecting,
+                    contact_point=self.choice(child, "contactPoint", _CONTACT_POINTS),
+                    lane_links=lane_links,
+                )
+            )
+        return Junction(id=self.required(element, "id"), name=element.get("name", ""), connections=tuple(connections))
+
+
+def _by_s0(record: CubicPoly) -> float:
+    return record.s0
+
+
+def _by_s(geometry: Geometry) -> float:
+    return geometry.s
+
+
+def _by_id(lane: Lane) -> int:
+    return lane.id
