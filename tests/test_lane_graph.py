@@ -1,0 +1,208 @@
+"""Lane graph: topology in the driving direction on hand-built maps, bundled maps and CARLA towns."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import bundled_map
+from graph_maps import (
+    JUNCTION_RADIUS_M,
+    LANE_WIDTH_M,
+    contact_points_map,
+    junction_map,
+    multi_section_map,
+    odr_map,
+    road,
+    section,
+    lane,
+    to_junction,
+    to_road,
+    with_rule,
+)
+
+from cold_maps.lane_graph import LaneGraph, LaneKey, build_lane_graph
+from cold_maps.opendrive.model import Connection, Junction, LaneLink
+
+CONTINUITY_TOLERANCE_M = 0.01
+
+
+def edges(graph: LaneGraph) -> set[tuple[LaneKey, LaneKey]]:
+    return set(graph.edges())
+
+
+def k(road_id: str, section_index: int, lane_id: int) -> LaneKey:
+    return LaneKey(road_id, section_index, lane_id)
+
+
+def test_multi_section_links_fallback_and_merge() -> None:
+    graph = build_lane_graph(multi_section_map())
+    assert edges(graph) == {
+        (k("1", 0, -1), k("1", 1, -1)),
+        (k("1", 0, -2), k("1", 1, -2)),
+        (k("1", 1, -1), k("1", 2, -1)),
+        (k("1", 1, -2), k("1", 2, -2)),
+        (k("1", 1, -3), k("1", 2, -2)),
+        # lane 1 drives against s in right-hand traffic
+        (k("1", 2, 1), k("1", 1, 1)),
+        (k("1", 1, 1), k("1", 0, 1)),
+    }
+    assert graph.predecessors[k("1", 2, -2)] == (k("1", 1, -3), k("1", 1, -2))
+    assert graph.predecessors[k("1", 1, -3)] == ()
+    assert graph.issues == ()
+
+
+def test_lane_types_filter_nodes() -> None:
+    default = build_lane_graph(multi_section_map())
+    every = build_lane_graph(multi_section_map(), lane_types=None)
+    assert k("1", 1, -4) not in default.lengths
+    assert set(every.lanes) - set(default.lanes) == {k("1", 1, -4)}
+    assert every.lane_types == ("driving", "sidewalk")
+
+
+def test_lengths_of_straight_lanes_are_section_lengths() -> None:
+    graph = build_lane_graph(multi_section_map())
+    assert graph.lengths[k("1", 0, -1)] == pytest.approx(40.0, abs=1e-9)
+    assert graph.lengths[k("1", 1, 1)] == pytest.approx(30.0, abs=1e-9)
+    assert graph.entry_s(k("1", 1, 1)) == 70.0 and graph.exit_s(k("1", 1, 1)) == 40.0
+
+
+@pytest.mark.parametrize("links_on", ["both", "A", "others"])
+def test_start_start_and_end_end_contacts(links_on: str) -> None:
+    graph = build_lane_graph(contact_points_map(links_on))
+    assert edges(graph) == {
+        # A's left lane drives towards A's start, then into B, which runs along -x
+        (k("A", 0, 1), k("B", 0, -1)),
+        (k("B", 0, 1), k("A", 0, -1)),
+        # A's right lane leaves at A's end into C, which is traversed against its s
+        (k("A", 0, -1), k("C", 0, 1)),
+        (k("C", 0, -1), k("A", 0, 1)),
+    }
+    assert graph.issues == ()
+
+
+@pytest.mark.parametrize("make_map", [multi_section_map, contact_points_map, junction_map])
+def test_left_hand_traffic_reverses_every_edge(make_map) -> None:
+    rht = build_lane_graph(make_map())
+    lht = build_lane_graph(with_rule(make_map(), "LHT"))
+    assert edges(rht)
+    assert edges(lht) == {(b, a) for a, b in edges(rht)}
+
+
+def test_junction_left_straight_right() -> None:
+    graph = build_lane_graph(junction_map())
+    assert graph.successors[k("W", 0, -1)] == (k("left", 0, -1), k("right", 0, -1), k("straight", 0, 1))
+    assert graph.successors[k("left", 0, -1)] == (k("N", 0, -1),)
+    assert graph.successors[k("right", 0, -1)] == (k("S", 0, -1),)
+    assert graph.successors[k("straight", 0, 1)] == (k("E", 0, -1),)
+    assert graph.predecessors[k("E", 0, -1)] == (k("straight", 0, 1),)
+    # nothing enters the junction from the other arms
+    assert graph.successors[k("E", 0, 1)] == ()
+    assert graph.issues == ()
+    # arc lanes: radius 10 ∓ half a lane width, a quarter turn
+    inner = (JUNCTION_RADIUS_M - LANE_WIDTH_M / 2) * math.pi / 2
+    outer = (JUNCTION_RADIUS_M + LANE_WIDTH_M / 2) * math.pi / 2
+    assert graph.lengths[k("right", 0, -1)] == pytest.approx(inner, abs=5e-3)
+    assert graph.lengths[k("left", 0, -1)] == pytest.approx(outer, abs=5e-3)
+
+
+def test_dangling_references_are_reported() -> None:
+    a = road(
+        "A",
+        50.0,
+        [section(0, 50, right=[lane(-1, succ=[-7])])],
+        pred=to_road("ghost", "end"),
+        succ=to_road("B", "start"),
+    )
+    b = road("B", 50.0, [section(0, 50, right=[lane(-1)])], x=50.0, succ=to_junction("nowhere"))
+    c = road("C", 10.0, [section(0, 10, right=[lane(-1)])], junction="J")
+    junction = Junction(
+        "J",
+        "",
+        (
+            Connection("0", "missing", "C", "start", (LaneLink(-1, -1),)),
+            Connection("1", "A", "C", "start", (LaneLink(-1, -5),)),
+        ),
+    )
+    graph = build_lane_graph(odr_map([a, b, c], [junction]))
+    assert edges(graph) == set()
+    text = "\n".join(graph.issues)
+    assert "road A predecessor: road ghost does not exist" in text
+    assert "lane -1 links to lane -7, which road B does not have" in text
+    assert "junction nowhere does not exist" in text
+    assert "connection 0: road missing does not exist" in text
+    assert "connection 1" in text
+
+
+def test_contact_of_two_exits_is_reported() -> None:
+    # B starts where A ends and runs on along +x, but the link claims B's END touches A.
+    a = road("A", 50.0, [section(0, 50, right=[lane(-1, succ=[-1])])], succ=to_road("B", "end"))
+    b = road("B", 50.0, [section(0, 50, right=[lane(-1)])], x=50.0)
+    graph = build_lane_graph(odr_map([a, b]))
+    assert edges(graph) == set()
+    assert graph.issues == ("contact joins two lane exits: road A section 0 lane -1 (end) "
+                            "and road B section 0 lane -1 (end)",)
+
+
+def test_bad_length_step() -> None:
+    with pytest.raises(ValueError, match="length_step"):
+        build_lane_graph(multi_section_map(), length_step=0.0)
+
+
+def _lane_centre_ends(graph: LaneGraph, step: float) -> dict[LaneKey, np.ndarray]:
+    """(2, 2) centre points where traffic enters and leaves each lane."""
+    from cold_maps.opendrive.sampling import sample_road
+
+    ends: dict[LaneKey, np.ndarray] = {}
+    for road_ in graph.odr_map.roads.values():
+        for samples in sample_road(road_, step=step, lane_types=graph.lane_types):
+            key = k(road_.id, samples.section, samples.lane_id)
+            centre = 0.5 * (samples.inner[:, :2] + samples.outer[:, :2])
+            ends[key] = centre[[0, -1]] if road_.drives_along_s(key.lane_id) else centre[[-1, 0]]
+    return ends
+
+
+def _discontinuities(graph: LaneGraph) -> list[tuple[LaneKey, LaneKey, float]]:
+    ends = _lane_centre_ends(graph, step=5.0)
+    gaps = [(a, b, float(np.linalg.norm(ends[a][1] - ends[b][0]))) for a, b in graph.edges()]
+    return [gap for gap in gaps if gap[2] > CONTINUITY_TOLERANCE_M]
+
+
+def test_hand_built_junction_is_continuous() -> None:
+    assert _discontinuities(build_lane_graph(junction_map())) == []
+    assert _discontinuities(build_lane_graph(contact_points_map())) == []
+
+
+@pytest.fixture(scope="session")
+def town_graphs(town01_path, town04_path) -> dict[str, LaneGraph]:
+    from cold_maps.opendrive.parser import load_opendrive
+
+    return {path.stem: build_lane_graph(load_opendrive(path)) for path in (town01_path, town04_path)}
+
+
+@pytest.mark.parametrize("town", ["Town01", "Town04"])
+def test_carla_town_graph(town_graphs, town: str) -> None:
+    graph = town_graphs[town]
+    assert graph.issues == ()
+    lengths = np.array(list(graph.lengths.values()))
+    assert np.isfinite(lengths).all() and (lengths > 0).all()
+    # every driving lane of a CARLA town is on a closed network: it has a way in and out
+    dead_ends = [lane for lane in graph.lanes if not graph.successors[lane]]
+    no_entry = [lane for lane in graph.lanes if not graph.predecessors[lane]]
+    assert dead_ends == [] and no_entry == []
+    # successive lanes meet within 1 cm; the count of gaps is reported, not hidden
+    gaps = _discontinuities(graph)
+    print(f"{town}: {len(graph.lanes)} lanes, {sum(1 for _ in graph.edges())} edges, "
+          f"{len(gaps)} discontinuities > {CONTINUITY_TOLERANCE_M} m")
+    assert len(gaps) <= 0.01 * len(graph.lanes), gaps[:5]
+
+
+@pytest.mark.parametrize("name", ["junction", "highway"])
+def test_bundled_map_graph(name: str) -> None:
+    from cold_maps.opendrive.parser import load_opendrive
+
+    graph = build_lane_graph(load_opendrive(bundled_map(name)))
+    assert graph.issues == ()
+    assert graph.lanes and any(True for _ in graph.edges())
+    assert _discontinuities(graph) == []
