@@ -54,6 +54,7 @@ _CONTACT_POINTS: Final[tuple[str, ...]] = ("start", "end")
 _RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
 _P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
 _LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
+_ONCE_PER_ROAD: Final[frozenset[str]] = frozenset({"link", "planView", "elevationProfile", "lanes"})
 _BOOLEANS: Final[dict[str, bool]] = {"true": True, "1": True, "false": False, "0": False}
 
 
@@ -243,10 +244,15 @@ class _Reader:
         elevation: tuple[CubicPoly, ...] = ()
         lane_offsets: tuple[CubicPoly, ...] = ()
         sections: list[LaneSection] = []
+        seen: set[str] = set()
         for child in element:
             tag = child.tag
+            if tag in _ONCE_PER_ROAD:
+                if tag in seen:
+                    raise self.error(f"more than one <{tag}> in road {road_id!r}", child)
+                seen.add(tag)
             if tag == "planView":
-                plan_view.extend(self.geometry(g) for g in child if g.tag == "geometry")
+                plan_view = [self.geometry(g) for g in child if g.tag == "geometry"]
             elif tag == "lanes":
                 lane_offsets = self.cubics((e for e in child if e.tag == "laneOffset"), "s")
                 sections = self.lane_sections(child, road_id, length)

@@ -32,7 +32,7 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     DOCTYPE that declares entities or references an external DTD.
     """
     if not isinstance(data, bytes):
-        raise OpenDriveError(f"expected bytes, got {type(data).__name__}", path=path)
+        raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
     try:
         root = etree.fromstring(data, _hardened_parser())
     except etree.XMLSyntaxError as exc:
