@@ -1,0 +1,58 @@
+"""Piecewise cubic profiles (lane width, border, laneOffset, elevation), vectorised over s.
+
+One shared evaluator for every ``<width>``, ``<border>``, ``<laneOffset>`` and
+``<elevation>`` record list: at position s the last record with ``s0 <= s - s_offset``
+applies, with ``ds = s - s_offset - s0``; where no record applies the profile is 0.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from cold_maps.opendrive.model import CubicPoly
+
+NDArrayFloat = npt.NDArray[np.float64]
+"""Float64 array; in this package arrays are vectorised over s (m)."""
+
+
+def _coefficients(records: Sequence[CubicPoly]) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Record starts (n,) and coefficients (n, 4), after checking the starts are ordered."""
+    starts = np.array([r.s0 for r in records], dtype=np.float64)
+    coeffs = np.array([(r.a, r.b, r.c, r.d) for r in records], dtype=np.float64).reshape(-1, 4)
+    if not np.all(np.isfinite(starts)) or not np.all(np.isfinite(coeffs)):
+        raise ValueError("cubic profile: a record has a non-finite s0 or coefficient")
+    if np.any(np.diff(starts) < 0.0):
+        raise ValueError(f"cubic profile: record starts are not ordered by s0: {starts.tolist()}")
+    return starts, coeffs
+
+
+def _locate(
+    records: Sequence[CubicPoly], s: NDArrayFloat, s_offset: float
+) -> tuple[NDArrayFloat, NDArrayFloat, npt.NDArray[np.bool_]]:
+    """Per point: the applying record's coefficients (N, 4), its ds (N,), and whether one applies."""
+    s = np.asarray(s, dtype=np.float64)
+    if not records:
+        return np.zeros(s.shape + (4,)), np.zeros(s.shape), np.zeros(s.shape, dtype=bool)
+    starts, coeffs = _coefficients(records)
+    local = s - s_offset
+    index = np.searchsorted(starts, local, side="right") - 1
+    applies = index >= 0
+    index = np.maximum(index, 0)
+    return coeffs[index], local - starts[index], applies
+
+
+def evaluate(records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0) -> NDArrayFloat:
+    """The profile value at each s (unit of the records' ``a``); 0 where no record applies."""
+    c, ds, applies = _locate(records, s, s_offset)
+    value = c[..., 0] + ds * (c[..., 1] + ds * (c[..., 2] + ds * c[..., 3]))
+    return np.where(applies, value, 0.0)
+
+
+def derivative(records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0) -> NDArrayFloat:
+    """d(profile)/ds at each s (unit of ``a`` per m); 0 where no record applies."""
+    c, ds, applies = _locate(records, s, s_offset)
+    value = c[..., 1] + ds * (2.0 * c[..., 2] + ds * 3.0 * c[..., 3])
+    return np.where(applies, value, 0.0)

@@ -1,0 +1,94 @@
+"""Lateral position (t) of lane borders, vectorised over s.
+
+Lane borders: t of lane 0 is laneOffset(s); each lane's outer border is its inner border
+plus its width (left lanes towards +t, right lanes towards -t); lane n's inner border is
+lane n∓1's outer border. Width records start at ``section.s + sOffset``; where no record
+applies (before the first) the width is 0, so zero-width lanes coincide with their inner
+border.
+
+``<border>`` records: ASAM OpenDRIVE 1.8.1 §11.6.2 "Lane borders" (1.6/1.7 §9.5.2) defines
+them as "the outer limits of a lane, independent of the parameters of their inner
+borders", with ``a`` the "border position at @s"; widths and borders are mutually
+exclusive and, if both are present, "the application shall use the information from the
+<width> elements". The spec does not say in words whether laneOffset applies. It places
+every lane relative to the centre lane and defines laneOffset (§11.4 "Lane offset") as
+the shift of the centre lane away from the reference line, so we read a border as t
+measured from the shifted centre lane: t_outer = laneOffset(s) + border(s), as the model's
+``Lane.borders`` field documents. The next outer lane's inner border is that border.
+A map written by a tool that reads borders from the reference line differs from ours by
+exactly laneOffset(s) in such lanes (none in the CARLA towns, which use no ``<border>``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cold_maps.opendrive import cubic_poly
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.model import Lane, LaneSection, Road
+from cold_maps.opendrive.reference_line import check_s
+
+
+def section_of(road: Road, section_index: int) -> LaneSection:
+    """The road's lane section with this index; IndexError naming the road when absent."""
+    if not 0 <= section_index < len(road.lane_sections):
+        raise IndexError(
+            f"road {road.id}: no lane section {section_index} (it has {len(road.lane_sections)})"
+        )
+    return road.lane_sections[section_index]
+
+
+def lane_of(road: Road, section_index: int, lane_id: int) -> Lane:
+    """The lane with this id in the section; KeyError naming the road when absent."""
+    try:
+        return section_of(road, section_index).lane(lane_id)
+    except KeyError:
+        raise KeyError(f"road {road.id}: lane section {section_index} has no lane {lane_id}") from None
+
+
+def lane_offset(road: Road, s: NDArrayFloat) -> NDArrayFloat:
+    """t of the centre lane (lane 0) at each s (m)."""
+    return cubic_poly.evaluate(road.lane_offsets, s)
+
+
+def _outer_border(
+    lane: Lane, section: LaneSection, inner: NDArrayFloat, offset: NDArrayFloat, s: NDArrayFloat
+) -> NDArrayFloat:
+    """t of a lane's outer border given its inner border and the centre-lane offset."""
+    if lane.widths or not lane.borders:
+        side = 1.0 if lane.id > 0 else -1.0
+        return inner + side * cubic_poly.evaluate(lane.widths, s, s_offset=section.s)
+    return offset + cubic_poly.evaluate(lane.borders, s, s_offset=section.s)
+
+
+def section_borders(
+    road: Road, section_index: int, s: NDArrayFloat, *, outermost: int | None = None
+) -> dict[int, tuple[NDArrayFloat, NDArrayFloat]]:
+    """t of (inner, outer) border at each s for every lane of a section, keyed by lane id.
+
+    The centre lane 0 maps to (laneOffset, laneOffset). ``outermost`` limits the lanes
+    computed to |id| <= outermost on each side.
+    """
+    section = section_of(road, section_index)
+    s = check_s(road, s)
+    offset = lane_offset(road, s)
+    borders = {0: (offset, offset)}
+    for side in (section.left, section.right):
+        inner = offset
+        for lane in side[:outermost]:
+            outer = _outer_border(lane, section, inner, offset, s)
+            borders[lane.id] = (inner, outer)
+            inner = outer
+    return borders
+
+
+def lane_border_offsets(
+    road: Road, section_index: int, lane_id: int, s: NDArrayFloat
+) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """t (m) of the lane's inner border (nearer lane 0) and outer border at each s (m).
+
+    laneOffset is included. KeyError naming the road when the section has no such lane.
+    """
+    lane_of(road, section_index, lane_id)
+    return section_borders(road, section_index, s, outermost=abs(lane_id))[lane_id]
+

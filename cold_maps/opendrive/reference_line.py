@@ -1,0 +1,46 @@
+"""A road's reference line (``<planView>``): pose at any s, vectorised."""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+
+from cold_maps.opendrive import geometry
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.model import Road
+
+S_TOLERANCE_M: Final[float] = 1e-6
+"""How far outside [0, road.length] an s may lie (round-off of the caller's arithmetic)."""
+
+
+def check_s(road: Road, s: NDArrayFloat) -> NDArrayFloat:
+    """s as a float64 array; ValueError naming the road when s is NaN or off the road."""
+    s = np.asarray(s, dtype=np.float64)
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"road {road.id}: s contains NaN or infinity")
+    if s.size and (s.min() < -S_TOLERANCE_M or s.max() > road.length + S_TOLERANCE_M):
+        raise ValueError(
+            f"road {road.id}: s in [{s.min():.6g}, {s.max():.6g}] m leaves the road [0, {road.length:.6g}] m"
+        )
+    return s
+
+
+def reference_pose(road: Road, s: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Inertial x, y (m) and heading (rad) of the reference line at each s (m), same shape as s.
+
+    Each s is evaluated on the last ``<geometry>`` record starting at or before it.
+    """
+    s = check_s(road, s)
+    if not road.plan_view:
+        raise ValueError(f"road {road.id}: <planView> has no <geometry> record")
+    starts = np.array([g.s for g in road.plan_view])
+    index = np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(starts) - 1)
+    x = np.empty_like(s)
+    y = np.empty_like(s)
+    hdg = np.empty_like(s)
+    for i in np.unique(index):
+        mask = index == i
+        record = road.plan_view[i]
+        x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
+    return x, y, hdg

@@ -1,0 +1,119 @@
+"""Sampling lane borders into 3-D polylines, and road → world coordinates.
+
+Points are in the inertial frame (x, y, z in m). z is the reference line's elevation
+(``<elevationProfile>``) at the same s: superelevation, shape and lane height are not
+applied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, Sequence
+
+import numpy as np
+
+from cold_maps.opendrive import cubic_poly
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
+from cold_maps.opendrive.model import Road
+from cold_maps.opendrive.reference_line import check_s, reference_pose
+
+SLIVER_FRACTION: Final[float] = 1e-9
+"""A grid point closer than this fraction of the step to the end point is merged into it."""
+
+
+def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
+    """s_start, s_start + step, ..., then exactly s_end (m).
+
+    Every interval is ``step`` except the last, which is in (0, step]; a sliver shorter
+    than ``SLIVER_FRACTION``·step is merged into the last interval instead of creating a
+    near-duplicate end point. s_start == s_end gives the single point s_start.
+    """
+    if not (np.isfinite(s_start) and np.isfinite(s_end)):
+        raise ValueError(f"sample_s: s_start={s_start} and s_end={s_end} must be finite")
+    if not (np.isfinite(step) and step > 0.0):
+        raise ValueError(f"sample_s: step must be a positive finite length in m, got {step}")
+    if s_end < s_start:
+        raise ValueError(f"sample_s: s_end={s_end} is before s_start={s_start}")
+    if s_end == s_start:
+        return np.array([float(s_start)])
+    count = int(np.ceil((s_end - s_start) / step))
+    grid = s_start + step * np.arange(count, dtype=np.float64)
+    grid = grid[grid < s_end - SLIVER_FRACTION * step]
+    return np.append(grid, float(s_end))
+
+
+def road_to_world(road: Road, s: NDArrayFloat, t: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Inertial x, y (m) of road coordinates (s along the reference line, t to its left), broadcast."""
+    x, y, hdg = reference_pose(road, s)
+    t = np.asarray(t, dtype=np.float64)
+    return x - t * np.sin(hdg), y + t * np.cos(hdg)
+
+
+def elevation(road: Road, s: NDArrayFloat) -> NDArrayFloat:
+    """z (m) of the reference line at each s (m) from ``<elevationProfile>``; 0 without records."""
+    return cubic_poly.evaluate(road.elevation, check_s(road, s))
+
+
+@dataclass(frozen=True)
+class LaneBorderSamples:
+    """Both borders of one lane in one lane section, sampled on a common s grid.
+
+    Fields:
+        road_id: id of the road.
+        section: index of the lane section in ``road.lane_sections``.
+        lane_id: OpenDRIVE lane id.
+        s: (N,) road s (m), strictly increasing (NOT the driving direction), both section
+            ends included.
+        inner: (N, 3) x, y, z (m, inertial frame) of the border nearer lane 0.
+        outer: (N, 3) x, y, z (m, inertial frame) of the border farther from lane 0.
+    """
+
+    road_id: str
+    section: int
+    lane_id: int
+    s: NDArrayFloat
+    inner: NDArrayFloat
+    outer: NDArrayFloat
+
+
+def _section_samples(
+    road: Road, section_index: int, step: float, lane_ids: Sequence[int]
+) -> list[LaneBorderSamples]:
+    """Samples of the listed lanes of one section; the reference line is evaluated once."""
+    section = section_of(road, section_index)
+    s = sample_s(section.s, section.s_end, step)
+    x, y, hdg = reference_pose(road, s)
+    normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
+    z = elevation(road, s)
+    outermost = max((abs(i) for i in lane_ids), default=0)
+    borders = section_borders(road, section_index, s, outermost=outermost)
+
+    def points(t: NDArrayFloat) -> NDArrayFloat:
+        return np.column_stack((x + t * normal_x, y + t * normal_y, z))
+
+    return [
+        LaneBorderSamples(road.id, section_index, i, s, points(borders[i][0]), points(borders[i][1]))
+        for i in lane_ids
+    ]
+
+
+def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: float = 0.1) -> LaneBorderSamples:
+    """Inner and outer border of one lane every ``step`` m over its section (ends included)."""
+    lane_of(road, section_index, lane_id)
+    return _section_samples(road, section_index, step, [lane_id])[0]
+
+
+def sample_road(
+    road: Road, step: float = 0.1, lane_types: Sequence[str] | None = ("driving",)
+) -> list[LaneBorderSamples]:
+    """Borders of every lane whose type is in ``lane_types`` (None: all lanes), section by section.
+
+    Ordered by section, then left lanes outwards, then right lanes outwards.
+    """
+    result: list[LaneBorderSamples] = []
+    for index, section in enumerate(road.lane_sections):
+        ids = [lane.id for lane in section.lanes if lane_types is None or lane.type in lane_types]
+        if ids:
+            result.extend(_section_samples(road, index, step, ids))
+    return result
