@@ -11,9 +11,9 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-import numpy.typing as npt
 
-NDArrayFloat = npt.NDArray[np.float64]
+from cold_maps.lane_strip import NDArrayFloat, polyline_distance
+from cold_maps.sensor import vehicle_to_world
 
 
 def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFloat:
@@ -31,11 +31,6 @@ def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFlo
     return array
 
 
-def arc_length(points: NDArrayFloat) -> NDArrayFloat:
-    """Cumulative arc length (m) at each vertex of an ``(N, 2)`` polyline, starting at 0."""
-    return np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
-
-
 def left_normals(points: NDArrayFloat) -> NDArrayFloat:
     """Unit normals pointing left of the driving direction at each vertex, ``(N, 2)``.
 
@@ -50,15 +45,9 @@ def left_normals(points: NDArrayFloat) -> NDArrayFloat:
     return np.column_stack((-tangents[:, 1], tangents[:, 0]))
 
 
-def rotate(points: NDArrayFloat, angle_rad: float) -> NDArrayFloat:
-    """``points`` rotated by ``angle_rad`` (counter-clockwise) about the origin."""
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return points @ np.array([[c, s], [-s, c]])
-
-
 def truncate(points: NDArrayFloat, fraction: float) -> NDArrayFloat:
     """The first ``fraction`` (0..1] of a polyline's arc length; the end point is interpolated."""
-    s = arc_length(points)
+    s = polyline_distance(points)
     end = fraction * s[-1]
     keep = int(np.searchsorted(s, end, side="right"))
     head = points[:keep]
@@ -118,7 +107,7 @@ class SensorErrorModel:
             return None
         if self.range_jitter_sigma_m > 0:
             cut = abs(rng.normal(0.0, self.range_jitter_sigma_m))
-            mean_length = 0.5 * (arc_length(borders[0])[-1] + arc_length(borders[1])[-1])
+            mean_length = 0.5 * (polyline_distance(borders[0])[-1] + polyline_distance(borders[1])[-1])
             fraction = 1.0 - cut / mean_length
             if fraction <= 0:
                 return None
@@ -134,7 +123,7 @@ class SensorErrorModel:
                 shifted.append(border + along[:, None] * left_normals(border))
             borders = shifted
         if self.heading_bias_rad != 0:
-            borders = [rotate(border, self.heading_bias_rad) for border in borders]
+            borders = [vehicle_to_world(border, 0.0, 0.0, self.heading_bias_rad) for border in borders]
         return borders[0], borders[1]
 
     def perturb_pose(self, x: float, y: float, yaw: float, rng: np.random.Generator) -> tuple[float, float, float]:

@@ -1,0 +1,217 @@
+"""MCAP recording: Foxglove-valid channels, round trip, interrupted runs, foreign files."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from cold_maps.recording import (
+    FRAME_METRICS_SCHEMA,
+    LANE_DETECTION_SCHEMA,
+    SCENE_UPDATE_SCHEMA,
+    Recorder,
+    RecordingError,
+    read_detections,
+    read_metadata,
+)
+
+FRAMES = 3
+DT_S = 0.1
+EGO_POSE = (10.0, 5.0, math.pi / 2)
+COOP_POSE = (10.0, 30.0, math.pi / 2)
+
+
+def lane(frame: int) -> tuple[np.ndarray, np.ndarray]:
+    """A straight detection in the vehicle frame, 1.75 m either side, a frame-dependent length."""
+    x = np.arange(0.0, 5.0 + frame, 0.1) + 0.013 * frame
+    return np.column_stack((x, np.full_like(x, 1.75))), np.column_stack((x, np.full_like(x, -1.75)))
+
+
+def record_frames(recorder: Recorder, frames: range) -> None:
+    for frame in frames:
+        stamp = frame * DT_S
+        left, right = lane(frame)
+        recorder.write_gt(stamp, {"left": np.array([[0.0, 0.0], [0.0, 50.0]]), "right": np.array([[3.5, 0.0], [3.5, 50.0]])})
+        recorder.write_detection(stamp, frame, "ego", EGO_POSE, left, right, ego=True)
+        recorder.write_detection(stamp, frame, "coop1", COOP_POSE, left, right)
+        recorder.write_fused(stamp, {"left": np.array([[8.25, 5.0], [8.25, 60.0]])})
+        recorder.write_metrics(stamp, frame, {"mean_error_m": 0.01 * frame, "max_error_m": float("nan"), "fused": 1})
+
+
+def read_all(path: Path):
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        messages = [(channel.topic, schema.name, json.loads(message.data), message.log_time)
+                    for schema, channel, message in reader.iter_messages()]
+        metadata = {record.name: dict(record.metadata) for record in reader.iter_metadata()}
+    return summary, messages, metadata
+
+
+@pytest.fixture(scope="session")
+def recording(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("rec") / "run.mcap"
+    with Recorder(path, map_path="maps/straight.xodr", params={"d_s": 20.0, "fusion": "spline"}) as recorder:
+        record_frames(recorder, range(FRAMES))
+    return path
+
+
+def test_recording_has_the_channels_schemas_counts_and_summary(recording):
+    summary, messages, metadata = read_all(recording)
+    assert summary is not None and summary.statistics is not None
+    topics = {c.topic: c for c in summary.channels.values()}
+    assert set(topics) == {"/gt", "/fused", "/detections/ego", "/detections/coop1", "/cold/detections", "/metrics"}
+    counts = {c.topic: summary.statistics.channel_message_counts[cid] for cid, c in summary.channels.items()}
+    assert counts == {"/gt": FRAMES, "/fused": FRAMES, "/detections/ego": FRAMES, "/detections/coop1": FRAMES,
+                      "/cold/detections": 2 * FRAMES, "/metrics": FRAMES}
+    schema_of = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    assert {t: s.name for t, s in schema_of.items()} == {
+        "/gt": "foxglove.SceneUpdate", "/fused": "foxglove.SceneUpdate", "/detections/ego": "foxglove.SceneUpdate",
+        "/detections/coop1": "foxglove.SceneUpdate", "/cold/detections": "cold.LaneDetection",
+        "/metrics": "cold.FrameMetrics"}
+    assert all(s.encoding == "jsonschema" for s in schema_of.values())
+    assert all(c.message_encoding == "json" for c in summary.channels.values())
+    assert len(summary.schemas) == 3  # one schema record shared by the SceneUpdate channels
+    assert summary.statistics.message_start_time == 0
+    assert summary.statistics.message_end_time == round((FRAMES - 1) * DT_S * 1e9)
+    assert metadata["cold.status"] == {"status": "complete"}
+    assert metadata["cold.run"]["map"] == "maps/straight.xodr"
+    assert json.loads(metadata["cold.run"]["params"]) == {"d_s": 20.0, "fusion": "spline"}
+    assert not recording.with_name("run.mcap.partial").exists()
+
+
+def test_every_message_validates_against_its_schema(recording):
+    schemas = {s["title"]: s for s in (SCENE_UPDATE_SCHEMA, LANE_DETECTION_SCHEMA, FRAME_METRICS_SCHEMA)}
+    for schema in schemas.values():
+        jsonschema.Draft202012Validator.check_schema(schema)
+    _, messages, _ = read_all(recording)
+    for _, name, payload, _ in messages:
+        jsonschema.validate(payload, schemas[name], cls=jsonschema.Draft202012Validator)
+    with pytest.raises(jsonschema.ValidationError):  # the schema does constrain: lines need points
+        bad = next(p for t, _, p, _ in messages if t == "/gt")
+        del bad["entities"][0]["lines"][0]["points"]
+        jsonschema.validate(bad, SCENE_UPDATE_SCHEMA)
+
+
+def test_scene_updates_are_line_strips_in_the_map_frame_at_the_world_pose(recording):
+    _, messages, _ = read_all(recording)
+    ego = [(p, t) for topic, _, p, t in messages if topic == "/detections/ego"]
+    payload, log_time = ego[2]
+    assert log_time == 200_000_000
+    assert payload["deletions"] == [{"timestamp": {"sec": 0, "nsec": 200_000_000}, "type": 1, "id": ""}]
+    entities = {e["id"]: e for e in payload["entities"]}
+    assert set(entities) == {"left", "right"}
+    line = entities["left"]["lines"][0]
+    assert entities["left"]["frame_id"] == "map" and line["type"] == 0
+    assert entities["left"]["timestamp"] == {"sec": 0, "nsec": 200_000_000}
+    # ego at (10, 5) heading north: vehicle (x, 1.75) -> world (10 - 1.75, 5 + x)
+    left, _ = lane(2)
+    points = np.array([[p["x"], p["y"], p["z"]] for p in line["points"]])
+    np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=1e-12)
+    np.testing.assert_allclose(points[:, 1], 5.0 + left[:, 0], atol=1e-12)
+    np.testing.assert_array_equal(points[:, 2], 0.0)
+    metrics = [p for topic, _, p, _ in messages if topic == "/metrics"]
+    assert metrics[1] == {"stamp_s": 0.1, "frame": 1, "mean_error_m": 0.01, "max_error_m": None, "fused": 1.0}
+
+
+def test_read_detections_round_trips_exactly(recording):
+    frames = list(read_detections(recording))
+    assert [frame for frame, _ in frames] == list(range(FRAMES))
+    for frame, detections in frames:
+        assert [d["sender"] for d in detections] == ["ego", "coop1"]
+        left, right = lane(frame)
+        for detection, pose in zip(detections, (EGO_POSE, COOP_POSE)):
+            np.testing.assert_array_equal(detection["left"], left)
+            np.testing.assert_array_equal(detection["right"], right)
+            assert detection["left"].dtype == np.float64
+            assert detection["pose"] == dict(zip("x y yaw".split(), pose))
+            assert detection["stamp_s"] == frame * DT_S and detection["frame"] == frame
+
+
+@pytest.mark.parametrize("interrupt", [RuntimeError, KeyboardInterrupt])
+def test_interrupted_run_is_finalised_and_marked_partial(tmp_path, interrupt):
+    path = tmp_path / "cut.mcap"
+    with pytest.raises(interrupt):
+        with Recorder(path, map_path="m.xodr") as recorder:
+            record_frames(recorder, range(2))
+            assert recorder.partial_path.exists() and not path.exists()
+            raise interrupt()
+    assert path.exists() and not recorder.partial_path.exists()
+    summary, messages, metadata = read_all(path)
+    assert summary is not None
+    assert metadata["cold.status"] == {"status": "partial", "reason": interrupt.__name__}
+    assert read_metadata(path)["cold.status"]["status"] == "partial"
+    assert sum(topic == "/cold/detections" for topic, *_ in messages) == 4
+    assert [frame for frame, _ in read_detections(path)] == [0, 1]
+
+
+def write_foreign(path: Path, topic: str, schema_name: str) -> None:
+    with open(path, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema(name=schema_name, encoding="jsonschema", data=b"{}")
+        channel = writer.register_channel(topic=topic, message_encoding="json", schema_id=schema)
+        writer.add_message(channel_id=channel, log_time=0, publish_time=0, data=b"{}")
+        writer.finish()
+
+
+def test_foreign_and_broken_files_give_one_line_errors(tmp_path, recording):
+    text = tmp_path / "notes.mcap"
+    text.write_text("hello, not an mcap\n")
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(recording.read_bytes()[: recording.stat().st_size // 2])
+    other_topic = tmp_path / "other.mcap"
+    write_foreign(other_topic, "/camera", "foxglove.CompressedImage")
+    other_schema = tmp_path / "schema.mcap"
+    write_foreign(other_schema, "/cold/detections", "acme.Lanes")
+    cases = [
+        (text, "not an MCAP file"),
+        (truncated, "truncated or not finalised"),
+        (other_topic, "no /cold/detections channel"),
+        (other_schema, r"\('acme.Lanes', 'jsonschema', 'json'\), expected \('cold.LaneDetection'"),
+        (tmp_path / "missing.mcap", "cannot open recording"),
+    ]
+    for path, message in cases:
+        with pytest.raises(RecordingError, match=message) as info:
+            read_detections(path)
+        assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_malformed_detection_message_names_the_message(tmp_path):
+    path = tmp_path / "bad.mcap"
+    with open(path, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema(name="cold.LaneDetection", encoding="jsonschema",
+                                        data=json.dumps(LANE_DETECTION_SCHEMA).encode())
+        channel = writer.register_channel(topic="/cold/detections", message_encoding="json", schema_id=schema)
+        message = {"stamp_s": 0.0, "frame": 0, "sender": "ego", "pose": {"x": 0, "y": 0, "yaw": 0},
+                   "left": [[0, 0], [1, float("nan")]], "right": [[0, -1], [1, -1]]}
+        writer.add_message(channel_id=channel, log_time=0, publish_time=0, data=json.dumps(message).encode())
+        writer.finish()
+    with pytest.raises(RecordingError, match="/cold/detections message 0: invalid cold.LaneDetection: left: "):
+        list(read_detections(path))
+
+
+def test_bad_input_is_rejected_with_the_name(tmp_path):
+    left, right = lane(0)
+    with Recorder(tmp_path / "x.mcap") as recorder:
+        with pytest.raises(ValueError, match="sender: expected letters"):
+            recorder.write_detection(0.0, 0, "ego car", EGO_POSE, left, right)
+        with pytest.raises(ValueError, match="ego right: expected an \\(N, 2\\) polyline"):
+            recorder.write_detection(0.0, 0, "ego", EGO_POSE, left, right[:, 0])
+        with pytest.raises(ValueError, match="stamp_s: expected a finite time >= 0 s"):
+            recorder.write_gt(-1.0, {"left": left})
+        with pytest.raises(ValueError, match="frame: expected an integer >= 0"):
+            recorder.write_metrics(0.0, -3, {})
+        with pytest.raises(ValueError, match=r"metrics\['x'\]: expected a number or None"):
+            recorder.write_metrics(0.0, 0, {"x": "high"})
+    with pytest.raises(RecordingError, match="not open"):
+        recorder.write_gt(0.0, {"left": left})
