@@ -1,0 +1,117 @@
+"""Route geometry: one continuous lane centreline with its borders, in driving direction.
+
+Built from a sequence of lanes that follow each other in the lane graph. Every lane is
+sampled on its section's s grid (``sampling.sample_lane_borders``), put in driving order,
+and appended; the first point of a lane is dropped when it coincides with the last point
+of the previous lane (within ``JOIN_TOLERANCE_M``). Seen in the driving direction the
+left border is the lane's inner border in right-hand traffic and its outer border in
+left-hand traffic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, Sequence
+
+import numpy as np
+
+from cold_maps.lane_graph import LaneGraph, LaneKey
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.model import Road
+from cold_maps.opendrive.sampling import LaneBorderSamples, sample_lane_borders
+
+JOIN_TOLERANCE_M: Final[float] = 1e-3
+"""Centre points of successive lanes closer than this (m) are one point."""
+
+
+@dataclass(frozen=True)
+class RoutePiece:
+    """One lane followed over part of its section.
+
+    Fields:
+        road_id: id of the road.
+        section: 0-based lane-section index.
+        lane_id: OpenDRIVE lane id.
+        s_start: road s (m) where the route enters the lane.
+        s_end: road s (m) where it leaves; below ``s_start`` when driving against s.
+    """
+
+    road_id: str
+    section: int
+    lane_id: int
+    s_start: float
+    s_end: float
+
+
+@dataclass(frozen=True)
+class Route:
+    """A drivable route, world frame (OpenDRIVE inertial), ordered in driving direction.
+
+    Fields:
+        pieces: the lanes it is made of, in order.
+        centre: (N, 2) centreline x, y (m).
+        left: (N, 2) left border seen in driving direction (m), index-aligned with centre.
+        right: (N, 2) right border seen in driving direction (m), index-aligned.
+        distance: (N,) arc length along the centreline from its first point (m).
+    """
+
+    pieces: tuple[RoutePiece, ...]
+    centre: NDArrayFloat
+    left: NDArrayFloat
+    right: NDArrayFloat
+    distance: NDArrayFloat
+
+    @property
+    def length(self) -> float:
+        """Centreline length (m)."""
+        return float(self.distance[-1])
+
+
+def borders_in_driving_direction(
+    road: Road, samples: LaneBorderSamples
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """s (N,), left (N, 3) and right (N, 3) borders of a sampled lane in driving order.
+
+    Left is the inner border in right-hand traffic and the outer one in left-hand traffic.
+    """
+    left, right = (samples.inner, samples.outer) if road.rule == "RHT" else (samples.outer, samples.inner)
+    if road.drives_along_s(samples.lane_id):
+        return samples.s, left, right
+    return samples.s[::-1], left[::-1], right[::-1]
+
+
+def route_from_lanes(graph: LaneGraph, lanes: Sequence[LaneKey], *, step: float = 0.1) -> Route:
+    """The route through ``lanes`` (each followed whole), sampled every ``step`` m of s.
+
+    Raises ValueError when ``lanes`` is empty, names a lane not in the graph, or two
+    successive lanes are not joined by a graph edge.
+    """
+    if not lanes:
+        raise ValueError("a route needs at least one lane")
+    for lane in lanes:
+        if lane not in graph.lengths:
+            raise ValueError(f"route lane {tuple(lane)} is not in the lane graph")
+    for before, after in zip(lanes, lanes[1:]):
+        if after not in graph.successors[before]:
+            raise ValueError(f"route lane {tuple(after)} does not follow lane {tuple(before)}")
+    centres: list[NDArrayFloat] = []
+    lefts: list[NDArrayFloat] = []
+    rights: list[NDArrayFloat] = []
+    for lane in lanes:
+        road = graph.odr_map.roads[lane.road_id]
+        samples = sample_lane_borders(road, lane.section, lane.lane_id, step=step)
+        _, left, right = borders_in_driving_direction(road, samples)
+        left, right = left[:, :2], right[:, :2]
+        centre = 0.5 * (left + right)
+        if centres and np.hypot(*(centre[0] - centres[-1][-1])) < JOIN_TOLERANCE_M:
+            centre, left, right = centre[1:], left[1:], right[1:]
+        centres.append(centre)
+        lefts.append(left)
+        rights.append(right)
+    centre = np.concatenate(centres)
+    pieces = tuple(
+        RoutePiece(lane.road_id, lane.section, lane.lane_id, graph.entry_s(lane), graph.exit_s(lane))
+        for lane in lanes
+    )
+    distance = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(centre, axis=0).T))))
+    return Route(pieces, centre, np.concatenate(lefts), np.concatenate(rights), distance)
