@@ -1,16 +1,23 @@
 """Hardened XML parsing for untrusted OpenDRIVE input.
 
-No entity is ever resolved, no DTD or network resource is loaded, comments and
-processing instructions are dropped, and libxml2's size limits stay on
-(``huge_tree=False``). A DOCTYPE that declares entities (billion laughs, external
-entities) or names an external DTD is rejected outright.
+No external entity, DTD or network resource is loaded, entity references in text stay
+unresolved, comments and processing instructions are dropped, and libxml2's size limits
+stay on (``huge_tree=False``). A DOCTYPE that declares entities (billion laughs,
+external entities) or names an external DTD is rejected outright: before parsing when
+the bytes show it, else from the parsed DTD.
 """
 
 from __future__ import annotations
 
+import re
+from typing import Final
+
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
+
+
+_ENTITY_DECLARATION: Final[re.Pattern[bytes]] = re.compile(rb"<!ENTITY\s+(?:%\s+)?([^\s\"'>]+)")
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -25,6 +32,28 @@ def _hardened_parser() -> etree.XMLParser:
     )
 
 
+def _reject_entity_declarations(data: bytes, path: str) -> None:
+    """Reject an internal DTD subset that declares entities before libxml2 sees it.
+
+    Needed: libxml2 expands internal entities in attribute values even with
+    ``resolve_entities=False`` (bounded only by its amplification limit). Input in other
+    encodings (UTF-16) is caught after parsing, from the parsed DTD.
+    """
+    doctype = data.find(b"<!DOCTYPE")
+    if doctype < 0:
+        return
+    subset_end = data.find(b"]>", doctype)
+    subset = data[doctype : len(data) if subset_end < 0 else subset_end]
+    names = [m.group(1).decode("utf-8", "replace") for m in _ENTITY_DECLARATION.finditer(subset)]
+    if names:
+        line = data.count(b"\n", 0, doctype + subset.find(b"<!ENTITY")) + 1
+        raise OpenDriveError(_entities_reason(names), path=path, line=line)
+
+
+def _entities_reason(names: list[str]) -> str:
+    return f"DOCTYPE declares entities ({', '.join(names[:5])}); entities are not allowed"
+
+
 def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     """Parse ``data`` with the hardened parser and return the root element.
 
@@ -33,23 +62,21 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     """
     if not isinstance(data, bytes):
         raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
+    _reject_entity_declarations(data, path)
     try:
         root = etree.fromstring(data, _hardened_parser())
     except etree.XMLSyntaxError as exc:
         reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
         raise OpenDriveError(reason, path=path, line=exc.lineno or None) from None
     docinfo = root.getroottree().docinfo
+    doctype = data.find(b"<!DOCTYPE")
+    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
     if docinfo.system_url or docinfo.public_id:
-        raise OpenDriveError(
-            f"DOCTYPE references an external DTD ({docinfo.system_url or docinfo.public_id!r})",
-            path=path,
-        )
+        external = docinfo.system_url or docinfo.public_id
+        raise OpenDriveError(f"DOCTYPE references an external DTD ({external!r})", path=path, line=line)
     dtd = docinfo.internalDTD
     if dtd is not None:
         names = [entity.name for entity in dtd.iterentities()]
         if names:
-            raise OpenDriveError(
-                f"DOCTYPE declares entities ({', '.join(names[:5])}); entities are not allowed",
-                path=path,
-            )
+            raise OpenDriveError(_entities_reason(names), path=path, line=line)
     return root
