@@ -1,1 +1,17 @@
-"""fusion package (see README)."""
+"""CoLD fusion: collective lane detection from an ego and a cooperative vehicle.
+
+Implements sec. III of the CoLD Fusion paper on numpy arrays (numpy and scipy only):
+convoy fusion of overlapping detections, spline fusion across a gap (the paper's natural
+spline with apex estimation, or a G1 Hermite variant), the fusibility check, and the
+Bézier exchange format (:mod:`fusion.bezier`). Frames: world = OpenDRIVE inertial frame,
+vehicle = ISO 8855. See :func:`fuse`.
+"""
+
+from fusion.api import DEFAULT_PARAMS, fuse, is_fusible
+from fusion.errors import BezierDecodeError, FusionError, InvalidDetectionError, InvalidParameterError
+from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Pose2D, Source
+
+__all__ = [
+    "DEFAULT_PARAMS", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
+    "InvalidParameterError", "LaneDetection", "NDArrayFloat", "NDArrayInt8", "Pose2D", "Source", "fuse", "is_fusible",
+]

@@ -1,0 +1,207 @@
+"""Data model of the fusion library: poses, lane detections, parameters and results.
+
+Frames: the *world* frame is the OpenDRIVE inertial frame (x east, y north, yaw
+counter-clockwise from x); the *vehicle* frame is ISO 8855 (x forward, y left). Units: m, rad.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Final, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from fusion.errors import InvalidDetectionError, InvalidParameterError
+
+NDArrayFloat = npt.NDArray[np.float64]
+NDArrayInt8 = npt.NDArray[np.int8]
+
+FusionKind = Literal["convoy", "spline", "none"]
+FusionMode = Literal["auto", "convoy", "spline"]
+Interpolation = Literal["paper", "hermite"]
+Fusibility = Literal["geometric", "paper"]
+ConvoyStrategy = Literal["weighted", "mean", "nearest"]
+
+MIN_BORDER_POINTS: Final[int] = 2
+
+
+class Source(IntEnum):
+    """Origin of one point of a fused border."""
+
+    EGO = 0
+    FUSED = 1
+    INTERPOLATED = 2
+    COOP = 3
+
+
+def _frozen(array: NDArrayFloat) -> NDArrayFloat:
+    array.flags.writeable = False
+    return array
+
+
+@dataclass(frozen=True)
+class Pose2D:
+    """Planar pose of a vehicle in the world frame.
+
+    Fields: ``x``, ``y`` position [m]; ``yaw`` heading [rad], counter-clockwise from x.
+    """
+
+    x: float
+    y: float
+    yaw: float
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "yaw"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(value):
+                raise InvalidDetectionError(f"Pose2D.{name} must be a finite number, got {value!r}")
+
+
+def _border(name: str, points: object) -> NDArrayFloat:
+    """Validated copy of one border with consecutive duplicate points removed."""
+    try:
+        array = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidDetectionError(f"LaneDetection.{name} is not numeric: {exc}") from None
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise InvalidDetectionError(f"LaneDetection.{name} must have shape (N, 2), got {array.shape}")
+    if not np.isfinite(array).all():
+        raise InvalidDetectionError(f"LaneDetection.{name} contains NaN or inf")
+    if array.shape[0] >= 2:
+        step = np.diff(array, axis=0)
+        keep = np.empty(array.shape[0], dtype=bool)
+        keep[0] = True
+        keep[1:] = (step != 0.0).any(axis=1)
+        if not keep.all():
+            array = array[keep]
+    if array.shape[0] < MIN_BORDER_POINTS:
+        raise InvalidDetectionError(
+            f"LaneDetection.{name} needs at least {MIN_BORDER_POINTS} distinct points, got {array.shape[0]}"
+        )
+    return _frozen(array)
+
+
+@dataclass(frozen=True)
+class LaneDetection:
+    """One vehicle's detection of one lane.
+
+    Fields:
+        pose: the sender's pose in the world frame at detection time.
+        left, right: lane borders, ``(N, 2)`` float64 in the sender's *vehicle* frame [m],
+            ordered in driving direction, about 0.10 m apart. The two borders may have
+            different lengths. Consecutive duplicate points are dropped on construction;
+            fewer than two distinct points, NaN or inf raise ``InvalidDetectionError``.
+        stamp: detection time [s] (informative; the fusion is static, no time alignment).
+        sender: identifier of the sending vehicle (informative).
+    """
+
+    pose: Pose2D
+    left: NDArrayFloat
+    right: NDArrayFloat
+    stamp: float = 0.0
+    sender: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.pose, Pose2D):
+            raise InvalidDetectionError(f"LaneDetection.pose must be a Pose2D, got {type(self.pose).__name__}")
+        object.__setattr__(self, "left", _border("left", self.left))
+        object.__setattr__(self, "right", _border("right", self.right))
+        if not math.isfinite(float(self.stamp)):
+            raise InvalidDetectionError(f"LaneDetection.stamp must be finite, got {self.stamp!r}")
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    """Parameters of :func:`fusion.fuse`; defaults are the paper's values where it gives one.
+
+    Fields:
+        t_pos_m: lateral position tolerance of the fusibility check [m] (paper: 0.40).
+        t_psi_rad: orientation tolerance of the fusibility check [rad] (paper: 10°).
+        d_i_m: maximum gap d_s bridged by spline fusion [m] (default 50).
+        apex_min_turn_rad: relative orientation above which the apex is estimated [rad]
+            (paper: 10°).
+        apex_ratio: P_c = P_i + apex_ratio·(P_j − P_i) (paper: 0.4).
+        spacing_m: sampling step of interpolated points [m] (paper: 0.10).
+        w_coop: weight of the cooperative detection in the weighted convoy fusion (paper: 0.75).
+        convoy_strategy: ``"weighted"`` (paper, ``w_coop``), ``"mean"`` (0.5) or ``"nearest"``
+            (the coop detection, nearest to its sensor, replaces the ego one in the overlap).
+        convoy_blend_offset_m: offset of the two borders at the overlap start above which the
+            overlap blends linearly from ego to coop instead of the fixed weights [m].
+        convoy_max_offset_m: largest lateral distance of the coop border start from the ego
+            border for a convoy overlap [m]; a lane width away is the adjacent lane.
+        convoy_max_heading_rad: largest heading difference of the two borders at the
+            overlap start [rad].
+        fusibility: ``"geometric"`` (default, works across curves, see
+            :func:`fusion.is_fusible`) or ``"paper"`` (the paper's three pose cases).
+        heading_window_m: length of the border end used to estimate end headings by least
+            squares for ``interpolation="hermite"`` and the geometric check [m].
+    """
+
+    t_pos_m: float = 0.40
+    t_psi_rad: float = math.radians(10.0)
+    d_i_m: float = 50.0
+    apex_min_turn_rad: float = math.radians(10.0)
+    apex_ratio: float = 0.4
+    spacing_m: float = 0.10
+    w_coop: float = 0.75
+    convoy_strategy: ConvoyStrategy = "weighted"
+    convoy_blend_offset_m: float = 0.20
+    convoy_max_offset_m: float = 1.0
+    convoy_max_heading_rad: float = math.radians(30.0)
+    fusibility: Fusibility = "geometric"
+    heading_window_m: float = 3.0
+
+    def __post_init__(self) -> None:
+        positive = ("t_pos_m", "t_psi_rad", "d_i_m", "spacing_m", "convoy_max_offset_m",
+                    "convoy_max_heading_rad", "heading_window_m")
+        for name in positive:
+            value = getattr(self, name)
+            if not math.isfinite(value) or value <= 0.0:
+                raise InvalidParameterError(f"FusionParams.{name} must be finite and > 0, got {value!r}")
+        for name in ("apex_min_turn_rad", "convoy_blend_offset_m"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0.0:
+                raise InvalidParameterError(f"FusionParams.{name} must be finite and >= 0, got {value!r}")
+        for name in ("apex_ratio", "w_coop"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise InvalidParameterError(f"FusionParams.{name} must be in [0, 1], got {value!r}")
+        if self.convoy_strategy not in ("weighted", "mean", "nearest"):
+            raise InvalidParameterError(f"FusionParams.convoy_strategy unknown: {self.convoy_strategy!r}")
+        if self.fusibility not in ("geometric", "paper"):
+            raise InvalidParameterError(f"FusionParams.fusibility unknown: {self.fusibility!r}")
+
+    @property
+    def coop_weight(self) -> float:
+        """Weight of the coop point in the convoy overlap for ``convoy_strategy``."""
+        return {"weighted": self.w_coop, "mean": 0.5, "nearest": 1.0}[self.convoy_strategy]
+
+
+@dataclass(frozen=True)
+class FusionResult:
+    """Collectively perceived lane.
+
+    Fields:
+        left, right: fused borders, ``(N, 2)`` float64 in the *world* frame [m], ordered in
+            driving direction (the ego detection alone when ``kind == "none"``).
+        left_source, right_source: ``(N,)`` int8 per-point :class:`Source` labels.
+        kind: ``"convoy"``, ``"spline"`` or ``"none"`` (nothing fused).
+        gap_m: signed gap d_s between the ego end and the coop start on the centre line [m]
+            (its length, negative along the ego end heading for an overlap).
+        reason: why nothing was fused (empty when something was).
+    """
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+    left_source: NDArrayInt8
+    right_source: NDArrayInt8
+    kind: FusionKind
+    gap_m: float
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("left", "right", "left_source", "right_source"):
+            getattr(self, name).flags.writeable = False
