@@ -1,0 +1,418 @@
+"""Ground truth of detected lanes from a Lanelet2 map: lanelet matching at the sender's
+pose, the lanelet sequence the detection follows, and closest-point error metrics.
+
+Everything is in the map's local metric frame (x east, y north, yaw counter-clockwise
+from x), which is the world frame of the detections.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from gt_matching.config import MatchingConfig
+from gt_matching.errors import MatchingError
+from gt_matching.geometry import BorderIndex, LaneletGeometry, LaneletKey
+from gt_matching.metrics import BorderMetrics, LaneMetrics
+from gt_matching.polyline import (
+    NDArrayFloat,
+    angle_difference,
+    arc_lengths,
+    as_polyline,
+    closest_distances,
+    heading_at,
+)
+from gt_matching.route import RouteBorder
+
+#: More candidate lanelet sequences than this for one detection is an error.
+MAX_SEQUENCES: Final = 4096
+#: Assembled routes kept per ``GroundTruth`` (consecutive frames of a drive reuse them).
+ROUTE_CACHE_SIZE: Final = 256
+#: ``GroundTruth`` objects kept by ``match_lane``/``evaluate_lane``.
+GROUND_TRUTH_CACHE_SIZE: Final = 4
+#: A lanelet sequence fits a detection when at least this share of the detection's
+#: centreline samples lie within ``max_distance_m`` of the sequence's centreline.
+MIN_FIT_SHARE: Final = 0.5
+
+Pose = tuple[float, float, float]
+"""Sender pose (x m, y m, yaw rad), world frame."""
+
+
+@dataclass(frozen=True)
+class LaneMatch:
+    """The ground truth found for one detected lane.
+
+    Fields:
+        lanelet_ids: GT lanelets in driving order; their borders cover the detection plus
+            ``margin_m`` on both ends where the map allows.
+        left_gt: GT left border, ``(M, 2)`` world frame, m, in driving order.
+        right_gt: GT right border, ``(K, 2)`` world frame, m, in driving order.
+        pose_lanelet_ids: lanelets the sender's pose is on (several when ambiguous).
+        matched: False when the detection does not follow the sender's lane; the GT is
+            then the sender's lane that fits the detection best.
+        mismatch: why ``matched`` is False, else None.
+    """
+
+    lanelet_ids: tuple[int, ...]
+    left_gt: NDArrayFloat
+    right_gt: NDArrayFloat
+    pose_lanelet_ids: tuple[int, ...]
+    matched: bool
+    mismatch: str | None
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """A lanelet near the pose: its geometry, Lanelet2 matching distance (m), the pose's
+    arc length on its centreline (m), and whether it counts as the sender's lane."""
+
+    geometry: LaneletGeometry
+    distance_m: float
+    pose_arc_m: float
+    on_pose: bool
+
+
+@dataclass(frozen=True)
+class _Sequence:
+    """A scored lanelet sequence: lanelets in driving order, the candidate it starts from,
+    mean capped centreline distance of the detection (m), and the share of detection
+    samples within ``max_distance_m``."""
+
+    lanelets: tuple[LaneletGeometry, ...]
+    candidate: _Candidate
+    score_m: float
+    fit_share: float
+
+
+@dataclass(frozen=True)
+class _Route:
+    """Assembled GT borders of a lanelet sequence."""
+
+    keys: tuple[LaneletKey, ...]
+    left: RouteBorder
+    right: RouteBorder
+
+
+def _pose(pose: Sequence[float]) -> Pose:
+    try:
+        x, y, yaw = (float(v) for v in pose)
+    except (TypeError, ValueError) as exc:
+        raise MatchingError(f"pose {pose!r}: expected (x, y, yaw)") from exc
+    if not all(np.isfinite((x, y, yaw))):
+        raise MatchingError(f"pose (x={x}, y={y}, yaw={yaw}) is not finite")
+    return x, y, yaw
+
+
+def _describe(pose: Pose) -> str:
+    return f"(x={pose[0]:.3f} m, y={pose[1]:.3f} m, yaw={pose[2]:.4f} rad)"
+
+
+def _ids(lanelets: Sequence[LaneletGeometry]) -> tuple[int, ...]:
+    return tuple(g.key[0] for g in lanelets)
+
+
+def detection_centreline(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
+    """Mid-line of two borders, sampled at equal fractions of their lengths, about every
+    ``step_m`` of the longer border (at least 2 points), m."""
+    cum_left, cum_right = arc_lengths(left), arc_lengths(right)
+    count = max(2, int(np.ceil(max(cum_left[-1], cum_right[-1]) / step_m)) + 1)
+    fractions = np.linspace(0.0, 1.0, count)
+
+    def at_fractions(line: NDArrayFloat, cum: NDArrayFloat) -> NDArrayFloat:
+        s = fractions * cum[-1]
+        return np.column_stack((np.interp(s, cum, line[:, 0]), np.interp(s, cum, line[:, 1])))
+
+    return 0.5 * (at_fractions(left, cum_left) + at_fractions(right, cum_right))
+
+
+class GroundTruth:
+    """A Lanelet2 map prepared for matching detections: lanelet geometry, every border
+    resampled into a KD-tree, and assembled routes, all built once and reused per frame.
+
+    The map must not change after construction.
+    """
+
+    def __init__(
+        self,
+        lanelet_map: Any,
+        routing_graph: Any,
+        *,
+        traffic_rules: Any = None,
+        config: MatchingConfig | None = None,
+    ) -> None:
+        """``traffic_rules`` (default: Lanelet2 Germany, vehicle) should be those of
+        ``routing_graph``; they remove matches against the allowed driving direction."""
+        import lanelet2
+
+        self.lanelet_map = lanelet_map
+        self.routing_graph = routing_graph
+        self.config = config or MatchingConfig()
+        self.traffic_rules = traffic_rules or lanelet2.traffic_rules.create(
+            lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
+        )
+        self.borders = BorderIndex(lanelet_map, self.config.step_m)
+        self._geometry: dict[LaneletKey, LaneletGeometry] = {}
+        self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
+
+    def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:
+        """Ground truth of a detected lane given its borders (``(N, 2)``, world frame,
+        driving order) and the sender's pose (x, y, yaw)."""
+        left_xy, right_xy, pose_ = self._inputs(left, right, pose)
+        sequence, pose_ids, mismatch = self._select(left_xy, right_xy, pose_)
+        route = self._route(sequence.lanelets)
+        return LaneMatch(
+            lanelet_ids=_ids(sequence.lanelets),
+            left_gt=route.left.vertices,
+            right_gt=route.right.vertices,
+            pose_lanelet_ids=pose_ids,
+            matched=mismatch is None,
+            mismatch=mismatch,
+        )
+
+    def evaluate(
+        self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float], *, exact: bool = False
+    ) -> LaneMetrics:
+        """Closest-point error metrics of a detected lane against its ground truth.
+
+        ``exact`` False: distances to the GT resampled every ``config.step_m`` (the paper's
+        method, floor up to ``step_m / 2``); True: point-to-segment distances to the GT
+        polyline.
+        """
+        left_xy, right_xy, pose_ = self._inputs(left, right, pose)
+        sequence, _, mismatch = self._select(left_xy, right_xy, pose_)
+        route = self._route(sequence.lanelets)
+        config = self.config
+        metrics = []
+        for points, border in ((left_xy, route.left), (right_xy, route.right)):
+            found = border.distances(
+                points,
+                exact=exact,
+                other_margin_m=config.other_border_margin_m,
+                half_window=config.exact_half_window,
+            )
+            unmatched = (found.distances > config.max_distance_m) | found.other_closer
+            metrics.append(BorderMetrics.from_distances(found.distances, unmatched, found.arc_m[-1] - found.arc_m[0]))
+        if mismatch is None and (metrics[0].length_m < 0.0 or metrics[1].length_m < 0.0):
+            mismatch = f"detection runs against the driving direction of lanelets {_ids(sequence.lanelets)}"
+        return LaneMetrics(
+            left=metrics[0],
+            right=metrics[1],
+            lanelet_ids=_ids(sequence.lanelets),
+            matched=mismatch is None,
+            mismatch=mismatch,
+            exact=exact,
+            step_m=config.step_m,
+        )
+
+    def _inputs(
+        self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]
+    ) -> tuple[NDArrayFloat, NDArrayFloat, Pose]:
+        return as_polyline("left border", left), as_polyline("right border", right), _pose(pose)
+
+    def _lanelet(self, lanelet: Any) -> LaneletGeometry:
+        key = (int(lanelet.id), bool(lanelet.inverted()))
+        geometry = self._geometry.get(key)
+        if geometry is None:
+            geometry = self._geometry[key] = self.borders.lanelet_geometry(lanelet)
+        return geometry
+
+    def _candidates(self, pose: Pose) -> list[_Candidate]:
+        """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose."""
+        from lanelet2 import matching
+
+        config = self.config
+        obj = matching.Object2d(0, matching.Pose2d(*pose), [])
+        found = matching.getDeterministicMatches(self.lanelet_map, obj, config.search_radius_m)
+        found = matching.removeNonRuleCompliantMatches(found, self.traffic_rules)
+        if not found:
+            raise MatchingError(f"no lanelet within {config.search_radius_m} m of the pose {_describe(pose)}")
+        near: dict[LaneletKey, tuple[LaneletGeometry, float, float]] = {}
+        headings = []
+        for match in found:
+            geometry = self._lanelet(match.lanelet)
+            if geometry.key in near:
+                continue
+            _, arc = closest_distances(np.array([pose[:2]]), geometry.centre)
+            heading = heading_at(geometry.centre, float(arc[0]))
+            headings.append(f"{geometry.key[0]}: {heading:.3f} rad")
+            if angle_difference(heading, pose[2]) <= config.max_heading_diff_rad:
+                near[geometry.key] = (geometry, float(match.distance), float(arc[0]))
+        if not near:
+            raise MatchingError(
+                f"no lanelet within {config.search_radius_m} m of the pose {_describe(pose)} runs within "
+                f"{config.max_heading_diff_rad:.3f} rad of its yaw (lanelet headings {', '.join(headings)})"
+            )
+        nearest = min(distance for _, distance, _ in near.values())
+        return [
+            _Candidate(geometry, distance, arc, distance <= nearest + config.ambiguity_m)
+            for geometry, distance, arc in near.values()
+        ]
+
+    def _select(
+        self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose
+    ) -> tuple[_Sequence, tuple[int, ...], str | None]:
+        """The lanelet sequence to score against, the sender's lanelets, and a mismatch reason."""
+        config = self.config
+        candidates = self._candidates(pose)
+        centre = detection_centreline(left, right, config.score_step_m)
+        pose_gap, pose_arc = closest_distances(np.array([pose[:2]]), centre)
+        ahead_m = arc_lengths(centre)[-1] - pose_arc[0] + pose_gap[0] + config.margin_m
+        behind_m = pose_arc[0] + config.margin_m
+        memo: dict[LaneletKey, NDArrayFloat] = {}
+
+        def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:
+            found = memo.get(geometry.key)
+            if found is None:
+                found = memo[geometry.key] = closest_distances(centre, geometry.centre)[0]
+            return found
+
+        sequences = [
+            sequence
+            for candidate in candidates
+            for sequence in self._sequences(candidate, ahead_m, behind_m, centre_distances)
+        ]
+        order = sorted(range(len(sequences)), key=lambda i: (sequences[i].score_m, not sequences[i].candidate.on_pose))
+        best = sequences[order[0]]
+        own = next(sequences[i] for i in order if sequences[i].candidate.on_pose)
+        pose_ids = tuple(sorted(c.geometry.key[0] for c in candidates if c.on_pose))
+        mismatch = None
+        if not best.candidate.on_pose:
+            mismatch = (
+                f"detection follows lanelets {_ids(best.lanelets)}, not the lane of the sender at pose "
+                f"{_describe(pose)} (lanelets {pose_ids})"
+            )
+        elif own.fit_share < MIN_FIT_SHARE:
+            mismatch = (
+                f"detection is off the lane of the sender at pose {_describe(pose)}: only "
+                f"{own.fit_share:.0%} of its centreline lies within {config.max_distance_m} m of lanelets "
+                f"{_ids(own.lanelets)}"
+            )
+        return own, pose_ids, mismatch
+
+    def _sequences(
+        self,
+        candidate: _Candidate,
+        ahead_m: float,
+        behind_m: float,
+        centre_distances: Callable[[LaneletGeometry], NDArrayFloat],
+    ) -> list[_Sequence]:
+        """Scored lanelet sequences through ``candidate``: predecessors chosen greedily until
+        ``behind_m`` is covered, then every successor sequence (routing graph) that stays
+        near the detection until ``ahead_m`` is covered or the map ends."""
+        config = self.config
+        graph = self.routing_graph
+        cap = config.max_distance_m
+
+        def near(geometry: LaneletGeometry, taken: Sequence[LaneletGeometry]) -> bool:
+            return all(geometry.key != g.key for g in taken) and float(np.min(centre_distances(geometry))) <= cap
+
+        start = candidate.geometry
+        behind: list[LaneletGeometry] = []
+        covered = candidate.pose_arc_m
+        while covered < behind_m:
+            first = (behind or [start])[0]
+            previous = [g for g in map(self._lanelet, graph.previous(first.lanelet)) if near(g, [start, *behind])]
+            if not previous:
+                break
+            chosen = min(previous, key=lambda g: float(np.sum(np.minimum(centre_distances(g), cap))))
+            behind.insert(0, chosen)
+            covered += chosen.length_m
+        leaves: list[list[LaneletGeometry]] = []
+        stack = [([start], start.length_m - candidate.pose_arc_m)]
+        while stack:
+            path, covered = stack.pop()
+            following = []
+            if covered < ahead_m:
+                following = [g for g in map(self._lanelet, graph.following(path[-1].lanelet)) if near(g, behind + path)]
+            if not following:
+                leaves.append(path)
+                if len(leaves) > MAX_SEQUENCES:
+                    raise MatchingError(
+                        f"more than {MAX_SEQUENCES} lanelet sequences from lanelet {start.key[0]} fit the detection"
+                    )
+            stack.extend((path + [g], covered + g.length_m) for g in following)
+        scored = []
+        for path in leaves:
+            lanelets = tuple(behind + path)
+            distances = np.min([centre_distances(g) for g in lanelets], axis=0)
+            scored.append(
+                _Sequence(
+                    lanelets=lanelets,
+                    candidate=candidate,
+                    score_m=float(np.mean(np.minimum(distances, cap))),
+                    fit_share=float(np.mean(distances <= cap)),
+                )
+            )
+        return scored
+
+    def _route(self, lanelets: Sequence[LaneletGeometry]) -> _Route:
+        keys = tuple(g.key for g in lanelets)
+        route = self._routes.get(keys)
+        if route is None:
+            route = _Route(
+                keys=keys,
+                left=RouteBorder(self.borders, [(g.left_line, g.left_reversed) for g in lanelets]),
+                right=RouteBorder(self.borders, [(g.right_line, g.right_reversed) for g in lanelets]),
+            )
+            self._routes[keys] = route
+            if len(self._routes) > ROUTE_CACHE_SIZE:
+                self._routes.popitem(last=False)
+        else:
+            self._routes.move_to_end(keys)
+        return route
+
+
+_GROUND_TRUTHS: OrderedDict[tuple[int, int, MatchingConfig], tuple[Any, Any, GroundTruth]] = OrderedDict()
+
+
+def ground_truth_for(lanelet_map: Any, routing_graph: Any, config: MatchingConfig | None = None) -> GroundTruth:
+    """The cached ``GroundTruth`` of a map and routing graph (built on first use)."""
+    config = config or MatchingConfig()
+    key = (id(lanelet_map), id(routing_graph), config)
+    entry = _GROUND_TRUTHS.get(key)
+    if entry is None or entry[0] is not lanelet_map or entry[1] is not routing_graph:
+        entry = (lanelet_map, routing_graph, GroundTruth(lanelet_map, routing_graph, config=config))
+        _GROUND_TRUTHS[key] = entry
+        if len(_GROUND_TRUTHS) > GROUND_TRUTH_CACHE_SIZE:
+            _GROUND_TRUTHS.popitem(last=False)
+    _GROUND_TRUTHS.move_to_end(key)
+    return entry[2]
+
+
+def match_lane(
+    lanelet_map: Any,
+    routing_graph: Any,
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    pose: Sequence[float],
+    *,
+    config: MatchingConfig | None = None,
+) -> LaneMatch:
+    """Ground-truth lanelets and assembled GT borders of a detected lane (see ``GroundTruth.match``)."""
+    return ground_truth_for(lanelet_map, routing_graph, config).match(left, right, pose)
+
+
+def evaluate_lane(
+    lanelet_map: Any,
+    routing_graph: Any,
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    pose: Sequence[float],
+    *,
+    step: float | None = None,
+    exact: bool = False,
+    config: MatchingConfig | None = None,
+) -> LaneMetrics:
+    """Error metrics of one detected lane in one frame (see ``GroundTruth.evaluate``).
+
+    ``step`` (m) overrides ``config.step_m``, the GT resampling distance (default 0.02 m).
+    """
+    config = config or MatchingConfig()
+    if step is not None and step != config.step_m:
+        config = replace(config, step_m=step)
+    return ground_truth_for(lanelet_map, routing_graph, config).evaluate(left, right, pose, exact=exact)

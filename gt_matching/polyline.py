@@ -1,0 +1,120 @@
+"""Polyline primitives in the world frame: validation, arc length, resampling and
+vectorised closest-point distances to polyline segments."""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from gt_matching.errors import MatchingError
+
+NDArrayFloat = npt.NDArray[np.float64]
+NDArrayInt = npt.NDArray[np.int64]
+NDArrayBool = npt.NDArray[np.bool_]
+
+#: Segments shorter than this are treated as zero-length (a repeated vertex), m.
+ZERO_LENGTH_M: Final = 1e-12
+
+
+def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
+    """``points`` as a ``(N, 2)`` float64 polyline with N >= 2, finite and of positive length.
+
+    Raises ``MatchingError`` naming ``name`` otherwise.
+    """
+    try:
+        array = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MatchingError(f"{name}: not a numeric (N, 2) array ({exc})") from exc
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise MatchingError(f"{name}: expected an (N, 2) array, got shape {array.shape}")
+    if array.shape[0] < 2:
+        raise MatchingError(f"{name}: needs at least 2 points, got {array.shape[0]}")
+    if not np.all(np.isfinite(array)):
+        bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
+        raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
+    if arc_lengths(array)[-1] <= ZERO_LENGTH_M:
+        raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
+    return array
+
+
+def arc_lengths(polyline: NDArrayFloat) -> NDArrayFloat:
+    """Cumulative arc length at each vertex, m; starts at 0."""
+    seg = np.hypot(*np.diff(polyline, axis=0).T)
+    return np.concatenate(([0.0], np.cumsum(seg)))
+
+
+def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArrayInt]:
+    """Points every ``step_m`` along ``polyline`` (both ends included; the last gap may be
+    shorter) and, for each, the index of the segment it lies on. A zero-length polyline
+    gives its first point. ``polyline`` needs at least 2 vertices."""
+    cum = arc_lengths(polyline)
+    if cum[-1] <= ZERO_LENGTH_M:
+        return polyline[:1].copy(), np.zeros(1, dtype=np.int64)
+    s = np.arange(0.0, cum[-1], step_m)
+    if cum[-1] - s[-1] > ZERO_LENGTH_M:
+        s = np.append(s, cum[-1])
+    seg = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(polyline) - 2)
+    seg_len = cum[seg + 1] - cum[seg]
+    t = np.divide(s - cum[seg], seg_len, out=np.zeros_like(s), where=seg_len > ZERO_LENGTH_M)
+    points = polyline[seg] + np.clip(t, 0.0, 1.0)[:, None] * (polyline[seg + 1] - polyline[seg])
+    return points, seg.astype(np.int64)
+
+
+def segment_distances(
+    points: NDArrayFloat, vertices: NDArrayFloat, segments: NDArrayInt
+) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Closest-point distance of each point to a set of candidate segments of ``vertices``.
+
+    ``segments`` is ``(N, K)``: for point i the indices of K candidate segments
+    (segment j joins vertex j and j + 1). Returns the smallest distance per point, m,
+    and the arc length along ``vertices`` of the closest point, m.
+    """
+    cum = arc_lengths(vertices)
+    start = vertices[segments]
+    delta = vertices[segments + 1] - start
+    length_sq = np.einsum("nkd,nkd->nk", delta, delta)
+    rel = points[:, None, :] - start
+    dot = np.einsum("nkd,nkd->nk", rel, delta)
+    t = np.clip(np.divide(dot, length_sq, out=np.zeros_like(dot), where=length_sq > 0.0), 0.0, 1.0)
+    gap = rel - t[..., None] * delta
+    dist = np.hypot(gap[..., 0], gap[..., 1])
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(len(points))
+    best_seg = segments[rows, best]
+    s = cum[best_seg] + t[rows, best] * np.sqrt(length_sq[rows, best])
+    return dist[rows, best], s
+
+
+def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Exact closest-point distance (m) and arc length (m) of each point on ``vertices``,
+    brute force over all segments: O(N * M), for short inputs."""
+    all_segments = np.broadcast_to(np.arange(len(vertices) - 1), (len(points), len(vertices) - 1))
+    return segment_distances(points, vertices, all_segments)
+
+
+def windowed_distances(
+    points: NDArrayFloat, vertices: NDArrayFloat, near_segment: NDArrayInt, half_window: int
+) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Exact closest-point distance (m) and arc length (m) of each point on ``vertices``,
+    searching the ``half_window`` segments on either side of ``near_segment`` (per point)."""
+    offsets = np.arange(-half_window, half_window + 1)
+    segments = np.clip(near_segment[:, None] + offsets, 0, len(vertices) - 2)
+    return segment_distances(points, vertices, segments)
+
+
+def heading_at(polyline: NDArrayFloat, s: float) -> float:
+    """Direction (rad, counter-clockwise from x) of the segment at arc length ``s``."""
+    cum = arc_lengths(polyline)
+    seg_len = np.diff(cum)
+    seg = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(polyline) - 2))
+    while seg_len[seg] <= ZERO_LENGTH_M and seg > 0:
+        seg -= 1
+    dx, dy = polyline[seg + 1] - polyline[seg]
+    return float(np.arctan2(dy, dx))
+
+
+def angle_difference(a: float, b: float) -> float:
+    """|a - b| wrapped to [0, pi], rad."""
+    return abs((a - b + np.pi) % (2.0 * np.pi) - np.pi)
