@@ -1,0 +1,478 @@
+"""The output of an evaluation run: ``metrics.json``, ``summary.md`` and ``frames.csv``.
+
+``metrics.json`` schema (version 1)::
+
+    {
+      "schema_version": 1,
+      "partial": false,              # true when the run was interrupted
+      "scenarios": [                 # one per map x fusion x interpolation x d_s x boundary
+        {
+          "map": "Town04",           # map name (file stem)
+          "fusion": "spline",        # "local" (ego only, the paper's l_ego) | "convoy" | "spline"
+          "interpolation": "paper",  # interpolation variant of the spline ("" when not used)
+          "d_s": 20.0,               # interpolation distance (m); 0 for local and convoy
+          "boundary": "left",        # "left" | "right" lane border, seen in driving direction
+          "points": 12345,           # error samples pooled over all fused frames
+          "mean_error_m": 0.02,      # mean closest-point distance to GT (the paper's "MSE", eq. 1)
+          "rmse_m": 0.05,            # root mean square of the same distances
+          "max_error_m": 0.6,        # largest distance over the run
+          "p95_error_m": 0.1,        # 95th percentile (linear interpolation) of the distances
+          "mean_frame_max_error_m": 0.11,  # per-frame maximum, averaged over fused frames
+          "perception_range_m": 80.0,      # mean length of the evaluated lane over fused frames
+          "frames": 300,             # evaluations: frames x vehicle pairs
+          "fused_frames": 280,       # evaluations that produced a lane
+          "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
+          "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
+          "fusibility": {"precision": 0.98, "recall": 1.0}     # fusibility check vs GT
+        }
+      ]
+    }
+
+Errors are pooled point distances (not averages of per-frame averages). A value that does
+not exist (no fused frame, no runtime measured, no fusibility decision) is ``null``.
+Every file is written to a temporary name and renamed, so none is ever half-written.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final, Iterable, Literal, Mapping, Sequence
+
+import numpy as np
+
+from cold_maps.lane_strip import NDArrayFloat
+
+Fusion = Literal["local", "convoy", "spline"]
+Boundary = Literal["left", "right"]
+RoadType = Literal["straight", "right_curve_90", "rural"]
+FUSIONS: Final[tuple[str, ...]] = ("local", "convoy", "spline")
+BOUNDARIES: Final[tuple[str, ...]] = ("left", "right")
+METRICS_SCHEMA_VERSION: Final[int] = 1
+P95_PERCENT: Final[float] = 95.0
+
+# The paper's results (cold-fusion-paper.tex, sec. IV "Results"). Table II: per road type and
+# method, (mean error m, max error m) for the left and right border. The paper's "MSE" is
+# its eq. 1, the mean of |P_s - P_GT|, i.e. our mean_error_m. Methods: "local" = l_ego,
+# "convoy" / "spline" = l_coll. The spline used d_s = 30 m on the straight lane and
+# d_s = 20 m on the 90° curve and the rural road (sec. IV-B text).
+PAPER_TABLE_II: Final[Mapping[tuple[str, str], Mapping[str, tuple[float, float]]]] = {
+    ("straight", "local"): {"left": (0.005, 0.010), "right": (0.005, 0.011)},
+    ("straight", "convoy"): {"left": (0.005, 0.010), "right": (0.005, 0.011)},
+    ("straight", "spline"): {"left": (0.005, 0.027), "right": (0.005, 0.028)},
+    ("right_curve_90", "local"): {"left": (0.005, 0.010), "right": (0.005, 0.011)},
+    ("right_curve_90", "convoy"): {"left": (0.005, 0.010), "right": (0.005, 0.011)},
+    ("right_curve_90", "spline"): {"left": (0.029, 0.693), "right": (0.030, 0.707)},
+    ("rural", "local"): {"left": (0.005, 0.010), "right": (0.005, 0.010)},
+    ("rural", "convoy"): {"left": (0.005, 0.010), "right": (0.005, 0.010)},
+    ("rural", "spline"): {"left": (0.023, 0.560), "right": (0.020, 0.572)},
+}
+# Table II, last row: perception range (m) per method, (low, high).
+PAPER_PERCEPTION_RANGE_M: Final[Mapping[str, tuple[float, float]]] = {
+    "local": (30.0, 30.0), "convoy": (55.0, 55.0), "spline": (80.0, 90.0)}
+PAPER_SPLINE_D_S_M: Final[Mapping[str, float]] = {"straight": 30.0, "right_curve_90": 20.0, "rural": 20.0}
+# Table I: fusion runtime (ms) on the rural road, 300 frames: (mean, σ, max).
+PAPER_TABLE_I_MS: Final[Mapping[str, tuple[float, float, float]]] = {
+    "convoy": (2.23, 0.42, 3.66), "spline": (3.62, 0.70, 6.62)}
+
+FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
+    "map", "fusion", "interpolation", "d_s", "boundary", "frame", "stamp_s", "ego", "coop", "fused",
+    "rejected", "points", "mean_error_m", "max_error_m", "perception_range_m", "runtime_ms",
+    "predicted_fusible", "truly_fusible")
+
+
+class ReportError(ValueError):
+    """A report that cannot be built, written or read; the message names the thing."""
+
+
+def _finite_or_none(value: float) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def _none_to_nan(value: Any, where: str) -> float:
+    if value is None:
+        return math.nan
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ReportError(f"{where}: expected a number or null, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True, slots=True)
+class ScenarioKey:
+    """What a scenario evaluates.
+
+    Fields:
+        map: map name (usually the file stem).
+        fusion: "local" (ego only), "convoy" or "spline".
+        interpolation: spline interpolation variant ("" when not used).
+        d_s: interpolation distance (m), 0 when not used.
+        boundary: "left" or "right" border in driving direction.
+    """
+
+    map: str
+    fusion: str
+    interpolation: str
+    d_s: float
+    boundary: str
+
+    def __post_init__(self) -> None:
+        if self.fusion not in FUSIONS:
+            raise ReportError(f"fusion: expected one of {FUSIONS}, got {self.fusion!r}")
+        if self.boundary not in BOUNDARIES:
+            raise ReportError(f"boundary: expected one of {BOUNDARIES}, got {self.boundary!r}")
+        if not isinstance(self.d_s, (int, float)) or not math.isfinite(self.d_s) or self.d_s < 0:
+            raise ReportError(f"d_s: expected a finite distance >= 0 m, got {self.d_s!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRecord:
+    """One evaluation: one frame, one vehicle pair, one scenario.
+
+    Fields:
+        frame: frame index.
+        stamp_s: frame time (s).
+        ego, coop: vehicle ids ("" for coop when the fusion is local).
+        errors_m: closest-point distances (m) of the evaluated lane's points to the GT;
+            empty when no lane was produced.
+        perception_range_m: length of the evaluated lane (m), NaN when none.
+        runtime_ms: fusion runtime (ms), NaN when not measured.
+        rejected: why no lane was produced ("" when one was).
+        predicted_fusible: the fusibility check's decision, None when not applicable.
+        truly_fusible: whether the pair is fusible by the ground truth, None when unknown.
+    """
+
+    frame: int
+    stamp_s: float
+    ego: str
+    coop: str
+    errors_m: NDArrayFloat
+    perception_range_m: float = math.nan
+    runtime_ms: float = math.nan
+    rejected: str = ""
+    predicted_fusible: bool | None = None
+    truly_fusible: bool | None = None
+
+    def __post_init__(self) -> None:
+        errors = np.asarray(self.errors_m, dtype=np.float64)
+        if errors.ndim != 1 or not np.all(np.isfinite(errors)) or np.any(errors < 0):
+            raise ReportError(f"frame {self.frame}: errors_m must be a 1-D array of finite distances >= 0")
+        if errors.size and self.rejected:
+            raise ReportError(f"frame {self.frame}: an evaluation with a lane cannot be rejected ({self.rejected!r})")
+        object.__setattr__(self, "errors_m", errors)
+
+    @property
+    def fused(self) -> bool:
+        """Whether this evaluation produced a lane (it has error samples)."""
+        return len(self.errors_m) > 0
+
+
+@dataclass(frozen=True, slots=True)
+class RuntimeStats:
+    """Runtime over a scenario's evaluations (ms): mean, sample standard deviation, max."""
+
+    mean: float
+    std: float
+    max: float
+
+
+@dataclass(frozen=True, slots=True)
+class ScenarioResult:
+    """Aggregated result of one scenario; the fields of one ``metrics.json`` record.
+
+    Fields:
+        key: the scenario (map, fusion, interpolation, d_s, boundary).
+        points: error samples pooled over all fused evaluations.
+        mean_error_m, rmse_m, max_error_m, p95_error_m: statistics of the pooled
+            closest-point distances (m); NaN without samples.
+        mean_frame_max_error_m: per-evaluation maximum error averaged over fused ones (m).
+        perception_range_m: mean evaluated lane length over fused evaluations (m).
+        frames: evaluations (frames x vehicle pairs).
+        fused_frames: evaluations that produced a lane.
+        rejected: (reason, count) of evaluations without a lane, sorted by reason.
+        runtime_ms: fusion runtime statistics (ms).
+        fusibility_precision, fusibility_recall: the fusibility check against the GT;
+            NaN when undefined.
+    """
+
+    key: ScenarioKey
+    points: int
+    mean_error_m: float
+    rmse_m: float
+    max_error_m: float
+    p95_error_m: float
+    mean_frame_max_error_m: float
+    perception_range_m: float
+    frames: int
+    fused_frames: int
+    rejected: tuple[tuple[str, int], ...]
+    runtime_ms: RuntimeStats
+    fusibility_precision: float
+    fusibility_recall: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``metrics.json`` record (NaN as null)."""
+        f = _finite_or_none
+        return {
+            "map": self.key.map, "fusion": self.key.fusion, "interpolation": self.key.interpolation,
+            "d_s": self.key.d_s, "boundary": self.key.boundary, "points": self.points,
+            "mean_error_m": f(self.mean_error_m), "rmse_m": f(self.rmse_m), "max_error_m": f(self.max_error_m),
+            "p95_error_m": f(self.p95_error_m), "mean_frame_max_error_m": f(self.mean_frame_max_error_m),
+            "perception_range_m": f(self.perception_range_m), "frames": self.frames,
+            "fused_frames": self.fused_frames, "rejected": dict(self.rejected),
+            "runtime_ms": {"mean": f(self.runtime_ms.mean), "std": f(self.runtime_ms.std),
+                           "max": f(self.runtime_ms.max)},
+            "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall)},
+        }
+
+    @classmethod
+    def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
+        """The inverse of :meth:`to_dict`; ReportError naming ``where`` and the key otherwise."""
+        try:
+            d_s = _none_to_nan(record["d_s"], f"{where}.d_s")
+            try:
+                key = ScenarioKey(str(record["map"]), str(record["fusion"]), str(record["interpolation"]), d_s,
+                                  str(record["boundary"]))
+            except ReportError as exc:
+                raise ReportError(f"{where}: {exc}") from exc
+            num = {name: _none_to_nan(record[name], f"{where}.{name}") for name in (
+                "mean_error_m", "rmse_m", "max_error_m", "p95_error_m", "mean_frame_max_error_m",
+                "perception_range_m")}
+            runtime = RuntimeStats(*(_none_to_nan(record["runtime_ms"][k], f"{where}.runtime_ms.{k}")
+                                     for k in ("mean", "std", "max")))
+            rejected = tuple(sorted((str(k), int(v)) for k, v in record["rejected"].items()))
+            return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
+                       fused_frames=int(record["fused_frames"]), rejected=rejected, runtime_ms=runtime,
+                       fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
+                       fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
+                       **num)
+        except ReportError:
+            raise
+        except KeyError as exc:
+            raise ReportError(f"{where}: missing key {exc.args[0]!r}") from exc
+        except (TypeError, AttributeError, ValueError) as exc:
+            raise ReportError(f"{where}: malformed record: {exc}") from exc
+
+
+def _ratio(numerator: int, denominator: int) -> float:
+    return numerator / denominator if denominator else math.nan
+
+
+@dataclass
+class ScenarioAccumulator:
+    """Collects the :class:`FrameRecord` s of one scenario and aggregates them.
+
+    Fields:
+        key: the scenario.
+        records: the evaluations added so far, in order.
+    """
+
+    key: ScenarioKey
+    records: list[FrameRecord] = field(default_factory=list)
+
+    def add(self, record: FrameRecord) -> None:
+        """Adds one evaluation."""
+        self.records.append(record)
+
+    def result(self) -> ScenarioResult:
+        """The aggregate over all records (pooled distances, see the module docstring)."""
+        fused = [r for r in self.records if r.fused]
+        errors = np.concatenate([r.errors_m for r in fused]) if fused else np.empty(0)
+        nan = math.nan
+        ranges = [r.perception_range_m for r in fused if math.isfinite(r.perception_range_m)]
+        runtimes = np.array([r.runtime_ms for r in self.records if math.isfinite(r.runtime_ms)])
+        decided = [(r.predicted_fusible, r.truly_fusible) for r in self.records
+                   if r.predicted_fusible is not None and r.truly_fusible is not None]
+        true_positive = sum(p and t for p, t in decided)
+        return ScenarioResult(
+            key=self.key,
+            points=int(errors.size),
+            mean_error_m=float(errors.mean()) if errors.size else nan,
+            rmse_m=float(np.sqrt(np.mean(errors**2))) if errors.size else nan,
+            max_error_m=float(errors.max()) if errors.size else nan,
+            p95_error_m=float(np.percentile(errors, P95_PERCENT)) if errors.size else nan,
+            mean_frame_max_error_m=float(np.mean([r.errors_m.max() for r in fused])) if fused else nan,
+            perception_range_m=float(np.mean(ranges)) if ranges else nan,
+            frames=len(self.records),
+            fused_frames=len(fused),
+            rejected=tuple(sorted(Counter(r.rejected for r in self.records if r.rejected).items())),
+            runtime_ms=RuntimeStats(
+                mean=float(runtimes.mean()) if runtimes.size else nan,
+                std=float(runtimes.std(ddof=1)) if runtimes.size > 1 else nan,
+                max=float(runtimes.max()) if runtimes.size else nan),
+            fusibility_precision=_ratio(true_positive, sum(p for p, _ in decided)),
+            fusibility_recall=_ratio(true_positive, sum(t for _, t in decided)),
+        )
+
+    def csv_rows(self) -> list[dict[str, Any]]:
+        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`)."""
+        def flag(value: bool | None) -> str:
+            return "" if value is None else str(int(value))
+
+        def number(value: float) -> str:
+            return "" if not math.isfinite(value) else repr(float(value))
+
+        return [{
+            "map": self.key.map, "fusion": self.key.fusion, "interpolation": self.key.interpolation,
+            "d_s": repr(float(self.key.d_s)), "boundary": self.key.boundary, "frame": r.frame,
+            "stamp_s": number(r.stamp_s), "ego": r.ego, "coop": r.coop, "fused": int(r.fused),
+            "rejected": r.rejected, "points": len(r.errors_m),
+            "mean_error_m": number(float(np.mean(r.errors_m))) if r.fused else "",
+            "max_error_m": number(float(np.max(r.errors_m))) if r.fused else "",
+            "perception_range_m": number(r.perception_range_m), "runtime_ms": number(r.runtime_ms),
+            "predicted_fusible": flag(r.predicted_fusible), "truly_fusible": flag(r.truly_fusible),
+        } for r in self.records]
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
+    """Writes ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    try:
+        handle, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise ReportError(f"{path}: cannot write: {exc.strerror}") from exc
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8", newline="") as stream:
+            stream.write(text)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
+
+
+def metrics_document(results: Sequence[ScenarioResult], *, partial: bool = False) -> dict[str, Any]:
+    """The ``metrics.json`` document (see the module docstring)."""
+    return {"schema_version": METRICS_SCHEMA_VERSION, "partial": bool(partial),
+            "scenarios": [r.to_dict() for r in results]}
+
+
+def write_metrics_json(path: str | os.PathLike[str], results: Sequence[ScenarioResult], *, partial: bool = False) -> None:
+    """Writes ``metrics.json`` atomically."""
+    atomic_write_text(path, json.dumps(metrics_document(results, partial=partial), indent=2, allow_nan=False) + "\n")
+
+
+def read_metrics_json(path: str | os.PathLike[str]) -> tuple[list[ScenarioResult], bool]:
+    """The scenarios and the partial flag of a ``metrics.json``; ReportError naming the file."""
+    path = Path(path)
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ReportError(f"{path}: cannot read: {exc.strerror}") from exc
+    except ValueError as exc:
+        raise ReportError(f"{path}: not JSON: {exc}") from exc
+    if not isinstance(document, dict) or not isinstance(document.get("scenarios"), list):
+        raise ReportError(f"{path}: expected an object with a 'scenarios' list")
+    if document.get("schema_version") != METRICS_SCHEMA_VERSION:
+        raise ReportError(f"{path}: schema_version {document.get('schema_version')!r}, "
+                          f"expected {METRICS_SCHEMA_VERSION}")
+    results = [ScenarioResult.from_dict(r, f"{path}: scenarios[{i}]") for i, r in enumerate(document["scenarios"])]
+    return results, bool(document.get("partial", False))
+
+
+def write_frames_csv(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
+    """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) atomically."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for accumulator in accumulators:
+        writer.writerows(accumulator.csv_rows())
+    atomic_write_text(path, buffer.getvalue())
+
+
+def _fmt(value: float, digits: int = 3) -> str:
+    return "–" if not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
+    k = result.key
+    return k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, BOUNDARIES.index(k.boundary)
+
+
+def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
+                     road_types: Mapping[str, str] | None = None) -> str:
+    """``summary.md``: one row per scenario (like the paper's Table II), then, for maps
+    named in ``road_types`` (map -> paper road type), the side-by-side with the paper."""
+    parts = ["# cold-eval summary\n"]
+    if partial:
+        parts.append("\n**PARTIAL RUN: interrupted; the figures cover only the frames evaluated.**\n")
+    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "RMSE [m]", "max [m]", "p95 [m]",
+              "range [m]", "fused / frames", "rejected", "fus. precision", "fus. recall",
+              "runtime mean / σ / max [ms]"]
+    rows = []
+    for r in sorted(results, key=_sort_key):
+        k = r.key
+        rejected = ", ".join(f"{reason}: {count}" for reason, count in r.rejected) or "–"
+        rows.append([k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1), k.boundary, _fmt(r.mean_error_m),
+                     _fmt(r.rmse_m), _fmt(r.max_error_m), _fmt(r.p95_error_m), _fmt(r.perception_range_m, 1),
+                     f"{r.fused_frames} / {r.frames}", rejected, _fmt(r.fusibility_precision),
+                     _fmt(r.fusibility_recall), " / ".join(_fmt(v, 2) for v in
+                                                          (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max))])
+    parts += ["\n## Results per scenario\n\n", _table(header, rows)]
+    if road_types:
+        parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
+    return "".join(parts)
+
+
+def paper_comparison_markdown(results: Sequence[ScenarioResult], road_types: Mapping[str, str]) -> str:
+    """Side-by-side tables of our results and the paper's Table II (errors, range) and
+    Table I (runtime), for the maps in ``road_types`` (map -> "straight" |
+    "right_curve_90" | "rural")."""
+    for name, road in road_types.items():
+        if road not in PAPER_SPLINE_D_S_M:
+            raise ReportError(f"road type of map {name!r}: expected one of {tuple(PAPER_SPLINE_D_S_M)}, got {road!r}")
+    error_rows, runtime_rows = [], []
+    for r in sorted(results, key=_sort_key):
+        road = road_types.get(r.key.map)
+        if road is None:
+            continue
+        paper_mean, paper_max = PAPER_TABLE_II[(road, r.key.fusion)][r.key.boundary]
+        low, high = PAPER_PERCEPTION_RANGE_M[r.key.fusion]
+        paper_d_s = _fmt(PAPER_SPLINE_D_S_M[road], 1) if r.key.fusion == "spline" else "–"
+        error_rows.append([r.key.map, road, r.key.fusion, _fmt(r.key.d_s, 1), paper_d_s, r.key.boundary,
+                           _fmt(r.mean_error_m), _fmt(paper_mean), _fmt(r.max_error_m), _fmt(paper_max),
+                           _fmt(r.perception_range_m, 1), f"{low:.0f}" if low == high else f"{low:.0f}–{high:.0f}"])
+        if r.key.fusion in PAPER_TABLE_I_MS:
+            ours = (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max)
+            runtime_rows.append([r.key.map, r.key.fusion, _fmt(r.key.d_s, 1), r.key.boundary,
+                                 " / ".join(_fmt(v, 2) for v in ours),
+                                 " / ".join(_fmt(v, 2) for v in PAPER_TABLE_I_MS[r.key.fusion])])
+    errors = _table(["map", "road type", "fusion", "d_s [m]", "paper d_s [m]", "boundary", "mean [m]",
+                     "paper mean [m]", "max [m]", "paper max [m]", "range [m]", "paper range [m]"], error_rows)
+    runtime = _table(["map", "fusion", "d_s [m]", "boundary", "runtime mean / σ / max [ms]",
+                      "paper Table I [ms]"], runtime_rows)
+    return ("Paper: Table II (mean = its eq. 1 \"MSE\", max) and Table I (runtime, rural road, "
+            "AMD Ryzen 7 5700X).\n\n" + errors + "\n" + runtime)
+
+
+def write_summary_md(path: str | os.PathLike[str], results: Sequence[ScenarioResult], *, partial: bool = False,
+                     road_types: Mapping[str, str] | None = None) -> None:
+    """Writes ``summary.md`` atomically (see :func:`summary_markdown`)."""
+    atomic_write_text(path, summary_markdown(results, partial=partial, road_types=road_types))
+
+
+def write_report(out_dir: str | os.PathLike[str], accumulators: Sequence[ScenarioAccumulator], *,
+                 partial: bool = False, road_types: Mapping[str, str] | None = None) -> list[ScenarioResult]:
+    """Writes ``metrics.json``, ``summary.md`` and ``frames.csv`` into ``out_dir``; returns
+    the results. ``partial`` marks the report of an interrupted run."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        raise ReportError(f"{out}: output folder does not exist")
+    results = [a.result() for a in accumulators]
+    write_frames_csv(out / "frames.csv", accumulators)
+    write_summary_md(out / "summary.md", results, partial=partial, road_types=road_types)
+    write_metrics_json(out / "metrics.json", results, partial=partial)
+    return results
