@@ -1,0 +1,274 @@
+"""``cold-maps``: command-line tools on OpenDRIVE maps.
+
+Subcommands live in ``COMMANDS``, a table of (name, help, configure, run); a new
+subcommand is one more entry. Every failure (unreadable or invalid map, I/O error, bad
+argument) ends with exit status 1 (2 for usage errors) and ONE line on stderr, never a
+traceback. Output files are written to a temporary file in the target folder and renamed
+into place, so a failure leaves no partial file.
+
+``info`` and ``export`` import only numpy and the map engine (no converter, no plotting).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import sys
+import tempfile
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Final, Iterator, Sequence, TextIO
+
+import numpy as np
+
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.model import OpenDriveMap
+
+PROG: Final[str] = "cold-maps"
+CSV_HEADER: Final[tuple[str, ...]] = ("road_id", "section", "lane_id", "side", "s", "x", "y", "z")
+COORDINATE_DECIMALS: Final[int] = 4
+"""Decimals of s, x, y, z (m) in exports: 0.1 mm."""
+EXPORT_LANE_TYPES: Final[tuple[str, ...]] = ("driving",)
+
+
+class UsageError(Exception):
+    """A bad command line (reported as one line, exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are exceptions, so main() prints them as one line."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+@dataclass(frozen=True)
+class Command:
+    """One subcommand.
+
+    Fields:
+        name: the word on the command line.
+        help: one-line description.
+        configure: adds the subcommand's arguments to its parser.
+        run: executes it and returns the exit status.
+    """
+
+    name: str
+    help: str
+    configure: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def _load(path: str) -> OpenDriveMap:
+    from cold_maps.opendrive.parser import load_opendrive
+
+    return load_opendrive(path)
+
+
+def _configure_info(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    print("\n".join(map_info(_load(args.map))))
+    return 0
+
+
+def map_info(odr_map: OpenDriveMap) -> list[str]:
+    """Summary lines of a map: header, roads, sections, lanes, junctions, geometry."""
+    from cold_maps.lane_graph import build_lane_graph
+
+    header = odr_map.header
+    roads = odr_map.roads.values()
+    sections = [section for road in roads for section in road.lane_sections]
+    lane_types = Counter(lane.type for section in sections for lane in section.lanes)
+    geometry = Counter(g.kind for road in roads for g in road.plan_view)
+    connections = sum(len(j.connections) for j in odr_map.junctions.values())
+    graph = build_lane_graph(odr_map, EXPORT_LANE_TYPES)
+    geo = header.geo_reference
+    rules = Counter(road.rule for road in roads)
+    return [
+        f"map: {odr_map.path or '<input>'}",
+        f"revision: {header.rev_major}.{header.rev_minor}",
+        f"name: {header.name or '-'}",
+        f"vendor: {header.vendor or '-'}",
+        f"geoReference: {geo.proj or '-'}",
+        f"offset: x={geo.offset_x:g} y={geo.offset_y:g} z={geo.offset_z:g} hdg={geo.offset_hdg:g}",
+        f"roads: {len(odr_map.roads)} ({sum(1 for r in roads if r.junction != '-1')} in junctions), "
+        f"{sum(r.length for r in roads) / 1000:.3f} km of reference line",
+        f"traffic rule: {_counts(rules)}",
+        f"lane sections: {len(sections)}",
+        f"lanes: {sum(lane_types.values())} ({_counts(lane_types)})",
+        f"driving lanes: {sum(graph.lengths.values()) / 1000:.3f} km",
+        f"junctions: {len(odr_map.junctions)}",
+        f"connections: {connections}",
+        f"geometry: {_counts(geometry)}",
+        f"lane graph: {len(graph.lanes)} driving lanes, {sum(1 for _ in graph.edges())} links, "
+        f"{len(graph.issues)} issues",
+    ]
+
+
+def _counts(counter: Counter[str]) -> str:
+    return ", ".join(f"{name} {count}" for name, count in sorted(counter.items())) or "-"
+
+
+def _positive_step(text: str) -> float:
+    try:
+        step = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"step must be a number of metres, got {text!r}") from None
+    if not (math.isfinite(step) and step > 0):
+        raise argparse.ArgumentTypeError(f"step must be a finite length > 0 m, got {text!r}")
+    return step
+
+
+def _configure_export(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
+    parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
+    parser.add_argument("--format", choices=("csv", "geojson"), default="csv")
+    parser.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
+
+
+@dataclass(frozen=True)
+class BorderPolyline:
+    """One border of one driving lane, in the lane's driving direction.
+
+    Fields:
+        road_id, section, lane_id: the lane (section = 0-based lane-section index).
+        side: "left" or "right", seen in the driving direction.
+        s: (N,) road s (m) of the points.
+        xyz: (N, 3) points in the OpenDRIVE inertial frame (m).
+    """
+
+    road_id: str
+    section: int
+    lane_id: int
+    side: str
+    s: NDArrayFloat
+    xyz: NDArrayFloat
+
+
+def lane_border_polylines(odr_map: OpenDriveMap, step: float) -> Iterator[BorderPolyline]:
+    """Left then right border of every driving lane, road by road, section by section."""
+    from cold_maps.opendrive.sampling import sample_road
+    from cold_maps.route import borders_in_driving_direction
+
+    for road in odr_map.roads.values():
+        for samples in sample_road(road, step=step, lane_types=EXPORT_LANE_TYPES):
+            s, left, right = borders_in_driving_direction(road, samples)
+            for side, xyz in (("left", left), ("right", right)):
+                yield BorderPolyline(road.id, samples.section, samples.lane_id, side, s, xyz)
+
+
+def _write_csv(borders: Iterator[BorderPolyline], out: TextIO) -> None:
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(CSV_HEADER)
+    fmt = f"%.{COORDINATE_DECIMALS}f"
+    for border in borders:
+        label = io.StringIO()
+        csv.writer(label, lineterminator="").writerow(
+            (border.road_id, border.section, border.lane_id, border.side, "")
+        )
+        values = np.column_stack((border.s, border.xyz))
+        rows = io.StringIO()
+        np.savetxt(rows, values, fmt=fmt, delimiter=",")
+        out.writelines(label.getvalue() + line + "\n" for line in rows.getvalue().splitlines())
+
+
+def _write_geojson(borders: Iterator[BorderPolyline], out: TextIO) -> None:
+    features = [
+        {
+            "type": "Feature",
+            "geometry": {
+                "type": "LineString",
+                "coordinates": np.round(border.xyz, COORDINATE_DECIMALS).tolist(),
+            },
+            "properties": {
+                "road_id": border.road_id,
+                "section": border.section,
+                "lane_id": border.lane_id,
+                "side": border.side,
+                "s": np.round(border.s, COORDINATE_DECIMALS).tolist(),
+            },
+        }
+        for border in borders
+    ]
+    json.dump({"type": "FeatureCollection", "features": features}, out, separators=(",", ":"))
+    out.write("\n")
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    odr_map = _load(args.map)
+    borders = lane_border_polylines(odr_map, args.step)
+    write = _write_csv if args.format == "csv" else _write_geojson
+    write_atomically(Path(args.output), lambda out: write(borders, out))
+    return 0
+
+
+def write_atomically(path: Path, write: Callable[[TextIO], None]) -> None:
+    """Write a text file through a temporary file in its folder, renamed into place.
+
+    The folder is created when missing; on any failure the temporary file is removed and
+    ``path`` is left as it was.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as out:
+            write(out)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temp, 0o666 & ~umask)
+        os.replace(temp, path)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
+
+
+COMMANDS: Final[tuple[Command, ...]] = (
+    Command("info", "summarise a map: roads, lanes, junctions, geometry", _configure_info, _run_info),
+    Command(
+        "export",
+        "write every border of every driving lane (csv or geojson)",
+        _configure_export,
+        _run_export,
+    ),
+)
+
+
+def build_parser(commands: Sequence[Command] = COMMANDS) -> argparse.ArgumentParser:
+    """The argument parser with one subparser per command."""
+    parser = _Parser(prog=PROG, description="Tools on OpenDRIVE maps for collective lane detection.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for command in commands:
+        configure = sub.add_parser(command.name, help=command.help, description=command.help)
+        command.configure(configure)
+        configure.set_defaults(run=command.run)
+    return parser
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``cold-maps``; returns the exit status."""
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.run(args))
+    except UsageError as exc:
+        print(_one_line(exc), file=sys.stderr)
+        return 2
+    except (OpenDriveError, OSError, ValueError) as exc:
+        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+"""``cold-maps`` CLI: info and export (CSV, GeoJSON), one-line errors, atomic output."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import PROJECT_ROOT, bundled_map
+from graph_maps import JUNCTION_RADIUS_M, LANE_WIDTH_M, junction_map
+
+from cold_maps import cli
+from cold_maps.cli import CSV_HEADER, main, map_info
+from cold_maps.opendrive.parser import load_opendrive
+
+ROAD_X0, ROAD_Y0, ROAD_LENGTH = 10.0, 20.0, 50.0
+Z0, Z_SLOPE = 1.5, 0.01
+
+
+def straight_xodr(rule: str) -> str:
+    """A 50 m road from (10, 20) along +x, lanes 1 and -1 (3.5 m), sidewalk -2, z = 1.5 + 0.01 s."""
+    lane = '<lane id="{id}" type="{type}" level="false"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>'
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<OpenDRIVE>
+  <header revMajor="1" revMinor="6" name="straight" vendor="test"/>
+  <road name="r" length="{ROAD_LENGTH}" id="7" junction="-1" rule="{rule}">
+    <planView><geometry s="0" x="{ROAD_X0}" y="{ROAD_Y0}" hdg="0" length="{ROAD_LENGTH}"><line/></geometry></planView>
+    <elevationProfile><elevation s="0" a="{Z0}" b="{Z_SLOPE}" c="0" d="0"/></elevationProfile>
+    <lanes><laneSection s="0">
+      <left>{lane.format(id=1, type="driving")}</left>
+      <center><lane id="0" type="none" level="false"/></center>
+      <right>{lane.format(id=-1, type="driving")}{lane.format(id=-2, type="sidewalk")}</right>
+    </laneSection></lanes>
+  </road>
+</OpenDRIVE>
+"""
+
+
+@pytest.fixture()
+def straight_map(tmp_path: Path) -> Path:
+    path = tmp_path / "straight.xodr"
+    path.write_text(straight_xodr("RHT"))
+    return path
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cold_maps.cli", *args], capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=60
+    )
+
+
+def read_csv(path: Path) -> tuple[list[str], dict[tuple[str, int, int, str], np.ndarray]]:
+    """Header and, per border, its (N, 4) rows s, x, y, z in file order."""
+    with path.open(newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        borders: dict[tuple[str, int, int, str], list[list[float]]] = {}
+        last = None
+        for road_id, section, lane_id, side, *values in reader:
+            key = (road_id, int(section), int(lane_id), side)
+            assert key == last or key not in borders, f"rows of border {key} are not consecutive"
+            borders.setdefault(key, []).append([float(v) for v in values])
+            last = key
+    return header, {key: np.array(rows) for key, rows in borders.items()}
+
+
+@pytest.mark.parametrize("rule", ["RHT", "LHT"])
+def test_export_csv_columns_on_a_straight_road(tmp_path: Path, rule: str) -> None:
+    source = tmp_path / "straight.xodr"
+    source.write_text(straight_xodr(rule))
+    out = tmp_path / "out" / "borders.csv"
+    assert main(["export", str(source), "--step", "0.5", "--format", "csv", "-o", str(out)]) == 0
+    header, borders = read_csv(out)
+    assert tuple(header) == CSV_HEADER
+    assert set(borders) == {("7", 0, lane, side) for lane in (1, -1) for side in ("left", "right")}
+    forward_lane = -1 if rule == "RHT" else 1
+    for (_, _, lane_id, side), rows in borders.items():
+        s, x, y, z = rows.T
+        forward = lane_id == forward_lane
+        # ordered in driving direction, uniform 0.5 m grid, both ends
+        assert np.all(np.diff(s) > 0) if forward else np.all(np.diff(s) < 0)
+        assert sorted(s) == pytest.approx(np.linspace(0, ROAD_LENGTH, 101))
+        np.testing.assert_allclose(x, ROAD_X0 + s, atol=1e-4)
+        np.testing.assert_allclose(z, Z0 + Z_SLOPE * s, atol=1e-4)
+        # the left border lies at +y of the lane centre when driving +x, at -y when driving -x
+        centre_y = ROAD_Y0 + math.copysign(LANE_WIDTH_M / 2, lane_id)
+        to_left = (1.0 if side == "left" else -1.0) * (1.0 if forward else -1.0)
+        np.testing.assert_allclose(y, centre_y + to_left * LANE_WIDTH_M / 2, atol=1e-4)
+
+
+def _assert_left_is_left(borders: dict[tuple[str, int, int, str], np.ndarray]) -> int:
+    """Cross-product check on every lane; returns the number of lanes checked."""
+    lanes = {key[:3] for key in borders}
+    for lane in lanes:
+        left, right = borders[(*lane, "left")], borders[(*lane, "right")]
+        assert left.shape == right.shape
+        np.testing.assert_array_equal(left[:, 0], right[:, 0])
+        xy_left, xy_right = left[:, 1:3], right[:, 1:3]
+        centre = 0.5 * (xy_left + xy_right)
+        tangent = np.gradient(centre, axis=0)
+        across = xy_left - xy_right
+        cross = tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0]
+        assert (cross > 0).all(), f"left border not left of right border in lane {lane}"
+    return len(lanes)
+
+
+def test_export_side_and_order_on_a_town(tmp_path: Path, town01_path: Path) -> None:
+    out = tmp_path / "town01.csv"
+    assert main(["export", str(town01_path), "--step", "1.0", "-o", str(out)]) == 0
+    _, borders = read_csv(out)
+    odr_map = load_opendrive(town01_path)
+    driving = sum(
+        lane.type == "driving" for road in odr_map.roads.values() for sec in road.lane_sections for lane in sec.lanes
+    )
+    assert _assert_left_is_left(borders) == driving
+    assert np.isfinite(np.concatenate(list(borders.values()))).all()
+
+
+def test_export_geojson_matches_csv(tmp_path: Path) -> None:
+    source = bundled_map("junction")
+    csv_out, geo_out = tmp_path / "b.csv", tmp_path / "b.geojson"
+    assert main(["export", str(source), "--step", "0.2", "-o", str(csv_out)]) == 0
+    assert main(["export", str(source), "--step", "0.2", "--format", "geojson", "-o", str(geo_out)]) == 0
+    _, borders = read_csv(csv_out)
+    assert _assert_left_is_left(borders) > 0
+    collection = json.loads(geo_out.read_text())
+    assert collection["type"] == "FeatureCollection"
+    assert len(collection["features"]) == len(borders)
+    for feature in collection["features"]:
+        props = feature["properties"]
+        rows = borders[(props["road_id"], props["section"], props["lane_id"], props["side"])]
+        assert feature["geometry"]["type"] == "LineString"
+        np.testing.assert_allclose(feature["geometry"]["coordinates"], rows[:, 1:], atol=1e-9)
+        np.testing.assert_allclose(props["s"], rows[:, 0], atol=1e-9)
+
+
+def test_map_info_counts_of_a_hand_built_map() -> None:
+    lines = dict(line.split(": ", 1) for line in map_info(junction_map()))
+    assert lines["roads"].startswith("7 (3 in junctions)")
+    assert lines["lanes"] == "11 (driving 11)"
+    assert lines["junctions"] == "1" and lines["connections"] == "3"
+    assert lines["geometry"] == "arc 2, line 5"
+    assert lines["revision"] == "1.6"
+    quarters = JUNCTION_RADIUS_M * math.pi  # inner + outer quarter turns
+    assert float(lines["driving lanes"].split()[0]) == pytest.approx((800 + 20 + quarters) / 1000, abs=1e-3)
+    assert lines["lane graph"] == "11 driving lanes, 6 links, 0 issues"
+
+
+def test_info_is_fast_to_import_and_reports_the_georeference(town04_path: Path) -> None:
+    code = (
+        "import sys; from cold_maps.cli import main; rc = main(['info', sys.argv[1]]); "
+        "heavy = [m for m in ('crdesigner', 'lanelet2', 'matplotlib', 'mcap') if m in sys.modules]; "
+        "print('heavy:', heavy); sys.exit(rc)"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code, str(town04_path)], capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=60
+    )
+    assert result.returncode == 0, result.stderr
+    assert "heavy: []" in result.stdout
+    assert "geoReference: +proj=tmerc" in result.stdout
+    assert "revision: 1.4" in result.stdout
+
+
+def test_export_of_a_broken_file_fails_cleanly(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.xodr"
+    broken.write_text(straight_xodr("RHT")[:400])
+    out = tmp_path / "out.csv"
+    result = run_cli("export", str(broken), "-o", str(out))
+    assert result.returncode != 0
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+    assert "broken.xodr" in result.stderr
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.xodr"]
+
+
+def test_failure_while_writing_leaves_the_old_file(
+    tmp_path: Path, straight_map: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "borders.csv"
+    out.write_text("old\n")
+    real = cli.lane_border_polylines
+
+    def failing(odr_map, step):
+        yield next(real(odr_map, step))
+        raise ValueError("road 7: sampling failed")
+
+    monkeypatch.setattr(cli, "lane_border_polylines", failing)
+    assert main(["export", str(straight_map), "-o", str(out)]) == 1
+    assert capsys.readouterr().err == "cold-maps: error: road 7: sampling failed\n"
+    assert out.read_text() == "old\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["borders.csv", "straight.xodr"]
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["export", "{map}", "--format", "xml", "-o", "x"], "invalid choice: 'xml'"),
+        (["export", "{map}", "--step", "nan", "-o", "x"], "step must be a finite length > 0 m"),
+        (["export", "{map}"], "required: -o/--output"),
+        (["frobnicate"], "invalid choice: 'frobnicate'"),
+        (["info", "{missing}"], "cannot read file"),
+        (["export", "{map}", "-o", "{dir}"], "cold-maps: error:"),
+    ],
+)
+def test_errors_are_one_line(tmp_path: Path, straight_map: Path, args: list[str], message: str) -> None:
+    values = {"map": str(straight_map), "missing": str(tmp_path / "none.xodr"), "dir": str(tmp_path)}
+    result = run_cli(*(arg.format(**values) for arg in args))
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert result.stdout == ""
