@@ -3,9 +3,15 @@
 With rate c = (curvEnd - curvStart)/length the heading is hdg + k0·u + c·u²/2. Completing
 the square, u + k0/c = w, turns the position integral into Fresnel integrals
 (scipy.special.fresnel) of w·sqrt(|c|/π); this covers spirals that start at any curvature
-and curvature sign changes. When the curvature is constant to within a lateral deviation
-|c|·length³/6 below ``ARC_FALLBACK_DEVIATION_M`` the record is evaluated as an arc of
-curvature k0 (the Fresnel form would divide by c ≈ 0).
+and curvature sign changes.
+
+The Fresnel form loses about 2e-16·|k0/c| m to round-off (it differences Fresnel values at
+arguments shifted by k0/c) and overflows for c → 0. When that shift exceeds
+``FRESNEL_MAX_SHIFT_M`` or the curvature change turns the heading by less than
+``NEAR_ARC_TURN_RAD`` over the record (nearly constant curvature, including c = 0), the
+record is evaluated as its starting arc (chord form) plus the small clothoid correction
+∫ e^{i(hdg + k0·u)}·(e^{i·c·u²/2} - 1) du, which Gauss–Legendre quadrature resolves to a
+tiny fraction of its already tiny size.
 """
 
 from __future__ import annotations
@@ -19,7 +25,37 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.geometry.arc import chord_pose
 from cold_maps.opendrive.model import Geometry
 
-ARC_FALLBACK_DEVIATION_M: Final[float] = 1e-10
+FRESNEL_MAX_SHIFT_M: Final[float] = 1e6
+NEAR_ARC_TURN_RAD: Final[float] = 1e-3
+CORRECTION_GAUSS_ORDER: Final[int] = 32
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(CORRECTION_GAUSS_ORDER)
+
+
+def _fresnel_offset(k0: float, rate: float, hdg: float, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """(dx, dy) in m from the start, by Fresnel integrals (rate != 0)."""
+    sign = np.sign(rate)
+    scale = np.sqrt(np.pi / abs(rate))
+    w0 = k0 / rate
+    s_start, c_start = fresnel(w0 / scale)
+    s_end, c_end = fresnel((ds + w0) / scale)
+    phase = hdg - 0.5 * k0 * w0
+    re = scale * (c_end - c_start)
+    im = scale * sign * (s_end - s_start)
+    cos_p, sin_p = np.cos(phase), np.sin(phase)
+    return re * cos_p - im * sin_p, re * sin_p + im * cos_p
+
+
+def _correction_offset(k0: float, rate: float, hdg: float, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """(dx, dy) in m of the clothoid from its starting arc, by Gauss–Legendre quadrature."""
+    half = 0.5 * ds[..., None]
+    u = half * (1.0 + _NODES)
+    arc_phase = hdg + k0 * u
+    extra = 0.5 * rate * u * u
+    re_extra, im_extra = -2.0 * np.sin(0.5 * extra) ** 2, np.sin(extra)
+    cos_a, sin_a = np.cos(arc_phase), np.sin(arc_phase)
+    re = (cos_a * re_extra - sin_a * im_extra) * half
+    im = (sin_a * re_extra + cos_a * im_extra) * half
+    return re @ _WEIGHTS, im @ _WEIGHTS
 
 
 def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
@@ -28,16 +64,9 @@ def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFlo
     k0 = geom.curv_start
     rate = (geom.curv_end - geom.curv_start) / geom.length
     heading = geom.hdg + ds * (k0 + 0.5 * rate * ds)
-    if abs(rate) * geom.length**3 / 6.0 < ARC_FALLBACK_DEVIATION_M:
+    if abs(k0) >= FRESNEL_MAX_SHIFT_M * abs(rate) or 0.5 * abs(rate) * geom.length**2 < NEAR_ARC_TURN_RAD:
         x, y, _ = chord_pose(geom.x, geom.y, geom.hdg, k0, ds)
-        return x, y, heading
-    sign = np.sign(rate)
-    scale = np.sqrt(np.pi / abs(rate))
-    w0 = k0 / rate
-    s_start, c_start = fresnel(w0 / scale)
-    s_end, c_end = fresnel((ds + w0) / scale)
-    phase = geom.hdg - 0.5 * k0 * w0
-    re = scale * (c_end - c_start)
-    im = scale * sign * (s_end - s_start)
-    cos_p, sin_p = np.cos(phase), np.sin(phase)
-    return geom.x + re * cos_p - im * sin_p, geom.y + re * sin_p + im * cos_p, heading
+        dx, dy = _correction_offset(k0, rate, geom.hdg, ds)
+        return x + dx, y + dy, heading
+    dx, dy = _fresnel_offset(k0, rate, geom.hdg, ds)
+    return geom.x + dx, geom.y + dy, heading
