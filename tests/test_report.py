@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -15,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cold_maps import report
+from cold_maps.progress import ProgressBar
 from cold_maps.report import (
     FRAMES_CSV_COLUMNS,
     PAPER_TABLE_I_MS,
@@ -209,3 +211,33 @@ def test_broken_metrics_json_names_file_and_key(tmp_path):
     with pytest.raises(ReportError, match="schema_version 2, expected 1"):
         read_metrics_json(path)
     assert ScenarioResult.from_dict(worked_example().result().to_dict()).key == KEY
+
+
+class FakeTerminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bar_is_silent_on_a_non_tty_stream():
+    stream = io.StringIO()
+    with ProgressBar(5, "frames", stream=stream, min_interval_s=0.0) as bar:
+        for _ in range(5):
+            bar.update()
+    assert bar.done == 5 and stream.getvalue() == ""
+
+
+def test_progress_bar_draws_proportionally_on_a_tty():
+    stream = FakeTerminal()
+    with ProgressBar(8, "frames", stream=stream, width=16, min_interval_s=0.0) as bar:
+        bar.update(2)
+        assert stream.getvalue().startswith("\rframes [" + "#" * 4 + "." * 12 + "] 2/8  ETA ")
+        bar.update(100)  # clamped to the total
+    lines = stream.getvalue().split("\r")
+    assert lines[-1].startswith("frames [" + "#" * 16 + "] 8/8  ETA 0 s") and lines[-1].endswith("\n")
+    throttled = FakeTerminal()
+    with ProgressBar(1000, stream=throttled, min_interval_s=3600.0) as bar:
+        for _ in range(1000):
+            bar.update()
+    assert throttled.getvalue().count("\r") == 2  # the first step and the last
+    with pytest.raises(ValueError, match="total: expected an integer > 0"):
+        ProgressBar(0)

@@ -1,0 +1,100 @@
+"""PNG plots of a run (matplotlib, Agg canvas, imported lazily).
+
+- :func:`plot_frame_errors`: mean and max error per frame for each boundary (the paper's Fig. 7).
+- :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
+  frame in the world frame, equal aspect (the paper's Fig. 8).
+
+Colours match the Foxglove channels of :mod:`cold_maps.recording`.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from typing import Any, Final, Mapping, Sequence
+
+import numpy as np
+
+from cold_maps.lane_strip import NDArrayFloat
+from cold_maps.recording import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
+from cold_maps.report import ScenarioAccumulator, atomic_write_bytes
+from cold_maps.sensor_errors import check_polyline
+
+FIGURE_SIZE_IN: Final[tuple[float, float]] = (8.0, 4.5)
+DPI: Final[int] = 100
+
+
+def _figure() -> Any:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def _save(figure: Any, path: str | os.PathLike[str]) -> None:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=DPI)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
+    """Mean (solid) and max (dashed) error per frame (m) of each scenario, usually the left
+    and right boundary of one fusion; frames without a lane are gaps."""
+    if not scenarios:
+        raise ValueError("plot_frame_errors: no scenarios to plot")
+    figure = _figure()
+    axes = figure.add_subplot()
+    for index, scenario in enumerate(scenarios):
+        records = scenario.records
+        frames = np.array([r.frame for r in records], dtype=float)
+        means = np.array([r.errors_m.mean() if r.fused else np.nan for r in records])
+        maxima = np.array([r.errors_m.max() if r.fused else np.nan for r in records])
+        label = f"{scenario.key.fusion} {scenario.key.boundary}"
+        color = f"C{index}"
+        axes.plot(frames, means, color=color, linestyle="-", label=f"{label} mean")
+        axes.plot(frames, maxima, color=color, linestyle="--", label=f"{label} max")
+    axes.set_xlabel("frame")
+    axes.set_ylabel("error [m]")
+    axes.set_ylim(bottom=0.0)
+    axes.set_title(title or f"error per frame: {scenarios[0].key.map}")
+    axes.grid(True, alpha=0.3)
+    axes.legend(loc="upper right", fontsize="small")
+    figure.tight_layout()
+    _save(figure, path)
+
+
+def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArrayFloat],
+                       detections: Mapping[str, tuple[NDArrayFloat, NDArrayFloat]],
+                       fused: Mapping[str, NDArrayFloat], ego: str = "ego", title: str = "") -> None:
+    """GT borders, each sender's (left, right) detection and the fused borders of one frame.
+
+    All polylines are ``(N, 2)`` in the world frame (m); ``ego`` names the ego sender.
+    """
+    layers: list[tuple[NDArrayFloat, tuple[float, ...], str, float, str]] = []
+    for name, points in gt.items():
+        layers.append((check_polyline(f"gt {name}", points), COLOR_GT, "-", 4.0, "ground truth"))
+    for sender, borders in detections.items():
+        color = COLOR_EGO if sender == ego else COLOR_COOP
+        for side, points in zip(("left", "right"), borders):
+            layers.append((check_polyline(f"{sender} {side}", points), color, "-", 2.0, f"detection {sender}"))
+    for name, points in fused.items():
+        layers.append((check_polyline(f"fused {name}", points), COLOR_FUSED, "--", 1.5, "fused"))
+    if not layers:
+        raise ValueError("plot_frame_overlay: nothing to plot")
+    figure = _figure()
+    axes = figure.add_subplot()
+    labelled: set[str] = set()
+    for points, color, style, width, label in layers:
+        axes.plot(points[:, 0], points[:, 1], color=color, linestyle=style, linewidth=width,
+                  label=None if label in labelled else label)
+        labelled.add(label)
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.set_xlabel("x (east) [m]")
+    axes.set_ylabel("y (north) [m]")
+    axes.set_title(title)
+    axes.grid(True, alpha=0.3)
+    axes.legend(loc="best", fontsize="small")
+    figure.tight_layout()
+    _save(figure, path)
