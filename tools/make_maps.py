@@ -22,7 +22,12 @@ import tempfile
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
-from typing import Callable, Final, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Final, Literal, Mapping, Sequence
+
+from cold_maps.opendrive.model import Connection, ContactPoint, CubicPoly, Junction, LaneLink, RoadLink
+
+if TYPE_CHECKING:
+    from lxml import etree
 
 LANE_WIDTH_M: Final[float] = 4.0
 DATE: Final[str] = "2026-01-01T00:00:00"
@@ -33,7 +38,6 @@ RURAL_GEO_REFERENCE: Final[str] = (
     "+proj=tmerc +lat_0=48.137 +lon_0=11.575 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
 )
 
-Contact = Literal["start", "end"]
 SegmentKind = Literal["line", "arc", "spiral"]
 
 
@@ -152,31 +156,20 @@ def reverse(pose: Pose) -> Pose:
     return Pose(pose.x, pose.y, pose.hdg + math.pi)
 
 
-@dataclass(frozen=True, slots=True)
-class Poly:
-    """A cubic record f(ds) = a + b·ds + c·ds² + d·ds³ from s0 (m; see the owning element)."""
-
-    s0: float
-    a: float
-    b: float = 0.0
-    c: float = 0.0
-    d: float = 0.0
-
-
-def smooth_step(s_from: float, length: float, value_from: float, value_to: float) -> tuple[Poly, ...]:
+def smooth_step(s_from: float, length: float, value_from: float, value_to: float) -> tuple[CubicPoly, ...]:
     """Records holding ``value_from`` until ``s_from``, a C¹ cubic to ``value_to`` over
     ``length`` m, then ``value_to``; starts at s0 = 0 (a leading constant record when
     ``s_from`` > 0)."""
     delta = value_to - value_from
-    ramp = Poly(s_from, value_from, 0.0, 3.0 * delta / length**2, -2.0 * delta / length**3)
-    hold = Poly(s_from + length, value_to)
-    lead = (Poly(0.0, value_from),) if s_from > 0.0 else ()
+    ramp = CubicPoly(s_from, value_from, 0.0, 3.0 * delta / length**2, -2.0 * delta / length**3)
+    hold = CubicPoly(s_from + length, value_to, 0.0, 0.0, 0.0)
+    lead = (CubicPoly(0.0, value_from, 0.0, 0.0, 0.0),) if s_from > 0.0 else ()
     return lead + (ramp, hold)
 
 
-def constant(value: float) -> tuple[Poly, ...]:
+def constant(value: float) -> tuple[CubicPoly, ...]:
     """A single constant record from s0 = 0."""
-    return (Poly(0.0, value),)
+    return (CubicPoly(0.0, value, 0.0, 0.0, 0.0),)
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,7 +186,7 @@ class LaneSpec:
     """
 
     id: int
-    widths: tuple[Poly, ...]
+    widths: tuple[CubicPoly, ...]
     mark: str
     predecessor: int | None = None
     successor: int | None = None
@@ -207,15 +200,6 @@ class SectionSpec:
     s: float
     center_mark: str
     lanes: tuple[LaneSpec, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class LinkSpec:
-    """A road link: element type, id, and the linked road's contact point (None for junctions)."""
-
-    element_type: Literal["road", "junction"]
-    element_id: str
-    contact: Contact | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,10 +224,10 @@ class RoadSpec:
     sections: tuple[SectionSpec, ...]
     road_type: str
     speed_kmh: float
-    predecessor: LinkSpec | None = None
-    successor: LinkSpec | None = None
+    predecessor: RoadLink | None = None
+    successor: RoadLink | None = None
     junction: str = "-1"
-    lane_offsets: tuple[Poly, ...] = ()
+    lane_offsets: tuple[CubicPoly, ...] = ()
 
     @property
     def length(self) -> float:
@@ -257,33 +241,12 @@ class RoadSpec:
 
 
 @dataclass(frozen=True, slots=True)
-class ConnectionSpec:
-    """A junction connection: id, incoming road, connecting road, the connecting road's
-    contact point, and (incoming lane, connecting lane) pairs."""
-
-    id: str
-    incoming: str
-    connecting: str
-    contact: Contact
-    lane_links: tuple[tuple[int, int], ...]
-
-
-@dataclass(frozen=True, slots=True)
-class JunctionSpec:
-    """A junction: id, name and connections."""
-
-    id: str
-    name: str
-    connections: tuple[ConnectionSpec, ...]
-
-
-@dataclass(frozen=True, slots=True)
 class MapSpec:
     """A whole map: file stem, roads, junctions and an optional PROJ geoReference string."""
 
     name: str
     roads: tuple[RoadSpec, ...]
-    junctions: tuple[JunctionSpec, ...] = ()
+    junctions: tuple[Junction, ...] = ()
     geo_reference: str = ""
 
 
@@ -394,7 +357,7 @@ def build_junction() -> MapSpec:
     """Four-way junction: four 150 m two-lane arms (east and north arms start at the
     junction, west and south arms end there) and 12 one-lane connecting roads (right turn
     and left turn arcs of reference radius 15 m, 30 m straight lines)."""
-    junction_link = LinkSpec("junction", JUNCTION_ID)
+    junction_link = RoadLink("junction", JUNCTION_ID)
     arms: list[RoadSpec] = []
     starts_at_junction = (True, True, False, False)
     for index, (name, at_start) in enumerate(zip(ARM_NAMES, starts_at_junction)):
@@ -416,12 +379,12 @@ def build_junction() -> MapSpec:
     connections: list[ConnectionSpec] = []
     movements = ((1, "right", -1.0), (2, "straight", 0.0), (3, "left", 1.0))
     for i, arm_in in enumerate(arms):
-        contact_in: Contact = "start" if starts_at_junction[i] else "end"
+        contact_in: ContactPoint = "start" if starts_at_junction[i] else "end"
         lane_in = 1 if starts_at_junction[i] else -1
         entry = reverse(arm_in.start) if starts_at_junction[i] else arm_in.end
         for step, movement, turn in movements:
             j = (i + step) % 4
-            contact_out: Contact = "start" if starts_at_junction[j] else "end"
+            contact_out: ContactPoint = "start" if starts_at_junction[j] else "end"
             lane_out = -1 if starts_at_junction[j] else 1
             if turn == 0.0:
                 segment = line(2.0 * JUNCTION_HALF_SIZE_M)
@@ -433,13 +396,13 @@ def build_junction() -> MapSpec:
                 RoadSpec(
                     road_id, f"{ARM_NAMES[i]}_{movement}_{ARM_NAMES[j]}", entry, (segment,),
                     (SectionSpec(0.0, "none", (lane,)),), "town", 30.0 if turn else 50.0,
-                    predecessor=LinkSpec("road", arm_in.id, contact_in),
-                    successor=LinkSpec("road", arms[j].id, contact_out),
+                    predecessor=RoadLink("road", arm_in.id, contact_in),
+                    successor=RoadLink("road", arms[j].id, contact_out),
                     junction=JUNCTION_ID,
                 )
             )
-            connections.append(ConnectionSpec(str(len(connections)), arm_in.id, road_id, "start", ((lane_in, -1),)))
-    junction = JunctionSpec(JUNCTION_ID, "crossroads", tuple(connections))
+            connections.append(Connection(str(len(connections)), arm_in.id, road_id, "start", (LaneLink(lane_in, -1),)))
+    junction = Junction(JUNCTION_ID, "crossroads", tuple(connections))
     return MapSpec("junction", tuple(arms) + tuple(connecting), (junction,))
 
 
@@ -454,7 +417,7 @@ def build_highway() -> MapSpec:
     zero width, and a junction where the main carriageway continues and the exit lane
     diverges onto a ramp curving away to the right."""
     junction_id = "100"
-    junction_link = LinkSpec("junction", junction_id)
+    junction_link = RoadLink("junction", junction_id)
     main_in = RoadSpec(
         "1", "main_before_exit", Pose(0.0, 0.0, 0.0),
         (line(150.0), spiral(80.0, 0.0, 1.0 / 800.0), arc(90.0, 1.0 / 800.0), spiral(80.0, 1.0 / 800.0, 0.0), line(200.0)),
@@ -473,7 +436,7 @@ def build_highway() -> MapSpec:
         "10", "main_through_exit", main_in.end, (line(30.0),),
         (SectionSpec(0.0, "solid", carriageway_lanes(3, 3)),),
         "motorway", 130.0,
-        predecessor=LinkSpec("road", "1", "end"), successor=LinkSpec("road", "2", "start"),
+        predecessor=RoadLink("road", "1", "end"), successor=RoadLink("road", "2", "start"),
         junction=junction_id, lane_offsets=constant(HIGHWAY_LANE_OFFSET_M),
     )
     exit_lane = LaneSpec(-1, constant(LANE_WIDTH_M), "solid", predecessor=-4, successor=-1)
@@ -481,7 +444,7 @@ def build_highway() -> MapSpec:
         "11", "exit_diverge", main_in.end, (spiral(40.0, 0.0, RAMP_CURVATURE),),
         (SectionSpec(0.0, "solid", (exit_lane,)),),
         "motorway", 80.0,
-        predecessor=LinkSpec("road", "1", "end"), successor=LinkSpec("road", "3", "start"),
+        predecessor=RoadLink("road", "1", "end"), successor=RoadLink("road", "3", "start"),
         junction=junction_id, lane_offsets=constant(ramp_offset),
     )
     main_out = RoadSpec(
@@ -498,13 +461,12 @@ def build_highway() -> MapSpec:
         "motorway", 80.0,
         predecessor=junction_link, lane_offsets=constant(ramp_offset),
     )
-    same = ((1, 1), (2, 2), (3, 3))
     connections = (
-        ConnectionSpec("0", "1", "10", "start", ((-1, -1), (-2, -2), (-3, -3))),
-        ConnectionSpec("1", "1", "11", "start", ((-4, -1),)),
-        ConnectionSpec("2", "2", "10", "end", same),
+        Connection("0", "1", "10", "start", tuple(LaneLink(-i, -i) for i in (1, 2, 3))),
+        Connection("1", "1", "11", "start", (LaneLink(-4, -1),)),
+        Connection("2", "2", "10", "end", tuple(LaneLink(i, i) for i in (1, 2, 3))),
     )
-    junction = JunctionSpec(junction_id, "exit", connections)
+    junction = Junction(junction_id, "exit", connections)
     return MapSpec("highway", (main_in, main_out, ramp, through, diverge), (junction,))
 
 
@@ -517,18 +479,18 @@ BUILDERS: Final[Mapping[str, Callable[[], MapSpec]]] = {
 }
 
 
-def _attrs(element, **values: object) -> None:
+def _attrs(element: etree._Element, **values: object) -> None:
     for key, value in values.items():
         element.set(key, fmt(value) if isinstance(value, float) else str(value))
 
 
-def _poly(parent, tag: str, poly: Poly, s_name: str) -> None:
+def _poly(parent: etree._Element, tag: str, poly: CubicPoly, s_name: str) -> None:
     from lxml import etree
 
     _attrs(etree.SubElement(parent, tag), **{s_name: poly.s0}, a=poly.a, b=poly.b, c=poly.c, d=poly.d)
 
 
-def _road_mark(parent, mark: str) -> None:
+def _road_mark(parent: etree._Element, mark: str) -> None:
     from lxml import etree
 
     _attrs(
@@ -538,7 +500,7 @@ def _road_mark(parent, mark: str) -> None:
     )
 
 
-def _lane(parent, lane: LaneSpec) -> None:
+def _lane(parent: etree._Element, lane: LaneSpec) -> None:
     from lxml import etree
 
     element = etree.SubElement(parent, "lane")
@@ -553,18 +515,18 @@ def _lane(parent, lane: LaneSpec) -> None:
     _road_mark(element, lane.mark)
 
 
-def _road_link(parent, tag: str, link: LinkSpec | None) -> None:
+def _road_link(parent: etree._Element, tag: str, link: RoadLink | None) -> None:
     from lxml import etree
 
     if link is None:
         return
     element = etree.SubElement(parent, tag)
     _attrs(element, elementType=link.element_type, elementId=link.element_id)
-    if link.contact is not None:
-        element.set("contactPoint", link.contact)
+    if link.contact_point is not None:
+        element.set("contactPoint", link.contact_point)
 
 
-def _road(parent, road: RoadSpec) -> None:
+def _road(parent: etree._Element, road: RoadSpec) -> None:
     from lxml import etree
 
     element = etree.SubElement(parent, "road")
@@ -589,7 +551,7 @@ def _road(parent, road: RoadSpec) -> None:
             _attrs(etree.SubElement(geometry, "spiral"), curvStart=seg.curv_start, curvEnd=seg.curv_end)
         pose, s = end_pose(pose, seg), s + seg.length
 
-    _poly(etree.SubElement(element, "elevationProfile"), "elevation", Poly(0.0, 0.0), "s")
+    _poly(etree.SubElement(element, "elevationProfile"), "elevation", CubicPoly(0.0, 0.0, 0.0, 0.0, 0.0), "s")
     etree.SubElement(element, "lateralProfile")
     lanes = etree.SubElement(element, "lanes")
     for offset in road.lane_offsets:
@@ -629,11 +591,11 @@ def to_xodr(spec: MapSpec) -> bytes:
         for connection in junction.connections:
             connection_element = etree.SubElement(element, "connection")
             _attrs(
-                connection_element, id=connection.id, incomingRoad=connection.incoming,
-                connectingRoad=connection.connecting, contactPoint=connection.contact,
+                connection_element, id=connection.id, incomingRoad=connection.incoming_road,
+                connectingRoad=connection.connecting_road, contactPoint=connection.contact_point,
             )
-            for from_lane, to_lane in connection.lane_links:
-                _attrs(etree.SubElement(connection_element, "laneLink"), **{"from": from_lane, "to": to_lane})
+            for link in connection.lane_links:
+                _attrs(etree.SubElement(connection_element, "laneLink"), **{"from": link.from_lane, "to": link.to_lane})
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
