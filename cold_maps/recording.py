@@ -286,6 +286,8 @@ class Recorder:
     def __enter__(self) -> Recorder:
         from mcap.writer import CompressionType, Writer
 
+        if self._writer is not None:
+            raise RecordingError(f"{self.path}: recording is already open")
         try:
             self._stream = open(self.partial_path, "wb")
         except OSError as exc:

@@ -215,3 +215,6 @@ def test_bad_input_is_rejected_with_the_name(tmp_path):
             recorder.write_metrics(0.0, 0, {"x": "high"})
     with pytest.raises(RecordingError, match="not open"):
         recorder.write_gt(0.0, {"left": left})
+    with pytest.raises(RecordingError, match="nowhere/y.mcap.partial: cannot create recording"):
+        with Recorder(tmp_path / "nowhere" / "y.mcap"):
+            pass
