@@ -93,6 +93,7 @@ BAD_CASES: dict[str, tuple[str, ...]] = {
     "section after road end": ('<laneSection s="18"', '<laneSection s="30.5"', "", "laneSection", "lane section starts at s=30.5, after the end of road '1' (30.0)"),
     "negative section start": ('<laneSection s="0">', '<laneSection s="-1">', ROAD2, "laneSection", "negative s=-1.0"),
     "bad singleSide": ('singleSide="true"', 'singleSide="maybe"', "", "laneSection", "'singleSide' is not a boolean: 'maybe'"),
+    "bad junction type": ('name="crossing"', 'name="crossing" type="roundabout"', "", "junction", "'type' is 'roundabout', expected one of default, direct, virtual, crossing"),
     "bad lane direction": ('direction="reversed"', 'direction="up"', "", "lane", "'direction' is 'up'"),
     "missing width sOffset": ('<width sOffset="9"', "<width", "", "width", "missing required attribute 'sOffset'"),
     "missing revMajor": ('revMajor="1" ', "", "", "header", "missing required attribute 'revMajor'"),

@@ -7,6 +7,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from conftest import bundled_map
 
 from cold_maps.opendrive.model import CubicPoly, LaneLink, OpenDriveMap, RoadLink
 from cold_maps.opendrive.parser import load_opendrive, parse_opendrive
@@ -138,7 +139,7 @@ def test_lane_fields(small: OpenDriveMap) -> None:
 def test_junction_connections(small: OpenDriveMap) -> None:
     assert list(small.junctions) == ["7"]
     junction = small.junctions["7"]
-    assert (junction.id, junction.name) == ("7", "crossing")
+    assert (junction.id, junction.name, junction.type) == ("7", "crossing", "default")
     first, second = junction.connections
     assert (first.id, first.incoming_road, first.connecting_road, first.contact_point) == ("0", "1", "3", "start")
     assert first.lane_links == (LaneLink(-1, -1), LaneLink(1, 2))
@@ -150,8 +151,9 @@ def test_direct_junction_linked_road() -> None:
       <planView><geometry s="0" x="10" y="0" hdg="0" length="5"><line/></geometry></planView>
       <lanes><laneSection s="0"><center><lane id="0" type="none"/></center></laneSection></lanes></road>
     <junction id="d" type="direct"><connection id="0" incomingRoad="r" linkedRoad="s" contactPoint="start"/></junction>"""
-    connection = parse_opendrive(minimal(extra=extra)).junctions["d"].connections[0]
-    assert (connection.incoming_road, connection.connecting_road) == ("r", "s")
+    junction = parse_opendrive(minimal(extra=extra)).junctions["d"]
+    assert junction.type == "direct"
+    assert (junction.connections[0].incoming_road, junction.connections[0].connecting_road) == ("r", "s")
 
 
 def test_last_section_ends_at_road_length_and_sections_can_be_empty_length() -> None:
@@ -166,6 +168,20 @@ def test_last_section_ends_at_road_length_and_sections_can_be_empty_length() -> 
 def test_namespaced_file_is_read() -> None:
     data = minimal().replace(b"<OpenDRIVE>", b'<OpenDRIVE xmlns="http://www.asam.net/xsd/OpenDRIVE/1.8">')
     assert list(parse_opendrive(data).roads) == ["r"]
+
+
+@pytest.mark.parametrize("minor", [4, 5, 6, 7, 8])
+def test_revisions_1_4_to_1_8_load(minor: int) -> None:
+    header = f'<header revMajor="1" revMinor="{minor}" name="v{minor}"/>'
+    odr = parse_opendrive(minimal(header=header))
+    assert (odr.header.rev_minor, odr.header.name, list(odr.roads)) == (minor, f"v{minor}", ["r"])
+
+
+def test_bundled_maps_load() -> None:
+    """Maps written by our own generator (OpenDRIVE 1.6) round-trip through the reader."""
+    odr = load_opendrive(bundled_map("junction"))
+    assert odr.header.rev_minor == 6 and len(odr.junctions) == 1
+    assert all(c.connecting_road in odr.roads for j in odr.junctions.values() for c in j.connections)
 
 
 def test_in_memory_map_has_empty_path() -> None:

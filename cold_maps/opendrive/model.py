@@ -265,11 +265,21 @@ class Connection:
 
 @dataclass(frozen=True, slots=True)
 class Junction:
-    """A ``<junction>``: id, name and its connections."""
+    """A ``<junction>``.
+
+    Fields:
+        id: junction id.
+        name: junction name ("" when absent).
+        connections: its connections in file order.
+        type: "default", or (OpenDRIVE 1.7+) "direct", "virtual" or "crossing". In a
+            direct junction a connection's ``connecting_road`` is the ``linkedRoad``,
+            a road outside the junction.
+    """
 
     id: str
     name: str
     connections: tuple[Connection, ...]
+    type: str = "default"
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,17 +5,22 @@ signals, road marks, userData, lateral profile, surface, railroad, controllers, 
 are skipped. Invalid input raises ``OpenDriveError`` naming the file, the element and
 its source line.
 
-Errors: malformed XML, entity declarations, wrong root, no header or roads, missing or
-non-numeric (NaN, inf) required attributes, unknown enumeration values, geometry length
-<= 0, negative road length, a ``<geometry>`` without a known kind, lane ids that are not
-consecutive from the reference line, a lane section starting after the road end,
-duplicate road or junction ids, road links and junction connections to ids that do not
-exist.
-Tolerated: a geometry ``s`` that differs from the running sum of lengths, records out
-of order (they are sorted by s), ``contactPoint`` on a link to a junction (dropped: the
-model has none for junctions), a missing road ``junction`` attribute ("-1"),
-``<border>`` records next to ``<width>`` records (widths win, see ``Lane``), a road
-length that differs from the sum of its geometry lengths.
+Errors: malformed XML, entity declarations, wrong root, no header or roads, revMajor
+other than 1, missing or non-numeric (NaN, inf) required attributes, unknown
+enumeration values (contactPoint, elementType, rule, pRange, direction, junction type),
+geometry length <= 0, negative road length, a ``<geometry>`` without exactly one known
+kind, a road without geometry or lane section or with two ``<planView>``/``<lanes>``/
+``<link>``/``<elevationProfile>`` or two predecessors/successors, lane ids that are not
+consecutive from the reference line, a centre that is not exactly lane 0, a lane
+section starting before 0 or after the road end, duplicate road or junction ids, road
+links, road ``junction`` attributes and junction connections to ids that do not exist.
+Tolerated: a geometry ``s`` that differs from the running sum of lengths, a road length
+that differs from the sum of its geometry lengths, records and sections out of order
+(sorted by s, stably), zero-length lane sections, ``contactPoint`` on a link to a
+junction (dropped: the model has none for junctions), a missing road ``junction``
+attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``Lane``),
+a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor.
+Numbers use Python ``float`` syntax.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ _GEOMETRY_KINDS: Final[frozenset[str]] = frozenset({"line", "arc", "spiral", "po
 _CONTACT_POINTS: Final[tuple[str, ...]] = ("start", "end")
 _RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
 _P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
+_JUNCTION_TYPES: Final[tuple[str, ...]] = ("default", "direct", "virtual", "crossing")
 _LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
 _ONCE_PER_ROAD: Final[frozenset[str]] = frozenset({"link", "planView", "elevationProfile", "lanes"})
 _BOOLEANS: Final[dict[str, bool]] = {"true": True, "1": True, "false": False, "0": False}
@@ -122,9 +128,20 @@ class _Reader:
             value = float(text)
         except ValueError:
             value = math.nan
-        if "_" in text or not math.isfinite(value):
+        if not math.isfinite(value):
             raise self.error(f"attribute '{name}' is not a finite number: {text[:40]!r}", element)
         return value
+
+    def numbers(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
+        """Several required finite float attributes (fast path; errors from ``number``)."""
+        get = element.get
+        try:
+            values = tuple([float(get(name)) for name in names])  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            values = (math.nan,)
+        if math.isfinite(sum(values)):  # any NaN or inf makes the sum non-finite
+            return values
+        return tuple(self.number(element, name) for name in names)
 
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
@@ -156,14 +173,7 @@ class _Reader:
         raise self.error(f"attribute '{name}' is {text[:40]!r}, expected one of {', '.join(allowed)}", element)
 
     def cubic(self, element: etree._Element, s_name: str) -> CubicPoly:
-        number = self.number
-        return CubicPoly(
-            number(element, s_name),
-            number(element, "a"),
-            number(element, "b"),
-            number(element, "c"),
-            number(element, "d"),
-        )
+        return CubicPoly(*self.numbers(element, (s_name, "a", "b", "c", "d")))
 
     def cubics(self, elements: Iterable[etree._Element], s_name: str) -> tuple[CubicPoly, ...]:
         return tuple(sorted((self.cubic(e, s_name) for e in elements), key=_by_s0))
@@ -216,7 +226,7 @@ class _Reader:
             if child.tag == "geoReference":
                 proj = (child.text or "").strip()
             elif child.tag == "offset":
-                offset = tuple(self.number(child, name) for name in ("x", "y", "z", "hdg"))
+                offset = self.numbers(child, ("x", "y", "z", "hdg"))
         nan = math.nan
         return Header(
             rev_major=rev_major,
@@ -298,10 +308,10 @@ class _Reader:
 
     def geometry(self, element: etree._Element) -> Geometry:
         number = self.number
-        length = number(element, "length")
+        start = self.numbers(element, ("s", "x", "y", "hdg", "length"))
+        length = start[4]
         if length <= 0.0:
             raise self.error(f"geometry length must be > 0, got {length}", element)
-        start = (number(element, "s"), number(element, "x"), number(element, "y"), number(element, "hdg"), length)
         shapes = [child for child in element if child.tag in _GEOMETRY_KINDS]
         if len(shapes) != 1:
             found = "no known kind" if not shapes else f"{len(shapes)} kinds"
@@ -315,11 +325,9 @@ class _Reader:
         if kind == "spiral":
             return Geometry("spiral", *start, curv_start=number(shape, "curvStart"), curv_end=number(shape, "curvEnd"))
         if kind == "poly3":
-            a, b, c, d = (number(shape, name) for name in ("a", "b", "c", "d"))
+            a, b, c, d = self.numbers(shape, ("a", "b", "c", "d"))
             return Geometry("poly3", *start, a=a, b=b, c=c, d=d)
-        au, bu, cu, du, av, bv, cv, dv = (
-            number(shape, name) for name in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")
-        )
+        au, bu, cu, du, av, bv, cv, dv = self.numbers(shape, ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV"))
         return Geometry(
             "paramPoly3", *start,
             au=au, bu=bu, cu=cu, du=du, av=av, bv=bv, cv=cv, dv=dv,
@@ -422,7 +430,12 @@ class _Reader:
                     lane_links=lane_links,
                 )
             )
-        return Junction(id=self.required(element, "id"), name=element.get("name", ""), connections=tuple(connections))
+        return Junction(
+            id=self.required(element, "id"),
+            name=element.get("name", ""),
+            connections=tuple(connections),
+            type=self.choice(element, "type", _JUNCTION_TYPES, "default"),
+        )
 
 
 def _by_s0(record: CubicPoly) -> float:
