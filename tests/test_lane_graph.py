@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 from conftest import bundled_map
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from graph_maps import (
     JUNCTION_RADIUS_M,
     LANE_WIDTH_M,
@@ -23,7 +25,7 @@ from graph_maps import (
 )
 
 from cold_maps.lane_graph import LaneGraph, LaneKey, build_lane_graph
-from cold_maps.opendrive.model import Connection, Junction, LaneLink
+from cold_maps.opendrive.model import Connection, Junction, LaneLink, RoadLink
 
 CONTINUITY_TOLERANCE_M = 0.01
 
@@ -219,4 +221,60 @@ def test_bundled_map_graph(name: str) -> None:
     graph = build_lane_graph(load_opendrive(bundled_map(name)))
     assert graph.issues == ()
     assert graph.lanes and any(True for _ in graph.edges())
+    assert _discontinuities(graph) == []
+
+
+ROAD_LENGTH_M = 20.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    flipped=st.lists(st.booleans(), min_size=2, max_size=5),
+    declared_by=st.lists(st.sampled_from(["first", "second", "both"]), min_size=4, max_size=4),
+    rule=st.sampled_from(["RHT", "LHT"]),
+)
+def test_chain_of_roads_in_any_orientation(flipped: list[bool], declared_by: list[str], rule: str) -> None:
+    """Roads end to end along +x, each drawn along +x or against it (flipped), linked with
+    the matching contact points by one or both roads: the lanes driving +x form one chain
+    and the lanes driving -x the reverse chain, whatever the orientations and the rule."""
+    n = len(flipped)
+    driving_plus_x = [(-1 if rule == "RHT" else 1) * (-1 if f else 1) for f in flipped]
+    links: list[dict[str, RoadLink]] = [{} for _ in range(n)]
+    lane_links: list[dict[tuple[str, int], int]] = [{} for _ in range(n)]
+    for i in range(n - 1):
+        mine = "start" if flipped[i] else "end"
+        theirs = "end" if flipped[i + 1] else "start"
+        who = declared_by[i % len(declared_by)]
+        if who in ("first", "both"):
+            links[i][mine] = to_road(str(i + 1), theirs)
+            for sign in (1, -1):
+                lane_links[i][mine, sign * driving_plus_x[i]] = sign * driving_plus_x[i + 1]
+        if who in ("second", "both"):
+            links[i + 1][theirs] = to_road(str(i), mine)
+            for sign in (1, -1):
+                lane_links[i + 1][theirs, sign * driving_plus_x[i + 1]] = sign * driving_plus_x[i]
+
+    def lane_of(i: int, lane_id: int):
+        pred = [lane_links[i][("start", lane_id)]] if ("start", lane_id) in lane_links[i] else []
+        succ = [lane_links[i][("end", lane_id)]] if ("end", lane_id) in lane_links[i] else []
+        return lane(lane_id, pred=pred, succ=succ)
+
+    roads = [
+        road(
+            str(i),
+            ROAD_LENGTH_M,
+            [section(0, ROAD_LENGTH_M, left=[lane_of(i, 1)], right=[lane_of(i, -1)])],
+            x=ROAD_LENGTH_M * (i + 1 if flipped[i] else i),
+            hdg=math.pi if flipped[i] else 0.0,
+            pred=links[i].get("start"),
+            succ=links[i].get("end"),
+            rule=rule,
+        )
+        for i in range(n)
+    ]
+    graph = build_lane_graph(odr_map(roads))
+    east = [k(str(i), 0, driving_plus_x[i]) for i in range(n)]
+    west = [k(str(i), 0, -driving_plus_x[i]) for i in range(n)]
+    assert graph.issues == ()
+    assert edges(graph) == set(zip(east, east[1:])) | set(zip(west[1:], west))
     assert _discontinuities(graph) == []

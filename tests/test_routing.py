@@ -217,3 +217,55 @@ def test_carla_random_routes_of_300_m(town: str, town01_path, town04_path) -> No
         assert route.length >= 300.0 - 0.05
         assert np.isfinite(route.left).all() and np.isfinite(route.right).all()
         assert (_cross(route) > 0).mean() > 0.99
+
+
+@pytest.fixture(scope="module")
+def bundled_junction() -> LaneGraph:
+    from conftest import bundled_map
+
+    from cold_maps.opendrive.parser import load_opendrive
+
+    return build_lane_graph(load_opendrive(bundled_map("junction")))
+
+
+def test_bundled_junction_routes_have_closed_form_lengths(bundled_junction: LaneGraph) -> None:
+    """150 m arm in, a right turn (lane radius 13 m), straight (30 m) or left turn (17 m),
+    150 m arm out: every entry-to-exit route is one of the three, four times each."""
+    graph = bundled_junction
+    entries = [lane for lane in graph.lanes if not graph.predecessors[lane]]
+    exits = [lane for lane in graph.lanes if not graph.successors[lane]]
+    assert len(entries) == len(exits) == 4
+    lengths = []
+    for a in entries:
+        for b in exits:
+            if a.road_id == b.road_id:
+                with pytest.raises(NoRouteError):
+                    shortest_route(graph, a, b)
+                continue
+            lanes = shortest_route(graph, a, b)
+            route = route_from_lanes(graph, lanes, step=0.1)
+            assert route.length == pytest.approx(route_length(graph, lanes), abs=0.01)
+            assert np.diff(route.distance).max() < 0.15
+            assert (_cross(route) > 0).all()
+            lengths.append(route.length)
+    expected = [300 + 13 * math.pi / 2, 330.0, 300 + 17 * math.pi / 2]
+    nearest = [min(range(3), key=lambda i: abs(length - expected[i])) for length in lengths]
+    assert sorted(nearest) == [0] * 4 + [1] * 4 + [2] * 4
+    np.testing.assert_allclose(lengths, [expected[i] for i in nearest], atol=0.01)
+
+
+def test_bundled_highway_random_routes_are_continuous() -> None:
+    from conftest import bundled_map
+
+    from cold_maps.opendrive.parser import load_opendrive
+
+    graph = build_lane_graph(load_opendrive(bundled_map("highway")))
+    rng = np.random.default_rng(11)
+    for _ in range(4):
+        lanes = random_route(graph, 500.0, rng)
+        assert lanes is not None
+        route = route_from_lanes(graph, lanes, step=0.5)
+        assert route.length >= 500.0 - 0.05
+        assert np.diff(route.distance).max() < 0.6
+        assert (_cross(route) > 0).all()
+    assert random_route(graph, 2000.0, rng) is None
