@@ -27,7 +27,8 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
 
     Every interval is ``step`` except the last, which is in (0, step]; a sliver shorter
     than ``SLIVER_FRACTION``·step is merged into the last interval instead of creating a
-    near-duplicate end point. s_start == s_end gives the single point s_start.
+    near-duplicate end point (unless it is the whole range). s_start == s_end gives the
+    single point s_start.
     """
     if not (np.isfinite(s_start) and np.isfinite(s_end)):
         raise ValueError(f"sample_s: s_start={s_start} and s_end={s_end} must be finite")
@@ -39,8 +40,8 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
         return np.array([float(s_start)])
     count = int(np.ceil((s_end - s_start) / step))
     grid = s_start + step * np.arange(count, dtype=np.float64)
-    grid = grid[grid < s_end - SLIVER_FRACTION * step]
-    return np.append(grid, float(s_end))
+    interior = grid[1:][grid[1:] < s_end - SLIVER_FRACTION * step]
+    return np.concatenate(([float(s_start)], interior, [float(s_end)]))
 
 
 def road_to_world(road: Road, s: NDArrayFloat, t: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
