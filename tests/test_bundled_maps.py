@@ -94,6 +94,7 @@ class RoadRec:
 
 @dataclass(frozen=True)
 class MapRec:
+    path: Path
     root: etree._Element
     roads: dict[str, RoadRec]
     junctions: dict[str, list[tuple[str, str, str, str, tuple[tuple[int, int], ...]]]]
@@ -149,7 +150,7 @@ def read_map(path: Path) -> MapRec:
         ]
         for j in root.findall("junction")
     }
-    return MapRec(root, roads, junctions)
+    return MapRec(path, root, roads, junctions)
 
 
 # ---- independent closed forms ---------------------------------------------------------
@@ -453,9 +454,11 @@ def test_junction_connections_match_connecting_road_links(odr):
 def test_maps_load_with_the_project_parser(odr):
     if importlib.util.find_spec("cold_maps.opendrive.parser") is None:
         pytest.skip("cold_maps.opendrive.parser not written yet")
-    from cold_maps.opendrive.parser import parse_opendrive
+    from cold_maps.opendrive.parser import load_opendrive
 
-    model = parse_opendrive(etree.tostring(odr.root))
+    model = load_opendrive(odr.path)
+    assert (model.header.rev_major, model.header.rev_minor) == (1, 6)
+    assert model.header.geo_reference.proj == (odr.root.findtext("header/geoReference") or "").strip()
     assert list(model.roads) == list(odr.roads)
     assert list(model.junctions) == list(odr.junctions)
     for road_id, road in odr.roads.items():
@@ -464,16 +467,17 @@ def test_maps_load_with_the_project_parser(odr):
         assert [sec.s for sec in parsed.lane_sections] == [sec.s for sec in road.sections]
         for sec, mine in zip(parsed.lane_sections, road.sections):
             assert sorted(lane.id for lane in sec.lanes) == sorted(mine.lanes)
-        assert len(parsed.plan_view) == len(road.geoms)
+        assert [(g.kind, g.s, g.length) for g in parsed.plan_view] == [(g.kind, g.s, g.length) for g in road.geoms]
+        assert parsed.junction == road.junction
 
 
 def test_map_engine_reference_line_agrees_with_closed_forms(odr):
     if importlib.util.find_spec("cold_maps.opendrive.reference_line") is None:
         pytest.skip("cold_maps.opendrive.reference_line not written yet")
-    from cold_maps.opendrive.parser import parse_opendrive
+    from cold_maps.opendrive.parser import load_opendrive
     from cold_maps.opendrive.reference_line import reference_pose
 
-    model = parse_opendrive(etree.tostring(odr.root))
+    model = load_opendrive(odr.path)
     for road_id, road in odr.roads.items():
         s = np.linspace(0.0, road.length, 23)
         x, y, h = reference_pose(model.roads[road_id], s)
