@@ -354,10 +354,17 @@ class GroundTruth:
         keys = tuple(g.key for g in lanelets)
         route = self._routes.get(keys)
         if route is None:
+            overlapping = {
+                int(line.id)
+                for g in lanelets
+                for other in self.routing_graph.conflicting(g.lanelet)
+                if hasattr(other, "leftBound")
+                for line in (other.leftBound, other.rightBound)
+            }
             route = _Route(
                 keys=keys,
-                left=RouteBorder(self.borders, [(g.left_line, g.left_reversed) for g in lanelets]),
-                right=RouteBorder(self.borders, [(g.right_line, g.right_reversed) for g in lanelets]),
+                left=RouteBorder(self.borders, [(g.left_line, g.left_reversed) for g in lanelets], overlapping),
+                right=RouteBorder(self.borders, [(g.right_line, g.right_reversed) for g in lanelets], overlapping),
             )
             self._routes[keys] = route
             if len(self._routes) > ROUTE_CACHE_SIZE:

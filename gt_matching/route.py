@@ -23,8 +23,9 @@ class BorderDistances:
     Fields:
         distances: per point, m (exact or to the resampled GT).
         arc_m: per point, arc length of its closest GT point along the border, m.
-        other_closer: per point, True when a border outside the GT border is closer than
-            the GT border by more than the configured margin (both resampled).
+        other_closer: per point, True when a border of another lane (not the GT border,
+            not a lanelet overlapping the route) is closer than the GT border by more than
+            the configured margin (both resampled).
     """
 
     distances: NDArrayFloat
@@ -36,9 +37,13 @@ class RouteBorder:
     """The left or right GT border of a lanelet sequence: the borders' vertices joined in
     driving order, and their samples from the ``BorderIndex`` (spacing <= ``step_m``)."""
 
-    def __init__(self, index: BorderIndex, parts: list[tuple[int, bool]]) -> None:
-        """``parts``: (line string id, reversed) per lanelet in driving order."""
+    def __init__(self, index: BorderIndex, parts: list[tuple[int, bool]], overlapping: set[int]) -> None:
+        """``parts``: (line string id, reversed) per lanelet in driving order;
+        ``overlapping``: line string ids of lanelets that overlap the route (the other
+        branches of a junction), which never count as another lane's border."""
         self._index = index
+        self._overlapping = np.zeros(len(index.vertices), dtype=bool)
+        self._overlapping[[index.slot_of_line[line] for line in overlapping]] = True
         vertices, samples, segments = [], [], []
         self._position = np.full(len(index.vertices), -1, dtype=np.int64)
         offsets, counts, starts, reversed_ = [], [], [], []
@@ -108,7 +113,9 @@ class RouteBorder:
             route_distance, route_sample = self.tree.query(points[off_route])
             sample[off_route] = route_sample
             distances[off_route] = route_distance
-            other_closer[off_route] = near_distance[off_route] < route_distance - other_margin_m
+            other_closer[off_route] = (near_distance[off_route] < route_distance - other_margin_m) & ~self._overlapping[
+                slot[off_route]
+            ]
         if exact:
             distances, arc = windowed_distances(points, self.vertices, self.sample_segment[sample], half_window)
         else:

@@ -18,6 +18,17 @@ from gt_matching.polyline import NDArrayFloat
 POINT_RESOLUTION_M: Final = 1e-6
 
 
+def offset_polyline(centre: NDArrayFloat, offset_m: float, headings: NDArrayFloat | None = None) -> NDArrayFloat:
+    """``centre`` (``(N, 2)``, m) moved ``offset_m`` to the left (negative: right) along the
+    normal of ``headings`` (rad, per vertex; default: direction of the neighbouring vertices).
+    On a finely sampled circular arc this is the concentric arc."""
+    centre = np.asarray(centre, dtype=np.float64)
+    if headings is None:
+        ahead = np.vstack((centre[1:2] - centre[0:1], centre[2:] - centre[:-2], centre[-1:] - centre[-2:-1]))
+        headings = np.arctan2(ahead[:, 1], ahead[:, 0])
+    return centre + offset_m * np.column_stack((-np.sin(headings), np.cos(headings)))
+
+
 class LaneletMapBuilder:
     """Collects lanes (centreline + width) and builds a ``LaneletMap`` and routing graph."""
 
@@ -32,14 +43,9 @@ class LaneletMapBuilder:
         vertex; default: direction of the neighbouring vertices). Returns the lanelet id."""
         from lanelet2.core import Lanelet, getId
 
-        centre = np.asarray(centre, dtype=np.float64)
-        if headings is None:
-            ahead = np.vstack((centre[1:2] - centre[0:1], centre[2:] - centre[:-2], centre[-1:] - centre[-2:-1]))
-            headings = np.arctan2(ahead[:, 1], ahead[:, 0])
-        normal = np.column_stack((-np.sin(headings), np.cos(headings)))
-        lanelet = Lanelet(
-            getId(), self._line(centre + 0.5 * width_m * normal), self._line(centre - 0.5 * width_m * normal)
-        )
+        left = offset_polyline(centre, 0.5 * width_m, headings)
+        right = offset_polyline(centre, -0.5 * width_m, headings)
+        lanelet = Lanelet(getId(), self._line(left), self._line(right))
         lanelet.attributes["subtype"] = "road"
         lanelet.attributes["location"] = "urban"
         lanelet.attributes["one_way"] = "yes"
