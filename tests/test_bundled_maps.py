@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import shutil
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,8 +113,9 @@ def _road_link(link, tag):
 
 
 def _lane(element) -> LaneRec:
-    link = element.find("link")
-    ids = lambda tag: tuple(int(e.get("id")) for e in link.iter(tag)) if link is not None else ()  # noqa: E731
+    def ids(tag: str) -> tuple[int, ...]:
+        return tuple(int(e.get("id")) for e in element.iterfind(f"link/{tag}"))
+
     return LaneRec(
         int(element.get("id")), element.get("type"),
         tuple(_poly(w, "sOffset") for w in element.findall("width")), ids("predecessor"), ids("successor"),
@@ -252,6 +254,14 @@ def test_generator_reproduces_committed_maps_byte_for_byte(generated_dir):
     for name in generated:
         committed = bundled_map(Path(name).stem)
         assert (generated_dir / name).read_bytes() == committed.read_bytes(), f"{name} differs: run make maps"
+
+
+def test_script_check_passes_on_committed_maps():
+    result = subprocess.run(
+        [sys.executable, str(PROJECT_ROOT / "tools" / "make_maps.py"), "--check"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
 
 
 def test_check_flag_detects_changed_and_missing_files(generated_dir, tmp_path):
