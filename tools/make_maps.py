@@ -376,7 +376,7 @@ def build_junction() -> MapSpec:
         )
 
     connecting: list[RoadSpec] = []
-    connections: list[ConnectionSpec] = []
+    connections: list[Connection] = []
     movements = ((1, "right", -1.0), (2, "straight", 0.0), (3, "left", 1.0))
     for i, arm_in in enumerate(arms):
         contact_in: ContactPoint = "start" if starts_at_junction[i] else "end"
