@@ -191,24 +191,37 @@ PARAMETER_ENTITY = b"""<?xml version="1.0"?>
 <!DOCTYPE OpenDRIVE [<!ENTITY % remote SYSTEM "http://127.0.0.1:9/evil.dtd"> %remote;]>
 <OpenDRIVE/>"""
 
+HIDDEN_AFTER_BRACKET = b"""<?xml version="1.0"?>
+<!DOCTYPE OpenDRIVE [<!ATTLIST header name CDATA "]>">
+<!ENTITY late "x">]>
+<OpenDRIVE/>"""
+
 EXTERNAL_DTD = b'<?xml version="1.0"?>\n<!DOCTYPE OpenDRIVE SYSTEM "file:///etc/passwd">\n<OpenDRIVE/>'
 
 
 @pytest.mark.parametrize(
-    "data, reason",
+    "data, reason, line",
     [
-        (billion_laughs(9), "DOCTYPE declares entities (lol0, lol1, lol2, lol3, lol4); entities are not allowed"),
-        (XXE_TEXT, "DOCTYPE declares entities (xxe); entities are not allowed"),
-        (XXE_ATTRIBUTE, "DOCTYPE declares entities (xxe); entities are not allowed"),
-        (PARAMETER_ENTITY, "DOCTYPE declares entities (remote); entities are not allowed"),
-        (EXTERNAL_DTD, "DOCTYPE references an external DTD ('file:///etc/passwd')"),
+        (billion_laughs(9), "DOCTYPE declares entities (lol0, lol1, lol2, lol3, lol4); entities are not allowed", 3),
+        (XXE_TEXT, "DOCTYPE declares entities (xxe); entities are not allowed", 2),
+        (XXE_ATTRIBUTE, "DOCTYPE declares entities (xxe); entities are not allowed", 2),
+        (PARAMETER_ENTITY, "DOCTYPE declares entities (remote); entities are not allowed", 2),
+        (HIDDEN_AFTER_BRACKET, "DOCTYPE declares entities (late); entities are not allowed", 3),
+        (EXTERNAL_DTD, "DOCTYPE references an external DTD ('file:///etc/passwd')", 2),
     ],
-    ids=["billion laughs", "external entity in text", "external entity in attribute", "parameter entity", "external DTD"],
+    ids=[
+        "billion laughs",
+        "external entity in text",
+        "external entity in attribute",
+        "parameter entity",
+        "declaration after ]> in a quoted value",
+        "external DTD",
+    ],
 )
-def test_entity_payloads_are_rejected(data: bytes, reason: str) -> None:
+def test_entity_payloads_are_rejected(data: bytes, reason: str, line: int) -> None:
     error = parse_error(data)
     assert error.reason == reason
-    assert error.path == NAME and error.line is not None
+    assert (error.path, error.line) == (NAME, line)
     assert "root:" not in str(error)
 
 
@@ -231,9 +244,11 @@ def test_entities_in_utf16_input_are_rejected_after_parsing() -> None:
     assert str(parse_error(data)) == f"{NAME}: DOCTYPE declares entities (lol0, lol1, lol2); entities are not allowed"
 
 
-def test_plain_doctype_is_tolerated() -> None:
+def test_plain_doctype_and_entity_text_without_doctype_are_tolerated() -> None:
     data = SMALL_TEXT.replace("<OpenDRIVE>", "<!DOCTYPE OpenDRIVE>\n<OpenDRIVE>", 1).encode()
     assert len(parse_opendrive(data).roads) == 3
+    data = SMALL_TEXT.replace("+units=m", '+units=m <!ENTITY x "y">').encode()
+    assert parse_opendrive(data).header.geo_reference.proj.endswith('+units=m <!ENTITY x "y">')
 
 
 def test_size_limit_is_checked_before_reading(tmp_path: Path) -> None:

@@ -16,7 +16,6 @@ from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
 
-
 _ENTITY_DECLARATION: Final[re.Pattern[bytes]] = re.compile(rb"<!ENTITY\s+(?:%\s+)?([^\s\"'>]+)")
 
 
@@ -32,21 +31,18 @@ def _hardened_parser() -> etree.XMLParser:
     )
 
 
-def _reject_entity_declarations(data: bytes, path: str) -> None:
-    """Reject an internal DTD subset that declares entities before libxml2 sees it.
+def _reject_entity_declarations(data: bytes, doctype: int, path: str) -> None:
+    """Reject entity declarations after the DOCTYPE at byte ``doctype`` before libxml2
+    sees them.
 
     Needed: libxml2 expands internal entities in attribute values even with
     ``resolve_entities=False`` (bounded only by its amplification limit). Input in other
     encodings (UTF-16) is caught after parsing, from the parsed DTD.
     """
-    doctype = data.find(b"<!DOCTYPE")
-    if doctype < 0:
-        return
-    subset_end = data.find(b"]>", doctype)
-    subset = data[doctype : len(data) if subset_end < 0 else subset_end]
-    names = [m.group(1).decode("utf-8", "replace") for m in _ENTITY_DECLARATION.finditer(subset)]
-    if names:
-        line = data.count(b"\n", 0, doctype + subset.find(b"<!ENTITY")) + 1
+    declarations = list(_ENTITY_DECLARATION.finditer(data, doctype))
+    if declarations:
+        names = [match.group(1).decode("utf-8", "replace") for match in declarations]
+        line = data.count(b"\n", 0, declarations[0].start()) + 1
         raise OpenDriveError(_entities_reason(names), path=path, line=line)
 
 
@@ -62,15 +58,16 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     """
     if not isinstance(data, bytes):
         raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
-    _reject_entity_declarations(data, path)
+    doctype = data.find(b"<!DOCTYPE")
+    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
+    if doctype >= 0:
+        _reject_entity_declarations(data, doctype, path)
     try:
         root = etree.fromstring(data, _hardened_parser())
     except etree.XMLSyntaxError as exc:
         reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
         raise OpenDriveError(reason, path=path, line=exc.lineno or None) from None
     docinfo = root.getroottree().docinfo
-    doctype = data.find(b"<!DOCTYPE")
-    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
     if docinfo.system_url or docinfo.public_id:
         external = docinfo.system_url or docinfo.public_id
         raise OpenDriveError(f"DOCTYPE references an external DTD ({external!r})", path=path, line=line)
