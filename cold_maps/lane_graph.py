@@ -91,15 +91,18 @@ class LaneGraph:
 
     def entry_s(self, lane: LaneKey) -> float:
         """Road s (m) where traffic enters the lane."""
-        section = self.odr_map.roads[lane.road_id].lane_sections[lane.section]
-        forward = self.odr_map.roads[lane.road_id].drives_along_s(lane.lane_id)
-        return section.s if forward else section.s_end
+        return self._section_ends(lane)[0]
 
     def exit_s(self, lane: LaneKey) -> float:
         """Road s (m) where traffic leaves the lane."""
-        section = self.odr_map.roads[lane.road_id].lane_sections[lane.section]
-        forward = self.odr_map.roads[lane.road_id].drives_along_s(lane.lane_id)
-        return section.s_end if forward else section.s
+        return self._section_ends(lane)[1]
+
+    def _section_ends(self, lane: LaneKey) -> tuple[float, float]:
+        road = self.odr_map.roads[lane.road_id]
+        section = road.lane_sections[lane.section]
+        if road.drives_along_s(lane.lane_id):
+            return section.s, section.s_end
+        return section.s_end, section.s
 
 
 def build_lane_graph(
@@ -243,7 +246,7 @@ def _road_link_contacts(
 
 
 def _incoming_end(
-    odr_map: OpenDriveMap, junction_id: str, incoming: Road, connecting: Road, contact: str
+    junction_id: str, incoming: Road, connecting: Road, contact: str
 ) -> ContactPoint | None:
     """End of the incoming road that touches the junction, or None when unknown.
 
@@ -253,12 +256,12 @@ def _incoming_end(
     link = connecting.predecessor if contact == "start" else connecting.successor
     if link is not None and link.element_type == "road" and link.element_id == incoming.id:
         return link.contact_point
-    ends = [
-        end
-        for end, own in (("start", incoming.predecessor), ("end", incoming.successor))
-        if _links_junction(own, junction_id)
-    ]
-    return ends[0] if len(ends) == 1 else None  # type: ignore[return-value]
+    ends: list[ContactPoint] = []
+    if _links_junction(incoming.predecessor, junction_id):
+        ends.append("start")
+    if _links_junction(incoming.successor, junction_id):
+        ends.append("end")
+    return ends[0] if len(ends) == 1 else None
 
 
 def _links_junction(link: RoadLink | None, junction_id: str) -> bool:
@@ -287,7 +290,7 @@ def _junction_contacts(
             if not incoming.lane_sections or not connecting.lane_sections:
                 issues.append(f"{where}: a road without lane sections")
                 continue
-            in_end = _incoming_end(odr_map, junction.id, incoming, connecting, conn.contact_point)
+            in_end = _incoming_end(junction.id, incoming, connecting, conn.contact_point)
             if in_end is None:
                 issues.append(
                     f"{where}: cannot tell which end of road {incoming.id} meets the junction"

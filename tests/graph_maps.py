@@ -195,24 +195,19 @@ def junction_map() -> OpenDriveMap:
     e = road("E", 100.0, one_way(), x=20.0, pred=to_junction("J"))
     n = road("N", 100.0, one_way(), x=10.0, y=10.0, hdg=math.pi / 2, pred=to_junction("J"))
     s = road("S", 100.0, one_way(), x=10.0, y=-10.0, hdg=-math.pi / 2, pred=to_junction("J"))
-    right = road(
-        "right",
-        quarter,
-        [section(0, quarter, right=[lane(-1, pred=[-1], succ=[-1])])],
-        curvature=-1 / JUNCTION_RADIUS_M,
-        pred=to_road("W", "end"),
-        succ=to_road("S", "start"),
-        junction="J",
-    )
-    left = road(
-        "left",
-        quarter,
-        [section(0, quarter, right=[lane(-1, pred=[-1], succ=[-1])])],
-        curvature=1 / JUNCTION_RADIUS_M,
-        pred=to_road("W", "end"),
-        succ=to_road("N", "start"),
-        junction="J",
-    )
+    def turn(road_id: str, curvature: float, arm: str) -> Road:
+        return road(
+            road_id,
+            quarter,
+            [section(0, quarter, right=[lane(-1, pred=[-1], succ=[-1])])],
+            curvature=curvature,
+            pred=to_road("W", "end"),
+            succ=to_road(arm, "start"),
+            junction="J",
+        )
+
+    right = turn("right", -1 / JUNCTION_RADIUS_M, "S")
+    left = turn("left", 1 / JUNCTION_RADIUS_M, "N")
     straight = road(
         "straight",
         20.0,

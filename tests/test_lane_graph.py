@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -278,3 +279,20 @@ def test_chain_of_roads_in_any_orientation(flipped: list[bool], declared_by: lis
     assert graph.issues == ()
     assert edges(graph) == set(zip(east, east[1:])) | set(zip(west[1:], west))
     assert _discontinuities(graph) == []
+
+
+def test_junction_without_connecting_road_links_uses_the_incoming_road_link() -> None:
+    base = junction_map()
+    bare = {rid: replace(r, predecessor=None, successor=None) if r.junction == "J" else r
+            for rid, r in base.roads.items()}
+    graph = build_lane_graph(replace(base, roads=bare))
+    # W's successor is junction J: W's end meets it; the exits out of J need the
+    # connecting roads' own links, which are gone
+    assert graph.successors[k("W", 0, -1)] == (k("left", 0, -1), k("right", 0, -1), k("straight", 0, 1))
+    assert graph.successors[k("right", 0, -1)] == ()
+    # a road linked to J at both ends is ambiguous: reported, no edge
+    looped = dict(bare, W=replace(bare["W"], predecessor=to_junction("J")))
+    ambiguous = build_lane_graph(replace(base, roads=looped))
+    assert ambiguous.successors[k("W", 0, -1)] == ()
+    assert len(ambiguous.issues) == 3
+    assert all("cannot tell which end of road W meets the junction" in issue for issue in ambiguous.issues)
