@@ -48,6 +48,7 @@ METADATA_STATUS: Final[str] = "cold.status"
 STATUS_COMPLETE: Final[str] = "complete"
 STATUS_PARTIAL: Final[str] = "partial"
 LINE_THICKNESS_M: Final[float] = 0.15
+DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 
 RGBA = tuple[float, float, float, float]
@@ -242,7 +243,7 @@ def _line_entity(entity_id: str, ns: int, points: NDArrayFloat, color: RGBA) -> 
         "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
         "thickness": LINE_THICKNESS_M,
         "scale_invariant": False,
-        "points": [{"x": float(x), "y": float(y), "z": 0.0} for x, y in points],
+        "points": [{"x": x, "y": y, "z": 0.0} for x, y in np.round(points, DISPLAY_DECIMALS).tolist()],
         "color": dict(zip("rgba", color)),
         "colors": [],
         "indices": [],

@@ -114,8 +114,8 @@ def test_scene_updates_are_line_strips_in_the_map_frame_at_the_world_pose(record
     # ego at (10, 5) heading north: vehicle (x, 1.75) -> world (10 - 1.75, 5 + x)
     left, _ = lane(2)
     points = np.array([[p["x"], p["y"], p["z"]] for p in line["points"]])
-    np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=1e-12)
-    np.testing.assert_allclose(points[:, 1], 5.0 + left[:, 0], atol=1e-12)
+    np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=0.5e-4)  # display rounding: 0.1 mm
+    np.testing.assert_allclose(points[:, 1], 5.0 + left[:, 0], atol=0.5e-4)
     np.testing.assert_array_equal(points[:, 2], 0.0)
     metrics = [p for topic, _, p, _ in messages if topic == "/metrics"]
     assert metrics[1] == {"stamp_s": 0.1, "frame": 1, "mean_error_m": 0.01, "max_error_m": None, "fused": 1.0}
