@@ -4,15 +4,18 @@ and every border of the map resampled into one KD-tree."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
 from gt_matching.errors import MatchingError
-from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, resample
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, mid_line, resample
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
+
+#: Sampling distance of lanelet centrelines (scoring lanelet sequences), m.
+CENTRE_STEP_M: Final = 0.1
 
 LaneletKey = tuple[int, bool]
 """A lanelet as (id, inverted): a bidirectional lanelet is driven in either orientation."""
@@ -33,11 +36,13 @@ class LaneletGeometry:
     Fields:
         lanelet: the Lanelet2 ``ConstLanelet`` (routing-graph queries take it).
         key: (id, inverted).
-        centre: centreline vertices, m.
+        centre: mid-line of the borders every <= ``CENTRE_STEP_M``, m (Lanelet2's own
+            centreline costs O(N^2) on densely sampled borders).
         length_m: centreline length, m.
         left_line, right_line: ids of the left and right border line strings.
         left_reversed, right_reversed: True when the border runs against the stored
             orientation of its line string in the ``BorderIndex``.
+        centre_tree: KD-tree of ``centre``.
     """
 
     lanelet: Any
@@ -48,6 +53,13 @@ class LaneletGeometry:
     right_line: int
     left_reversed: bool
     right_reversed: bool
+    centre_tree: cKDTree
+
+    def centre_distances(self, points: NDArrayFloat) -> NDArrayFloat:
+        """Distance of each point to the closest ``centre`` vertex, m: at most
+        ``sqrt(d**2 + (CENTRE_STEP_M / 2)**2)`` for a distance d to the mid-line."""
+        distances: NDArrayFloat = self.centre_tree.query(points)[0]
+        return distances
 
 
 class BorderIndex:
@@ -86,11 +98,13 @@ class BorderIndex:
 
     def lanelet_geometry(self, lanelet: Any) -> LaneletGeometry:
         """Numpy geometry of a Lanelet2 lanelet (either orientation)."""
-        centre = line_xy(lanelet.centerline, f"lanelet {lanelet.id}")
         left, right = lanelet.leftBound, lanelet.rightBound
+        centre = mid_line(line_xy(left, f"lanelet {lanelet.id}"), line_xy(right, f"lanelet {lanelet.id}"), CENTRE_STEP_M)
         for line in (left, right):
             if line.id not in self.slot_of_line:
                 raise MatchingError(f"lanelet {lanelet.id}: border {line.id} is not in the lanelet map")
+        from scipy.spatial import cKDTree
+
         return LaneletGeometry(
             lanelet=lanelet,
             key=(int(lanelet.id), bool(lanelet.inverted())),
@@ -100,4 +114,5 @@ class BorderIndex:
             right_line=int(right.id),
             left_reversed=bool(left.inverted()) != self.inverted[self.slot_of_line[left.id]],
             right_reversed=bool(right.inverted()) != self.inverted[self.slot_of_line[right.id]],
+            centre_tree=cKDTree(centre),
         )

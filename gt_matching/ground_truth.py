@@ -26,6 +26,7 @@ from gt_matching.polyline import (
     as_polyline,
     closest_distances,
     heading_at,
+    mid_line,
 )
 from gt_matching.route import RouteBorder
 
@@ -114,20 +115,6 @@ def _describe(pose: Pose) -> str:
 
 def _ids(lanelets: Sequence[LaneletGeometry]) -> tuple[int, ...]:
     return tuple(g.key[0] for g in lanelets)
-
-
-def detection_centreline(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
-    """Mid-line of two borders, sampled at equal fractions of their lengths, about every
-    ``step_m`` of the longer border (at least 2 points), m."""
-    cum_left, cum_right = arc_lengths(left), arc_lengths(right)
-    count = max(2, int(np.ceil(max(cum_left[-1], cum_right[-1]) / step_m)) + 1)
-    fractions = np.linspace(0.0, 1.0, count)
-
-    def at_fractions(line: NDArrayFloat, cum: NDArrayFloat) -> NDArrayFloat:
-        s = fractions * cum[-1]
-        return np.column_stack((np.interp(s, cum, line[:, 0]), np.interp(s, cum, line[:, 1])))
-
-    return 0.5 * (at_fractions(left, cum_left) + at_fractions(right, cum_right))
 
 
 class GroundTruth:
@@ -259,7 +246,7 @@ class GroundTruth:
         """The lanelet sequence to score against, the sender's lanelets, and a mismatch reason."""
         config = self.config
         candidates = self._candidates(pose)
-        centre = detection_centreline(left, right, config.score_step_m)
+        centre = mid_line(left, right, config.score_step_m)
         pose_gap, pose_arc = closest_distances(np.array([pose[:2]]), centre)
         ahead_m = arc_lengths(centre)[-1] - pose_arc[0] + pose_gap[0] + config.margin_m
         behind_m = pose_arc[0] + config.margin_m
@@ -268,7 +255,7 @@ class GroundTruth:
         def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:
             found = memo.get(geometry.key)
             if found is None:
-                found = memo[geometry.key] = closest_distances(centre, geometry.centre)[0]
+                found = memo[geometry.key] = geometry.centre_distances(centre)
             return found
 
         sequences = [
