@@ -5,8 +5,8 @@ Channels (all JSON-encoded, schemas in ``jsonschema``):
 - ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the Foxglove
   JSON schema, with the item schemas of the primitive lists we always leave empty reduced to
   their title). One entity per polyline, a ``LINE_STRIP`` in frame ``map`` (= the world
-  frame, m, z = 0). Every update first deletes all older entities on its topic, so the
-  3D panel shows exactly the current frame.
+  frame, m, z = 0, rounded to 0.1 mm). Every update first deletes all older entities on its
+  topic, so the 3D panel shows exactly the current frame.
 - ``/cold/detections``: ``cold.LaneDetection`` (:data:`LANE_DETECTION_SCHEMA`), the raw
   detections for re-fusion.
 - ``/metrics``: ``cold.FrameMetrics`` (:data:`FRAME_METRICS_SCHEMA`), a flat object of
