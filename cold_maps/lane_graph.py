@@ -78,6 +78,13 @@ class LaneGraph:
     predecessors: Mapping[LaneKey, tuple[LaneKey, ...]]
     issues: tuple[str, ...]
 
+    def __repr__(self) -> str:
+        return (
+            f"LaneGraph({self.odr_map.path or '<input>'}: {len(self.lengths)} lanes of types "
+            f"{self.lane_types}, {sum(map(len, self.successors.values()))} edges, "
+            f"{len(self.issues)} issues)"
+        )
+
     @property
     def lanes(self) -> tuple[LaneKey, ...]:
         """All nodes, in map order (roads in file order, sections, lanes left to right)."""
