@@ -31,7 +31,7 @@ def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFlo
     return array
 
 
-def left_normals(points: NDArrayFloat) -> NDArrayFloat:
+def left_normals(points: NDArrayFloat, name: str = "polyline") -> NDArrayFloat:
     """Unit normals pointing left of the driving direction at each vertex, ``(N, 2)``.
 
     Tangents are central differences (one-sided at the ends), so on a uniformly sampled
@@ -40,7 +40,7 @@ def left_normals(points: NDArrayFloat) -> NDArrayFloat:
     tangents = np.gradient(points, axis=0)
     norms = np.hypot(tangents[:, 0], tangents[:, 1])
     if np.any(norms == 0.0):
-        raise ValueError("polyline has repeated consecutive points: normal undefined")
+        raise ValueError(f"{name}: repeated or reversing points, normal undefined")
     tangents = tangents / norms[:, None]
     return np.column_stack((-tangents[:, 1], tangents[:, 0]))
 
@@ -108,6 +108,8 @@ class SensorErrorModel:
         if self.range_jitter_sigma_m > 0:
             cut = abs(rng.normal(0.0, self.range_jitter_sigma_m))
             mean_length = 0.5 * (polyline_distance(borders[0])[-1] + polyline_distance(borders[1])[-1])
+            if mean_length <= 0:
+                raise ValueError("left, right: detection has zero length")
             fraction = 1.0 - cut / mean_length
             if fraction <= 0:
                 return None
@@ -116,11 +118,11 @@ class SensorErrorModel:
                 return None
         if self.lateral_offset_m != 0 or self.noise_sigma_m > 0:
             shifted = []
-            for border in borders:
+            for name, border in zip(("left", "right"), borders):
                 along = np.full(len(border), self.lateral_offset_m)
                 if self.noise_sigma_m > 0:
                     along = along + rng.normal(0.0, self.noise_sigma_m, len(border))
-                shifted.append(border + along[:, None] * left_normals(border))
+                shifted.append(border + along[:, None] * left_normals(border, name))
             borders = shifted
         if self.heading_bias_rad != 0:
             borders = [vehicle_to_world(border, 0.0, 0.0, self.heading_bias_rad) for border in borders]

@@ -184,5 +184,8 @@ def test_invalid_detections_are_named():
         model.apply(bad, right, np.random.default_rng(0))
     with pytest.raises(ValueError, match=r"right: expected an \(N, 2\) polyline"):
         model.apply(left, right[:, 0], np.random.default_rng(0))
+    stuck = np.array([[1.0, -1.75], [1.0, -1.75], [2.0, -1.75]])
+    with pytest.raises(ValueError, match="right: repeated or reversing points"):
+        model.apply(left, stuck, np.random.default_rng(0))
     with pytest.raises(ValueError, match="right: expected at least 2 points, got 0"):
         check_polyline("right", np.empty((0, 2)))
