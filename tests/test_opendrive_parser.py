@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import random
 from collections import Counter
 from pathlib import Path
 
 import pytest
 from conftest import bundled_map
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cold_maps.opendrive.model import CubicPoly, LaneLink, OpenDriveMap, RoadLink
 from cold_maps.opendrive.parser import load_opendrive, parse_opendrive
@@ -70,7 +73,8 @@ def test_road_fields_and_links(small: OpenDriveMap) -> None:
     assert road.predecessor == RoadLink("road", "2", "end")
     # a contactPoint on a junction link (CARLA writes them) is tolerated and dropped
     assert road.successor == RoadLink("junction", "7", None)
-    assert road.line == SMALL_MAP.read_text().splitlines().index('  <road id="1" name="main" length="30" junction="-1" rule="LHT">') + 1
+    road_tag = '  <road id="1" name="main" length="30" junction="-1" rule="LHT">'
+    assert road.line == SMALL_MAP.read_text().splitlines().index(road_tag) + 1
     other = small.roads["2"]
     assert (other.rule, other.predecessor, other.successor) == ("RHT", None, RoadLink("road", "1", "start"))
     assert small.roads["3"].junction == "7"
@@ -150,7 +154,9 @@ def test_direct_junction_linked_road() -> None:
     extra = """<road id="s" length="5" junction="-1">
       <planView><geometry s="0" x="10" y="0" hdg="0" length="5"><line/></geometry></planView>
       <lanes><laneSection s="0"><center><lane id="0" type="none"/></center></laneSection></lanes></road>
-    <junction id="d" type="direct"><connection id="0" incomingRoad="r" linkedRoad="s" contactPoint="start"/></junction>"""
+    <junction id="d" type="direct">
+      <connection id="0" incomingRoad="r" linkedRoad="s" contactPoint="start"/>
+    </junction>"""
     junction = parse_opendrive(minimal(extra=extra)).junctions["d"]
     assert junction.type == "direct"
     assert (junction.connections[0].incoming_road, junction.connections[0].connecting_road) == ("r", "s")
@@ -162,6 +168,9 @@ def test_last_section_ends_at_road_length_and_sections_can_be_empty_length() -> 
     assert [(sec.s, sec.s_end) for sec in road.lane_sections] == [(0.0, 4.0), (4.0, 10.0)]
     at_end = CENTER_ONLY.replace('s="0"', 's="10"')
     road = parse_opendrive(minimal(sections=CENTER_ONLY + at_end)).roads["r"]
+    assert [(sec.s, sec.s_end) for sec in road.lane_sections] == [(0.0, 10.0), (10.0, 10.0)]
+    rounded_past_end = CENTER_ONLY.replace('s="0"', 's="10.0009"')
+    road = parse_opendrive(minimal(sections=CENTER_ONLY + rounded_past_end)).roads["r"]
     assert [(sec.s, sec.s_end) for sec in road.lane_sections] == [(0.0, 10.0), (10.0, 10.0)]
 
 
@@ -225,3 +234,26 @@ def test_town04_has_multi_section_roads_and_lane_offsets(town04_path: Path) -> N
     assert sum(len(road.lane_offsets) for road in odr.roads.values()) == 1393
     assert sum(len(road.elevation) for road in odr.roads.values()) == 2055
     assert sum(len(road.plan_view) for road in odr.roads.values()) == 1280
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    starts=st.lists(st.floats(0.0, 10.0, allow_nan=False), min_size=1, max_size=6),
+    widths=st.lists(st.tuples(st.floats(0.0, 50.0), st.floats(-5.0, 5.0)), max_size=5),
+    order=st.randoms(use_true_random=False),
+)
+def test_sections_and_records_in_any_file_order(
+    starts: list[float], widths: list[tuple[float, float]], order: random.Random
+) -> None:
+    """Sections and width records come out sorted by s whatever their file order; the
+    section ends chain to the next start and the last ends at the road length."""
+    records = "".join(f'<width sOffset="{s0!r}" a="{a!r}" b="0" c="0" d="0"/>' for s0, a in widths)
+    lane = f'<right><lane id="-1" type="driving">{records}</lane></right>'
+    center = '<center><lane id="0" type="none"/></center>'
+    sections = [f'<laneSection s="{s!r}">{center}{lane}</laneSection>' for s in [0.0, *starts]]
+    order.shuffle(sections)
+    road = parse_opendrive(minimal(sections="".join(sections))).roads["r"]
+    assert [sec.s for sec in road.lane_sections] == sorted([0.0, *starts])
+    assert [sec.s_end for sec in road.lane_sections] == sorted(starts) + [10.0]
+    expected = sorted((CubicPoly(s0, a, 0.0, 0.0, 0.0) for s0, a in widths), key=lambda r: r.s0)
+    assert all(list(sec.lane(-1).widths) == expected for sec in road.lane_sections)

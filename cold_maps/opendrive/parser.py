@@ -51,8 +51,9 @@ from cold_maps.opendrive.xml_safety import parse_xml
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
 """Default input size limit (bytes) of ``load_opendrive``."""
 
-S_TOLERANCE_M: Final[float] = 1e-6
-"""A lane section may start this far (m) past the road length before it is an error."""
+SECTION_START_TOLERANCE_M: Final[float] = 1e-3
+"""A lane section may start this far (m) past the road length (rounding in real maps)
+before it is an error; such a section starts at the road length, with zero length."""
 
 _GEOMETRY_KINDS: Final[frozenset[str]] = frozenset({"line", "arc", "spiral", "poly3", "paramPoly3"})
 _CONTACT_POINTS: Final[tuple[str, ...]] = ("start", "end")
@@ -315,7 +316,8 @@ class _Reader:
         shapes = [child for child in element if child.tag in _GEOMETRY_KINDS]
         if len(shapes) != 1:
             found = "no known kind" if not shapes else f"{len(shapes)} kinds"
-            raise self.error(f"geometry has {found} (expected exactly one of {', '.join(sorted(_GEOMETRY_KINDS))})", element)
+            expected = ", ".join(sorted(_GEOMETRY_KINDS))
+            raise self.error(f"geometry has {found} (expected exactly one of {expected})", element)
         shape = shapes[0]
         kind = shape.tag
         if kind == "line":
@@ -338,13 +340,15 @@ class _Reader:
         parsed = sorted(
             (self.lane_section(child) for child in lanes if child.tag == "laneSection"), key=lambda p: p[0]
         )
-        sections = []
-        for index, (s, single_side, left, center, right, element) in enumerate(parsed):
-            if s > length + S_TOLERANCE_M:
+        for s, *_, element in parsed:
+            if s > length + SECTION_START_TOLERANCE_M:
                 raise self.error(f"lane section starts at s={s}, after the end of road {road_id!r} ({length})", element)
-            s_end = parsed[index + 1][0] if index + 1 < len(parsed) else max(length, s)
-            sections.append(LaneSection(s, s_end, single_side, left, center, right))
-        return sections
+        starts = [min(s, length) for s, *_ in parsed]
+        ends = starts[1:] + [length]
+        return [
+            LaneSection(s, s_end, single_side, left, center, right)
+            for s, s_end, (_, single_side, left, center, right, _) in zip(starts, ends, parsed)
+        ]
 
     def lane_section(
         self, element: etree._Element
@@ -419,7 +423,9 @@ class _Reader:
             links.append(("road", incoming, child))
             links.append(("road", connecting, child))
             lane_links = tuple(
-                LaneLink(self.integer(link, "from"), self.integer(link, "to")) for link in child if link.tag == "laneLink"
+                LaneLink(self.integer(link, "from"), self.integer(link, "to"))
+                for link in child
+                if link.tag == "laneLink"
             )
             connections.append(
                 Connection(
