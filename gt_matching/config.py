@@ -30,8 +30,6 @@ class MatchingConfig:
         margin_m: the GT route extends this far beyond both ends of the detection, m.
         score_step_m: spacing of the detection centreline samples that score candidate
             lanelet sequences, m.
-        exact_half_window: exact mode searches this many GT segments either side of the
-            segment of the closest resampled point.
     """
 
     step_m: float = PAPER_STEP_M
@@ -42,7 +40,6 @@ class MatchingConfig:
     other_border_margin_m: float = 0.10
     margin_m: float = 5.0
     score_step_m: float = 1.0
-    exact_half_window: int = 2
 
     def __post_init__(self) -> None:
         for field in fields(self):

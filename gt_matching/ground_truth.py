@@ -180,7 +180,6 @@ class GroundTruth:
                 points,
                 exact=exact,
                 other_margin_m=config.other_border_margin_m,
-                half_window=config.exact_half_window,
             )
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
             metrics.append(BorderMetrics.from_distances(found.distances, unmatched, found.arc_m[-1] - found.arc_m[0]))

@@ -95,12 +95,16 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
 
 
 def windowed_distances(
-    points: NDArrayFloat, vertices: NDArrayFloat, near_segment: NDArrayInt, half_window: int
+    points: NDArrayFloat, vertices: NDArrayFloat, near_arc_m: NDArrayFloat, reach_m: float
 ) -> tuple[NDArrayFloat, NDArrayFloat]:
     """Exact closest-point distance (m) and arc length (m) of each point on ``vertices``,
-    searching the ``half_window`` segments on either side of ``near_segment`` (per point)."""
-    offsets = np.arange(-half_window, half_window + 1)
-    segments = np.clip(near_segment[:, None] + offsets, 0, len(vertices) - 2)
+    searching the segments within ``reach_m`` of arc length ``near_arc_m`` (per point; e.g.
+    that of its closest resampled point, with ``reach_m`` >= the resampling step)."""
+    cum = arc_lengths(vertices)
+    first = np.clip(np.searchsorted(cum, near_arc_m - reach_m, side="right") - 1, 0, len(vertices) - 2)
+    last = np.clip(np.searchsorted(cum, near_arc_m + reach_m, side="left"), 1, len(vertices) - 1) - 1
+    span = int(np.max(last - first)) + 1
+    segments = np.minimum(first[:, None] + np.arange(span), last[:, None])
     return segment_distances(points, vertices, segments)
 
 

@@ -89,13 +89,15 @@ class RouteBorder:
         return cKDTree(self.samples)
 
     def distances(
-        self, points: NDArrayFloat, *, exact: bool, other_margin_m: float, half_window: int
+        self, points: NDArrayFloat, *, exact: bool, other_margin_m: float
     ) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m) to this border.
 
         The map-wide KD-tree gives each point's closest sample; when that sample is on this
         border it is the answer, otherwise this border's own KD-tree is asked. Exact mode
-        refines with point-to-segment distances around the closest sample.
+        refines with point-to-segment distances to the segments within one resampling step
+        (arc length) of the closest sample, which hold the closest point wherever the
+        border's radius of curvature exceeds the distance.
         """
         index = self._index
         near_distance, near_sample = index.tree.query(points)
@@ -117,7 +119,7 @@ class RouteBorder:
                 slot[off_route]
             ]
         if exact:
-            distances, arc = windowed_distances(points, self.vertices, self.sample_segment[sample], half_window)
+            distances, arc = windowed_distances(points, self.vertices, self.sample_arc[sample], self._index.step_m)
         else:
             arc = self.sample_arc[sample]
         return BorderDistances(distances=distances, arc_m=arc, other_closer=other_closer)
