@@ -1,1 +1,15 @@
-"""converters package (see README)."""
+"""OpenDRIVE → Lanelet2 through commonroad-scenario-designer, in the exact OpenDRIVE
+inertial frame, with an on-disk cache.
+
+Entry points: ``load_lanelet2`` (map + routing graph), ``convert`` (write an OSM file,
+get its ``LoadRecipe``), ``cli_convert`` (the ``cold-maps convert`` subcommand),
+``clear_cache``. crdesigner and lanelet2 are imported lazily, inside the functions that
+use them. This package never imports ``cold_maps``.
+"""
+
+from converters.api import cli_convert, convert, load_lanelet2, routing_graph
+from converters.cache import clear_cache
+from converters.errors import ConversionError
+from converters.frame import LoadRecipe
+
+__all__ = ["ConversionError", "LoadRecipe", "clear_cache", "cli_convert", "convert", "load_lanelet2", "routing_graph"]

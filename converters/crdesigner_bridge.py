@@ -1,0 +1,144 @@
+"""OpenDRIVE → CommonRoad lanelets through commonroad-scenario-designer, in the inertial frame.
+
+crdesigner re-projects every vertex from the map's geoReference to pseudo-Mercator
+(``proj_string_odr``); we switch that off, so the CommonRoad vertices stay in the
+OpenDRIVE inertial frame (the ``<offset>`` of the geoReference is not applied either).
+crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from collections.abc import Iterator
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+from lxml import etree
+
+from converters.errors import ConversionError
+
+NDArrayFloat = npt.NDArray[np.float64]
+
+MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
+"""Largest OpenDRIVE file we hand to the converter (bytes)."""
+
+
+@dataclass(frozen=True)
+class SourceLanelet:
+    """One CommonRoad lanelet as converted by crdesigner.
+
+    Fields:
+        id: CommonRoad lanelet id (positive; kept as the Lanelet2 lanelet id).
+        left, right: (N, 2) borders in the inertial frame (m), ordered in driving
+            direction; ``left`` is on the left of a driver.
+        types: CommonRoad lanelet type values, e.g. {"urban", "intersection"}.
+    """
+
+    id: int
+    left: NDArrayFloat
+    right: NDArrayFloat
+    types: frozenset[str]
+
+
+def _hardened_parser() -> etree.XMLParser:
+    return etree.XMLParser(
+        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False, remove_pis=True
+    )
+
+
+def read_geo_reference(path: Path) -> str:
+    """Check that ``path`` is a readable OpenDRIVE file; return its geoReference ("" if none).
+
+    Raises ConversionError for a missing, oversized or malformed file, a DOCTYPE (never
+    needed by OpenDRIVE, and the only way in for entity attacks) or a non-OpenDRIVE root.
+    """
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ConversionError(str(path), f"file is {size} bytes, more than the {MAX_FILE_BYTES} allowed")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
+    if b"<!DOCTYPE" in data[:4096]:
+        raise ConversionError(str(path), "a DOCTYPE is not allowed in an OpenDRIVE map")
+    try:
+        root = etree.fromstring(data, _hardened_parser())
+    except etree.XMLSyntaxError as exc:
+        raise ConversionError(str(path), f"not well-formed XML: {exc}") from exc
+    if etree.QName(root).localname != "OpenDRIVE":
+        raise ConversionError(str(path), f"root element is <{etree.QName(root).localname}>, not <OpenDRIVE>")
+    geo = root.find("{*}header/{*}geoReference")
+    return "" if geo is None else " ".join((geo.text or "").split())
+
+
+@contextlib.contextmanager
+def _quiet(verbose: bool) -> Iterator[None]:
+    """Silence crdesigner's warnings, log records and prints unless ``verbose``."""
+    if verbose:
+        yield
+        return
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logging.disable(previous)
+
+
+def crdesigner_version() -> str:
+    """Installed commonroad-scenario-designer version (part of the cache key)."""
+    from importlib.metadata import version
+
+    return version("commonroad-scenario-designer")
+
+
+def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLanelet], str]:
+    """Convert an OpenDRIVE file with crdesigner: lanelets in the inertial frame and the
+    map's geoReference ("" if none).
+
+    Raises ConversionError naming ``path`` when the file is unreadable, crdesigner fails
+    or finds no lanelet.
+    """
+    geo_reference = read_geo_reference(path)
+    with _quiet(verbose):
+        try:
+            scenario = _run_crdesigner(path)
+        except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
+            raise ConversionError(str(path), f"converter crashed: {type(exc).__name__}: {exc}") from exc
+    lanelets = [
+        SourceLanelet(
+            id=int(lanelet.lanelet_id),
+            left=np.asarray(lanelet.left_vertices, dtype=np.float64)[:, :2],
+            right=np.asarray(lanelet.right_vertices, dtype=np.float64)[:, :2],
+            types=frozenset(str(t.value) for t in lanelet.lanelet_type),
+        )
+        for lanelet in scenario.lanelet_network.lanelets
+    ]
+    if not lanelets:
+        raise ConversionError(str(path), "the converter produced no lanelets (no convertible lanes?)")
+    for lanelet in lanelets:
+        if not (np.isfinite(lanelet.left).all() and np.isfinite(lanelet.right).all()):
+            raise ConversionError(str(path), f"the converter produced non-finite vertices in lanelet {lanelet.id}")
+    return lanelets, geo_reference
+
+
+def _run_crdesigner(path: Path):  # noqa: ANN202 - returns a commonroad Scenario
+    from crdesigner.common.config.general_config import GeneralConfig
+    from crdesigner.common.config.opendrive_config import OpenDriveConfig
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion.network import Network
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
+
+    config = OpenDriveConfig()
+    config.proj_string_odr = None
+    network = Network(config)
+    network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
+    return network.export_commonroad_scenario(GeneralConfig(), config)

@@ -1,0 +1,175 @@
+"""CommonRoad lanelets → a standard Lanelet2 OSM document in the inertial frame.
+
+Built here rather than by crdesigner's CR2LaneletConverter, which (0.8.5) shares the
+first/last nodes of a lanelet with its CommonRoad predecessor/successor without checking
+the distance (Town01: lanelets whose first point jumps 224 m) and shares adjacent ways on
+``max(signed difference) < tol``. Here points closer than ``MERGE_TOLERANCE_M`` are
+merged (so consecutive and adjacent lanelets share points and ways, which Lanelet2
+routing needs), and no point moves farther than that.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+from lxml import etree
+
+from converters import frame
+from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
+from converters.errors import ConversionError
+
+NDArrayInt = npt.NDArray[np.int64]
+
+MERGE_TOLERANCE_M: Final[float] = 1e-3
+"""Points of different borders closer than this (m) become one OSM node."""
+
+_SUBTYPES: Final[tuple[tuple[str, str], ...]] = (
+    ("sidewalk", "walkway"),
+    ("crosswalk", "crosswalk"),
+    ("bicycleLane", "bicycle_lane"),
+    ("busLane", "bus_lane"),
+    ("border", "emergency_lane"),
+    ("shoulder", "emergency_lane"),
+    ("restricted", "emergency_lane"),
+    ("highway", "highway"),
+    ("interstate", "highway"),
+)
+"""CommonRoad lanelet type → Lanelet2 subtype, most specific first; default "road"."""
+
+TYPES_TAG: Final[str] = "commonroad:types"
+"""Lanelet tag listing the CommonRoad lanelet types (comma-separated, sorted)."""
+
+
+def lanelet_attributes(types: frozenset[str]) -> dict[str, str]:
+    """Lanelet2 tags of a lanelet with these CommonRoad types."""
+    subtype = next((l2 for cr, l2 in _SUBTYPES if cr in types), "road")
+    urban = "urban" in types or "intersection" in types
+    return {
+        "type": "lanelet",
+        "subtype": subtype,
+        "location": "urban" if urban else "nonurban",
+        "one_way": "yes",
+        TYPES_TAG: ",".join(sorted(types)),
+    }
+
+
+def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
+    """Index of each point's representative: the first earlier-or-same point within
+    ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
+    its representative."""
+    from scipy.spatial import cKDTree
+
+    neighbours = cKDTree(points).query_ball_point(points, r=tolerance)
+    representative = np.full(len(points), -1, dtype=np.int64)
+    for index, near in enumerate(neighbours):
+        if representative[index] >= 0:
+            continue
+        representative[index] = index
+        for other in near:
+            if representative[other] < 0:
+                representative[other] = index
+    return representative
+
+
+def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
+    """``lanelet`` with its borders swapped when its left border lies on the driver's
+    right. crdesigner 0.8.5 does that for every lane of an LHT road (it reverses the
+    vertex order for the driving direction but keeps inner as left); Lanelet2's loader
+    would then invert both borders and flip the driving direction."""
+    if len(lanelet.left) != len(lanelet.right) or len(lanelet.left) < 2:
+        return lanelet
+    centre = 0.5 * (lanelet.left + lanelet.right)
+    tangent = np.gradient(centre, axis=0)
+    across = lanelet.left - lanelet.right
+    leftness = np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
+    if leftness >= 0.0:
+        return lanelet
+    return SourceLanelet(id=lanelet.id, left=lanelet.right, right=lanelet.left, types=lanelet.types)
+
+
+def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
+    keep = np.ones(len(ids), dtype=bool)
+    keep[1:] = ids[1:] != ids[:-1]
+    return tuple(int(i) for i in ids[keep])
+
+
+def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", source: str = "") -> bytes:
+    """The OSM document (UTF-8 bytes) of ``lanelets``, in our frame convention.
+
+    Raises ConversionError naming ``source`` when a lanelet has a border with fewer
+    than two distinct points, or when nothing is left to write.
+    """
+    lanelets = [left_on_left(lanelet) for lanelet in lanelets]
+    borders = [border for lanelet in lanelets for border in (lanelet.left, lanelet.right)]
+    if not borders:
+        raise ConversionError(source, "no lanelets to write")
+    stacked = np.vstack(borders)
+    representative = merge_points(stacked, MERGE_TOLERANCE_M)
+    unique, node_index = np.unique(representative, return_inverse=True)
+    first_id = max(lanelet.id for lanelet in lanelets) + 1
+    node_ids = first_id + node_index
+    root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
+    root.append(etree.Comment(_recipe_comment(geo_reference)))
+    projector = frame.projector()
+    from lanelet2.core import BasicPoint3d
+
+    for offset, point in enumerate(stacked[unique]):
+        gps = projector.reverse(BasicPoint3d(float(point[0]), float(point[1]), 0.0))
+        etree.SubElement(root, "node", id=str(first_id + offset), lat=repr(gps.lat), lon=repr(gps.lon))
+    ways: dict[tuple[int, ...], int] = {}
+    next_way = first_id + len(unique)
+    starts = np.cumsum([0] + [len(border) for border in borders])
+    relations = []
+    for index, lanelet in enumerate(lanelets):
+        members = []
+        for side, position in (("left", 2 * index), ("right", 2 * index + 1)):
+            nodes = _without_repeats(node_ids[starts[position] : starts[position + 1]])
+            if len(nodes) < 2:
+                raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {MERGE_TOLERANCE_M} m")
+            way = ways.get(nodes, ways.get(nodes[::-1]))
+            if way is None:
+                way = ways[nodes] = next_way
+                next_way += 1
+                element = etree.SubElement(root, "way", id=str(way))
+                for node in nodes:
+                    etree.SubElement(element, "nd", ref=str(node))
+            members.append((side, way))
+        relations.append((lanelet, members))
+    for lanelet, members in relations:
+        element = etree.SubElement(root, "relation", id=str(lanelet.id))
+        for role, way in members:
+            etree.SubElement(element, "member", type="way", role=role, ref=str(way))
+        for key, value in lanelet_attributes(lanelet.types).items():
+            etree.SubElement(element, "tag", k=key, v=value)
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+
+
+def _recipe_comment(geo_reference: str) -> str:
+    text = (
+        f" Written by {frame.GENERATOR}: x, y are the OpenDRIVE inertial frame. Load with "
+        f"lanelet2.io.load(path, lanelet2.projection.{frame.PROJECTOR_CLASS}(lanelet2.io.Origin("
+        f"{frame.ORIGIN_LAT_DEG!r}, {frame.ORIGIN_LON_DEG!r}))); lat/lon are not geographic. "
+        f"Source geoReference (not applied): {geo_reference or '(none)'} "
+    )
+    return text.replace("--", "- -")
+
+
+def read_generator(path: Path) -> str:
+    """The ``generator`` attribute of an OSM file's root ("" when absent).
+
+    Raises ConversionError naming ``path`` for an unreadable file or non-OSM root.
+    """
+    try:
+        for _, element in etree.iterparse(str(path), events=("start",), resolve_entities=False, no_network=True):
+            if element.tag != "osm":
+                raise ConversionError(str(path), f"root element is <{element.tag}>, not <osm>")
+            return str(element.get("generator", ""))
+    except OSError as exc:
+        raise ConversionError(str(path), f"cannot read the OSM file: {exc}") from exc
+    except etree.XMLSyntaxError as exc:
+        raise ConversionError(str(path), f"not well-formed XML: {exc}") from exc
+    raise ConversionError(str(path), "empty OSM file")
