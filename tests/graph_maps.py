@@ -129,48 +129,26 @@ def contact_points_map(links_on: str = "both") -> OpenDriveMap:
     """
     a_links = links_on in ("both", "A")
     o_links = links_on in ("both", "others")
-    a = road(
+
+    def two_way(road_id: str, length: float, links: bool, ends: Sequence[str], **kw) -> Road:
+        """Lanes 1 and -1, each linked to the other id at the listed road ends."""
+        at = {end: links and end in ends for end in ("start", "end")}
+        lanes = [
+            lane(i, pred=[-i] if at["start"] else [], succ=[-i] if at["end"] else []) for i in (1, -1)
+        ]
+        return road(road_id, length, [section(0, length, left=lanes[:1], right=lanes[1:])], **kw)
+
+    a = two_way(
         "A",
         100.0,
-        [
-            section(
-                0,
-                100,
-                left=[lane(1, pred=[-1] if a_links else [], succ=[-1] if a_links else [])],
-                right=[lane(-1, pred=[1] if a_links else [], succ=[1] if a_links else [])],
-            )
-        ],
+        a_links,
+        ("start", "end"),
         pred=to_road("B", "start") if a_links else None,
         succ=to_road("C", "end") if a_links else None,
     )
-    b = road(
-        "B",
-        50.0,
-        [
-            section(
-                0,
-                50,
-                left=[lane(1, pred=[-1] if o_links else [])],
-                right=[lane(-1, pred=[1] if o_links else [])],
-            )
-        ],
-        hdg=math.pi,
-        pred=to_road("A", "start") if o_links else None,
-    )
-    c = road(
-        "C",
-        200.0,
-        [
-            section(
-                0,
-                200,
-                left=[lane(1, succ=[-1] if o_links else [])],
-                right=[lane(-1, succ=[1] if o_links else [])],
-            )
-        ],
-        x=300.0,
-        hdg=math.pi,
-        succ=to_road("A", "end") if o_links else None,
+    b = two_way("B", 50.0, o_links, ("start",), hdg=math.pi, pred=to_road("A", "start") if o_links else None)
+    c = two_way(
+        "C", 200.0, o_links, ("end",), x=300.0, hdg=math.pi, succ=to_road("A", "end") if o_links else None
     )
     return odr_map([a, b, c])
 
