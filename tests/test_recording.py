@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
@@ -218,3 +221,22 @@ def test_bad_input_is_rejected_with_the_name(tmp_path):
     with pytest.raises(RecordingError, match="nowhere/y.mcap.partial: cannot create recording"):
         with Recorder(tmp_path / "nowhere" / "y.mcap"):
             pass
+
+
+coordinates = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+polylines = st.integers(2, 40).flatmap(lambda n: st.lists(st.tuples(coordinates, coordinates), min_size=n, max_size=n))
+
+
+@settings(max_examples=25, deadline=None)
+@given(left=polylines, right=polylines, pose=st.tuples(coordinates, coordinates, st.floats(-4.0, 4.0)),
+       frame=st.integers(0, 10**6))
+def test_raw_detections_round_trip_bit_exactly(left, right, pose, frame):
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "p.mcap"
+        with Recorder(path) as recorder:
+            recorder.write_detection(frame * DT_S, frame, "coop_2", pose, np.array(left), np.array(right))
+        [(read_frame, [detection])] = list(read_detections(path))
+    assert read_frame == frame
+    np.testing.assert_array_equal(detection["left"], np.array(left))
+    np.testing.assert_array_equal(detection["right"], np.array(right))
+    assert tuple(detection["pose"].values()) == pose
