@@ -215,13 +215,29 @@ def _at_lane_offset_step(graph: LaneGraph, a: LaneKey, b: LaneKey) -> bool:
     return any(record.s0 == boundary for record in road_.lane_offsets)
 
 
-@pytest.mark.parametrize("name", ["junction", "highway"])
+@pytest.mark.parametrize("name", ["straight", "curve90", "rural", "junction", "highway"])
 def test_bundled_map_graph(name: str) -> None:
     from cold_maps.opendrive.parser import load_opendrive
 
-    graph = build_lane_graph(load_opendrive(bundled_map(name)))
+    odr = load_opendrive(bundled_map(name))
+    graph = build_lane_graph(odr)
     assert graph.issues == ()
-    assert graph.lanes and any(True for _ in graph.edges())
+    driving = [
+        k(road_.id, index, lane_.id)
+        for road_ in odr.roads.values()
+        for index, sec in enumerate(road_.lane_sections)
+        for lane_ in sec.lanes
+        if lane_.type == "driving"
+    ]
+    assert list(graph.lanes) == driving
+    # a lane is a dead end only where its road ends unlinked
+    for lane_ in graph.lanes:
+        road_ = odr.roads[lane_.road_id]
+        forward = road_.drives_along_s(lane_.lane_id)
+        last = lane_.section == (len(road_.lane_sections) - 1 if forward else 0)
+        link = road_.successor if forward else road_.predecessor
+        if not graph.successors[lane_]:
+            assert last and link is None, f"{lane_} is a dead end inside the network"
     assert _discontinuities(graph) == []
 
 
