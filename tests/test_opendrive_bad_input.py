@@ -20,13 +20,17 @@ SMALL_TEXT = SMALL_MAP.read_text(encoding="utf-8")
 NAME = "bad.xodr"
 
 
+def line_of(text: str, after: str = "") -> int:
+    """1-based line of the small map where the first ``text`` after ``after`` starts."""
+    return SMALL_TEXT.count("\n", 0, SMALL_TEXT.index(text, SMALL_TEXT.index(after) if after else 0)) + 1
+
+
 def mutate(old: str, new: str, after: str = "") -> tuple[bytes, int]:
     """The small map with the first ``old`` after ``after`` replaced by ``new``, and the
-    1-based line where the replacement starts."""
-    start = SMALL_TEXT.index(after) if after else 0
-    at = SMALL_TEXT.index(old, start)
+    line where the replacement starts."""
+    at = SMALL_TEXT.index(old, SMALL_TEXT.index(after) if after else 0)
     text = SMALL_TEXT[:at] + new + SMALL_TEXT[at + len(old) :]
-    return text.encode(), SMALL_TEXT.count("\n", 0, at) + 1
+    return text.encode(), line_of(old, after)
 
 
 def parse_error(data: bytes) -> OpenDriveError:
@@ -39,7 +43,6 @@ def test_small_map_is_valid() -> None:
     assert isinstance(parse_opendrive(SMALL_TEXT.encode(), path=NAME), OpenDriveMap)
 
 
-ROAD1 = '<road id="1"'
 ROAD2 = '<road id="2"'
 ROAD3 = '<road id="3"'
 LINE_GEOMETRY = '<geometry s="0" x="1" y="2" hdg="0.5" length="5"><line/>'
@@ -108,7 +111,7 @@ def test_bad_input_names_file_element_and_line(case: str) -> None:
     old, new, after, element, reason, *at = BAD_CASES[case]
     data, line = mutate(old, new, after)
     if at:
-        line = SMALL_TEXT.count("\n", 0, SMALL_TEXT.index(at[0], SMALL_TEXT.index(after) if after else 0)) + 1
+        line = line_of(at[0], after)
     error = parse_error(data)
     assert (error.path, error.element, error.line) == (NAME, element, line)
     assert str(error).startswith(f"{NAME}:{line}: <{element}>: ")
@@ -117,7 +120,7 @@ def test_bad_input_names_file_element_and_line(case: str) -> None:
 
 def test_duplicate_road_points_at_the_second_one() -> None:
     data, line = mutate(ROAD3, ROAD2)
-    assert line > SMALL_TEXT.count("\n", 0, SMALL_TEXT.index(ROAD2)) + 1
+    assert line > line_of(ROAD2)
     assert parse_error(data).line == line
 
 
@@ -125,8 +128,7 @@ def test_road_without_lane_section() -> None:
     start = SMALL_TEXT.index(ROAD3)
     road3 = SMALL_TEXT[start : SMALL_TEXT.index("</road>", start)]
     text = SMALL_TEXT.replace(road3, road3.replace("laneSection", "userData"))
-    line = SMALL_TEXT.count("\n", 0, start) + 1
-    assert str(parse_error(text.encode())) == f"{NAME}:{line}: <road>: road '3' has no <laneSection>"
+    assert str(parse_error(text.encode())) == f"{NAME}:{line_of(ROAD3)}: <road>: road '3' has no <laneSection>"
 
 
 def test_wrong_root() -> None:
