@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 from typing import Final, Iterable
 
 from lxml import etree
@@ -249,8 +250,7 @@ class _Reader:
         junction = element.get("junction", "-1")
         if junction != "-1":
             links.append(("junction", junction, element))
-        predecessor: RoadLink | None = None
-        successor: RoadLink | None = None
+        ends: dict[str, RoadLink | None] = {"predecessor": None, "successor": None}
         plan_view: list[Geometry] = []
         elevation: tuple[CubicPoly, ...] = ()
         lane_offsets: tuple[CubicPoly, ...] = ()
@@ -271,14 +271,11 @@ class _Reader:
                 elevation = self.cubics((e for e in child if e.tag == "elevation"), "s")
             elif tag == "link":
                 for link in child:
-                    if link.tag == "predecessor":
-                        if predecessor is not None:
-                            raise self.error("more than one road predecessor", link)
-                        predecessor = self.road_link(link, links)
-                    elif link.tag == "successor":
-                        if successor is not None:
-                            raise self.error("more than one road successor", link)
-                        successor = self.road_link(link, links)
+                    end = link.tag
+                    if end in ends:
+                        if ends[end] is not None:
+                            raise self.error(f"more than one road {end}", link)
+                        ends[end] = self.road_link(link, links)
         if not plan_view:
             raise self.error(f"road {road_id!r} has no <planView> geometry", element)
         if not sections:
@@ -290,8 +287,8 @@ class _Reader:
             length=length,
             junction=junction,
             rule=self.choice(element, "rule", _RULES, "RHT"),
-            predecessor=predecessor,
-            successor=successor,
+            predecessor=ends["predecessor"],
+            successor=ends["successor"],
             plan_view=tuple(plan_view),
             elevation=elevation,
             lane_offsets=lane_offsets,
@@ -337,22 +334,22 @@ class _Reader:
         )  # fmt: skip
 
     def lane_sections(self, lanes: etree._Element, road_id: str, length: float) -> list[LaneSection]:
-        parsed = sorted(
-            (self.lane_section(child) for child in lanes if child.tag == "laneSection"), key=lambda p: p[0]
-        )
-        for s, *_, element in parsed:
-            if s > length + SECTION_START_TOLERANCE_M:
-                raise self.error(f"lane section starts at s={s}, after the end of road {road_id!r} ({length})", element)
-        starts = [min(s, length) for s, *_ in parsed]
+        """The sections sorted by s, each ending where the next starts (the last at ``length``)."""
+        sections = []
+        for element in lanes:
+            if element.tag == "laneSection":
+                section = self.lane_section(element)
+                if section.s > length + SECTION_START_TOLERANCE_M:
+                    reason = f"lane section starts at s={section.s}, after the end of road {road_id!r} ({length})"
+                    raise self.error(reason, element)
+                sections.append(section)
+        sections.sort(key=_by_s)
+        starts = [min(section.s, length) for section in sections]
         ends = starts[1:] + [length]
-        return [
-            LaneSection(s, s_end, single_side, left, center, right)
-            for s, s_end, (_, single_side, left, center, right, _) in zip(starts, ends, parsed)
-        ]
+        return [replace(section, s=s, s_end=s_end) for section, s, s_end in zip(sections, starts, ends)]
 
-    def lane_section(
-        self, element: etree._Element
-    ) -> tuple[float, bool, tuple[Lane, ...], Lane, tuple[Lane, ...], etree._Element]:
+    def lane_section(self, element: etree._Element) -> LaneSection:
+        """One section; ``s_end`` is NaN until ``lane_sections`` knows the next start."""
         s = self.number(element, "s")
         if s < 0.0:
             raise self.error(f"lane section starts at negative s={s}", element)
@@ -370,7 +367,7 @@ class _Reader:
         if len(center) != 1 or center[0].id != 0:
             found = ", ".join(str(lane.id) for lane in center) or "none"
             raise self.error(f"lane section needs exactly one <center> lane with id 0, found: {found}", element)
-        return s, self.flag(element, "singleSide"), tuple(left), center[0], tuple(right), element
+        return LaneSection(s, math.nan, self.flag(element, "singleSide"), tuple(left), center[0], tuple(right))
 
     def check_lane_ids(self, lanes: list[Lane], sign: int, side: str, section: etree._Element) -> None:
         ids = [lane.id for lane in lanes]
@@ -448,8 +445,8 @@ def _by_s0(record: CubicPoly) -> float:
     return record.s0
 
 
-def _by_s(geometry: Geometry) -> float:
-    return geometry.s
+def _by_s(record: Geometry | LaneSection) -> float:
+    return record.s
 
 
 def _by_id(lane: Lane) -> int:
