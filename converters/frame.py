@@ -5,7 +5,8 @@ store every point as the exact inverse of ``lanelet2.projection.MercatorProjecto
 with origin (0°, 0°): ``lon = x / R``, ``lat = 2·atan(exp(y / R)) − π/2`` (R = 6 378 137
 m, the projector's sphere). Loading with that projector returns the OpenDRIVE inertial
 x, y to ~1e-9 m anywhere within ±2e7 m, whatever the map's geoReference says (zone-free,
-unlike the UTM projector). The geoReference is recorded in the file, never applied:
+unlike the UTM projector). ``lanelet2.io.load(path, Origin(0, 0))`` is equivalent: it
+defaults to the same spherical Mercator projector. The geoReference is recorded in the file, never applied:
 latitude and longitude are therefore not geographic positions for georeferenced maps.
 """
 

@@ -1,0 +1,335 @@
+"""converters: OpenDRIVE → Lanelet2 in the exact inertial frame, the cache, errors, CLI.
+
+Synthetic maps: a straight road and an arc (radius 80 m) with lanes 1, -1 (3.5 m) and -2
+(3.0 m); their borders are known in closed form, so every Lanelet2 vertex is checked
+against the analytic border it must lie on, and every lanelet's driving direction and
+left/right sides against RHT/LHT.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import converters
+from converters import api, frame
+from converters.cache import atomic_write, cache_path, cache_root
+from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
+from converters.osm import MERGE_TOLERANCE_M, left_on_left, merge_points
+
+HEADING = 0.3
+LENGTH = 60.0
+RADIUS = 80.0
+ARC_OFFSET = (200.0, 10.0)
+LANE_T = {1: (0.0, 3.5), -1: (0.0, -3.5), -2: (-3.5, -6.5)}
+"""lane id → (t of inner border, t of outer border), m."""
+
+
+def synthetic_xodr(geo_reference: str = "", rule: str = "RHT", x0: float = 0.0, y0: float = 0.0) -> str:
+    """Road 1: a line from (x0, y0); road 2: an arc from (x0, y0) + ARC_OFFSET; both with
+    heading HEADING and length LENGTH, lanes of LANE_T."""
+    geo = f"<geoReference><![CDATA[{geo_reference}]]></geoReference>" if geo_reference else ""
+    rule_attr = f' rule="{rule}"' if rule != "RHT" else ""
+    lanes = (
+        '<lanes><laneSection s="0">'
+        '<left><lane id="1" type="driving" level="false"><link/><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane></left>'
+        '<center><lane id="0" type="driving" level="false"><link/></lane></center>'
+        '<right><lane id="-1" type="driving" level="false"><link/><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>'
+        '<lane id="-2" type="driving" level="false"><link/><width sOffset="0" a="3.0" b="0" c="0" d="0"/></lane></right>'
+        "</laneSection></lanes>"
+    )
+
+    def road(road_id: int, geometry: str, x: float, y: float) -> str:
+        return (
+            f'<road name="r{road_id}" length="{LENGTH!r}" id="{road_id}" junction="-1"{rule_attr}><link/>'
+            f'<planView><geometry s="0" x="{x!r}" y="{y!r}" hdg="{HEADING!r}" length="{LENGTH!r}">{geometry}</geometry>'
+            f"</planView><elevationProfile/><lateralProfile/>{lanes}</road>"
+        )
+
+    arc = f'<arc curvature="{1.0 / RADIUS!r}"/>'
+    return (
+        '<?xml version="1.0" encoding="UTF-8"?>\n<OpenDRIVE><header revMajor="1" revMinor="4" name="synthetic">'
+        f"{geo}</header>{road(1, '<line/>', x0, y0)}{road(2, arc, x0 + ARC_OFFSET[0], y0 + ARC_OFFSET[1])}"
+        "</OpenDRIVE>\n"
+    )
+
+
+def road_coordinates(road: int, points: np.ndarray, x0: float, y0: float) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form (s, t) of inertial points on road 1 (line) or road 2 (arc)."""
+    if road == 1:
+        rel = points - (x0, y0)
+        return rel @ (math.cos(HEADING), math.sin(HEADING)), rel @ (-math.sin(HEADING), math.cos(HEADING))
+    start = np.array([x0 + ARC_OFFSET[0], y0 + ARC_OFFSET[1]])
+    centre = start + RADIUS * np.array([-math.sin(HEADING), math.cos(HEADING)])
+    rel = points - centre
+    angle = np.arctan2(rel[:, 1], rel[:, 0]) - math.atan2(*(start - centre)[::-1])
+    return RADIUS * np.mod(angle + math.pi, 2 * math.pi) - RADIUS * math.pi, RADIUS - np.hypot(rel[:, 0], rel[:, 1])
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    geo_reference: str
+    rule: str
+    x0: float
+    y0: float
+
+
+VARIANTS = (
+    Variant("no-georef", "", "RHT", 12.5, -7.25),
+    Variant(
+        "tmerc-false-easting",
+        "+proj=tmerc +lat_0=48 +lon_0=11 +k=0.9996 +x_0=500000 +y_0=200000 +ellps=WGS84 +units=m +no_defs",
+        "RHT",
+        512345.678,
+        234567.891,
+    ),
+    Variant("utm-1e6", "+proj=utm +zone=32 +datum=WGS84 +units=m +no_defs", "RHT", 987654.321, 5334567.891),
+    Variant("lht", "", "LHT", -40.0, 25.0),
+)
+
+
+@pytest.fixture(scope="session")
+def synthetic_maps(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Variant, object]]:
+    """Each variant converted once (no cache)."""
+    folder = tmp_path_factory.mktemp("synthetic")
+    result = {}
+    for variant in VARIANTS:
+        path = folder / f"{variant.name}.xodr"
+        path.write_text(synthetic_xodr(variant.geo_reference, variant.rule, variant.x0, variant.y0))
+        lanelet_map, _ = converters.load_lanelet2(path, cache=False)
+        result[variant.name] = (variant, lanelet_map)
+    return result
+
+
+def xy(line: object) -> np.ndarray:
+    return np.array([(p.x, p.y) for p in line])
+
+
+@pytest.mark.parametrize("name", [v.name for v in VARIANTS])
+def test_synthetic_borders_on_analytic_borders_in_driving_direction(synthetic_maps, name: str) -> None:
+    variant, lanelet_map = synthetic_maps[name]
+    errors, seen = [], set()
+    for lanelet in lanelet_map.laneletLayer:
+        left, right = xy(lanelet.leftBound), xy(lanelet.rightBound)
+        road = 1 if np.mean(left[:, 0]) - variant.x0 < 0.5 * ARC_OFFSET[0] else 2
+        s_left, t_left = road_coordinates(road, left, variant.x0, variant.y0)
+        _, t_right = road_coordinates(road, right, variant.x0, variant.y0)
+        centre_t = 0.5 * (np.mean(t_left) + np.mean(t_right))
+        lane = next(i for i, (a, b) in LANE_T.items() if min(a, b) < centre_t < max(a, b))
+        seen.add((road, lane))
+        along_s = (lane < 0) == (variant.rule == "RHT")
+        assert (s_left[-1] > s_left[0]) == along_s, f"{name}: road {road} lane {lane} runs the wrong way"
+        assert s_left.min() > -1e-6 and s_left.max() < LENGTH + 1e-6
+        inner, outer = LANE_T[lane]
+        left_t, right_t = (inner, outer) if variant.rule == "RHT" else (outer, inner)
+        errors.extend(np.abs(t_left - left_t))
+        errors.extend(np.abs(t_right - right_t))
+    assert seen == {(road, lane) for road in (1, 2) for lane in LANE_T}
+    errors = np.asarray(errors)
+    assert np.median(errors) <= 1e-3
+    assert np.percentile(errors, 95) <= 5e-3
+    assert errors.max() <= MERGE_TOLERANCE_M + 1e-6
+
+
+def test_plain_lanelet2_with_the_recipe_lands_in_the_same_frame(tmp_path: Path, synthetic_maps) -> None:
+    import lanelet2.io
+    import lanelet2.projection
+
+    variant, converted = synthetic_maps["utm-1e6"]
+    xodr = tmp_path / "utm.xodr"
+    xodr.write_text(synthetic_xodr(variant.geo_reference, variant.rule, variant.x0, variant.y0))
+    recipe = converters.convert(xodr, tmp_path / "utm.osm", cache=False)
+    assert recipe.geo_reference == variant.geo_reference and recipe.lanelets == 6
+    projector = getattr(lanelet2.projection, recipe.projector)(
+        lanelet2.io.Origin(recipe.origin_lat_deg, recipe.origin_lon_deg)
+    )
+    plain = lanelet2.io.load(recipe.osm_path, projector)
+    for lanelet in plain.laneletLayer:
+        expected = converted.laneletLayer[lanelet.id]
+        assert np.abs(xy(lanelet.leftBound) - xy(expected.leftBound)).max() < 1e-9
+    # lanelet2.io.load(path, Origin(0, 0)) defaults to the same spherical Mercator; the
+    # UTM projector at that origin would put the map ~100 km away.
+    default = lanelet2.io.load(recipe.osm_path, lanelet2.io.Origin(0.0, 0.0))
+    utm = lanelet2.io.load(recipe.osm_path, lanelet2.projection.UtmProjector(lanelet2.io.Origin(0.0, 0.0)))
+    for other, low, high in ((default, 0.0, 1e-9), (utm, 1e4, np.inf)):
+        lanelet = next(iter(other.laneletLayer))
+        offset = np.abs(xy(lanelet.leftBound) - xy(converted.laneletLayer[lanelet.id].leftBound)).max()
+        assert low <= offset <= high
+    program, flag, code = shlex.split(recipe.python_snippet())
+    assert (program, flag) == ("python", "-c")
+    shell = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert shell.returncode == 0, shell.stderr
+    assert shell.stdout.strip() == "6 lanelets"
+
+
+def test_routing_follows_the_arc_after_the_line(tmp_path: Path) -> None:
+    """Two roads joined end to start (line, then arc): the routing graph connects them."""
+    text = synthetic_xodr()
+    end = (LENGTH * math.cos(HEADING), LENGTH * math.sin(HEADING))
+    text = text.replace(f'x="{ARC_OFFSET[0]!r}" y="{ARC_OFFSET[1]!r}"', f'x="{end[0]!r}" y="{end[1]!r}"')
+    text = text.replace('id="1" junction="-1"><link/>', 'id="1" junction="-1"><link><successor elementType="road" elementId="2" contactPoint="start"/></link>')
+    text = text.replace('id="2" junction="-1"><link/>', 'id="2" junction="-1"><link><predecessor elementType="road" elementId="1" contactPoint="end"/></link>')
+    path = tmp_path / "joined.xodr"
+    path.write_text(text)
+    lanelet_map, graph = converters.load_lanelet2(path, cache=False)
+    starts = {lanelet.id: xy(lanelet.leftBound)[0] for lanelet in lanelet_map.laneletLayer}
+    first = next(lanelet for lanelet in lanelet_map.laneletLayer if np.linalg.norm(starts[lanelet.id]) < 1e-6)
+    following = graph.following(first)
+    assert len(following) == 1
+    assert np.linalg.norm(xy(following[0].leftBound)[0] - end) < 1e-6
+
+
+# --- point merging and orientation -----------------------------------------------------
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.floats(-5, 5), st.floats(-5, 5)), min_size=1, max_size=60), st.floats(1e-4, 0.5))
+def test_merge_points_moves_no_point_farther_than_the_tolerance(points, tolerance) -> None:
+    array = np.array(points, dtype=np.float64)
+    representative = merge_points(array, tolerance)
+    assert np.all(representative[representative] == representative)
+    assert np.all(np.linalg.norm(array - array[representative], axis=1) <= tolerance)
+    alone = np.array([np.sum(np.linalg.norm(array - p, axis=1) <= tolerance) == 1 for p in array])
+    assert np.all(representative[alone] == np.flatnonzero(alone))
+
+
+def test_left_on_left_swaps_only_lanelets_whose_left_border_is_on_the_right() -> None:
+    s = np.linspace(0.0, 10.0, 11)
+    centre = np.column_stack((s, 0.1 * s**2))
+    normal = np.column_stack((-0.2 * s, np.ones_like(s))) / np.hypot(0.2 * s, 1.0)[:, None]
+    good = SourceLanelet(7, centre + 1.5 * normal, centre - 1.5 * normal, frozenset({"urban"}))
+    assert left_on_left(good) is good
+    swapped = left_on_left(SourceLanelet(7, good.right, good.left, good.types))
+    assert np.array_equal(swapped.left, good.left) and np.array_equal(swapped.right, good.right)
+
+
+# --- cache -----------------------------------------------------------------------------
+
+@pytest.fixture()
+def straight_map(tmp_path: Path) -> Path:
+    path = tmp_path / "straight.xodr"
+    path.write_text(synthetic_xodr())
+    return path
+
+
+def _forbid_conversion(monkeypatch: pytest.MonkeyPatch) -> None:
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the converter was called")
+
+    monkeypatch.setattr(api, "odr_to_lanelets", refuse)
+
+
+def test_cache_hit_returns_the_same_map_without_converting(straight_map, tmp_path, monkeypatch) -> None:
+    cache = tmp_path / "cache"
+    first, _ = converters.load_lanelet2(straight_map, cache_dir=cache)
+    key = cache_path(straight_map.read_bytes(), crdesigner_version(), cache)
+    assert key.is_file() and key.parent == cache
+    _forbid_conversion(monkeypatch)
+    second, graph = converters.load_lanelet2(straight_map, cache_dir=cache)
+    assert sorted(ll.id for ll in first.laneletLayer) == sorted(ll.id for ll in second.laneletLayer)
+    for lanelet in first.laneletLayer:
+        assert np.array_equal(xy(lanelet.rightBound), xy(second.laneletLayer[lanelet.id].rightBound))
+    assert len(graph.following(second.laneletLayer[lanelet.id])) == 0
+    with pytest.raises(AssertionError, match="converter was called"):
+        converters.load_lanelet2(straight_map, cache=False)
+    straight_map.write_text(synthetic_xodr(x0=1.0))
+    with pytest.raises(AssertionError, match="converter was called"):
+        converters.load_lanelet2(straight_map, cache_dir=cache)
+
+
+def test_stray_temporary_file_is_ignored_and_cleared(straight_map, tmp_path, monkeypatch) -> None:
+    cache = tmp_path / "cache"
+    key = cache_path(straight_map.read_bytes(), crdesigner_version(), cache)
+    cache.mkdir()
+    stray = cache / f".{key.name}.abandoned.tmp"
+    stray.write_bytes(b"<osm half-written")
+    lanelet_map, _ = converters.load_lanelet2(straight_map, cache_dir=cache)
+    assert len(lanelet_map.laneletLayer) == 6 and key.is_file() and stray.is_file()
+    (cache / "unrelated.txt").write_text("keep")
+    assert converters.clear_cache(cache) == 2
+    assert sorted(p.name for p in cache.iterdir()) == ["unrelated.txt"]
+
+
+def test_failed_write_leaves_neither_target_nor_temporary(tmp_path, monkeypatch) -> None:
+    target = tmp_path / "out" / "map.osm"
+
+    def broken_replace(source: str, destination: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", broken_replace)
+    with pytest.raises(converters.ConversionError, match="map.osm: cannot write: No space left"):
+        atomic_write(target, b"data")
+    assert list(target.parent.iterdir()) == []
+
+
+def test_cache_folder_precedence(tmp_path, monkeypatch) -> None:
+    monkeypatch.delenv("COLD_MAPS_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_root() == tmp_path / "xdg" / "cold-maps"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert cache_root() == Path.home() / ".cache" / "cold-maps"
+    monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "env"))
+    assert cache_root() == tmp_path / "env"
+    assert cache_root(tmp_path / "arg") == tmp_path / "arg"
+    name = cache_path(b"abc", "9.9", tmp_path).name
+    assert name.startswith("ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad")
+    assert "crdesigner9.9" in name and f"format{frame.FORMAT_VERSION}" in name
+
+
+# --- errors and CLI --------------------------------------------------------------------
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, "cannot read the map"),
+        ("<OpenDRIVE><header", "not well-formed XML"),
+        ('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "b">]><OpenDRIVE/>', "DOCTYPE is not allowed"),
+        ("<osm/>", "root element is <osm>, not <OpenDRIVE>"),
+        ('<OpenDRIVE><header revMajor="1" revMinor="4"/></OpenDRIVE>', "no lanelets"),
+        (synthetic_xodr().replace(' length="60.0">', ">", 1), "converter crashed"),
+    ],
+)
+def test_bad_maps_raise_conversion_error_naming_the_file(tmp_path, content, message) -> None:
+    path = tmp_path / "bad.xodr"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(converters.ConversionError, match=message) as info:
+        converters.load_lanelet2(path, cache=False)
+    assert str(path) in str(info.value)
+
+
+def test_foreign_osm_and_unknown_suffix_are_refused(tmp_path) -> None:
+    foreign = tmp_path / "foreign.osm"
+    foreign.write_text('<osm version="0.6" generator="JOSM"/>')
+    with pytest.raises(converters.ConversionError, match="'JOSM'.*frame unknown"):
+        converters.load_lanelet2(foreign)
+    with pytest.raises(converters.ConversionError, match="unknown map type '.txt'"):
+        converters.load_lanelet2(tmp_path / "map.txt")
+
+
+def test_cli_convert_prints_the_recipe_and_loads_back(straight_map, tmp_path, capsys) -> None:
+    out = tmp_path / "straight.osm"
+    assert converters.cli_convert([str(straight_map), "-o", str(out), "--no-cache"]) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out}: 6 lanelets" in printed and "MercatorProjector" in printed
+    lanelet_map, _ = converters.load_lanelet2(out)
+    assert len(lanelet_map.laneletLayer) == 6
+    assert converters.cli_convert([str(tmp_path / "missing.xodr"), "-o", str(out), "--no-cache"]) == 1
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "missing.xodr: cannot read the map" in error
+
+
+def test_importing_converters_does_not_import_crdesigner_or_lanelet2() -> None:
+    code = "import sys, converters; print(any(m.split('.')[0] in ('crdesigner', 'lanelet2') for m in sys.modules))"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.stdout.strip() == "False", result.stderr
