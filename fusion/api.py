@@ -10,7 +10,7 @@ from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_check, lane_curvatures, lane_ends, paper_check, relative_pose
 from fusion.geometry import to_world
-from fusion.spline import hermite_gap, paper_gap
+from fusion.spline import hermite_lane, paper_gap
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, Source
 
 DEFAULT_PARAMS = FusionParams()
@@ -108,12 +108,12 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
         left, left_src = convoy_border(el, cl, starts[0], params.coop_weight, params.convoy_blend_offset_m)
         right, right_src = convoy_border(er, cr, starts[1], params.coop_weight, params.convoy_blend_offset_m)
         return FusionResult(left, right, left_src, right_src, "convoy", ends.gap_m)
-    fused = []
-    for e, c in ((el, cl), (er, cr)):
-        if interpolation == "paper":
-            gap = paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m)
-        else:
-            gap = hermite_gap(e, c, params.heading_window_m, params.spacing_m)
-        fused.append(_labelled((e, Source.EGO), (gap, Source.INTERPOLATED), (c, Source.COOP)))
-    (left, left_src), (right, right_src) = fused
+    if interpolation == "paper":
+        gaps = tuple(paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m)
+                     for e, c in ((el, cl), (er, cr)))
+    else:
+        gaps = hermite_lane((el, er), (cl, cr), params.heading_window_m, params.spacing_m)
+    (left, left_src), (right, right_src) = (
+        _labelled((e, Source.EGO), (gap, Source.INTERPOLATED), (c, Source.COOP))
+        for e, gap, c in ((el, gaps[0], cl), (er, gaps[1], cr)))
     return FusionResult(left, right, left_src, right_src, "spline", ends.gap_m)

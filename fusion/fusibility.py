@@ -16,7 +16,7 @@ import numpy as np
 from fusion.geometry import end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
-_CHORD_WINDOW_M = 2.0
+_CHORD_WINDOW_M = 4.0
 _CURVATURE_WINDOW_M = 5.0
 _MIN_ARC_CURVATURE = 1.0 / 300.0
 
@@ -109,8 +109,10 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     2. |Δψ| ≤ 90° + t_Ψ: the same direction up to a right-angle turn (rejects the opposite
        direction);
     3. cone: a lane that turns one way between P0 and P1 has its chord between the two end
-       headings, so φ must lie between 0 and Δψ up to a lateral excess ≤ t_pos (on a
-       straight this is the paper's |y_rel| ≤ t_pos; it rejects the adjacent lane there);
+       headings, so φ must lie between 0 and Δψ; the lateral excess of P1 outside that cone
+       may be at most half the ego lane width (measured at the ego end). On a straight this
+       is a lateral offset test that rejects the adjacent lane (a full lane width off) while
+       tolerating heading noise over a 50 m gap and the shift of an S-bend;
     4. arc consistency: when both ends are curved the same way (the detections' curvatures
        agree within 50 %), the gap is taken as one arc, whose chord direction is Δψ/2;
        P1 may then deviate from that line by at most half the ego lane width (the adjacent
@@ -133,9 +135,9 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     lo, hi = min(0.0, turn), max(0.0, turn)
     outside = max(lo - phi, phi - hi, 0.0)
     excess = ends.gap_m * math.sin(min(outside, math.pi / 2))
-    if excess > params.t_pos_m:
+    if excess > 0.5 * ends.width_m:
         return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
-                f"(t_pos = {params.t_pos_m:.2f} m): another lane")
+                f"(more than half the lane width {ends.width_m:.2f} m): another lane")
     if curvatures is not None and abs(turn) > params.t_psi_rad:
         k0, k1 = curvatures
         one_arc = (k0 * k1 > 0.0 and min(abs(k0), abs(k1)) >= _MIN_ARC_CURVATURE

@@ -8,6 +8,9 @@ import numpy as np
 
 from fusion.types import NDArrayFloat, Pose2D
 
+_SIGMA_FLOOR_M = 0.002
+_CI_FACTOR = 2.5
+
 
 def to_world(points: NDArrayFloat, pose: Pose2D) -> NDArrayFloat:
     """Vehicle-frame points of a vehicle at ``pose`` in the world frame."""
@@ -63,35 +66,64 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
     return float(vec[0] / norm), float(vec[1] / norm)
 
 
-def fit_end_tangent(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
-    """Unit tangent at the last (``at_end``) or first point by least squares.
+def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
+            sigma_m: float) -> tuple[NDArrayFloat, tuple[float, float]]:
+    """End point and unit tangent of a border by least-squares quadratics, adaptive window.
 
-    Fits ``y = a + b·x + c·x²`` to the points within ``window_m`` of the end, in a frame whose
-    x axis is the end chord, and returns the direction of the fitted curve at the end point
-    (driving direction). The quadratic term removes the bias a straight-line fit would have
-    on a curve; the fit averages detection noise. Falls back to the chord when the window
-    holds fewer than four points.
+    Fits ``y = a + b·x + c·x²`` to the points within each of ``windows_m`` (increasing) of
+    the last (``at_end``) or first point, in a frame whose x axis is the chord of the shortest
+    window and whose origin is that point. The quadratic term removes most of the bias a
+    line fit has on a curve, and longer windows average the noise but are biased where the
+    curvature changes. The window is chosen by the intersection-of-confidence-intervals
+    rule: the longest window whose slope interval b ± 2.5·σ_b (σ_b from the detection noise
+    ``sigma_m``) still intersects those of all shorter windows. Returns the fitted end point
+    (world frame) and the fitted direction there (driving direction); with fewer than four
+    points in the shortest window, the end point and the chord direction.
     """
-    cx, cy = end_direction(points, at_end, window_m)
+    cx, cy = end_direction(points, at_end, windows_m[0])
     n = points.shape[0]
-    approx_step = float(np.hypot(*(points[-1] - points[0]))) / (n - 1) or 1.0
-    k = min(n, max(2, int(round(window_m / approx_step)) + 1))
-    if k < 4:
-        return cx, cy
-    window = points[n - k:] if at_end else points[:k]
     origin = points[-1] if at_end else points[0]
-    rel = window - origin
+    approx_step = float(np.hypot(*(points[-1] - points[0]))) / (n - 1) or 1.0
+    counts = np.minimum(n, np.rint(np.asarray(windows_m) / approx_step).astype(np.intp) + 1)
+    counts = counts[counts >= 4]
+    if counts.shape[0] == 0:
+        return origin, (cx, cy)
+    k_max = int(counts[-1])
+    rel = (points[n - k_max:][::-1] if at_end else points[:k_max]) - origin
     x = rel[:, 0] * cx + rel[:, 1] * cy
     y = rel[:, 1] * cx - rel[:, 0] * cy
     x2 = x * x
-    s1, s2, s3, s4 = float(x.sum()), float(x2.sum()), float(x2 @ x), float(x2 @ x2)
-    t0, t1, t2 = float(y.sum()), float(y @ x), float(y @ x2)
-    det = k * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
-    if abs(det) < 1e-12 * max(1.0, s4 * s4):
-        return cx, cy
-    slope = (k * (t1 * s4 - s3 * t2) - t0 * (s1 * s4 - s3 * s2) + s2 * (s1 * t2 - s2 * t1)) / det
+    sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=1)[:, counts - 1]
+    s1, s2, s3, s4, t0, t1, t2 = sums
+    k = counts.astype(np.float64)
+    m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
+    det = k * m0 - s1 * m1 + s2 * m2
+    ok = np.abs(det) > 1e-12 * np.maximum(1.0, s4 * s4)
+    if not ok[0]:
+        return origin, (cx, cy)
+    det = np.where(ok, det, 1.0)
+    a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+    b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
+    half = _CI_FACTOR * max(sigma_m, _SIGMA_FLOOR_M) * np.sqrt(np.abs((k * s4 - s2 * s2) / det))
+    lo = np.maximum.accumulate(b - half)
+    hi = np.minimum.accumulate(b + half)
+    valid = (lo <= hi) & ok
+    j = int(np.argmin(valid)) - 1 if not valid.all() else valid.shape[0] - 1
+    j = max(j, 0)
+    slope = float(b[j])
     norm = math.hypot(1.0, slope)
-    return (cx - slope * cy) / norm, (cy + slope * cx) / norm
+    point = origin + float(a[j]) * np.array((-cy, cx))
+    return point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm)
+
+
+def noise_level(points: NDArrayFloat, count: int) -> float:
+    """Detection noise σ per coordinate [m] estimated from second differences of ``count``
+    points at the end of ``points`` (a smooth curve sampled every 0.1 m contributes < 1 mm)."""
+    tail = points[-count:]
+    if tail.shape[0] < 3:
+        return 0.0
+    d2 = tail[:-2] - 2.0 * tail[1:-1] + tail[2:]
+    return math.sqrt(float(np.einsum("ij,ij->", d2, d2)) / (12.0 * d2.shape[0]))
 
 
 def sample_curve(evaluate, t_start: float, t_end: float, length_hint_m: float, spacing_m: float,

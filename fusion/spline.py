@@ -7,11 +7,16 @@ at most ``spacing_m`` apart, from the ego border's last point to the coop border
 from __future__ import annotations
 
 import math
+from typing import Final
 
 import numpy as np
 
-from fusion.geometry import fit_end_tangent, sample_curve
+from fusion.geometry import fit_end, noise_level, sample_curve
 from fusion.types import NDArrayFloat
+
+_MIN_ARC_TURN_RAD: Final[float] = 1e-3
+_NOISE_SAMPLE_M: Final[float] = 5.0
+_WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 
 
 def _cross(ax: float, ay: float, bx: float, by: float) -> float:
@@ -107,48 +112,87 @@ def paper_gap(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, a
     return sample_curve(evaluate, float(t[1]), float(t[-2]), float(t[-2] - t[1]), spacing_m)
 
 
-def bezier_arm_factor(turn_rad: float) -> float:
-    """Ratio of a cubic Bézier arm to the tangent-triangle leg that reproduces a circular arc.
-
-    For an arc turning by θ the tangent legs are R·tan(θ/2) and the Bézier arm is
-    (4/3)·R·tan(θ/4), so the factor is (4/3)·tan(θ/4)/tan(θ/2) (→ 2/3 for θ → 0).
-    """
-    theta = abs(turn_rad)
-    if theta < 1e-6:
-        return 2.0 / 3.0
-    return (4.0 / 3.0) * math.tan(theta / 4.0) / math.tan(theta / 2.0)
-
-
-def hermite_gap(ego: NDArrayFloat, coop: NDArrayFloat, window_m: float, spacing_m: float) -> NDArrayFloat:
-    """G1 cubic Bézier from ego[-1] to coop[0], sampled in the gap.
-
-    End directions come from least-squares fits over ``window_m`` of each detection
-    (:func:`fusion.geometry.fit_end_tangent`). Arm lengths: the two tangent lines and the
-    chord form a triangle with legs a (ego side) and b (coop side); the arms are
-    a·k(θ) and b·k(θ) with :func:`bezier_arm_factor` k, which reproduces a circular arc
-    (a = b) to within 3·10⁻⁴·R and stretches the arms for a curve starting later in the gap.
-    For parallel or S-shaped tangents (no triangle) the arms are chord/3, a straight or
-    symmetric transition.
-    """
-    p0, p3 = ego[-1], coop[0]
-    d0 = fit_end_tangent(ego, True, window_m)
-    d1 = fit_end_tangent(coop, False, window_m)
-    chord = p3 - p0
-    c = math.hypot(chord[0], chord[1])
-    turn = math.atan2(_cross(*d0, *d1), d0[0] * d1[0] + d0[1] * d1[1])
-    arm0 = arm1 = c / 3.0
-    denom = _cross(d0[0], d0[1], d1[0], d1[1])
-    if abs(turn) > 1e-3 and abs(denom) > 1e-9:
-        a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
-        b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
-        if a > 0.0 and b > 0.0:
-            k = bezier_arm_factor(turn)
-            arm0, arm1 = min(a * k, c), min(b * k, c)
-    ctrl = np.array([p0, p0 + arm0 * np.asarray(d0), p3 - arm1 * np.asarray(d1), p3])
+def _bezier_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
+                spacing_m: float) -> NDArrayFloat:
+    """Cubic Bézier with arms of a third of the chord (straight or S-shaped transition)."""
+    arm = math.hypot(*(p3 - p0)) / 3.0
+    ctrl = np.array([p0, p0 + arm * d0, p3 - arm * d1, p3])
 
     def evaluate(u: NDArrayFloat) -> NDArrayFloat:
         v = 1.0 - u
         basis = np.stack((v**3, 3.0 * v * v * u, 3.0 * v * u * u, u**3), axis=1)
         return basis @ ctrl
 
-    return sample_curve(evaluate, 0.0, 1.0, arm0 + arm1 + c / 3.0, spacing_m)
+    return sample_curve(evaluate, 0.0, 1.0, 3.0 * arm, spacing_m)
+
+
+def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
+    d = np.array((a[0] + b[0], a[1] + b[1]))
+    return d / (math.hypot(d[0], d[1]) or 1.0)
+
+
+def hermite_lane(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
+                 window_m: float | None, spacing_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """G1 gap interpolation of both borders of a lane; returns the (left, right) gap points.
+
+    The ego end and coop start of each border are least-squares quadratic fits
+    (:func:`fusion.geometry.fit_end`) over ``window_m``, or with ``None`` over the window
+    among 2–6 m chosen adaptively from the noise σ estimated on the last 5 m; the end
+    directions of the two borders are averaged (the borders of a lane are parallel), which
+    halves the heading variance. Each border's gap is :func:`hermite_gap` between the
+    fitted ends.
+    """
+    count = max(3, int(round(_NOISE_SAMPLE_M / spacing_m)))
+    sigma = sum(noise_level(b, count) for b in ego + coop) / 4.0
+    windows = _WINDOWS_M if window_m is None else (window_m,)
+    ego_fits = [fit_end(b, True, windows, sigma) for b in ego]
+    coop_fits = [fit_end(b, False, windows, sigma) for b in coop]
+    d0 = _mean_dir(ego_fits[0][1], ego_fits[1][1])
+    d1 = _mean_dir(coop_fits[0][1], coop_fits[1][1])
+    return (hermite_gap(ego_fits[0][0], d0, coop_fits[0][0], d1, spacing_m),
+            hermite_gap(ego_fits[1][0], d0, coop_fits[1][0], d1, spacing_m))
+
+
+def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
+                spacing_m: float) -> NDArrayFloat:
+    """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``), world frame.
+
+    The two tangent lines meet at P_i, at distance a from p0 and b from p3. The curve is the
+    largest circular arc tangent to both lines (tangent length m = min(a, b), radius
+    m / tan(θ/2) for the turn θ) preceded or followed by a straight of length |a − b| on the
+    longer side. A circular arc between the ends is therefore reproduced exactly (a = b),
+    and so is a curve that starts or ends inside the gap; it is sampled in closed form every
+    ≤ ``spacing_m``, ends excluded. (A cubic Bézier with arms (4/3)·R·tan(θ/4) would
+    approximate the same arc to 3·10⁻⁴·R.) Parallel or S-shaped end tangents (no triangle
+    ahead of both ends) use a cubic Bézier with arms of a third of the chord.
+    """
+    chord = p3 - p0
+    denom = _cross(d0[0], d0[1], d1[0], d1[1])
+    turn = math.atan2(denom, float(d0 @ d1))
+    if abs(turn) < _MIN_ARC_TURN_RAD:
+        return _bezier_gap(p0, d0, p3, d1, spacing_m)
+    a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
+    b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
+    if a <= 0.0 or b <= 0.0:
+        return _bezier_gap(p0, d0, p3, d1, spacing_m)
+    m = min(a, b)
+    radius = m / math.tan(abs(turn) / 2.0)
+    kappa = math.copysign(1.0 / radius, turn)
+    lead, arc, tail = a - m, radius * abs(turn), b - m
+    total = lead + arc + tail
+    n_steps = math.ceil(total / spacing_m * (1.0 + 1e-9))
+    if n_steps < 2:
+        return np.empty((0, 2))
+    u = np.linspace(0.0, total, n_steps + 1)[1:-1]
+    t0 = p0 + lead * d0
+    psi0 = math.atan2(d0[1], d0[0])
+    ua = np.clip(u - lead, 0.0, arc)
+    heading = psi0 + kappa * ua
+    out = np.empty((u.shape[0], 2))
+    out[:, 0] = t0[0] + (np.sin(heading) - math.sin(psi0)) / kappa
+    out[:, 1] = t0[1] - (np.cos(heading) - math.cos(psi0)) / kappa
+    before = u < lead
+    out[before] = p0 + u[before, None] * d0
+    after = u > lead + arc
+    out[after] = (p3 - b * d1 + m * d1) + (u[after] - lead - arc)[:, None] * d1
+    return out

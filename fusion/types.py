@@ -136,8 +136,9 @@ class FusionParams:
             overlap start [rad].
         fusibility: ``"geometric"`` (default, works across curves, see
             :func:`fusion.is_fusible`) or ``"paper"`` (the paper's three pose cases).
-        heading_window_m: length of the border end used to estimate end headings by least
-            squares for ``interpolation="hermite"`` and the geometric check [m].
+        heading_window_m: length of the border ends fitted by least squares for
+            ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
+            2–6 m from the detection noise (see :func:`fusion.geometry.fit_end`).
     """
 
     t_pos_m: float = 0.40
@@ -152,11 +153,13 @@ class FusionParams:
     convoy_max_offset_m: float = 1.0
     convoy_max_heading_rad: float = math.radians(30.0)
     fusibility: Fusibility = "geometric"
-    heading_window_m: float = 3.0
+    heading_window_m: float | None = None
 
     def __post_init__(self) -> None:
         positive = ("t_pos_m", "t_psi_rad", "d_i_m", "spacing_m", "convoy_max_offset_m",
-                    "convoy_max_heading_rad", "heading_window_m")
+                    "convoy_max_heading_rad")
+        if self.heading_window_m is not None:
+            positive += ("heading_window_m",)
         for name in positive:
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0.0:
