@@ -333,3 +333,86 @@ def test_importing_converters_does_not_import_crdesigner_or_lanelet2() -> None:
     code = "import sys, converters; print(any(m.split('.')[0] in ('crdesigner', 'lanelet2') for m in sys.modules))"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.stdout.strip() == "False", result.stderr
+
+
+# --- cross-check against our own sampling (cold_maps.gt_check) ---------------------------
+
+@pytest.fixture(scope="session")
+def town01_checked(town01_path: Path, tmp_path_factory: pytest.TempPathFactory):
+    """Town01 converted once into a session cache, and its cross-check report."""
+    from cold_maps.gt_check import check_map
+
+    cache = tmp_path_factory.mktemp("cache")
+    report = check_map(town01_path, cache_dir=cache)
+    lanelet_map, graph = converters.load_lanelet2(town01_path, cache_dir=cache)
+    return report, lanelet_map, graph
+
+
+def test_town01_ground_truth_agrees_with_our_sampling(town01_checked) -> None:
+    from cold_maps.gt_check import format_report
+
+    report, lanelet_map, _ = town01_checked
+    assert report.lanes and report.trustworthy and report.exit_code == 0
+    assert len({lane.lanelet_id for lane in report.lanes}) > 0.9 * len(report.lanes)
+    medians = np.array([lane.median_m for lane in report.lanes])
+    assert np.all(medians <= 5e-3) and np.median(medians) <= 1e-3
+    assert "TRUSTWORTHY" in format_report(report) and "NOT" not in format_report(report)
+    assert report.lanelets == len(lanelet_map.laneletLayer)
+
+
+def test_town01_routes_between_any_two_road_lanelets(town01_checked) -> None:
+    _, lanelet_map, graph = town01_checked
+    roads = sorted((ll for ll in lanelet_map.laneletLayer if ll.attributes["subtype"] == "road"), key=lambda ll: ll.id)
+    assert all(graph.following(ll) and graph.previous(ll) for ll in roads)
+    rng = np.random.default_rng(7)
+    for a, b in rng.choice(len(roads), size=(15, 2), replace=True):
+        assert graph.getRoute(roads[a], roads[b]) is not None, (roads[a].id, roads[b].id)
+
+
+def _parsed(text: str):
+    from cold_maps.opendrive.parser import parse_opendrive
+
+    return parse_opendrive(text.encode(), path="synthetic.xodr")
+
+
+@pytest.mark.parametrize("name", ["no-georef", "lht"])
+def test_check_passes_on_a_faithful_conversion(synthetic_maps, name: str) -> None:
+    from cold_maps.gt_check import check_lanelet_map
+
+    variant, lanelet_map = synthetic_maps[name]
+    odr = _parsed(synthetic_xodr(variant.geo_reference, variant.rule, variant.x0, variant.y0))
+    report = check_lanelet_map(odr, lanelet_map)
+    assert len(report.lanes) == 6 and report.trustworthy
+    chord_sagitta = 0.5**2 / (8 * (RADIUS - 3.5))  # crdesigner samples every <= 0.5 m
+    assert max(lane.max_m for lane in report.lanes) <= chord_sagitta + MERGE_TOLERANCE_M
+    assert len({lane.lanelet_id for lane in report.lanes}) == 6
+
+
+def test_check_measures_a_known_lateral_shift_and_lists_every_lane(synthetic_maps) -> None:
+    from cold_maps.gt_check import check_lanelet_map, format_report
+
+    variant, lanelet_map = synthetic_maps["no-georef"]
+    shift = 0.08
+    x0 = variant.x0 - shift * math.sin(HEADING)
+    y0 = variant.y0 + shift * math.cos(HEADING)
+    report = check_lanelet_map(_parsed(synthetic_xodr("", "RHT", x0, y0)), lanelet_map, path="shifted.xodr")
+    assert not report.trustworthy and report.exit_code == 1 and len(report.failing) == 6
+    for lane in report.lanes:
+        if lane.road_id == "1":
+            assert lane.median_m == pytest.approx(shift, abs=1e-6) and lane.max_m == pytest.approx(shift, abs=1e-6)
+        else:
+            assert shift * math.cos(LENGTH / RADIUS) - 1e-3 <= lane.median_m <= shift + 1e-3
+    text = format_report(report)
+    assert "NOT TRUSTWORTHY (6 of 6 lanes" in text
+    assert any(line.split()[:3] == ["1", "0", "-2"] and line.split()[4] == "80.00" for line in text.splitlines())
+
+
+def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
+    from cold_maps.gt_check import check_lanelet_map, format_report
+
+    variant, lanelet_map = synthetic_maps["no-georef"]
+    report = check_lanelet_map(_parsed(synthetic_xodr("", "RHT", 5000.0, 5000.0)), lanelet_map)
+    assert all(lane.lanelet_id is None and lane.max_m == math.inf for lane in report.lanes)
+    assert "none" in format_report(report).splitlines()[-1]
+    with pytest.raises(ValueError, match="threshold"):
+        check_lanelet_map(_parsed(synthetic_xodr()), lanelet_map, threshold_m=float("nan"))

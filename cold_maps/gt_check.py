@@ -1,0 +1,245 @@
+"""Cross-check of the Lanelet2 ground truth against our own OpenDRIVE border sampling.
+
+Every lane of the checked types is sampled by ``cold_maps.opendrive.sampling`` and
+matched to the converted lanelet whose borders lie closest to it (crdesigner 0.8.5 drops
+the OpenDRIVE road/section/lane ids when it renumbers and concatenates lanelets, so
+the match is geometric). The disagreement of a lane is the distance from each of our
+border points to the matched lanelet's corresponding border polyline: the inner border
+is the lanelet's left one in RHT, its right one in LHT. A lane over the threshold, or
+with no lanelet near it, makes the ground truth untrustworthy.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from cold_maps.opendrive.parser import load_opendrive
+from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, segment_distances
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
+
+THRESHOLD_M: Final[float] = 0.05
+"""A lane whose largest disagreement exceeds this (m) is listed; the map is then untrustworthy."""
+
+STEP_M: Final[float] = 0.1
+"""Our border sampling step along s (m)."""
+
+SEARCH_RADIUS_M: Final[float] = 2.0
+"""Lanelets with a border vertex this close (m) to one of a lane's border points are candidates."""
+
+NEAREST_VERTICES: Final[int] = 3
+"""The closest point is searched on the segments next to this many nearest vertices."""
+
+EXIT_TRUSTWORTHY: Final[int] = 0
+EXIT_UNTRUSTWORTHY: Final[int] = 1
+
+
+@dataclass(frozen=True)
+class LaneCheck:
+    """Disagreement of one OpenDRIVE lane (one lane section) with its lanelet.
+
+    Fields:
+        road_id, section, lane_id: the OpenDRIVE lane (section index in the road).
+        lanelet_id: id of the matched Lanelet2 lanelet, None when none is near.
+        median_m, max_m: median and largest distance (m) of our border points (both
+            borders) to the lanelet's borders; inf when unmatched.
+        points: number of our border points compared.
+    """
+
+    road_id: str
+    section: int
+    lane_id: int
+    lanelet_id: int | None
+    median_m: float
+    max_m: float
+    points: int
+
+    def passes(self, threshold_m: float) -> bool:
+        """True when matched and no point is farther than ``threshold_m`` (m)."""
+        return self.lanelet_id is not None and self.max_m <= threshold_m
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """Result of ``check_map``.
+
+    Fields:
+        path: the OpenDRIVE file.
+        threshold_m: largest allowed disagreement per lane (m).
+        step_m: our sampling step along s (m).
+        lanes: one entry per checked lane and section, in map order.
+        lanelets: number of lanelets in the converted map.
+    """
+
+    path: str
+    threshold_m: float
+    step_m: float
+    lanes: tuple[LaneCheck, ...]
+    lanelets: int
+
+    @property
+    def failing(self) -> tuple[LaneCheck, ...]:
+        """Lanes over the threshold or unmatched, worst first."""
+        bad = [lane for lane in self.lanes if not lane.passes(self.threshold_m)]
+        return tuple(sorted(bad, key=lambda lane: -lane.max_m))
+
+    @property
+    def trustworthy(self) -> bool:
+        """True when at least one lane was checked and every lane passes."""
+        return bool(self.lanes) and not self.failing
+
+    @property
+    def exit_code(self) -> int:
+        """0 (``EXIT_TRUSTWORTHY``) or 1 (``EXIT_UNTRUSTWORTHY``)."""
+        return EXIT_TRUSTWORTHY if self.trustworthy else EXIT_UNTRUSTWORTHY
+
+
+class _LaneletIndex:
+    """Borders of every lanelet and one KD-tree over all their vertices."""
+
+    def __init__(self, lanelet_map: Any) -> None:
+        from scipy.spatial import cKDTree
+
+        self.ids: list[int] = []
+        self.left: list[NDArrayFloat] = []
+        self.right: list[NDArrayFloat] = []
+        owners: list[NDArrayInt] = []
+        for slot, lanelet in enumerate(lanelet_map.laneletLayer):
+            self.ids.append(int(lanelet.id))
+            for border, store in ((lanelet.leftBound, self.left), (lanelet.rightBound, self.right)):
+                store.append(np.array([(p.x, p.y) for p in border], dtype=np.float64))
+                owners.append(np.full(len(store[-1]), slot, dtype=np.int64))
+        self.owner = np.concatenate(owners)
+        self.tree: cKDTree = cKDTree(np.vstack([v for pair in zip(self.left, self.right) for v in pair]))
+        self.trees = [(cKDTree(left), cKDTree(right)) for left, right in zip(self.left, self.right)]
+
+    def candidates(self, points: NDArrayFloat) -> set[int]:
+        """Slots of lanelets with a border vertex within SEARCH_RADIUS_M of any point."""
+        near = self.tree.query_ball_point(points, r=SEARCH_RADIUS_M)
+        return {int(self.owner[i]) for hits in near for i in hits}
+
+
+def _distances(points: NDArrayFloat, vertices: NDArrayFloat, tree: cKDTree) -> NDArrayFloat:
+    """Closest-point distance (m) of each point to the polyline ``vertices``, searched on
+    the segments next to the NEAREST_VERTICES nearest vertices."""
+    if len(vertices) < 2:
+        return np.full(len(points), np.inf)
+    count = min(NEAREST_VERTICES, len(vertices))
+    nearest = tree.query(points, k=count)[1].reshape(len(points), count)
+    segments = np.clip(np.concatenate((nearest - 1, nearest), axis=1), 0, len(vertices) - 2)
+    return segment_distances(points, vertices, segments)[0]
+
+
+def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
+    inner, outer = samples.inner[:, :2], samples.outer[:, :2]
+    best: tuple[float, int, NDArrayFloat] | None = None
+    for slot in index.candidates(np.vstack((inner, outer))):
+        left_tree, right_tree = index.trees[slot]
+        inner_border, inner_tree, outer_border, outer_tree = (
+            (index.left[slot], left_tree, index.right[slot], right_tree)
+            if rule == "RHT"
+            else (index.right[slot], right_tree, index.left[slot], left_tree)
+        )
+        distances = np.concatenate(
+            (_distances(inner, inner_border, inner_tree), _distances(outer, outer_border, outer_tree))
+        )
+        score = float(np.median(distances))
+        if best is None or score < best[0]:
+            best = (score, slot, distances)
+    points = 2 * len(samples.s)
+    if best is None:
+        return LaneCheck(samples.road_id, samples.section, samples.lane_id, None, np.inf, np.inf, points)
+    _, slot, distances = best
+    return LaneCheck(
+        samples.road_id,
+        samples.section,
+        samples.lane_id,
+        index.ids[slot],
+        float(np.median(distances)),
+        float(np.max(distances)),
+        points,
+    )
+
+
+def check_lanelet_map(
+    odr_map: Any,
+    lanelet_map: Any,
+    *,
+    path: str = "",
+    threshold_m: float = THRESHOLD_M,
+    step_m: float = STEP_M,
+    lane_types: Sequence[str] | None = ("driving",),
+) -> CheckReport:
+    """Compare a parsed OpenDRIVE map with a Lanelet2 map in its inertial frame."""
+    if not (np.isfinite(threshold_m) and threshold_m > 0.0):
+        raise ValueError(f"check: threshold must be a positive length in m, got {threshold_m}")
+    index = _LaneletIndex(lanelet_map)
+    lanes = tuple(
+        _check_lane(samples, road.rule, index)
+        for road in odr_map.roads.values()
+        for samples in sample_road(road, step_m, lane_types)
+        if len(samples.s) > 1
+    )
+    return CheckReport(path, threshold_m, step_m, lanes, len(index.ids))
+
+
+def check_map(
+    xodr_path: str | os.PathLike[str],
+    *,
+    threshold_m: float = THRESHOLD_M,
+    step_m: float = STEP_M,
+    lane_types: Sequence[str] | None = ("driving",),
+    cache: bool = True,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> CheckReport:
+    """Convert (or load from the cache) the map's ground truth and cross-check it.
+
+    Raises ``OpenDriveError`` when our parser rejects the file and
+    ``converters.ConversionError`` when the converter does.
+    """
+    from converters import load_lanelet2
+
+    odr_map = load_opendrive(xodr_path)
+    lanelet_map, _ = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
+    return check_lanelet_map(
+        odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types
+    )
+
+
+def _mm(value: float) -> str:
+    return "-" if not np.isfinite(value) else f"{1e3 * value:.2f}"
+
+
+def format_report(report: CheckReport) -> str:
+    """Summary, verdict and one line per failing lane (road, section, lane, lanelet, mm)."""
+    medians = np.array([lane.median_m for lane in report.lanes if lane.lanelet_id is not None])
+    maxima = np.array([lane.max_m for lane in report.lanes if lane.lanelet_id is not None])
+    lines = [
+        f"{report.path}: {len(report.lanes)} lanes checked against {report.lanelets} lanelets "
+        f"(our borders every {report.step_m} m, threshold {_mm(report.threshold_m)} mm)",
+    ]
+    if len(medians):
+        lines.append(
+            f"per-lane median disagreement: median {_mm(float(np.median(medians)))} mm, "
+            f"max {_mm(float(medians.max()))} mm; largest single point {_mm(float(maxima.max()))} mm"
+        )
+    failing = report.failing
+    verdict = "TRUSTWORTHY" if report.trustworthy else "NOT TRUSTWORTHY"
+    reason = f"{len(failing)} of {len(report.lanes)} lanes over {_mm(report.threshold_m)} mm or unmatched"
+    lines.append(f"ground truth: {verdict} ({reason if report.lanes else 'no lane checked'})")
+    if failing:
+        lines.append(f"{'road':>8} {'section':>7} {'lane':>5} {'lanelet':>8} {'median mm':>10} {'max mm':>10}")
+        for lane in failing:
+            lanelet = "none" if lane.lanelet_id is None else str(lane.lanelet_id)
+            lines.append(
+                f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} "
+                f"{_mm(lane.median_m):>10} {_mm(lane.max_m):>10}"
+            )
+    return "\n".join(lines)
