@@ -1,5 +1,5 @@
-"""Numpy geometry of a Lanelet2 map, built once per map: lanelet centrelines and borders,
-and every border of the map resampled into one KD-tree."""
+"""Numpy geometry of a Lanelet2 map, extracted once per map: lanelet borders and
+mid-lines, and every border line string of the map with its bounding box and samples."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, mid_line
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
-#: Sampling distance of lanelet centrelines (scoring lanelet sequences), m.
+#: Sampling distance of lanelet mid-lines (scoring lanelet sequences), m.
 CENTRE_STEP_M: Final = 0.1
 
 LaneletKey = tuple[int, bool]
@@ -36,24 +36,47 @@ class LaneletGeometry:
     Fields:
         lanelet: the Lanelet2 ``ConstLanelet`` (routing-graph queries take it).
         key: (id, inverted).
+        left, right: border vertices, m.
+        left_line, right_line: ids of the border line strings.
         centre: mid-line of the borders every <= ``CENTRE_STEP_M``, m (Lanelet2's own
             centreline costs O(N^2) on densely sampled borders).
-        length_m: centreline length, m.
-        left_line, right_line: ids of the left and right border line strings.
-        left_reversed, right_reversed: True when the border runs against the stored
-            orientation of its line string in the ``BorderIndex``.
+        centre_arc_m: arc length of each ``centre`` vertex, m.
+        length_m: mid-line length, m.
         centre_tree: KD-tree of ``centre``.
     """
 
     lanelet: Any
     key: LaneletKey
-    centre: NDArrayFloat
-    length_m: float
+    left: NDArrayFloat
+    right: NDArrayFloat
     left_line: int
     right_line: int
-    left_reversed: bool
-    right_reversed: bool
+    centre: NDArrayFloat
+    centre_arc_m: NDArrayFloat
+    length_m: float
     centre_tree: cKDTree
+
+    @classmethod
+    def of(cls, lanelet: Any) -> LaneletGeometry:
+        """Numpy geometry of a Lanelet2 lanelet (either orientation)."""
+        from scipy.spatial import cKDTree
+
+        owner = f"lanelet {lanelet.id}"
+        left, right = line_xy(lanelet.leftBound, owner), line_xy(lanelet.rightBound, owner)
+        centre = mid_line(left, right, CENTRE_STEP_M)
+        centre_arc = arc_lengths(centre)
+        return cls(
+            lanelet=lanelet,
+            key=(int(lanelet.id), bool(lanelet.inverted())),
+            left=left,
+            right=right,
+            left_line=int(lanelet.leftBound.id),
+            right_line=int(lanelet.rightBound.id),
+            centre=centre,
+            centre_arc_m=centre_arc,
+            length_m=float(centre_arc[-1]),
+            centre_tree=cKDTree(centre),
+        )
 
     def centre_distances(self, points: NDArrayFloat) -> NDArrayFloat:
         """Distance of each point to the closest ``centre`` vertex, m: at most
@@ -61,58 +84,51 @@ class LaneletGeometry:
         distances: NDArrayFloat = self.centre_tree.query(points)[0]
         return distances
 
+    def locate(self, xy: tuple[float, float]) -> tuple[float, float]:
+        """Arc length (m) of the mid-line vertex closest to ``xy`` and the mid-line heading
+        there (rad)."""
+        index = int(self.centre_tree.query(xy)[1])
+        ahead = min(index + 1, len(self.centre) - 1)
+        behind = ahead - 1
+        dx, dy = self.centre[ahead] - self.centre[behind]
+        return float(self.centre_arc_m[index]), float(np.arctan2(dy, dx))
 
-class BorderIndex:
-    """Every border line string of a map (each once), resampled every ``step_m`` into one
-    KD-tree, with the owner line string of each sample."""
 
-    def __init__(self, lanelet_map: Any, step_m: float) -> None:
-        from scipy.spatial import cKDTree
+class MapLines:
+    """Every border line string of a map, each once, in its stored orientation: vertices,
+    bounding boxes, and samples every ``step_m`` built on first use."""
 
-        self.step_m = step_m
+    def __init__(self, lanelet_map: Any) -> None:
         self.slot_of_line: dict[int, int] = {}
         self.vertices: list[NDArrayFloat] = []
-        self.inverted: list[bool] = []
-        samples: list[NDArrayFloat] = []
-        segments: list[NDArrayInt] = []
         for lanelet in lanelet_map.laneletLayer:
             for line in (lanelet.leftBound, lanelet.rightBound):
-                if line.id in self.slot_of_line:
-                    continue
-                self.slot_of_line[line.id] = len(self.vertices)
-                vertices = line_xy(line, f"lanelet {lanelet.id}")
-                self.vertices.append(vertices)
-                self.inverted.append(bool(line.inverted()))
-                points, seg = resample(vertices, step_m)
-                samples.append(points)
-                segments.append(seg)
-        if not samples:
+                if line.id not in self.slot_of_line:
+                    self.slot_of_line[line.id] = len(self.vertices)
+                    self.vertices.append(line_xy(line, f"lanelet {lanelet.id}"))
+        if not self.vertices:
             raise MatchingError("lanelet map has no lanelets")
-        counts = np.array([len(s) for s in samples], dtype=np.int64)
-        self.count: NDArrayInt = counts
-        self.start: NDArrayInt = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        self.owner: NDArrayInt = np.repeat(np.arange(len(samples), dtype=np.int64), counts)
-        self.samples: NDArrayFloat = np.concatenate(samples)
-        self.sample_segment: NDArrayInt = np.concatenate(segments)
-        self.tree: cKDTree = cKDTree(self.samples)
-
-    def lanelet_geometry(self, lanelet: Any) -> LaneletGeometry:
-        """Numpy geometry of a Lanelet2 lanelet (either orientation)."""
-        left, right = lanelet.leftBound, lanelet.rightBound
-        centre = mid_line(line_xy(left, f"lanelet {lanelet.id}"), line_xy(right, f"lanelet {lanelet.id}"), CENTRE_STEP_M)
-        for line in (left, right):
-            if line.id not in self.slot_of_line:
-                raise MatchingError(f"lanelet {lanelet.id}: border {line.id} is not in the lanelet map")
-        from scipy.spatial import cKDTree
-
-        return LaneletGeometry(
-            lanelet=lanelet,
-            key=(int(lanelet.id), bool(lanelet.inverted())),
-            centre=centre,
-            length_m=float(arc_lengths(centre)[-1]),
-            left_line=int(left.id),
-            right_line=int(right.id),
-            left_reversed=bool(left.inverted()) != self.inverted[self.slot_of_line[left.id]],
-            right_reversed=bool(right.inverted()) != self.inverted[self.slot_of_line[right.id]],
-            centre_tree=cKDTree(centre),
+        self.boxes: NDArrayFloat = np.array(
+            [np.concatenate((v.min(axis=0), v.max(axis=0))) for v in self.vertices], dtype=np.float64
         )
+        self._samples: dict[tuple[int, float], NDArrayFloat] = {}
+
+    def slots(self, lines: set[int]) -> NDArrayInt:
+        """Slots of the given line string ids that belong to the map."""
+        return np.array([self.slot_of_line[line] for line in lines if line in self.slot_of_line], dtype=np.int64)
+
+    def near(self, boxes: NDArrayFloat, reach_m: float) -> NDArrayInt:
+        """Slots of the lines whose bounding box comes within ``reach_m`` of any of ``boxes``
+        (``(K, 4)``: x min, y min, x max, y max)."""
+        lo = boxes[:, None, :2] - reach_m
+        hi = boxes[:, None, 2:] + reach_m
+        overlap = np.all((self.boxes[None, :, :2] <= hi) & (self.boxes[None, :, 2:] >= lo), axis=2)
+        return np.flatnonzero(np.any(overlap, axis=0))
+
+    def samples(self, slot: int, step_m: float) -> NDArrayFloat:
+        """Points every ``step_m`` along line ``slot`` (cached)."""
+        key = (slot, step_m)
+        found = self._samples.get(key)
+        if found is None:
+            found = self._samples[key] = resample(self.vertices[slot], step_m)[0]
+        return found

@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from gt_matching.config import MatchingConfig
 from gt_matching.errors import MatchingError
-from gt_matching.geometry import BorderIndex, LaneletGeometry, LaneletKey
+from gt_matching.geometry import LaneletGeometry, LaneletKey, MapLines
 from gt_matching.metrics import BorderMetrics, LaneMetrics
 from gt_matching.polyline import (
     NDArrayFloat,
@@ -25,7 +25,6 @@ from gt_matching.polyline import (
     arc_lengths,
     as_polyline,
     closest_distances,
-    heading_at,
     mid_line,
 )
 from gt_matching.route import RouteBorder
@@ -53,6 +52,8 @@ class LaneMatch:
             ``margin_m`` on both ends where the map allows.
         left_gt: GT left border, ``(M, 2)`` world frame, m, in driving order.
         right_gt: GT right border, ``(K, 2)`` world frame, m, in driving order.
+        left_gt_samples, right_gt_samples: the GT borders resampled every ``step_m``
+            (ends included), m; the points closest-point errors are measured to.
         pose_lanelet_ids: lanelets the sender's pose is on (several when ambiguous).
         matched: False when the detection does not follow the sender's lane; the GT is
             then the sender's lane that fits the detection best.
@@ -62,6 +63,8 @@ class LaneMatch:
     lanelet_ids: tuple[int, ...]
     left_gt: NDArrayFloat
     right_gt: NDArrayFloat
+    left_gt_samples: NDArrayFloat
+    right_gt_samples: NDArrayFloat
     pose_lanelet_ids: tuple[int, ...]
     matched: bool
     mismatch: str | None
@@ -142,7 +145,7 @@ class GroundTruth:
         self.traffic_rules = traffic_rules or lanelet2.traffic_rules.create(
             lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
         )
-        self.borders = BorderIndex(lanelet_map, self.config.step_m)
+        self.lines = MapLines(lanelet_map)
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
 
@@ -156,6 +159,8 @@ class GroundTruth:
             lanelet_ids=_ids(sequence.lanelets),
             left_gt=route.left.vertices,
             right_gt=route.right.vertices,
+            left_gt_samples=route.left.samples,
+            right_gt_samples=route.right.samples,
             pose_lanelet_ids=pose_ids,
             matched=mismatch is None,
             mismatch=mismatch,
@@ -204,7 +209,7 @@ class GroundTruth:
         key = (int(lanelet.id), bool(lanelet.inverted()))
         geometry = self._geometry.get(key)
         if geometry is None:
-            geometry = self._geometry[key] = self.borders.lanelet_geometry(lanelet)
+            geometry = self._geometry[key] = LaneletGeometry.of(lanelet)
         return geometry
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
@@ -223,11 +228,10 @@ class GroundTruth:
             geometry = self._lanelet(match.lanelet)
             if geometry.key in near:
                 continue
-            _, arc = closest_distances(np.array([pose[:2]]), geometry.centre)
-            heading = heading_at(geometry.centre, float(arc[0]))
+            arc, heading = geometry.locate(pose[:2])
             headings.append(f"{geometry.key[0]}: {heading:.3f} rad")
             if angle_difference(heading, pose[2]) <= config.max_heading_diff_rad:
-                near[geometry.key] = (geometry, float(match.distance), float(arc[0]))
+                near[geometry.key] = (geometry, float(match.distance), arc)
         if not near:
             raise MatchingError(
                 f"no lanelet within {config.search_radius_m} m of the pose {_describe(pose)} runs within "
@@ -260,7 +264,7 @@ class GroundTruth:
         sequences = [
             sequence
             for candidate in candidates
-            for sequence in self._sequences(candidate, ahead_m, behind_m, centre_distances)
+            for sequence in self._sequences(candidate, centre, ahead_m, behind_m, centre_distances)
         ]
         order = sorted(range(len(sequences)), key=lambda i: (sequences[i].score_m, not sequences[i].candidate.on_pose))
         best = sequences[order[0]]
@@ -283,26 +287,38 @@ class GroundTruth:
     def _sequences(
         self,
         candidate: _Candidate,
+        detection: NDArrayFloat,
         ahead_m: float,
         behind_m: float,
         centre_distances: Callable[[LaneletGeometry], NDArrayFloat],
     ) -> list[_Sequence]:
         """Scored lanelet sequences through ``candidate``: predecessors chosen greedily until
-        ``behind_m`` is covered, then every successor sequence (routing graph) that stays
-        near the detection until ``ahead_m`` is covered or the map ends."""
+        ``behind_m`` is covered, then every successor sequence (routing graph) until
+        ``ahead_m`` is covered or the map ends. Lanelets followed stay within
+        ``max_distance_m`` of the detection's mid-line samples ``detection`` or join the
+        sequence within ``margin_m + max_distance_m`` of the detection's ends."""
         config = self.config
         graph = self.routing_graph
         cap = config.max_distance_m
 
-        def near(geometry: LaneletGeometry, taken: Sequence[LaneletGeometry]) -> bool:
-            return all(geometry.key != g.key for g in taken) and float(np.min(centre_distances(geometry))) <= cap
+        reach = config.margin_m + cap
+
+        def near(geometry: LaneletGeometry, taken: Sequence[LaneletGeometry], joint: NDArrayFloat, end: NDArrayFloat) -> bool:
+            """Not taken yet, and near the detection or joined to the path near its end."""
+            if any(geometry.key == g.key for g in taken):
+                return False
+            return float(np.min(centre_distances(geometry))) <= cap or float(np.hypot(*(joint - end))) <= reach
 
         start = candidate.geometry
         behind: list[LaneletGeometry] = []
         covered = candidate.pose_arc_m
         while covered < behind_m:
             first = (behind or [start])[0]
-            previous = [g for g in map(self._lanelet, graph.previous(first.lanelet)) if near(g, [start, *behind])]
+            previous = [
+                g
+                for g in map(self._lanelet, graph.previous(first.lanelet))
+                if near(g, [start, *behind], g.centre[-1], detection[0])
+            ]
             if not previous:
                 break
             chosen = min(previous, key=lambda g: float(np.sum(np.minimum(centre_distances(g), cap))))
@@ -314,7 +330,11 @@ class GroundTruth:
             path, covered = stack.pop()
             following = []
             if covered < ahead_m:
-                following = [g for g in map(self._lanelet, graph.following(path[-1].lanelet)) if near(g, behind + path)]
+                following = [
+                    g
+                    for g in map(self._lanelet, graph.following(path[-1].lanelet))
+                    if near(g, behind + path, g.centre[0], detection[-1])
+                ]
             if not following:
                 leaves.append(path)
                 if len(leaves) > MAX_SEQUENCES:
@@ -347,11 +367,15 @@ class GroundTruth:
                 if hasattr(other, "leftBound")
                 for line in (other.leftBound, other.rightBound)
             }
-            route = _Route(
-                keys=keys,
-                left=RouteBorder(self.borders, [(g.left_line, g.left_reversed) for g in lanelets], overlapping),
-                right=RouteBorder(self.borders, [(g.right_line, g.right_reversed) for g in lanelets], overlapping),
-            )
+            config = self.config
+            reach = 2.0 * config.max_distance_m + config.other_border_margin_m
+
+            def border(side: str) -> RouteBorder:
+                own = {getattr(g, f"{side}_line") for g in lanelets}
+                parts = [getattr(g, side) for g in lanelets]
+                return RouteBorder(self.lines, parts, own | overlapping, config.step_m, reach)
+
+            route = _Route(keys=keys, left=border("left"), right=border("right"))
             self._routes[keys] = route
             if len(self._routes) > ROUTE_CACHE_SIZE:
                 self._routes.popitem(last=False)

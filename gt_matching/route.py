@@ -1,19 +1,26 @@
-"""One continuous GT border assembled along a sequence of lanelets, and the closest-point
-distances of detected points to it."""
+"""One continuous GT border assembled along a sequence of lanelets, resampled, and the
+closest-point distances of detected points to it."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
-from gt_matching.geometry import BorderIndex
-from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, windowed_distances
+from gt_matching.geometry import MapLines
+from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, resample, windowed_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
+
+#: Spacing of the coarse border samples that seed each point's closest-point search, m.
+GUESS_STEP_M: Final = 1.0
+#: Spacing of the samples of nearby lines that bound their distance to the border, m.
+CLEARANCE_STEP_M: Final = 0.25
+#: Resampled points either side of the exact closest point that are compared.
+SAMPLE_WINDOW: Final = 2
 
 
 @dataclass(frozen=True)
@@ -21,11 +28,11 @@ class BorderDistances:
     """Closest-point distances of detected points to a GT border.
 
     Fields:
-        distances: per point, m (exact or to the resampled GT).
+        distances: per point, m (exact, or to the GT resampled every ``step_m``).
         arc_m: per point, arc length of its closest GT point along the border, m.
-        other_closer: per point, True when a border of another lane (not the GT border,
-            not a lanelet overlapping the route) is closer than the GT border by more than
-            the configured margin (both resampled).
+        other_closer: per point, True when a border of another lane (not this GT border,
+            not a lanelet overlapping the route) is closer than the resampled GT border by
+            more than the margin (distances to samples every ``step_m``).
     """
 
     distances: NDArrayFloat
@@ -34,92 +41,74 @@ class BorderDistances:
 
 
 class RouteBorder:
-    """The left or right GT border of a lanelet sequence: the borders' vertices joined in
-    driving order, and their samples from the ``BorderIndex`` (spacing <= ``step_m``)."""
+    """The left or right GT border of a lanelet sequence (the lanelets' borders joined in
+    driving order) and its samples every ``step_m``, with what is needed to find each
+    detected point's closest GT point and whether another lane's border is closer."""
 
-    def __init__(self, index: BorderIndex, parts: list[tuple[int, bool]], overlapping: set[int]) -> None:
-        """``parts``: (line string id, reversed) per lanelet in driving order;
-        ``overlapping``: line string ids of lanelets that overlap the route (the other
-        branches of a junction), which never count as another lane's border."""
-        self._index = index
-        self._overlapping = np.zeros(len(index.vertices), dtype=bool)
-        self._overlapping[[index.slot_of_line[line] for line in overlapping]] = True
-        vertices, samples, segments = [], [], []
-        self._position = np.full(len(index.vertices), -1, dtype=np.int64)
-        offsets, counts, starts, reversed_ = [], [], [], []
-        vertex_offset = sample_offset = 0
-        for position, (line, reversed_part) in enumerate(parts):
-            slot = index.slot_of_line[line]
-            if self._position[slot] < 0:
-                self._position[slot] = position
-            line_vertices = index.vertices[slot]
-            first, count = index.start[slot], index.count[slot]
-            line_samples = index.samples[first : first + count]
-            line_segments = index.sample_segment[first : first + count]
-            if reversed_part:
-                line_vertices = line_vertices[::-1]
-                line_samples = line_samples[::-1]
-                line_segments = (len(line_vertices) - 2 - line_segments)[::-1]
-            vertices.append(line_vertices)
-            samples.append(line_samples)
-            segments.append(line_segments + vertex_offset)
-            offsets.append(sample_offset)
-            counts.append(count)
-            starts.append(first)
-            reversed_.append(reversed_part)
-            vertex_offset += len(line_vertices)
-            sample_offset += count
-        self.vertices: NDArrayFloat = np.concatenate(vertices)
-        self.samples: NDArrayFloat = np.concatenate(samples)
-        self.sample_segment: NDArrayInt = np.concatenate(segments)
-        cum = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(self.vertices, axis=0).T))))
-        self.sample_arc: NDArrayFloat = cum[self.sample_segment] + np.hypot(
-            *(self.samples - self.vertices[self.sample_segment]).T
-        )
-        self._offset = np.array(offsets, dtype=np.int64)
-        self._count = np.array(counts, dtype=np.int64)
-        self._start = np.array(starts, dtype=np.int64)
-        self._reversed = np.array(reversed_, dtype=bool)
-
-    @cached_property
-    def tree(self) -> cKDTree:
-        """KD-tree of the samples, built on first use."""
+    def __init__(
+        self,
+        lines: MapLines,
+        parts: list[NDArrayFloat],
+        ignored: set[int],
+        step_m: float,
+        reach_m: float,
+    ) -> None:
+        """``parts``: border vertices per lanelet in driving order, m; ``ignored``: line
+        string ids that are never another lane's border (this border's own lines and
+        those of lanelets overlapping the route); ``reach_m``: lines farther than this from
+        the border are never closer than it for a point within ``reach_m / 2``."""
         from scipy.spatial import cKDTree
 
-        return cKDTree(self.samples)
+        self.step_m = step_m
+        self.vertices: NDArrayFloat = np.concatenate(parts)
+        self.samples, segment = resample(self.vertices, step_m)
+        cum = arc_lengths(self.vertices)
+        self.sample_arc: NDArrayFloat = cum[segment] + np.hypot(*(self.samples - self.vertices[segment]).T)
+        guess, segment = resample(self.vertices, GUESS_STEP_M)
+        self._guess_arc = cum[segment] + np.hypot(*(guess - self.vertices[segment]).T)
+        self._guess_tree = cKDTree(guess)
+        boxes = np.array([np.concatenate((p.min(axis=0), p.max(axis=0))) for p in parts])
+        near = lines.near(boxes, reach_m)
+        self._lines = lines
+        self._others: NDArrayInt = near[~np.isin(near, lines.slots(ignored))]
+        self._clearance = np.full(len(guess), np.inf)
+        if len(self._others):
+            coarse = np.concatenate([lines.samples(int(slot), CLEARANCE_STEP_M) for slot in self._others])
+            self._clearance = cKDTree(coarse).query(guess)[0] - CLEARANCE_STEP_M / 2.0
 
-    def distances(
-        self, points: NDArrayFloat, *, exact: bool, other_margin_m: float
-    ) -> BorderDistances:
+    @cached_property
+    def _others_tree(self) -> cKDTree:
+        """KD-tree of the other lines' samples every ``step_m``, built on first use."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(np.concatenate([self._lines.samples(int(slot), self.step_m) for slot in self._others]))
+
+    def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m) to this border.
 
-        The map-wide KD-tree gives each point's closest sample; when that sample is on this
-        border it is the answer, otherwise this border's own KD-tree is asked. Exact mode
-        refines with point-to-segment distances to the segments within one resampling step
-        (arc length) of the closest sample, which hold the closest point wherever the
-        border's radius of curvature exceeds the distance.
+        The nearest coarse sample (KD-tree) seeds a point-to-segment search over the
+        vertices within ``GUESS_STEP_M`` of arc length; the resampled distance is the
+        smallest to the samples around that exact closest point. Both equal a global search
+        wherever the border's radius of curvature exceeds the distance. Only points far
+        enough off the border to possibly be closer to another line (by the clearance of
+        the coarse sample) are checked against the other lines.
         """
-        index = self._index
-        near_distance, near_sample = index.tree.query(points)
-        slot = index.owner[near_sample]
-        position = self._position[slot]
-        on_route = position >= 0
-        sample = np.empty(len(points), dtype=np.int64)
-        pos = position[on_route]
-        local = near_sample[on_route] - self._start[pos]
-        sample[on_route] = self._offset[pos] + np.where(self._reversed[pos], self._count[pos] - 1 - local, local)
-        distances = near_distance.copy()
+        _, guess = self._guess_tree.query(points)
+        exact_distance, arc = windowed_distances(points, self.vertices, self._guess_arc[guess], GUESS_STEP_M)
+        nearest = np.searchsorted(self.sample_arc, arc)
+        around = np.clip(nearest[:, None] + np.arange(-SAMPLE_WINDOW, SAMPLE_WINDOW), 0, len(self.samples) - 1)
+        gaps = self.samples[around] - points[:, None, :]
+        sample_distances = np.hypot(gaps[..., 0], gaps[..., 1])
+        closest = np.argmin(sample_distances, axis=1)
+        rows = np.arange(len(points))
+        resampled = sample_distances[rows, closest]
         other_closer = np.zeros(len(points), dtype=bool)
-        off_route = ~on_route
-        if np.any(off_route):
-            route_distance, route_sample = self.tree.query(points[off_route])
-            sample[off_route] = route_sample
-            distances[off_route] = route_distance
-            other_closer[off_route] = (near_distance[off_route] < route_distance - other_margin_m) & ~self._overlapping[
-                slot[off_route]
-            ]
+        suspect = 2.0 * resampled > self._clearance[guess] + other_margin_m - GUESS_STEP_M / 2.0
+        if np.any(suspect):
+            other = self._others_tree.query(points[suspect])[0]
+            other_closer[suspect] = other < resampled[suspect] - other_margin_m
         if exact:
-            distances, arc = windowed_distances(points, self.vertices, self.sample_arc[sample], self._index.step_m)
-        else:
-            arc = self.sample_arc[sample]
-        return BorderDistances(distances=distances, arc_m=arc, other_closer=other_closer)
+            return BorderDistances(distances=exact_distance, arc_m=arc, other_closer=other_closer)
+        return BorderDistances(
+            distances=resampled, arc_m=self.sample_arc[around[rows, closest]], other_closer=other_closer
+        )

@@ -183,6 +183,18 @@ def test_gt_covers_detection_plus_margin(junction: JunctionMap) -> None:
         assert np.all(np.hypot(*np.diff(gt, axis=0).T) < 1.0), "GT border has a gap"
 
 
+def test_margin_extends_gt_into_the_junction_after_the_detection(junction: JunctionMap) -> None:
+    """The detection ends 1.6 m before the junction; its mid-line is then farther than
+    max_distance_m from every junction lanelet, yet the GT still extends margin_m beyond."""
+    left, right = route(junction, "approach").borders(10.0, 38.4)
+    found = junction.gt.match(left, right, (10.0, 0.0, 0.0))
+    assert found.lanelet_ids[0] == junction.ids["approach"]
+    assert found.lanelet_ids[1] in {junction.ids[name] for name in ("straight", "left", "right")}
+    _, arc_m = closest_distances(right[[-1]], found.right_gt)
+    gt_length = float(np.sum(np.hypot(*np.diff(found.right_gt, axis=0).T)))
+    assert gt_length - arc_m[0] >= junction.gt.config.margin_m
+
+
 def test_detection_behind_the_pose_pulls_in_the_predecessor(junction: JunctionMap) -> None:
     path = route(junction, "approach", "right", "right_exit")
     left, right = path.borders(30.0, 60.0)
