@@ -109,7 +109,8 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
         right, right_src = convoy_border(er, cr, starts[1], params.coop_weight, params.convoy_blend_offset_m)
         return FusionResult(left, right, left_src, right_src, "convoy", ends.gap_m)
     if interpolation == "paper":
-        gaps = tuple(paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m)
+        uniform = params.spline_parameter == "uniform"
+        gaps = tuple(paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m, uniform)
                      for e, c in ((el, cl), (er, cr)))
     else:
         gaps = hermite_lane((el, er), (cl, cr), params.heading_window_m, params.spacing_m)

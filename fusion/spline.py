@@ -15,6 +15,7 @@ from fusion.geometry import fit_end, noise_level, sample_curve
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
+_MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 
@@ -76,19 +77,19 @@ def natural_spline_moments(h: NDArrayFloat, y: NDArrayFloat) -> NDArrayFloat:
 
 
 def paper_gap(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, apex_ratio: float,
-              spacing_m: float) -> NDArrayFloat:
+              spacing_m: float, uniform: bool = False) -> NDArrayFloat:
     """The paper's spline through ego[-3], ego[-1], (apex), coop[0], coop[2], sampled in the gap.
 
     The spline is parametric in cumulative chord length (a 90° curve is not a function
-    y(x)) with natural boundary conditions. The apex P_c is added when the end directions
+    y(x)), or in the knot index with ``uniform``, with natural boundary conditions. The apex P_c is added when the end directions
     ego[-3]→ego[-1] and coop[0]→coop[2] differ by more than ``apex_min_turn_rad``.
     """
     e0, e1 = ego[max(0, ego.shape[0] - 3)], ego[-1]
     c0, c1 = coop[0], coop[min(2, coop.shape[0] - 1)]
     knots = [e0, e1]
     de, dc = e1 - e0, c1 - c0
-    de_u = (de[0] / math.hypot(*de), de[1] / math.hypot(*de))
-    dc_u = (dc[0] / math.hypot(*dc), dc[1] / math.hypot(*dc))
+    ne, nc = math.hypot(de[0], de[1]) or 1.0, math.hypot(dc[0], dc[1]) or 1.0
+    de_u, dc_u = (de[0] / ne, de[1] / ne), (dc[0] / nc, dc[1] / nc)
     turn = math.atan2(_cross(*de_u, *dc_u), de_u[0] * dc_u[0] + de_u[1] * dc_u[1])
     if abs(turn) > apex_min_turn_rad:
         apex = estimate_apex(e1, de_u, c0, dc_u, apex_ratio)
@@ -96,7 +97,11 @@ def paper_gap(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, a
             knots.append(apex)
     knots += [c0, c1]
     q = np.array(knots)
-    h = np.hypot(*np.diff(q, axis=0).T)
+    chords = np.hypot(*np.diff(q, axis=0).T)
+    keep = np.concatenate(([True], chords > _MIN_KNOT_STEP_M))
+    if not keep.all():
+        q, chords = q[keep], chords[keep[1:]]
+    h = np.ones_like(chords) if uniform else chords
     t = np.concatenate(([0.0], np.cumsum(h)))
     moments = natural_spline_moments(h, q)
 
@@ -109,7 +114,8 @@ def paper_gap(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, a
                 + (q[i] / hi - moments[i] * hi / 6.0) * a
                 + (q[i + 1] / hi - moments[i + 1] * hi / 6.0) * b)
 
-    return sample_curve(evaluate, float(t[1]), float(t[-2]), float(t[-2] - t[1]), spacing_m)
+    first, last = 1, q.shape[0] - 2
+    return sample_curve(evaluate, float(t[first]), float(t[last]), float(chords[first:last].sum()), spacing_m)
 
 
 def _bezier_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,

@@ -24,6 +24,7 @@ FusionMode = Literal["auto", "convoy", "spline"]
 Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
 ConvoyStrategy = Literal["weighted", "mean", "nearest"]
+SplineParameter = Literal["chord", "uniform"]
 
 MIN_BORDER_POINTS: Final[int] = 2
 
@@ -124,6 +125,9 @@ class FusionParams:
         apex_min_turn_rad: relative orientation above which the apex is estimated [rad]
             (paper: 10°).
         apex_ratio: P_c = P_i + apex_ratio·(P_j − P_i) (paper: 0.4).
+        spline_parameter: knot parameter of the paper's spline: ``"chord"`` (cumulative chord
+            length, default) or ``"uniform"`` (knot index; reproduces the paper's too-flat
+            curve without apex, Fig. 4a, for the ablation).
         spacing_m: sampling step of interpolated points [m] (paper: 0.10).
         w_coop: weight of the cooperative detection in the weighted convoy fusion (paper: 0.75).
         convoy_strategy: ``"weighted"`` (paper, ``w_coop``), ``"mean"`` (0.5) or ``"nearest"``
@@ -146,6 +150,7 @@ class FusionParams:
     d_i_m: float = 50.0
     apex_min_turn_rad: float = math.radians(10.0)
     apex_ratio: float = 0.4
+    spline_parameter: SplineParameter = "chord"
     spacing_m: float = 0.10
     w_coop: float = 0.75
     convoy_strategy: ConvoyStrategy = "weighted"
@@ -174,6 +179,8 @@ class FusionParams:
                 raise InvalidParameterError(f"FusionParams.{name} must be in [0, 1], got {value!r}")
         if self.convoy_strategy not in ("weighted", "mean", "nearest"):
             raise InvalidParameterError(f"FusionParams.convoy_strategy unknown: {self.convoy_strategy!r}")
+        if self.spline_parameter not in ("chord", "uniform"):
+            raise InvalidParameterError(f"FusionParams.spline_parameter unknown: {self.spline_parameter!r}")
         if self.fusibility not in ("geometric", "paper"):
             raise InvalidParameterError(f"FusionParams.fusibility unknown: {self.fusibility!r}")
 
