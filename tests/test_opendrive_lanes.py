@@ -221,3 +221,23 @@ def test_sample_s_examples_and_errors():
         sample_s(1.0, 0.0, 0.1)
     with pytest.raises(ValueError, match="finite"):
         sample_s(0.0, float("nan"), 0.1)
+
+
+def test_section_end_uses_the_left_limit_of_road_level_jumps():
+    # laneOffset and elevation jump at s = 30 where section 1 starts; the plan view has a
+    # 1 cm gap there. Section 0's closing border keeps section 0's values.
+    road = make_road(
+        (Geometry("line", 0.0, 0.0, 0.0, 0.0, 30.0), Geometry("line", 30.0, 30.0, 0.01, 0.0, 20.0)),
+        (
+            section(0.0, 30.0, right=(Lane(-1, "driving", widths=const(3.0)),)),
+            section(30.0, 50.0, right=(Lane(-1, "driving", widths=const(3.0)),)),
+        ),
+        offsets=(CubicPoly(0.0, 0.0, 0.0, 0.0, 0.0), CubicPoly(30.0, -2.0, 0.0, 0.0, 0.0)),
+        elevation_records=(CubicPoly(0.0, 1.0, 0.0, 0.0, 0.0), CubicPoly(30.0, 5.0, 0.0, 0.0, 0.0)),
+    )
+    first, second = sample_road(road, step=1.0)
+    np.testing.assert_allclose(first.inner[-1], [30.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(first.outer[-1], [30.0, -3.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(second.inner[0], [30.0, 0.01 - 2.0, 5.0], atol=1e-12)
+    np.testing.assert_allclose(lane_border_offsets(road, 0, -1, np.array([30.0]))[1], [-3.0])
+    np.testing.assert_allclose(lane_border_offsets(road, 1, -1, np.array([30.0]))[1], [-5.0])

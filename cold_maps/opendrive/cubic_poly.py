@@ -3,6 +3,10 @@
 One shared evaluator for every ``<width>``, ``<border>``, ``<laneOffset>`` and
 ``<elevation>`` record list: at position s the last record with ``s0 <= s - s_offset``
 applies, with ``ds = s - s_offset - s0``; where no record applies the profile is 0.
+Profiles are right-continuous. ``before`` ignores records starting at or after that s, which
+gives the left limit at a lane section's end: a road-level profile (laneOffset,
+elevation) that jumps where the next section starts must not move the closing border of
+the section before it.
 """
 
 from __future__ import annotations
@@ -30,10 +34,12 @@ def _coefficients(records: Sequence[CubicPoly]) -> tuple[NDArrayFloat, NDArrayFl
 
 
 def _locate(
-    records: Sequence[CubicPoly], s: NDArrayFloat, s_offset: float
+    records: Sequence[CubicPoly], s: NDArrayFloat, s_offset: float, before: float | None
 ) -> tuple[NDArrayFloat, NDArrayFloat, npt.NDArray[np.bool_]]:
     """Per point: the applying record's coefficients (N, 4), its ds (N,), and whether one applies."""
     s = np.asarray(s, dtype=np.float64)
+    if before is not None:
+        records = [r for r in records if r.s0 + s_offset < before]
     if not records:
         return np.zeros(s.shape + (4,)), np.zeros(s.shape), np.zeros(s.shape, dtype=bool)
     starts, coeffs = _coefficients(records)
@@ -44,15 +50,19 @@ def _locate(
     return coeffs[index], local - starts[index], applies
 
 
-def evaluate(records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0) -> NDArrayFloat:
+def evaluate(
+    records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0, before: float | None = None
+) -> NDArrayFloat:
     """The profile value at each s (unit of the records' ``a``); 0 where no record applies."""
-    c, ds, applies = _locate(records, s, s_offset)
+    c, ds, applies = _locate(records, s, s_offset, before)
     value = c[..., 0] + ds * (c[..., 1] + ds * (c[..., 2] + ds * c[..., 3]))
     return np.where(applies, value, 0.0)
 
 
-def derivative(records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0) -> NDArrayFloat:
+def derivative(
+    records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0, before: float | None = None
+) -> NDArrayFloat:
     """d(profile)/ds at each s (unit of ``a`` per m); 0 where no record applies."""
-    c, ds, applies = _locate(records, s, s_offset)
+    c, ds, applies = _locate(records, s, s_offset, before)
     value = c[..., 1] + ds * (2.0 * c[..., 2] + ds * 3.0 * c[..., 3])
     return np.where(applies, value, 0.0)

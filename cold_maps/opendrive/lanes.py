@@ -46,9 +46,9 @@ def lane_of(road: Road, section_index: int, lane_id: int) -> Lane:
         raise KeyError(f"road {road.id}: lane section {section_index} has no lane {lane_id}") from None
 
 
-def lane_offset(road: Road, s: NDArrayFloat) -> NDArrayFloat:
-    """t of the centre lane (lane 0) at each s (m)."""
-    return cubic_poly.evaluate(road.lane_offsets, s)
+def lane_offset(road: Road, s: NDArrayFloat, *, before: float | None = None) -> NDArrayFloat:
+    """t of the centre lane (lane 0) at each s (m); ``before``: see ``cubic_poly.evaluate``."""
+    return cubic_poly.evaluate(road.lane_offsets, s, before=before)
 
 
 def _outer_border(
@@ -66,12 +66,14 @@ def section_borders(
 ) -> dict[int, tuple[NDArrayFloat, NDArrayFloat]]:
     """t of (inner, outer) border at each s for every lane of a section, keyed by lane id.
 
-    The centre lane 0 maps to (laneOffset, laneOffset). ``outermost`` limits the lanes
-    computed to |id| <= outermost on each side.
+    The centre lane 0 maps to (laneOffset, laneOffset). At the section's end laneOffset is
+    its limit from inside the section (a jump where the next section starts belongs to
+    that section). ``outermost`` limits the lanes computed to |id| <= outermost on each
+    side.
     """
     section = section_of(road, section_index)
     s = check_s(road, s)
-    offset = lane_offset(road, s)
+    offset = lane_offset(road, s, before=section.s_end)
     borders = {0: (offset, offset)}
     for side in (section.left, section.right):
         inner = offset

@@ -26,16 +26,22 @@ def check_s(road: Road, s: NDArrayFloat) -> NDArrayFloat:
     return s
 
 
-def reference_pose(road: Road, s: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+def reference_pose(
+    road: Road, s: NDArrayFloat, *, before: float | None = None
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """Inertial x, y (m) and heading (rad) of the reference line at each s (m), same shape as s.
 
-    Each s is evaluated on the last ``<geometry>`` record starting at or before it.
+    Each s is evaluated on the last ``<geometry>`` record starting at or before it, among
+    the records starting before ``before`` (m) when given: at a lane section's end this
+    takes the record the section's interior uses, so a small gap the map has between
+    two records does not bend the section's closing border.
     """
     s = check_s(road, s)
     if not road.plan_view:
         raise ValueError(f"road {road.id}: <planView> has no <geometry> record")
     starts = np.array([g.s for g in road.plan_view])
-    index = np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(starts) - 1)
+    last = len(starts) if before is None else max(int(np.searchsorted(starts, before, side="left")), 1)
+    index = np.clip(np.searchsorted(starts[:last], s, side="right") - 1, 0, last - 1)
     x = np.empty_like(s)
     y = np.empty_like(s)
     hdg = np.empty_like(s)

@@ -84,9 +84,9 @@ def _section_samples(
     """Samples of the listed lanes of one section; the reference line is evaluated once."""
     section = section_of(road, section_index)
     s = sample_s(section.s, section.s_end, step)
-    x, y, hdg = reference_pose(road, s)
+    x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
-    z = elevation(road, s)
+    z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
     outermost = max((abs(i) for i in lane_ids), default=0)
     borders = section_borders(road, section_index, s, outermost=outermost)
 
