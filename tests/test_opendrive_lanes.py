@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.optimize import brentq
+from test_opendrive_geometry import parabola_length, quadrature_pose
 
 from cold_maps.opendrive.lanes import lane_border_offsets, section_borders
 from cold_maps.opendrive.model import CubicPoly, Geometry, Lane, LaneSection, Road
@@ -241,3 +243,48 @@ def test_section_end_uses_the_left_limit_of_road_level_jumps():
     np.testing.assert_allclose(second.inner[0], [30.0, 0.01 - 2.0, 5.0], atol=1e-12)
     np.testing.assert_allclose(lane_border_offsets(road, 0, -1, np.array([30.0]))[1], [-3.0])
     np.testing.assert_allclose(lane_border_offsets(road, 1, -1, np.array([30.0]))[1], [-5.0])
+
+
+def independent_reference(geom: Geometry, ds: float) -> tuple[float, float, float]:
+    """Reference pose by a route independent of ours: quadrature (spiral) or the parabola's closed form."""
+    if geom.kind == "spiral":
+        rate = (geom.curv_end - geom.curv_start) / geom.length
+        return quadrature_pose(geom.x, geom.y, geom.hdg, geom.curv_start, rate, ds)
+    c = geom.c if geom.kind == "poly3" else geom.cv / geom.bu**2
+    u = brentq(lambda x: float(parabola_length(c, np.array(x))) - ds, 0.0, ds + 1.0, xtol=1e-14)
+    v = c * u * u
+    cos_h, sin_h = math.cos(geom.hdg), math.sin(geom.hdg)
+    return geom.x + u * cos_h - v * sin_h, geom.y + u * sin_h + v * cos_h, geom.hdg + math.atan(2 * c * u)
+
+
+C_PARABOLA, U_END = 0.004, 90.0
+PARABOLA_LENGTH = float(parabola_length(C_PARABOLA, np.array(U_END)))
+
+
+@pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
+@pytest.mark.parametrize(
+    "geom",
+    [
+        Geometry("spiral", 0.0, 1.2e6, -8e5, 2.0, 140.0, curv_start=0.015, curv_end=-0.02),
+        Geometry("poly3", 0.0, -9e5, 1.1e6, -0.7, PARABOLA_LENGTH, c=C_PARABOLA),
+        Geometry(
+            "paramPoly3", 0.0, 9e5, 9e5, 0.3, PARABOLA_LENGTH,
+            bu=U_END, cv=C_PARABOLA * U_END**2, p_range="normalized",
+        ),
+    ],
+    ids=["spiral", "poly3", "paramPoly3"],
+)
+def test_curved_road_borders_far_from_origin_match_independent_evaluation(geom):
+    road = make_road(
+        (geom,),
+        (section(0.0, geom.length, left=(Lane(1, "driving", widths=const(3.5)),), right=(Lane(-1, "driving", widths=const(2.0)),)),),
+        offsets=(CubicPoly(0.0, 0.3, 0.0, 0.0, 0.0),),
+    )
+    worst = 0.0
+    for samples in sample_road(road, step=7.0):
+        t_outer = 3.8 if samples.lane_id > 0 else -1.7
+        for k, s in enumerate(samples.s):
+            x, y, h = independent_reference(geom, float(s))
+            for points, t in ((samples.inner, 0.3), (samples.outer, t_outer)):
+                worst = max(worst, math.hypot(points[k, 0] - (x - t * math.sin(h)), points[k, 1] - (y + t * math.cos(h))))
+    assert worst < 1e-6
