@@ -39,7 +39,7 @@ class MatchingConfig:
     max_distance_m: float = 1.5
     other_border_margin_m: float = 0.10
     margin_m: float = 5.0
-    score_step_m: float = 1.0
+    score_step_m: float = 2.0
 
     def __post_init__(self) -> None:
         for field in fields(self):

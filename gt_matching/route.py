@@ -16,11 +16,12 @@ if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 #: Spacing of the coarse border samples that seed each point's closest-point search, m.
-GUESS_STEP_M: Final = 1.0
+GUESS_STEP_M: Final = 0.05
+#: The closest resampled point lies within this arc length of the nearest coarse sample
+#: (half a coarse step, plus slack), m.
+SAMPLE_REACH_M: Final = GUESS_STEP_M / 2.0
 #: Spacing of the samples of nearby lines that bound their distance to the border, m.
 CLEARANCE_STEP_M: Final = 0.25
-#: Resampled points either side of the exact closest point that are compared.
-SAMPLE_WINDOW: Final = 2
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ class RouteBorder:
         self.step_m = step_m
         self.vertices: NDArrayFloat = np.concatenate(parts)
         self.samples, segment = resample(self.vertices, step_m)
+        self._window = int(np.ceil(2.0 * (SAMPLE_REACH_M + step_m) / step_m)) + 1
         cum = arc_lengths(self.vertices)
         self.sample_arc: NDArrayFloat = cum[segment] + np.hypot(*(self.samples - self.vertices[segment]).T)
         guess, segment = resample(self.vertices, GUESS_STEP_M)
@@ -86,17 +88,17 @@ class RouteBorder:
     def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m) to this border.
 
-        The nearest coarse sample (KD-tree) seeds a point-to-segment search over the
-        vertices within ``GUESS_STEP_M`` of arc length; the resampled distance is the
-        smallest to the samples around that exact closest point. Both equal a global search
+        The nearest coarse sample (KD-tree) seeds both searches: the resampled distance is
+        the smallest to the samples within ``SAMPLE_REACH_M`` of its arc length, the exact
+        one the smallest to the segments within ``GUESS_STEP_M``. Both equal a global search
         wherever the border's radius of curvature exceeds the distance. Only points far
         enough off the border to possibly be closer to another line (by the clearance of
         the coarse sample) are checked against the other lines.
         """
         _, guess = self._guess_tree.query(points)
-        exact_distance, arc = windowed_distances(points, self.vertices, self._guess_arc[guess], GUESS_STEP_M)
-        nearest = np.searchsorted(self.sample_arc, arc)
-        around = np.clip(nearest[:, None] + np.arange(-SAMPLE_WINDOW, SAMPLE_WINDOW), 0, len(self.samples) - 1)
+        guess_arc = self._guess_arc[guess]
+        first = np.floor((guess_arc - SAMPLE_REACH_M - self.step_m) / self.step_m).astype(np.int64)
+        around = np.clip(first[:, None] + np.arange(self._window), 0, len(self.samples) - 1)
         gaps = self.samples[around] - points[:, None, :]
         sample_distances = np.hypot(gaps[..., 0], gaps[..., 1])
         closest = np.argmin(sample_distances, axis=1)
@@ -108,6 +110,7 @@ class RouteBorder:
             other = self._others_tree.query(points[suspect])[0]
             other_closer[suspect] = other < resampled[suspect] - other_margin_m
         if exact:
+            exact_distance, arc = windowed_distances(points, self.vertices, guess_arc, GUESS_STEP_M)
             return BorderDistances(distances=exact_distance, arc_m=arc, other_closer=other_closer)
         return BorderDistances(
             distances=resampled, arc_m=self.sample_arc[around[rows, closest]], other_closer=other_closer

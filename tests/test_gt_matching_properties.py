@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 pytest.importorskip("lanelet2")
 
-from gt_matching import GroundTruth
+from gt_matching import GroundTruth, MatchingConfig
 from gt_matching.metrics import BorderMetrics
 from gt_matching.polyline import closest_distances, resample, windowed_distances
 from gt_matching.synthetic import LaneletMapBuilder, arc, offset_polyline, straight
@@ -140,3 +140,45 @@ def test_metrics_are_invariant_under_a_rigid_motion(
         assert e.max_error_m <= r.max_error_m + 1e-9
         assert e.mean_error_m <= r.mean_error_m + 1e-9
         assert r.max_error_m <= e.max_error_m + results[False].step_m / 2.0 + 1e-9
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    path=st.builds(curved_path, radius_m=st.floats(10.0, 100.0), turn_rad=st.floats(-1.5, 1.5), vertex_step_m=st.floats(0.05, 2.0)),
+    lateral_m=st.floats(-1.0, 1.0),
+    noise_m=st.floats(0.0, 0.3),
+    seed=st.integers(0, 2**16),
+    step_m=st.sampled_from([0.02, 0.05, 0.2]),
+)
+def test_evaluate_equals_global_closest_point_search(
+    path: tuple[np.ndarray, np.ndarray], lateral_m: float, noise_m: float, seed: int, step_m: float
+) -> None:
+    """Per-frame metrics equal a KD-tree over all GT samples (resampled) and a brute-force
+    point-to-segment search over the whole GT polyline (exact)."""
+    centre, headings = path
+    rng = np.random.default_rng(seed)
+    keep = slice(3, len(centre) - 3)
+    left, right = (
+        offset_polyline(centre[keep], side * WIDTH_M / 2.0 + lateral_m, headings[keep])
+        + rng.normal(0.0, noise_m, (len(centre[keep]), 2))
+        for side in (1.0, -1.0)
+    )
+    builder = LaneletMapBuilder()
+    builder.add_lane(centre, WIDTH_M, headings)
+    lanelet_map, graph = builder.build()
+    gt = GroundTruth(lanelet_map, graph, config=MatchingConfig(step_m=step_m, max_distance_m=3.0))
+    pose = (*centre[3], float(headings[3]))
+    found = gt.match(left, right, pose)
+    resampled = gt.evaluate(left, right, pose)
+    exact = gt.evaluate(left, right, pose, exact=True)
+    for points, samples, vertices, r, e in (
+        (left, found.left_gt_samples, found.left_gt, resampled.left, exact.left),
+        (right, found.right_gt_samples, found.right_gt, resampled.right, exact.right),
+    ):
+        assert np.all(np.hypot(*np.diff(samples, axis=0).T) <= step_m + 1e-9)
+        global_resampled = cKDTree(samples).query(points)[0]
+        global_exact = closest_distances(points, vertices)[0]
+        assert r.mean_error_m == pytest.approx(float(global_resampled.mean()), abs=1e-12)
+        assert r.max_error_m == pytest.approx(float(global_resampled.max()), abs=1e-12)
+        assert e.mean_error_m == pytest.approx(float(global_exact.mean()), abs=1e-12)
+        assert e.max_error_m == pytest.approx(float(global_exact.max()), abs=1e-12)
