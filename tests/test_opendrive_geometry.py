@@ -300,6 +300,11 @@ def test_unknown_kind_and_non_positive_length_raise():
         evaluate(Geometry("line", 0.0, 0.0, 0.0, 0.0, 0.0), np.array([0.0]))
 
 
+def test_degenerate_param_poly3_raises():
+    with pytest.raises(ValueError, match=r"paramPoly3 at s=3.0: .* \(zero arc length\)"):
+        evaluate(Geometry("paramPoly3", 3.0, 0.0, 0.0, 0.0, 5.0, au=1.0, av=2.0), np.array([1.0]))
+
+
 def test_reference_pose_rejects_s_off_the_road_and_nan():
     road = road_of(Geometry("line", 0.0, 0.0, 0.0, 0.0, 10.0), road_id="7")
     with pytest.raises(ValueError, match="road 7: s in"):

@@ -17,6 +17,9 @@ measured from the shifted centre lane: t_outer = laneOffset(s) + border(s), as t
 ``Lane.borders`` field documents. The next outer lane's inner border is that border.
 A map written by a tool that reads borders from the reference line differs from ours by
 exactly laneOffset(s) in such lanes (none in the CARLA towns, which use no ``<border>``).
+commonroad-scenario-designer 0.8.5 also measures border records from the laneOffset
+line, but negates them for right lanes (it reuses them as width magnitudes); we keep the
+signed t the spec and ``Lane.borders`` describe.
 """
 
 from __future__ import annotations

@@ -28,5 +28,7 @@ def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFlo
     """Inertial x, y (m) and heading (rad) at arc length ds (m) from the record start."""
     curve = curve_of(geom)
     table = arc_length_table(curve)
+    if not table.total > 0.0:
+        raise ValueError(f"paramPoly3 at s={geom.s}: u(p), v(p) describe a single point (zero arc length)")
     p = table.parameter(np.asarray(ds, dtype=np.float64) * (table.total / geom.length))
     return pose_at_parameter(geom, curve, p)
