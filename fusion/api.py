@@ -8,9 +8,9 @@ import numpy as np
 
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
-from fusion.fusibility import LaneEnds, geometric_check, lane_curvatures, lane_ends, paper_check, relative_pose
-from fusion.geometry import to_world
-from fusion.spline import hermite_lane, paper_gap
+from fusion.fusibility import LaneEnds, geometric_check, lane_ends, paper_check, relative_pose
+from fusion.geometry import EndFit, to_world
+from fusion.spline import hermite_lane, lane_end_fits, paper_gap
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, Source
 
 DEFAULT_PARAMS = FusionParams()
@@ -43,15 +43,28 @@ def _convoy_reason(ego: LaneDetection, coop: LaneDetection, starts: tuple[Overla
     return ""
 
 
-def _spline_reason(ego: LaneDetection, coop: LaneDetection, borders: Borders, ends: LaneEnds,
+class _EndFits:
+    """Least-squares end fits of the four borders, computed once on first use."""
+
+    def __init__(self, borders: Borders, params: FusionParams):
+        self._borders, self._params, self._fits = borders, params, None
+
+    def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+        if self._fits is None:
+            el, er, cl, cr = self._borders
+            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m, self._params.spacing_m)
+        return self._fits
+
+
+def _spline_reason(ego: LaneDetection, coop: LaneDetection, fits: _EndFits, ends: LaneEnds,
                    params: FusionParams) -> str:
     if params.fusibility == "paper":
         return paper_check(ego.pose, coop.pose, ends, params)
-    return geometric_check(ego.pose, coop.pose, ends, params, lane_curvatures(*borders))
+    return geometric_check(ego.pose, coop.pose, ends, params, fits)
 
 
-def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams,
-            borders: Borders) -> tuple[FusionKind, str, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams, borders: Borders,
+            fits: _EndFits) -> tuple[FusionKind, str, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
     if mode not in _MODES:
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
@@ -59,7 +72,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     ends = lane_ends(*borders)
     kind: FusionKind = ("convoy" if ends.gap_m <= 0.0 else "spline") if mode == "auto" else mode
     if kind == "spline":
-        return kind, _spline_reason(ego, coop, borders, ends, params), ends, None
+        return kind, _spline_reason(ego, coop, fits, ends, params), ends, None
     el, er, cl, cr = borders
     if ends.gap_m > 0.0:
         return kind, f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", ends, None
@@ -75,7 +88,8 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
     for spline fusion with ``params.fusibility`` (``"geometric"`` by default, see
     :func:`fusion.fusibility.geometric_check`; ``"paper"`` for the paper's pose cases).
     """
-    _, reason, _, _ = _decide(ego, coop, mode, params, _world_borders(ego, coop))
+    borders = _world_borders(ego, coop)
+    _, reason, _, _ = _decide(ego, coop, mode, params, borders, _EndFits(borders, params))
     return not reason, reason
 
 
@@ -99,7 +113,8 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
     borders = _world_borders(ego, coop)
-    kind, reason, ends, starts = _decide(ego, coop, mode, params, borders)
+    fits = _EndFits(borders, params)
+    kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, fits)
     el, er, cl, cr = borders
     if reason:
         return FusionResult(el, er, np.zeros(el.shape[0], np.int8), np.zeros(er.shape[0], np.int8),
@@ -113,7 +128,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
         gaps = tuple(paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m, uniform)
                      for e, c in ((el, cl), (er, cr)))
     else:
-        gaps = hermite_lane((el, er), (cl, cr), params.heading_window_m, params.spacing_m)
+        gaps = hermite_lane(fits(), params.spacing_m)
     (left, left_src), (right, right_src) = (
         _labelled((e, Source.EGO), (gap, Source.INTERPOLATED), (c, Source.COOP))
         for e, gap, c in ((el, gaps[0], cl), (er, gaps[1], cr)))

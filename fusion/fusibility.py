@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable, Sequence
 
 import numpy as np
 
-from fusion.geometry import end_direction, wrap_angle
+from fusion.geometry import EndFit, end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
 _CHORD_WINDOW_M = 4.0
-_CURVATURE_WINDOW_M = 5.0
-_MIN_ARC_CURVATURE = 1.0 / 300.0
+_MIN_ARC_CURVATURE = 1.0 / 100.0
+_CURVATURE_SLACK = 0.10
+_CURVATURE_SAMPLES = 9
+_ARC_TOLERANCE_LANES = 0.75
 
 
 @dataclass(frozen=True)
@@ -98,7 +101,7 @@ def paper_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionParams)
 
 
 def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionParams,
-                    curvatures: tuple[float, float] | None = None) -> str:
+                    end_fits: Callable[[], Sequence[EndFit]] | None = None) -> str:
     """Curve-aware fusibility of a gap; returns the rejection reason or ``""``.
 
     The rule compares the *detections*, not the vehicle poses, so a coop vehicle on the same
@@ -113,12 +116,15 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
        may be at most half the ego lane width (measured at the ego end). On a straight this
        is a lateral offset test that rejects the adjacent lane (a full lane width off) while
        tolerating heading noise over a 50 m gap and the shift of an S-bend;
-    4. arc consistency: when both ends are curved the same way (the detections' curvatures
-       agree within 50 %), the gap is taken as one arc, whose chord direction is Δψ/2;
-       P1 may then deviate from that line by at most half the ego lane width (the adjacent
-       lane of a curve lies a full lane width off it). ``curvatures`` are the centre-line
-       curvatures (ego end, coop start) [1/m], see :func:`lane_curvatures`; the check is
-       skipped without them or when |Δψ| ≤ t_Ψ.
+    4. curved ends: a detection that ends (or starts) inside a curve fixes the arc radius;
+       the lane continues on that arc to the other heading and then runs straight, and the
+       other end must lie within 3/4 of the lane width of that line
+       (:func:`curved_end_mismatch`; the adjacent lane of a curve lies a full lane width
+       off). ``end_fits`` returns the least-squares fits of (ego left, ego right) ends and
+       (coop left, coop right) starts (:func:`fusion.spline.lane_end_fits`); the check is
+       skipped without them, when |Δψ| ≤ t_Ψ, and when both ends are straight (then any arc
+       position fits: an adjacent lane is not distinguishable from the same lane bending
+       later).
     """
     x_rel, _, _ = relative_pose(ego, coop)
     if x_rel <= 0.0:
@@ -138,45 +144,67 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     if excess > 0.5 * ends.width_m:
         return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
                 f"(more than half the lane width {ends.width_m:.2f} m): another lane")
-    if curvatures is not None and abs(turn) > params.t_psi_rad:
-        k0, k1 = curvatures
-        one_arc = (k0 * k1 > 0.0 and min(abs(k0), abs(k1)) >= _MIN_ARC_CURVATURE
-                   and abs(k0 - k1) <= 0.5 * max(abs(k0), abs(k1)))
-        mismatch = arc_mismatch(ends)
-        if one_arc and mismatch > 0.5 * ends.width_m:
-            return (f"both detections lie on one arc but the coop start is {mismatch:.2f} m off it "
-                    f"(more than half the lane width {ends.width_m:.2f} m): another lane")
+    if end_fits is not None and abs(turn) > params.t_psi_rad:
+        mismatch = curved_end_mismatch(ends, end_fits())
+        if mismatch > _ARC_TOLERANCE_LANES * ends.width_m:
+            return (f"a detection end lies on an arc that puts the coop start {mismatch:.2f} m off "
+                    f"(more than {_ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m): another lane")
     return ""
 
 
-def lane_curvatures(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArrayFloat,
-                    coop_right: NDArrayFloat) -> tuple[float, float]:
-    """Centre-line curvature at the ego end and at the coop start [1/m] (mean of the borders)."""
-    w = _CURVATURE_WINDOW_M
-    k_end = 0.5 * (end_curvature(ego_left, True, w) + end_curvature(ego_right, True, w))
-    k_start = 0.5 * (end_curvature(coop_left, False, w) + end_curvature(coop_right, False, w))
-    return k_end, k_start
+def _arc_chord(psi: float, kappa: float, turn: float) -> tuple[float, float]:
+    """Chord of an arc starting with heading ``psi`` and curvature ``kappa`` turning by ``turn``."""
+    return ((math.sin(psi + turn) - math.sin(psi)) / kappa, (math.cos(psi) - math.cos(psi + turn)) / kappa)
 
 
-def arc_mismatch(ends: LaneEnds) -> float:
-    """Lateral distance of the coop start from the line P0 + r·(heading ψ0 + Δψ/2) [m]."""
-    t0, t1 = ends.t_end, ends.t_start
-    turn = math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
-    c, s = math.cos(turn / 2), math.sin(turn / 2)
-    mx, my = t0[0] * c - t0[1] * s, t0[0] * s + t0[1] * c
-    d = ends.p_start - ends.p_end
-    return abs(mx * d[1] - my * d[0])
+def _mean_heading(a: EndFit, b: EndFit) -> float:
+    return math.atan2(a.direction[1] + b.direction[1], a.direction[0] + b.direction[0])
 
 
-def end_curvature(border: NDArrayFloat, at_end: bool, window_m: float) -> float:
-    """Mean curvature of the last/first ``2·window_m`` of a border [1/m] (positive left)."""
-    a = end_direction(border, at_end, window_m)
-    n = border.shape[0]
-    approx = float(np.hypot(*(border[-1] - border[0]))) / (n - 1) or 1.0
-    k = min(n - 1, max(1, int(round(window_m / approx))))
-    if 2 * k >= n:
+def _curvature_range(a: EndFit, b: EndFit) -> tuple[float, float] | None:
+    """Plausible centre curvatures [1/m] at an end from two border fits: κ ± (3σ + 25 %),
+    or ``None`` unless clearly curved (|κ| ≥ 1/100 m⁻¹ and ≥ 3σ)."""
+    kappa = 0.5 * (a.curvature + b.curvature)
+    sigma = 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
+    if abs(kappa) < max(_MIN_ARC_CURVATURE, 3.0 * sigma):
+        return None
+    spread = 3.0 * sigma + _CURVATURE_SLACK * abs(kappa)
+    return kappa - spread, kappa + spread
+
+
+def _arc_line_mismatch(p_from: NDArrayFloat, psi_from: float, p_to: NDArrayFloat, psi_to: float,
+                       turn: float, kappas: tuple[float, float]) -> float:
+    """Smallest lateral offset of ``p_to`` from the line (heading ``psi_to``) reached by an arc
+    leaving ``p_from`` at ``psi_from`` with a curvature in ``kappas`` turning by ``turn``."""
+    best = math.inf
+    for i in range(_CURVATURE_SAMPLES):
+        kappa = kappas[0] + (kappas[1] - kappas[0]) * i / (_CURVATURE_SAMPLES - 1)
+        if kappa * turn <= 0.0:
+            continue
+        cx, cy = _arc_chord(psi_from, kappa, turn)
+        rx, ry = p_to[0] - p_from[0] - cx, p_to[1] - p_from[1] - cy
+        best = min(best, abs(math.cos(psi_to) * ry - math.sin(psi_to) * rx))
+    return best
+
+
+def curved_end_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
+    """Smallest lateral mismatch [m] of the line-arc models a curved detection end implies.
+
+    If the ego end lies in a curve (fitted centre curvature clearly non-zero), the lane
+    continues on an arc of that curvature (± 3σ + 25 %, for noise and a changing curvature)
+    until it reaches the coop heading and then runs straight: the coop start must lie on
+    that straight. Likewise backwards from a curved coop start. Returns the smallest
+    offset over the applicable models, 0 when no end is curved.
+    """
+    psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
+    k_end, k_start = _curvature_range(fits[0], fits[1]), _curvature_range(fits[2], fits[3])
+    if k_end is None and k_start is None:
         return 0.0
-    part = border[: n - k] if at_end else border[k:]
-    b = end_direction(part, at_end, window_m)
-    first, second = (b, a) if at_end else (a, b)
-    return math.atan2(first[0] * second[1] - first[1] * second[0], first[0] * second[0] + first[1] * second[1]) / (k * approx)
+    turn = wrap_angle(psi1 - psi0)
+    best = math.inf
+    if k_end is not None:
+        best = _arc_line_mismatch(ends.p_end, psi0, ends.p_start, psi1, turn, k_end)
+    if k_start is not None:
+        backwards = (-k_start[1], -k_start[0])  # reversed travel: curvature and turn change sign
+        best = min(best, _arc_line_mismatch(ends.p_start, psi1 + math.pi, ends.p_end, psi0, -turn, backwards))
+    return best if math.isfinite(best) else 0.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -66,8 +67,22 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
     return float(vec[0] / norm), float(vec[1] / norm)
 
 
-def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
-            sigma_m: float) -> tuple[NDArrayFloat, tuple[float, float]]:
+@dataclass(frozen=True)
+class EndFit:
+    """Least-squares estimate at a border end (world frame).
+
+    Fields: ``point`` fitted end point [m]; ``direction`` unit tangent (driving direction);
+    ``curvature`` [1/m] (positive turning left); ``curvature_sigma`` its standard deviation
+    from the detection noise [1/m].
+    """
+
+    point: NDArrayFloat
+    direction: tuple[float, float]
+    curvature: float
+    curvature_sigma: float
+
+
+def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...], sigma_m: float) -> EndFit:
     """End point and unit tangent of a border by least-squares quadratics, adaptive window.
 
     Fits ``y = a + b·x + c·x²`` to the points within each of ``windows_m`` (increasing) of
@@ -76,9 +91,11 @@ def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
     line fit has on a curve, and longer windows average the noise but are biased where the
     curvature changes. The window is chosen by the intersection-of-confidence-intervals
     rule: the longest window whose slope interval b ± 2.5·σ_b (σ_b from the detection noise
-    ``sigma_m``) still intersects those of all shorter windows. Returns the fitted end point
-    (world frame) and the fitted direction there (driving direction); with fewer than four
-    points in the shortest window, the end point and the chord direction.
+    ``sigma_m``) still intersects those of all shorter windows. The curvature comes from the
+    shortest window (least biased by a curvature change, so with noise it is uncertain and
+    ``curvature_sigma`` says so). With fewer than four points
+    in the shortest window: the end point, the chord direction and zero curvature of
+    infinite uncertainty.
     """
     cx, cy = end_direction(points, at_end, windows_m[0])
     n = points.shape[0]
@@ -87,7 +104,7 @@ def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
     counts = np.minimum(n, np.rint(np.asarray(windows_m) / approx_step).astype(np.intp) + 1)
     counts = counts[counts >= 4]
     if counts.shape[0] == 0:
-        return origin, (cx, cy)
+        return EndFit(origin, (cx, cy), 0.0, math.inf)
     k_max = int(counts[-1])
     rel = (points[n - k_max:][::-1] if at_end else points[:k_max]) - origin
     x = rel[:, 0] * cx + rel[:, 1] * cy
@@ -100,11 +117,13 @@ def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
     det = k * m0 - s1 * m1 + s2 * m2
     ok = np.abs(det) > 1e-12 * np.maximum(1.0, s4 * s4)
     if not ok[0]:
-        return origin, (cx, cy)
+        return EndFit(origin, (cx, cy), 0.0, math.inf)
     det = np.where(ok, det, 1.0)
     a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
     b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
-    half = _CI_FACTOR * max(sigma_m, _SIGMA_FLOOR_M) * np.sqrt(np.abs((k * s4 - s2 * s2) / det))
+    c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
+    sigma = max(sigma_m, _SIGMA_FLOOR_M)
+    half = _CI_FACTOR * sigma * np.sqrt(np.abs((k * s4 - s2 * s2) / det))
     lo = np.maximum.accumulate(b - half)
     hi = np.minimum.accumulate(b + half)
     valid = (lo <= hi) & ok
@@ -113,7 +132,9 @@ def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...],
     slope = float(b[j])
     norm = math.hypot(1.0, slope)
     point = origin + float(a[j]) * np.array((-cy, cx))
-    return point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm)
+    scale = 2.0 / math.hypot(1.0, float(b[0])) ** 3
+    c_sigma = sigma * math.sqrt(abs(float((k[0] * s2[0] - s1[0] * s1[0]) / det[0])))
+    return EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm), scale * float(c[0]), scale * c_sigma)
 
 
 def noise_level(points: NDArrayFloat, count: int) -> float:

@@ -7,11 +7,11 @@ at most ``spacing_m`` apart, from the ego border's last point to the coop border
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
 
-from fusion.geometry import fit_end, noise_level, sample_curve
+from fusion.geometry import EndFit, fit_end, noise_level, sample_curve
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
@@ -137,26 +137,32 @@ def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
     return d / (math.hypot(d[0], d[1]) or 1.0)
 
 
-def hermite_lane(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
-                 window_m: float | None, spacing_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
+def hermite_lane(fits: Sequence[EndFit], spacing_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
     """G1 gap interpolation of both borders of a lane; returns the (left, right) gap points.
 
-    The ego end and coop start of each border are least-squares quadratic fits
-    (:func:`fusion.geometry.fit_end`) over ``window_m``, or with ``None`` over the window
-    among 2–6 m chosen adaptively from the noise σ estimated on the last 5 m; the end
-    directions of the two borders are averaged (the borders of a lane are parallel), which
-    halves the heading variance. Each border's gap is :func:`hermite_gap` between the
-    fitted ends.
+    ``fits`` are the least-squares end fits of (ego left, ego right, coop left, coop right)
+    from :func:`lane_end_fits`; the end directions of the two borders are averaged (the
+    borders of a lane are parallel), which halves the heading variance. Each border's gap
+    is :func:`hermite_gap` between the fitted ends.
+    """
+    d0 = _mean_dir(fits[0].direction, fits[1].direction)
+    d1 = _mean_dir(fits[2].direction, fits[3].direction)
+    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m),
+            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m))
+
+
+def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
+                  window_m: float | None, spacing_m: float) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+    """End fits of (ego left, ego right) at their ends and (coop left, coop right) at their starts.
+
+    Windows: ``window_m``, or with ``None`` adaptive among 2–6 m from the noise σ estimated
+    on the last/first 5 m of the four borders (:func:`fusion.geometry.fit_end`).
     """
     count = max(3, int(round(_NOISE_SAMPLE_M / spacing_m)))
-    sigma = sum(noise_level(b, count) for b in ego + coop) / 4.0
+    sigma = (sum(noise_level(b, count) for b in ego) + sum(noise_level(b[::-1], count) for b in coop)) / 4.0
     windows = _WINDOWS_M if window_m is None else (window_m,)
-    ego_fits = [fit_end(b, True, windows, sigma) for b in ego]
-    coop_fits = [fit_end(b, False, windows, sigma) for b in coop]
-    d0 = _mean_dir(ego_fits[0][1], ego_fits[1][1])
-    d1 = _mean_dir(coop_fits[0][1], coop_fits[1][1])
-    return (hermite_gap(ego_fits[0][0], d0, coop_fits[0][0], d1, spacing_m),
-            hermite_gap(ego_fits[1][0], d0, coop_fits[1][0], d1, spacing_m))
+    return (fit_end(ego[0], True, windows, sigma), fit_end(ego[1], True, windows, sigma),
+            fit_end(coop[0], False, windows, sigma), fit_end(coop[1], False, windows, sigma))
 
 
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
