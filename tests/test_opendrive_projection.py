@@ -141,3 +141,20 @@ def test_round_trip_on_town04_roads_outside_junctions(town04):
         assert abs(found.s - s) < 1e-3 and abs(found.t - t) < 1e-3
         checked += 1
     assert checked > 100
+
+
+def test_points_on_town04_junction_roads_map_back_to_themselves(town04):
+    # connecting roads overlap, so the road found may be another one; its (s, t) must
+    # still map back onto the point, inside a lane
+    odr_map, town_locator = town04
+    roads = [r for r in odr_map.roads.values() if r.junction != "-1"]
+    rng = np.random.default_rng(11)
+    checked = 0
+    for r, s, t, _ in random_lane_points(odr_map, rng, 80, roads):
+        x, y = road_to_world(r, np.array([s]), np.array([t]))
+        found = town_locator.locate(float(x[0]), float(y[0]))
+        assert found is not None and found.distance == 0.0
+        fx, fy = road_to_world(odr_map.roads[found.road_id], np.array([found.s]), np.array([found.t]))
+        assert math.hypot(fx[0] - x[0], fy[0] - y[0]) < 1e-3
+        checked += 1
+    assert checked > 50

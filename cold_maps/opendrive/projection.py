@@ -50,30 +50,29 @@ class RoadPosition:
     distance: float
 
 
+def _frame_offsets(road: Road, x: float, y: float, s: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """(along, lateral) offsets (m) of point (x, y) in the reference frame at each s, and the heading (rad)."""
+    px, py, heading = reference_pose(road, s)
+    dx, dy = x - px, y - py
+    cos_h, sin_h = np.cos(heading), np.sin(heading)
+    return dx * cos_h + dy * sin_h, dy * cos_h - dx * sin_h, heading
+
+
 def _project(road: Road, x: float, y: float, s: float) -> tuple[float, float, float]:
-    """Newton refinement of the foot point from a start s: (s, t, overshoot past an end in m)."""
-    along = 0.0
-    lateral = 0.0
+    """Newton refinement of the foot point from a start s: (s, t, overshoot past an end), in m."""
     for _ in range(NEWTON_ITERATIONS):
         probe = np.clip(s + np.array([-CURVATURE_STEP_M, 0.0, CURVATURE_STEP_M]), 0.0, road.length)
-        px, py, ph = reference_pose(road, probe)
-        dx, dy = x - px[1], y - py[1]
-        cos_h, sin_h = np.cos(ph[1]), np.sin(ph[1])
-        along = dx * cos_h + dy * sin_h
-        lateral = -dx * sin_h + dy * cos_h
-        curvature = (ph[2] - ph[0]) / max(probe[2] - probe[0], 1e-12)
-        step = along / max(1.0 - curvature * lateral, MIN_RADIAL_FACTOR)
+        along, lateral, heading = _frame_offsets(road, x, y, probe)
+        curvature = (heading[2] - heading[0]) / max(probe[2] - probe[0], 1e-12)
+        step = along[1] / max(1.0 - curvature * lateral[1], MIN_RADIAL_FACTOR)
         s_next = float(np.clip(s + step, 0.0, road.length))
         converged = abs(s_next - s) < NEWTON_TOLERANCE_M
         s = s_next
         if converged:
             break
-    px, py, ph = reference_pose(road, np.array([s]))
-    dx, dy = x - px[0], y - py[0]
-    along = dx * np.cos(ph[0]) + dy * np.sin(ph[0])
-    lateral = -dx * np.sin(ph[0]) + dy * np.cos(ph[0])
-    overshoot = abs(along) if s in (0.0, road.length) else 0.0
-    return s, float(lateral), float(overshoot)
+    along, lateral, _ = _frame_offsets(road, x, y, np.array([s]))
+    overshoot = abs(float(along[0])) if s in (0.0, road.length) else 0.0
+    return s, float(lateral[0]), overshoot
 
 
 def _lane_at(road: Road, s: float, t: float) -> tuple[int, int, float, float]:
