@@ -2,7 +2,8 @@
 
 A road is a reference line given by a piecewise-linear curvature profile (straight lines,
 circular arcs, clothoids) in the world frame; lane borders are lateral offsets of it
-(positive to the left). :func:`detect` plays the paper's generic lane sensor.
+(positive to the left). :func:`detect` plays the paper's generic lane sensor;
+:func:`distance_to_polyline` measures errors against the dense true borders.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Final, Sequence
 import numpy as np
 
 from fusion.errors import InvalidParameterError
-from fusion.geometry import cumulative_length
+from fusion.geometry import cumulative_length, distance_to_polyline
 from fusion.types import LaneDetection, NDArrayFloat, Pose2D
 
 TABLE_STEP_M: Final[float] = 0.005
@@ -97,18 +98,3 @@ def detect(road: AnalyticRoad, s_from: float, length_m: float, left_m: float, ri
             pts = pts + (rng or np.random.default_rng(0)).normal(0.0, noise_m, pts.shape)
         borders.append((pts - (pose.x, pose.y)) @ rot)
     return LaneDetection(pose, borders[0], borders[1], sender=sender)
-
-
-def distance_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
-    """Distance of every point to a dense ``polyline`` (closest vertex, then its segments)."""
-    from scipy.spatial import cKDTree
-
-    _, idx = cKDTree(polyline).query(points)
-    best = np.full(points.shape[0], np.inf)
-    for k in (-1, 0):
-        i0 = np.clip(idx + k, 0, polyline.shape[0] - 2)
-        a, b = polyline[i0], polyline[i0 + 1]
-        seg = b - a
-        t = np.clip(np.einsum("ij,ij->i", points - a, seg) / np.einsum("ij,ij->i", seg, seg), 0.0, 1.0)
-        best = np.minimum(best, np.hypot(*(points - a - seg * t[:, None]).T))
-    return best

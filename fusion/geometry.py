@@ -165,3 +165,18 @@ def sample_curve(evaluate, t_start: float, t_end: float, length_hint_m: float, s
         return np.empty((0, 2))
     target = np.linspace(0.0, total, n_steps + 1)[1:-1]
     return evaluate(np.interp(target, grid_s, grid_t))
+
+
+def distance_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
+    """Distance of every point to a dense ``polyline`` (closest vertex, then its segments)."""
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(polyline).query(points)
+    best = np.full(points.shape[0], np.inf)
+    for k in (-1, 0):
+        i0 = np.clip(idx + k, 0, polyline.shape[0] - 2)
+        a, b = polyline[i0], polyline[i0 + 1]
+        seg = b - a
+        t = np.clip(np.einsum("ij,ij->i", points - a, seg) / np.einsum("ij,ij->i", seg, seg), 0.0, 1.0)
+        best = np.minimum(best, np.hypot(*(points - a - seg * t[:, None]).T))
+    return best

@@ -61,16 +61,20 @@ class Pose2D:
                 raise InvalidDetectionError(f"Pose2D.{name} must be a finite number, got {value!r}")
 
 
-def _border(name: str, points: object) -> NDArrayFloat:
-    """Validated copy of one border with consecutive duplicate points removed."""
+def validated_border(name: str, points: object) -> NDArrayFloat:
+    """Read-only float64 copy of a border ``(N, 2)`` with consecutive duplicates removed.
+
+    Raises ``InvalidDetectionError`` naming ``name`` for a wrong shape, NaN/inf or fewer
+    than two distinct points.
+    """
     try:
         array = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InvalidDetectionError(f"LaneDetection.{name} is not numeric: {exc}") from None
+        raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
     if array.ndim != 2 or array.shape[1] != 2:
-        raise InvalidDetectionError(f"LaneDetection.{name} must have shape (N, 2), got {array.shape}")
+        raise InvalidDetectionError(f"{name} must have shape (N, 2), got {array.shape}")
     if not np.isfinite(array).all():
-        raise InvalidDetectionError(f"LaneDetection.{name} contains NaN or inf")
+        raise InvalidDetectionError(f"{name} contains NaN or inf")
     if array.shape[0] >= 2:
         step = np.diff(array, axis=0)
         keep = np.empty(array.shape[0], dtype=bool)
@@ -80,7 +84,7 @@ def _border(name: str, points: object) -> NDArrayFloat:
             array = array[keep]
     if array.shape[0] < MIN_BORDER_POINTS:
         raise InvalidDetectionError(
-            f"LaneDetection.{name} needs at least {MIN_BORDER_POINTS} distinct points, got {array.shape[0]}"
+            f"{name} needs at least {MIN_BORDER_POINTS} distinct points, got {array.shape[0]}"
         )
     return _frozen(array)
 
@@ -108,8 +112,8 @@ class LaneDetection:
     def __post_init__(self) -> None:
         if not isinstance(self.pose, Pose2D):
             raise InvalidDetectionError(f"LaneDetection.pose must be a Pose2D, got {type(self.pose).__name__}")
-        object.__setattr__(self, "left", _border("left", self.left))
-        object.__setattr__(self, "right", _border("right", self.right))
+        object.__setattr__(self, "left", validated_border("LaneDetection.left", self.left))
+        object.__setattr__(self, "right", validated_border("LaneDetection.right", self.right))
         if not math.isfinite(float(self.stamp)):
             raise InvalidDetectionError(f"LaneDetection.stamp must be finite, got {self.stamp!r}")
 
