@@ -1,0 +1,368 @@
+"""Drives: an ego and cooperative vehicles following routes of the lane graph.
+
+A drive is one ego ``Track`` (a lane sequence and its ``LaneStrip``) plus vehicles placed
+relative to the ego in every frame (10 Hz, 10 m/s by default):
+
+- ``coop``: ahead on the ego's own lanes, ``lead_m`` metres of station ahead. The paper's
+  presets: convoy headway d_v = 25 m (detections overlap), spline gap d_s between the
+  ego's detection end and the coop's detection start (lead = r_lane + d_s).
+- ``turn``: ahead on a branch that shares the ego's lanes up to a junction and turns off
+  there (present only once past the branch point): a lane the ego could drive, fusible.
+- ``adjacent`` / ``opposite``: distractors on the lane beside the ego's lane ahead, in the
+  same or the opposite direction, placed at the point of their lane nearest to the ego's
+  lane ``lead_m`` ahead; the fusion must reject them.
+- ``behind``: on the ego's lanes, ``lead_m`` behind; must be rejected.
+
+Stations are centreline arc lengths (m) from the start of a track. The true lane relation
+(:func:`lane_relation`) is read from the lane graph, never from the fusion.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Final, Literal, Mapping, Sequence
+
+import numpy as np
+
+from cold_maps.lane_graph import LaneGraph, LaneKey
+from cold_maps.lane_strip import LaneStrip, NDArrayFloat
+from cold_maps.route import route_from_lanes
+from cold_maps.routing import longest_route_lengths, random_route
+from cold_maps.sensor import SENSOR_RANGE_M
+
+FRAME_RATE_HZ: Final[float] = 10.0
+DEFAULT_SPEED_MPS: Final[float] = 10.0
+CONVOY_HEADWAY_M: Final[float] = 25.0
+"""The paper's convoy headway d_v (m)."""
+PAPER_GAPS_M: Final[tuple[float, ...]] = (20.0, 30.0, 50.0)
+"""The paper's spline gaps d_s (m)."""
+BESIDE_MAX_DISTANCE_M: Final[float] = 8.0
+"""A distractor farther than this (m) from the ego's lane point it is placed beside is absent."""
+ROUTE_MARGIN_M: Final[float] = 5.0
+"""Extra route length (m) beyond what the vehicles and their sensors need."""
+MAX_BRANCHES: Final[int] = 2
+"""Branch (turning) tracks built per drive at most."""
+
+Role = Literal["ego", "coop", "turn", "adjacent", "opposite", "behind"]
+ROLES: Final[tuple[str, ...]] = ("ego", "coop", "turn", "adjacent", "opposite", "behind")
+
+
+class DriveError(ValueError):
+    """A drive that cannot be built (no drivable route, a route too short); names the map."""
+
+
+@dataclass(frozen=True)
+class Track:
+    """A path of whole lanes, world frame (OpenDRIVE inertial), in driving direction.
+
+    Fields:
+        lanes: the lanes in driving order.
+        strip: their centreline and borders by station (m).
+        lane_starts: (L + 1,) station (m) where each lane begins; the last entry is the
+            track length. From the graph's lane lengths scaled to the strip length.
+    """
+
+    lanes: tuple[LaneKey, ...]
+    strip: LaneStrip
+    lane_starts: NDArrayFloat
+
+    @classmethod
+    def build(cls, graph: LaneGraph, lanes: Sequence[LaneKey]) -> Track:
+        """The track through ``lanes`` (ValueError when they do not follow each other)."""
+        route = route_from_lanes(graph, lanes)
+        strip = LaneStrip.from_borders(route.left, route.right)
+        cumulative = np.concatenate(([0.0], np.cumsum([graph.lengths[lane] for lane in lanes])))
+        return cls(tuple(lanes), strip, cumulative * (strip.length / cumulative[-1]))
+
+    @property
+    def length(self) -> float:
+        """Track length (m)."""
+        return self.strip.length
+
+    def borders_between(self, start: float, end: float) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """Left and right borders (world frame, m) from station ``start`` to ``end``,
+        the strip's own points plus both ends."""
+        strip = self.strip
+        inside = (strip.station > start) & (strip.station < end)
+        stations = np.concatenate(([start], strip.station[inside], [end]))
+        _, left, right = strip.interpolate(stations)
+        return left, right
+
+    def lane_at(self, station: float) -> tuple[int, float]:
+        """Index of the lane at ``station`` and the distance (m) driven in it."""
+        index = int(np.clip(np.searchsorted(self.lane_starts, station, side="right") - 1, 0, len(self.lanes) - 1))
+        return index, float(station - self.lane_starts[index])
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A vehicle of a drive other than the ego.
+
+    Fields:
+        name: unique id (letters, digits, '_' or '-'), e.g. ``coop50``.
+        role: ``coop``, ``turn``, ``adjacent``, ``opposite`` or ``behind`` (see the module).
+        lead_m: station distance ahead of the ego (m; negative behind).
+        track: the vehicle's track; ``coop``, ``turn`` and ``behind`` share the ego's
+            stations up to their branch point. None for ``adjacent``/``opposite``, whose
+            tracks are the drive's ``beside`` tracks.
+        branch_station_m: for ``turn``, the station where its track leaves the ego's; the
+            vehicle is present only while it is past it and the ego is not. 0 otherwise.
+    """
+
+    name: str
+    role: Role
+    lead_m: float
+    track: Track | None = None
+    branch_station_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """One vehicle in one frame.
+
+    Fields:
+        name, role: as in :class:`Vehicle` (``ego`` for the ego).
+        track: the track it drives on.
+        station: its station on the track (m).
+        lane: the lane it is in.
+        lane_offset_m: distance driven in that lane (m).
+        lead_m: its station distance ahead of the ego (m; negative behind, 0 for the ego).
+    """
+
+    name: str
+    role: str
+    track: Track
+    station: float
+    lane: LaneKey
+    lane_offset_m: float
+    lead_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Drive:
+    """The ego and its vehicles on one route.
+
+    Fields:
+        graph: the lane graph.
+        ego: the ego's track.
+        vehicles: the other vehicles.
+        beside: lane → tracks starting at the lanes beside it (role ``adjacent`` or
+            ``opposite``, track), for the lanes of the ego's track.
+        frames: number of frames.
+        speed_mps: ego speed (m/s).
+        rate_hz: frame rate (Hz).
+        sensor_range_m: detection range every vehicle needs ahead of it (m).
+        start_station_m: the ego's station in frame 0 (m), room for vehicles behind it.
+    """
+
+    graph: LaneGraph
+    ego: Track
+    vehicles: tuple[Vehicle, ...]
+    beside: Mapping[LaneKey, tuple[tuple[str, Track], ...]] = field(repr=False)
+    frames: int
+    speed_mps: float = DEFAULT_SPEED_MPS
+    rate_hz: float = FRAME_RATE_HZ
+    sensor_range_m: float = SENSOR_RANGE_M
+    start_station_m: float = 0.0
+
+    def stamp(self, frame: int) -> float:
+        """Time of a frame (s) from the start of the drive."""
+        return frame / self.rate_hz
+
+    def ego_station(self, frame: int) -> float:
+        """The ego's station (m) in a frame."""
+        return self.start_station_m + frame * self.speed_mps / self.rate_hz
+
+    def states(self, frame: int) -> dict[str, VehicleState]:
+        """Every vehicle present in ``frame`` (ego first), by name. A vehicle is present
+        when it stands on its track with a full sensor range of lane ahead of it."""
+        if not 0 <= frame < self.frames:
+            raise ValueError(f"frame {frame} outside the drive's 0..{self.frames - 1}")
+        ego_station = self.ego_station(frame)
+        states = {"ego": self._state("ego", "ego", self.ego, ego_station)}
+        for vehicle in self.vehicles:
+            state = self._vehicle_state(vehicle, ego_station)
+            if state is not None:
+                states[vehicle.name] = state
+        return states
+
+    def _state(self, name: str, role: str, track: Track, station: float, lead_m: float = 0.0) -> VehicleState:
+        index, offset = track.lane_at(station)
+        return VehicleState(name, role, track, station, track.lanes[index], offset, lead_m)
+
+    def _fits(self, track: Track, station: float) -> bool:
+        return 0.0 <= station <= track.length - self.sensor_range_m
+
+    def _vehicle_state(self, vehicle: Vehicle, ego_station: float) -> VehicleState | None:
+        target = ego_station + vehicle.lead_m
+        if vehicle.track is not None:
+            if vehicle.role == "turn" and not ego_station < vehicle.branch_station_m < target:
+                return None
+            if not self._fits(vehicle.track, target):
+                return None
+            return self._state(vehicle.name, vehicle.role, vehicle.track, target, vehicle.lead_m)
+        if not self._fits(self.ego, target):
+            return None
+        lane = self.ego.lanes[self.ego.lane_at(target)[0]]
+        point = self.ego.strip.interpolate(np.array([target]))[0][0]
+        for role, track in self.beside.get(lane, ()):
+            if role != vehicle.role:
+                continue
+            distances = np.hypot(*(track.strip.centerline - point).T)
+            nearest = int(np.argmin(distances))
+            station = float(track.strip.station[nearest])
+            if distances[nearest] <= BESIDE_MAX_DISTANCE_M and self._fits(track, station):
+                return self._state(vehicle.name, vehicle.role, track, station, vehicle.lead_m)
+        return None
+
+
+def required_route_length(frames: int, leads_m: Sequence[float], *, behind_m: float = 0.0,
+                          speed_mps: float = DEFAULT_SPEED_MPS, rate_hz: float = FRAME_RATE_HZ, sensor_range_m: float = SENSOR_RANGE_M) -> float:
+    """Route length (m) an ego needs for ``frames`` frames with vehicles ``leads_m`` ahead
+    and room for one ``behind_m`` behind it."""
+    if frames < 1:
+        raise ValueError(f"frames: expected at least 1, got {frames!r}")
+    if not (math.isfinite(speed_mps) and speed_mps > 0 and math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"speed and frame rate must be finite and > 0, got {speed_mps!r} m/s, {rate_hz!r} Hz")
+    ahead = max([0.0, *leads_m])
+    return behind_m + (frames - 1) * speed_mps / rate_hz + ahead + sensor_range_m + ROUTE_MARGIN_M
+
+
+def _map_name(graph: LaneGraph) -> str:
+    return str(graph.odr_map.path or "<map>")
+
+
+def covering_routes(graph: LaneGraph, count: int, length_m: float, rng: np.random.Generator) -> list[tuple[LaneKey, ...]]:
+    """``count`` random routes of at least ``length_m``, each starting, where it can, on a
+    lane no earlier route covers, so the routes spread over the map's driving lanes.
+
+    Raises DriveError naming the map when no route is that long.
+    """
+    if count < 1:
+        raise ValueError(f"routes: expected at least 1, got {count!r}")
+    if not graph.lanes:
+        raise DriveError(f"{_map_name(graph)}: the map has no driving lanes")
+    longest = longest_route_lengths(graph)
+    startable = [lane for lane in graph.lanes if longest[lane] >= length_m]
+    if not startable:
+        best = max(longest.values())
+        raise DriveError(f"{_map_name(graph)}: no drivable route of {length_m:.0f} m (longest {best:.0f} m); "
+                         "use fewer --frames")
+    covered: set[LaneKey] = set()
+    routes = []
+    for _ in range(count):
+        pool = [lane for lane in startable if lane not in covered] or startable
+        start = pool[int(rng.integers(len(pool)))]
+        lanes = random_route(graph, length_m, rng, start=start, longest=longest)
+        assert lanes is not None  # start is drivable for length_m
+        routes.append(lanes)
+        covered.update(lanes)
+    return routes
+
+
+def route_from_start(graph: LaneGraph, start: LaneKey, length_m: float, rng: np.random.Generator) -> tuple[LaneKey, ...]:
+    """A random route of at least ``length_m`` from ``start``; DriveError when none exists."""
+    lanes = random_route(graph, length_m, rng, start=start)
+    if lanes is None:
+        longest = longest_route_lengths(graph)[start]
+        raise DriveError(f"{_map_name(graph)}: no route of {length_m:.0f} m from lane {tuple(start)} "
+                         f"(longest {longest:.0f} m); use fewer --frames")
+    return lanes
+
+
+def lanes_beside(graph: LaneGraph, lane: LaneKey) -> list[tuple[str, LaneKey]]:
+    """The graph lanes next to ``lane`` in its lane section: ``adjacent`` (same direction,
+    neighbouring id) and ``opposite`` (the nearest lane driven the other way)."""
+    road = graph.odr_map.roads[lane.road_id]
+    own = road.drives_along_s(lane.lane_id)
+    same_section = [k for k in graph.lanes if k.road_id == lane.road_id and k.section == lane.section and k != lane]
+    found: list[tuple[str, LaneKey]] = []
+    for other in same_section:
+        if road.drives_along_s(other.lane_id) == own and abs(other.lane_id - lane.lane_id) == 1 \
+                and (other.lane_id > 0) == (lane.lane_id > 0):
+            found.append(("adjacent", other))
+    opposite = [k for k in same_section if road.drives_along_s(k.lane_id) != own]
+    if opposite:
+        found.append(("opposite", min(opposite, key=lambda k: (abs(k.lane_id - lane.lane_id), k.lane_id))))
+    return found
+
+
+def _forward(graph: LaneGraph, lanes: list[LaneKey], length_m: float, rng: np.random.Generator) -> list[LaneKey]:
+    """``lanes`` extended by random successors until they are ``length_m`` long (or end)."""
+    total = sum(graph.lengths[lane] for lane in lanes)
+    while total < length_m and graph.successors[lanes[-1]]:
+        nexts = graph.successors[lanes[-1]]
+        lanes.append(nexts[int(rng.integers(len(nexts)))])
+        total += graph.lengths[lanes[-1]]
+    return lanes
+
+
+def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop_leads_m: Sequence[float],
+                distractor_leads_m: Sequence[float] = (), rng: np.random.Generator,
+                speed_mps: float = DEFAULT_SPEED_MPS, rate_hz: float = FRAME_RATE_HZ,
+                sensor_range_m: float = SENSOR_RANGE_M) -> Drive:
+    """A drive of ``frames`` frames on the route ``lanes``: a ``coop`` at each of
+    ``coop_leads_m`` and, for each of ``distractor_leads_m``, ``turn`` vehicles on branches
+    of the route, ``adjacent``/``opposite`` distractors and one ``behind``.
+
+    Raises DriveError when the route is shorter than the drive needs.
+    """
+    behind = max(distractor_leads_m, default=0.0)
+    needed = required_route_length(frames, [*coop_leads_m, *distractor_leads_m], behind_m=behind,
+                                   speed_mps=speed_mps, rate_hz=rate_hz, sensor_range_m=sensor_range_m)
+    ego = Track.build(graph, lanes)
+    if ego.length < needed - ROUTE_MARGIN_M:
+        raise DriveError(f"{_map_name(graph)}: route of {ego.length:.0f} m is shorter than the {needed:.0f} m "
+                         f"{frames} frames need; use fewer --frames")
+    vehicles = [Vehicle(f"coop{lead:g}", "coop", lead, ego) for lead in coop_leads_m]
+    beside: dict[LaneKey, tuple[tuple[str, Track], ...]] = {}
+    if distractor_leads_m:
+        branches = _branches(graph, ego, needed, rng)
+        for lead in distractor_leads_m:
+            vehicles += [Vehicle(f"turn{lead:g}-{i}", "turn", lead, track, station)
+                         for i, (track, station) in enumerate(branches)]
+            vehicles += [Vehicle(f"{role}{lead:g}", role, lead) for role in ("adjacent", "opposite")]
+            vehicles.append(Vehicle(f"behind{lead:g}", "behind", -lead, ego))
+        reach = 2.0 * sensor_range_m + max(distractor_leads_m) + ROUTE_MARGIN_M
+        tracks: dict[LaneKey, Track] = {}
+        for lane in dict.fromkeys(ego.lanes):
+            entries = []
+            for role, other in lanes_beside(graph, lane):
+                if other not in tracks:
+                    tracks[other] = Track.build(graph, _forward(graph, [other], reach, rng))
+                entries.append((role, tracks[other]))
+            beside[lane] = tuple(entries)
+    return Drive(graph, ego, tuple(vehicles), beside, frames, speed_mps, rate_hz, sensor_range_m, behind)
+
+
+def _branches(graph: LaneGraph, ego: Track, length_m: float, rng: np.random.Generator) -> list[tuple[Track, float]]:
+    """Up to MAX_BRANCHES tracks that follow the ego's lanes to a lane with several
+    successors and turn into another one there; each with its branch station (m)."""
+    branches = []
+    for index, (lane, following) in enumerate(zip(ego.lanes, ego.lanes[1:])):
+        for other in graph.successors[lane]:
+            if other == following or len(branches) >= MAX_BRANCHES:
+                continue
+            lanes = _forward(graph, [*ego.lanes[: index + 1], other], length_m, rng)
+            branches.append((Track.build(graph, lanes), float(ego.lane_starts[index + 1])))
+    return branches
+
+
+def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_distance_m: float) -> bool:
+    """True when ``coop`` stands on a lane the ego can drive to: ahead of it along the lane
+    graph by at most ``max_distance_m`` (m) of lane. Adjacent and opposite lanes, and
+    vehicles behind, are not."""
+    if coop.lane == ego.lane and coop.lane_offset_m > ego.lane_offset_m:
+        return coop.lane_offset_m - ego.lane_offset_m <= max_distance_m
+    start = graph.lengths[ego.lane] - ego.lane_offset_m
+    best: dict[LaneKey, float] = {}
+    frontier = [(nxt, start) for nxt in graph.successors[ego.lane]]
+    while frontier:
+        lane, entry = frontier.pop()
+        if entry > max_distance_m or best.get(lane, math.inf) <= entry:
+            continue
+        best[lane] = entry
+        frontier += [(nxt, entry + graph.lengths[lane]) for nxt in graph.successors[lane]]
+    entry = best.get(coop.lane)
+    return entry is not None and 0.0 < entry + coop.lane_offset_m <= max_distance_m

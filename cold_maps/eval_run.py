@@ -1,0 +1,176 @@
+"""A ``cold-eval`` run: evaluators for the maps, the MCAP recording, the progress bar and
+the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``plots/*.png``,
+``run.mcap``).
+
+Everything that can fail on bad input (maps, routes, ground truth, the output folder) is
+checked before the first output file is opened. An interrupted or crashed run still
+finalises the MCAP (marked ``partial``) and writes the report marked partial.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final, Mapping, Sequence, TextIO
+
+from cold_maps.evaluation import Collector, MapEvaluator, MapPlan
+from cold_maps.progress import ProgressBar
+from cold_maps.report import (
+    ScenarioAccumulator,
+    ScenarioResult,
+    atomic_write_text,
+    summary_markdown,
+    write_frames_csv,
+    write_metrics_json,
+)
+
+LOG = logging.getLogger("cold_maps.eval_run")
+
+MCAP_NAME: Final[str] = "run.mcap"
+PLOTS_DIR: Final[str] = "plots"
+
+
+class OutputError(Exception):
+    """An output folder that cannot be created or written; the message names it."""
+
+
+def prepare_out_dir(path: str | os.PathLike[str]) -> Path:
+    """Creates ``path`` if needed and checks that files can be written into it."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{out}: output folder cannot be written: {exc.strerror or exc}") from exc
+    return out
+
+
+def _file_part(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
+
+
+def write_plots(out: Path, collector: Collector) -> list[Path]:
+    """Per map and scenario: the error per frame of its own coop (Fig. 7) and the overlay
+    of its worst frame (Fig. 8), into ``out/plots``; returns the files."""
+    from cold_maps.plots import plot_frame_errors, plot_frame_overlay
+
+    folder = out / PLOTS_DIR
+    folder.mkdir(exist_ok=True)
+    written = []
+    groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
+    for key, accumulator in collector.accumulators.items():
+        label = key.fusion if key.fusion != "spline" else f"spline-{key.interpolation}-d{key.d_s:g}"
+        own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
+        groups.setdefault((key.map, label), []).append(ScenarioAccumulator(key, own))
+    for (map_name, label), accumulators in groups.items():
+        if not any(r.fused for a in accumulators for r in a.records):
+            continue
+        path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
+        plot_frame_errors(path, accumulators, title=f"{map_name}: {label}, error per frame")
+        written.append(path)
+    for (map_name, label), overlay in collector.overlays.items():
+        path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
+        plot_frame_overlay(path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
+                           title=f"{map_name}: {label}, frame {overlay.frame} (max error {overlay.max_error_m:.3f} m)")
+        written.append(path)
+    return written
+
+
+def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
+                  plots: bool = True) -> list[ScenarioResult]:
+    """``frames.csv``, ``summary.md`` (the per-scenario table, notes, then ``sections``:
+    (title, markdown)), ``metrics.json`` and the plots; returns the scenario results."""
+    accumulators = list(collector.accumulators.values())
+    results = [a.result() for a in accumulators]
+    write_frames_csv(out / "frames.csv", accumulators)
+    text = summary_markdown(results, partial=partial)
+    if collector.notes:
+        text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
+    for title, body in sections:
+        text += f"\n## {title}\n\n{body}"
+    atomic_write_text(out / "summary.md", text)
+    write_metrics_json(out / "metrics.json", results, partial=partial)
+    if plots and not partial:
+        write_plots(out, collector)
+    return results
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run and what to write.
+
+    Fields:
+        out: the output folder.
+        mcap: write ``run.mcap``.
+        plots: write the PNG plots.
+        progress: stream of the progress bar (drawn only on a TTY).
+        run_params: the run's parameters for the MCAP ``cold.run`` metadata.
+    """
+
+    out: Path
+    mcap: bool = True
+    plots: bool = True
+    progress: TextIO | None = None
+    run_params: Mapping[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a run did.
+
+    Fields:
+        results: the scenario results written to ``metrics.json``.
+        collector: everything measured.
+        partial: True when interrupted or crashed.
+        error: the exception that ended it early, or None.
+    """
+
+    results: list[ScenarioResult]
+    collector: Collector
+    partial: bool
+    error: BaseException | None
+
+
+def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
+                   extra_sections: Any = None) -> RunResult:
+    """Prepares every map (routes, ground truth), then evaluates them all into one MCAP and
+    one report. ``extra_sections(collector, results)`` returns more (title, markdown)
+    summary sections. Bad input raises before any output file is opened; an exception
+    during the run (Ctrl-C included) ends it with partial outputs, returned in the result."""
+    out = prepare_out_dir(options.out)
+    evaluators = [MapEvaluator(plan) for plan in plans]
+    for evaluator in evaluators:
+        LOG.info("%s: preparing ground truth", evaluator.plan.path)
+        evaluator.prepare()
+    collector = Collector()
+    error: BaseException | None = None
+    total = sum(e.total_frames for e in evaluators)
+    try:
+        with ProgressBar(total, "cold-eval", stream=options.progress) as bar:
+            if options.mcap:
+                from cold_maps.recording import Recorder
+
+                with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
+                              params=options.run_params) as recorder:
+                    _run_all(evaluators, collector, recorder, bar)
+            else:
+                _run_all(evaluators, collector, None, bar)
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
+        error = exc
+        LOG.debug("run ended early", exc_info=True)
+    partial = error is not None
+    results = [a.result() for a in collector.accumulators.values()]
+    sections = list(extra_sections(collector, results)) if extra_sections is not None else []
+    results = write_outputs(out, collector, partial=partial, sections=sections, plots=options.plots)
+    return RunResult(results, collector, partial, error)
+
+
+def _run_all(evaluators: Sequence[MapEvaluator], collector: Collector, recorder: Any, bar: ProgressBar) -> None:
+    offset = 0
+    for evaluator in evaluators:
+        offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)
