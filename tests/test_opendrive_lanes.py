@@ -195,6 +195,8 @@ def test_bad_lane_section_and_s_raise_naming_the_road():
         sample_lane_borders(STRAIGHT, 5, -1)
     with pytest.raises(ValueError, match="road 1: s in"):
         lane_border_offsets(STRAIGHT, 0, -1, np.array([101.0]))
+    with pytest.raises(ValueError, match="road 1: t contains NaN"):
+        road_to_world(STRAIGHT, np.array([1.0]), np.array([np.nan]))
 
 
 # ---------------------------------------------------------------- sample_s

@@ -48,6 +48,8 @@ def road_to_world(road: Road, s: NDArrayFloat, t: NDArrayFloat) -> tuple[NDArray
     """Inertial x, y (m) of road coordinates (s along the reference line, t to its left), broadcast."""
     x, y, hdg = reference_pose(road, s)
     t = np.asarray(t, dtype=np.float64)
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"road {road.id}: t contains NaN or infinity")
     return x - t * np.sin(hdg), y + t * np.cos(hdg)
 
 
