@@ -27,6 +27,7 @@ ConvoyStrategy = Literal["weighted", "mean", "nearest"]
 SplineParameter = Literal["chord", "uniform"]
 
 MIN_BORDER_POINTS: Final[int] = 2
+MIN_POINT_STEP_M: Final[float] = 1e-9
 
 
 class Source(IntEnum):
@@ -79,7 +80,7 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
         step = np.diff(array, axis=0)
         keep = np.empty(array.shape[0], dtype=bool)
         keep[0] = True
-        keep[1:] = (step != 0.0).any(axis=1)
+        keep[1:] = np.hypot(step[:, 0], step[:, 1]) > MIN_POINT_STEP_M
         if not keep.all():
             array = array[keep]
     if array.shape[0] < MIN_BORDER_POINTS:
@@ -97,7 +98,8 @@ class LaneDetection:
         pose: the sender's pose in the world frame at detection time.
         left, right: lane borders, ``(N, 2)`` float64 in the sender's *vehicle* frame [m],
             ordered in driving direction, about 0.10 m apart. The two borders may have
-            different lengths. Consecutive duplicate points are dropped on construction;
+            different lengths. Points within 1 nm of their predecessor (duplicates) are
+            dropped on construction;
             fewer than two distinct points, NaN or inf raise ``InvalidDetectionError``.
         stamp: detection time [s] (informative; the fusion is static, no time alignment).
         sender: identifier of the sending vehicle (informative).
