@@ -1,0 +1,237 @@
+"""``cold-fuse``: fusion re-run on recorded lane detections.
+
+Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
+:mod:`cold_maps.recording`) of an MCAP file written by ``cold-eval`` or by any other source
+in that format, fuses the ego's detection (sender ``--ego``) with every other sender's of
+the same frame, and writes a new MCAP: the detections again, the fused lanes on
+``/fused`` and per-frame metrics on ``/metrics``. With ``--map`` (or the map named in the
+recording's ``cold.run`` metadata) the local and fused lanes are measured against Lanelet2
+ground truth; ``--report DIR`` writes summary.md, metrics.json and frames.csv there
+(fusion ``convoy`` when the detections overlap, else ``spline``; d_s 0 = all gaps pooled).
+Exit 0; 1 with one line on stderr for bad input or a crash; 130 when interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any, Final, Sequence
+
+import numpy as np
+
+PROG: Final[str] = "cold-fuse"
+EXIT_INTERRUPTED: Final[int] = 130
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``cold-fuse`` argument parser."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Fuse recorded lane detections (cold.LaneDetection) again.")
+    parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap", help="recording to read")
+    parser.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.mcap", help="recording to write")
+    parser.add_argument("--ego", default="ego", help="sender id of the ego vehicle (default ego)")
+    parser.add_argument("--mode", choices=("auto", "convoy", "spline"), default="auto", help="fusion mode")
+    parser.add_argument("--interpolation", choices=("paper", "hermite"), default="paper", help="spline interpolation")
+    parser.add_argument("--max-gap", type=float, default=None, metavar="D_I",
+                        help="longest gap d_i bridged by spline fusion in m (default 50, the fusion default)")
+    parser.add_argument("--map", type=Path, default=None, help="OpenDRIVE map for ground truth (default: the "
+                        "recording's cold.run map when it names one readable file)")
+    parser.add_argument("--no-gt", action="store_true", help="do not measure against ground truth")
+    parser.add_argument("--report", type=Path, default=None, help="folder for summary.md, metrics.json, frames.csv")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
+    return parser
+
+
+def _map_path(args: argparse.Namespace) -> Path | None:
+    from cold_maps.recording import METADATA_RUN, read_metadata
+
+    if args.no_gt:
+        return None
+    if args.map is not None:
+        return args.map
+    named = read_metadata(args.input).get(METADATA_RUN, {}).get("map", "")
+    path = Path(named) if named else None
+    return path if path is not None and path.suffix == ".xodr" and path.is_file() else None
+
+
+def _meter(map_path: Path | None) -> Any:
+    if map_path is None:
+        return None
+    from converters import load_lanelet2
+    from gt_matching import GroundTruth
+
+    from cold_maps.evaluation import GroundTruthMeter
+
+    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path)))
+
+
+class Refuser:
+    """Fuses and measures recorded frames into a collector and a recorder.
+
+    Fields (attributes): ``ego`` sender id, fusion ``mode``, ``interpolation`` and ``params``,
+    ``meter`` (a ``GroundTruthMeter`` or None), ``map_name`` for the report, ``collector``.
+    """
+
+    def __init__(self, ego: str, mode: str, interpolation: str, meter: Any, map_name: str, params: Any) -> None:
+        from cold_maps.evaluation import Collector
+
+        self.ego, self.mode, self.interpolation, self.params = ego, mode, interpolation, params
+        self.meter, self.map_name = meter, map_name
+        self.collector = Collector()
+        self.frames_without_ego = 0
+
+    def frame(self, frame: int, detections: list[dict[str, Any]], recorder: Any) -> None:
+        """Fuses one recorded frame and writes it to ``recorder``."""
+        import fusion
+
+        from gt_matching.polyline import resample
+
+        from cold_maps.evaluation import DISPLAY_STEP_M, reason_category
+
+        stamp = detections[0]["stamp_s"]
+        lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
+                                                   sender=d["sender"]) for d in detections}
+        for d in detections:
+            recorder.write_detection(stamp, frame, d["sender"], tuple(d["pose"].values()), d["left"], d["right"],
+                                     ego=d["sender"] == self.ego)
+        ego = lanes.get(self.ego)
+        if ego is None:
+            self.frames_without_ego += 1
+            recorder.write_fused(stamp, {})
+            return
+        pose = (ego.pose.x, ego.pose.y, ego.pose.yaw)
+        metrics: dict[str, float | None] = {}
+        fused_lines = {}
+        local = self._measure(*_world(ego), pose)
+        self._add("local", frame, stamp, "", local, math.nan, "", None)
+        for sender, coop in lanes.items():
+            if sender == self.ego:
+                continue
+            start = time.perf_counter()
+            result = fusion.fuse(ego, coop, mode=self.mode, interpolation=self.interpolation, params=self.params)
+            runtime = (time.perf_counter() - start) * 1e3
+            kind = "convoy" if result.gap_m <= 0.0 else "spline"
+            metrics[f"{sender}_gap_m"] = result.gap_m
+            metrics[f"{sender}_runtime_ms"] = runtime
+            if result.kind == "none":
+                self._add(kind, frame, stamp, sender, None, runtime, reason_category(result.reason), False)
+                continue
+            fused_lines.update({f"{sender}-left": result.left, f"{sender}-right": result.right})
+            ego_left, ego_right = _world(ego)
+            coop_left, coop_right = _world(coop)
+            reference = (np.vstack((ego_left, coop_left)), np.vstack((ego_right, coop_right)))
+            measured = self._measure(result.left, result.right, pose, reference)
+            self._add(kind, frame, stamp, sender, measured, runtime, "", True)
+            if hasattr(measured, "left_errors_m"):
+                metrics[f"{sender}_left_max_error_m"] = float(np.max(measured.left_errors_m))
+                metrics[f"{sender}_right_max_error_m"] = float(np.max(measured.right_errors_m))
+        recorder.write_fused(stamp, {k: resample(v, DISPLAY_STEP_M)[0] for k, v in fused_lines.items()})
+        recorder.write_metrics(stamp, frame, metrics)
+
+    def _measure(self, left: np.ndarray, right: np.ndarray, pose: tuple[float, float, float],
+                 reference: tuple[np.ndarray, np.ndarray] | None = None) -> Any:
+        """The lane's ``Measurement``, or None without a map, or the reason it has none:
+        ``no_ground_truth`` (no lanelet at the pose) or ``gt_unmatched`` (the lanelets
+        matched to ``reference`` do not cover it; without the drive's true path a spline
+        across a junction may cut the corner by more than the matcher's 1.5 m and is then
+        not measured). ``reference`` defaults to the lane; for a fused lane it is the ego's
+        and the coop's detections."""
+        from gt_matching import MatchingError
+
+        if self.meter is None:
+            return None
+        try:
+            measured = self.meter.measure(left, right, pose, reference=reference)
+        except MatchingError:
+            return "no_ground_truth"
+        return measured if measured.matched else "gt_unmatched"
+
+    def _add(self, fusion_name: str, frame: int, stamp: float, coop: str, measured: Any, runtime: float,
+             rejected: str, predicted: bool | None) -> None:
+        from cold_maps.evaluation import Measurement
+        from cold_maps.report import FrameRecord, ScenarioKey
+
+        interpolation = self.interpolation if fusion_name == "spline" else ""
+        if isinstance(measured, str):
+            rejected = measured
+        for boundary in ("left", "right"):
+            key = ScenarioKey(self.map_name, fusion_name, interpolation, 0.0, boundary)
+            if isinstance(measured, Measurement):
+                left = boundary == "left"
+                record = FrameRecord(frame, stamp, self.ego, coop, measured.left_errors_m if left else
+                                     measured.right_errors_m, perception_range_m=measured.left_range_m if left
+                                     else measured.right_range_m, runtime_ms=runtime, predicted_fusible=predicted)
+            else:
+                record = FrameRecord(frame, stamp, self.ego, coop, np.empty(0), runtime_ms=runtime,
+                                     rejected=rejected or "not_measured", predicted_fusible=predicted)
+            self.collector.add(key, record)
+
+
+def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
+    from cold_maps.evaluation import world_borders
+
+    return world_borders(detection)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``cold-fuse``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    from cold_maps.recording import Recorder, read_detections
+
+    error: BaseException | None = None
+    try:
+        if args.input.resolve() == args.output.resolve():
+            raise ValueError(f"{args.output}: output would overwrite the input recording")
+        frames = read_detections(args.input)
+        map_path = _map_path(args)
+        import fusion
+
+        params = fusion.DEFAULT_PARAMS if args.max_gap is None else fusion.FusionParams(d_i_m=args.max_gap)
+        refuser = Refuser(args.ego, args.mode, args.interpolation, _meter(map_path),
+                          map_path.stem if map_path else args.input.stem, params)
+        report_dir = None
+        if args.report is not None:
+            from cold_maps.eval_run import prepare_out_dir
+
+            report_dir = prepare_out_dir(args.report)
+        run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
+                      "interpolation": args.interpolation, "d_i_m": params.d_i_m}
+        recorder = Recorder(args.output, map_path=map_path or "", params=run_params).__enter__()
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted before the run started; nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - bad input is reported as one line
+        logging.getLogger(PROG).debug("failed", exc_info=True)
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return 1
+    count = 0
+    try:
+        for frame, detections in frames:
+            refuser.frame(frame, detections, recorder)
+            count += 1
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - outputs are finalised as partial
+        error = exc
+        logging.getLogger(PROG).debug("run ended early", exc_info=True)
+    recorder.__exit__(type(error) if error is not None else None, error, None)
+    if report_dir is not None:
+        from cold_maps.eval_run import write_outputs
+
+        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False)
+    if isinstance(error, KeyboardInterrupt):
+        print(f"{PROG}: interrupted after {count} frames; {args.output} finalised as partial", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if error is not None:
+        print(f"{PROG}: {error}; {args.output} finalised as partial", file=sys.stderr)
+        return 1
+    print(f"{PROG}: {count} frames fused -> {args.output}"
+          + (f" ({refuser.frames_without_ego} without ego '{args.ego}')" if refuser.frames_without_ego else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
