@@ -25,7 +25,7 @@ import converters
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
-from converters.osm import MERGE_TOLERANCE_M, left_on_left, merge_points
+from converters.osm import MERGE_TOLERANCE_M, left_on_left, merge_points, simplify
 
 HEADING = 0.3
 LENGTH = 60.0
@@ -201,6 +201,26 @@ def test_merge_points_moves_no_point_farther_than_the_tolerance(points, toleranc
     assert np.all(np.linalg.norm(array - array[representative], axis=1) <= tolerance)
     alone = np.array([np.sum(np.linalg.norm(array - p, axis=1) <= tolerance) == 1 for p in array])
     assert np.all(representative[alone] == np.flatnonzero(alone))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=40), st.floats(1e-4, 1.0))
+def test_simplify_keeps_the_ends_and_every_dropped_vertex_within_tolerance(points, tolerance) -> None:
+    from gt_matching.polyline import closest_distances
+
+    array = np.array(points, dtype=np.float64)
+    keep = simplify(array, tolerance)
+    assert keep[0] and keep[-1]
+    kept = array[keep]
+    if len(kept) >= 2 and (~keep).any():
+        assert closest_distances(array[~keep], kept)[0].max() <= tolerance + 1e-9
+
+
+def test_simplify_drops_collinear_vertices_and_keeps_corners() -> None:
+    line = np.column_stack((np.linspace(0.0, 10.0, 21), np.zeros(21)))
+    corner = np.vstack((line, [[10.0, 5.0]]))
+    assert simplify(line, 1e-6).tolist() == [True] + [False] * 19 + [True]
+    assert np.flatnonzero(simplify(corner, 1e-6)).tolist() == [0, 20, 21]
 
 
 def test_left_on_left_swaps_only_lanelets_whose_left_border_is_on_the_right() -> None:
