@@ -1,0 +1,146 @@
+"""Drives: vehicle placement by closed forms on the bundled maps, branches, the true lane
+relation, route lengths and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cold_maps.drive import (
+    ROUTE_MARGIN_M,
+    DriveError,
+    Track,
+    build_drive,
+    covering_routes,
+    lane_relation,
+    required_route_length,
+)
+from cold_maps.lane_graph import LaneKey, build_lane_graph
+from cold_maps.opendrive.parser import load_opendrive
+from conftest import bundled_map
+
+LANE = LaneKey("1", 0, -1)
+
+
+@pytest.fixture(scope="module")
+def straight():
+    return build_lane_graph(load_opendrive(bundled_map("straight")))
+
+
+@pytest.fixture(scope="module")
+def curve90():
+    return build_lane_graph(load_opendrive(bundled_map("curve90")))
+
+
+@pytest.fixture(scope="module")
+def junction():
+    return build_lane_graph(load_opendrive(bundled_map("junction")))
+
+
+@pytest.fixture(scope="module")
+def straight_drive(straight):
+    return build_drive(straight, [LANE], 20, coop_leads_m=[25.0, 60.0], distractor_leads_m=[60.0],
+                       rng=np.random.default_rng(0))
+
+
+def _xy(state):
+    return np.array(state.track.strip.pose(state.station)[:2])
+
+
+def test_track_length_and_lanes_on_straight(straight):
+    track = Track.build(straight, [LANE])
+    assert track.length == pytest.approx(1000.0, abs=1e-6)
+    assert track.lane_at(500.0) == (0, pytest.approx(500.0))
+    left, right = track.borders_between(100.0, 130.0)
+    # lane -1: borders at t = 0 and t = -4 of an eastward reference line at y = 0
+    np.testing.assert_allclose(left[[0, -1]], [[100.0, 0.0], [130.0, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(right[[0, -1]], [[100.0, -4.0], [130.0, -4.0]], atol=1e-9)
+
+
+def test_coops_lead_the_ego_by_their_headway(straight_drive):
+    states = straight_drive.states(7)
+    ego = states["ego"]
+    assert ego.station == pytest.approx(60.0 + 7 * 1.0)  # room for the 60 m 'behind' vehicle
+    for name, lead in (("coop25", 25.0), ("coop60", 60.0), ("behind60", -60.0)):
+        np.testing.assert_allclose(_xy(states[name]) - _xy(ego), [lead, 0.0], atol=1e-9)
+
+
+def test_distractors_stand_beside_the_lane_ahead(straight_drive):
+    states = straight_drive.states(3)
+    ego = _xy(states["ego"])
+    # adjacent lane -2 is one lane width (4 m) right, opposite lane 1 one lane width left
+    np.testing.assert_allclose(_xy(states["adjacent60"]) - ego, [60.0, -4.0], atol=0.06)
+    np.testing.assert_allclose(_xy(states["opposite60"]) - ego, [60.0, 4.0], atol=0.06)
+    assert states["opposite60"].track.strip.pose(states["opposite60"].station)[2] == pytest.approx(math.pi, abs=1e-6)
+    assert states["adjacent60"].lane == LaneKey("1", 0, -2)
+    assert states["opposite60"].lane == LaneKey("1", 0, 1)
+
+
+def test_lane_relation_separates_coops_from_distractors(straight, straight_drive):
+    states = straight_drive.states(5)
+    truth = {name: lane_relation(straight, states["ego"], state, 85.0) for name, state in states.items() if name != "ego"}
+    assert truth == {"coop25": True, "coop60": True, "behind60": False, "adjacent60": False, "opposite60": False}
+    assert not lane_relation(straight, states["ego"], states["coop60"], 59.0)  # farther than allowed
+
+
+def test_turning_coops_on_junction_branches(junction):
+    lanes = [LaneKey("3", 0, -1)]
+    nxt = junction.successors[lanes[0]]
+    assert len(nxt) == 3  # left, straight, right
+    straight_on = next(k for k in nxt if junction.successors[k] and junction.successors[k][0].road_id == "1")
+    lanes += [straight_on, junction.successors[straight_on][0]]
+    drive = build_drive(junction, lanes, 100, coop_leads_m=[50.0], distractor_leads_m=[50.0],
+                        rng=np.random.default_rng(1))
+    branch = float(drive.ego.lane_starts[1])
+    assert branch == pytest.approx(junction.lengths[lanes[0]], rel=1e-3)
+    turns = [v for v in drive.vehicles if v.role == "turn"]
+    assert len(turns) == 2 and all(v.branch_station_m == pytest.approx(branch) for v in turns)
+    seen = 0
+    for frame in range(drive.frames):
+        states = drive.states(frame)
+        ego_station = states["ego"].station
+        for vehicle in turns:
+            present = vehicle.name in states
+            assert present == (ego_station < branch < ego_station + 50.0)
+            if present:
+                seen += 1
+                state = states[vehicle.name]
+                assert state.lane != states["coop50"].lane
+                assert lane_relation(junction, states["ego"], state, 85.0)
+    assert seen > 0
+
+
+def test_required_route_length_closed_form():
+    assert required_route_length(11, [25.0, 80.0], behind_m=50.0) == pytest.approx(50 + 10 + 80 + 30 + ROUTE_MARGIN_M)
+    with pytest.raises(ValueError, match="frames"):
+        required_route_length(0, [])
+
+
+def test_too_short_route_and_too_long_drive_raise(curve90):
+    with pytest.raises(DriveError, match=r"curve90.*shorter than"):
+        build_drive(curve90, [LANE], 1000, coop_leads_m=[50.0], rng=np.random.default_rng(0))
+    with pytest.raises(DriveError, match=r"curve90.*no drivable route"):
+        covering_routes(curve90, 1, 10_000.0, np.random.default_rng(0))
+
+
+def test_covering_routes_start_on_uncovered_lanes(junction):
+    routes = covering_routes(junction, 4, 120.0, np.random.default_rng(3))
+    firsts = [route[0] for route in routes]
+    assert len(set(firsts)) == 4
+    for route in routes:
+        assert sum(junction.lengths[k] for k in route) >= 120.0
+        assert all(b in junction.successors[a] for a, b in zip(route, route[1:]))
+
+
+@settings(max_examples=25, deadline=None)
+@given(lead=st.floats(1.0, 100.0), frame=st.integers(0, 9))
+def test_coop_station_lead_and_chord_on_the_curve(curve90, lead, frame):
+    drive = build_drive(curve90, [LANE], 10, coop_leads_m=[lead], rng=np.random.default_rng(0))
+    states = drive.states(frame)
+    ego, coop = states["ego"], states[f"coop{lead:g}"]
+    assert coop.station - ego.station == pytest.approx(lead)
+    assert np.hypot(*(_xy(coop) - _xy(ego))) <= lead + 1e-9  # a chord is never longer than its arc
