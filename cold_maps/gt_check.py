@@ -11,6 +11,7 @@ with no lanelet near it, makes the ground truth untrustworthy.
 
 from __future__ import annotations
 
+import argparse
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -38,7 +39,8 @@ NEAREST_VERTICES: Final[int] = 3
 """The closest point is searched on the segments next to this many nearest vertices."""
 
 EXIT_TRUSTWORTHY: Final[int] = 0
-EXIT_UNTRUSTWORTHY: Final[int] = 1
+EXIT_UNTRUSTWORTHY: Final[int] = 3
+"""Exit status of ``cold-maps check``: 0 trustworthy, 3 not (1 stays for errors, 2 for usage)."""
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,7 @@ class CheckReport:
 
     @property
     def exit_code(self) -> int:
-        """0 (``EXIT_TRUSTWORTHY``) or 1 (``EXIT_UNTRUSTWORTHY``)."""
+        """``EXIT_TRUSTWORTHY`` (0) or ``EXIT_UNTRUSTWORTHY`` (3)."""
         return EXIT_TRUSTWORTHY if self.trustworthy else EXIT_UNTRUSTWORTHY
 
 
@@ -243,3 +245,25 @@ def format_report(report: CheckReport) -> str:
                 f"{_mm(lane.median_m):>10} {_mm(lane.max_m):>10}"
             )
     return "\n".join(lines)
+
+
+def configure_check(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``cold-maps check``: MAP.xodr [--threshold M] [--step M] [--all-lanes] [--no-cache]."""
+    parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE map")
+    parser.add_argument("--threshold", type=float, default=THRESHOLD_M, help="largest allowed disagreement (m)")
+    parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
+    parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
+    parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """Print the report; return its exit code. Raises OpenDriveError or ConversionError."""
+    report = check_map(
+        args.map,
+        threshold_m=args.threshold,
+        step_m=args.step,
+        lane_types=None if args.all_lanes else ("driving",),
+        cache=not args.no_cache,
+    )
+    print(format_report(report))
+    return report.exit_code

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 
-class ConversionError(RuntimeError):
+class ConversionError(ValueError):
     """An OpenDRIVE or OSM file that cannot be converted or loaded.
 
     The message names the file: ``Town01.xodr: converter crashed: KeyError: '7'``.
+    A ValueError, like ``OpenDriveError``: the input cannot be turned into a map.
 
     Fields:
         path: the file at fault.

@@ -416,7 +416,7 @@ def test_check_measures_a_known_lateral_shift_and_lists_every_lane(synthetic_map
     x0 = variant.x0 - shift * math.sin(HEADING)
     y0 = variant.y0 + shift * math.cos(HEADING)
     report = check_lanelet_map(_parsed(synthetic_xodr("", "RHT", x0, y0)), lanelet_map, path="shifted.xodr")
-    assert not report.trustworthy and report.exit_code == 1 and len(report.failing) == 6
+    assert not report.trustworthy and report.exit_code == 3 and len(report.failing) == 6
     for lane in report.lanes:
         if lane.road_id == "1":
             assert lane.median_m == pytest.approx(shift, abs=1e-6) and lane.max_m == pytest.approx(shift, abs=1e-6)
@@ -436,3 +436,17 @@ def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
     assert "none" in format_report(report).splitlines()[-1]
     with pytest.raises(ValueError, match="threshold"):
         check_lanelet_map(_parsed(synthetic_xodr()), lanelet_map, threshold_m=float("nan"))
+
+
+def test_check_subcommand_exit_codes(straight_map, tmp_path, monkeypatch, capsys) -> None:
+    import argparse
+
+    from cold_maps.gt_check import configure_check, run_check
+
+    monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
+    parser = argparse.ArgumentParser()
+    configure_check(parser)
+    assert run_check(parser.parse_args([str(straight_map)])) == 0
+    assert "ground truth: TRUSTWORTHY (0 of 6 lanes" in capsys.readouterr().out
+    assert run_check(parser.parse_args([str(straight_map), "--threshold", "1e-6"])) == 3
+    assert "NOT TRUSTWORTHY" in capsys.readouterr().out
