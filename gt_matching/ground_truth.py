@@ -26,6 +26,7 @@ from gt_matching.polyline import (
     as_polyline,
     closest_distances,
     mid_line,
+    resample,
 )
 from gt_matching.route import RouteBorder
 
@@ -147,6 +148,7 @@ class GroundTruth:
         )
         self.lines = MapLines(lanelet_map)
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
+        self._border_samples: dict[tuple[LaneletKey, str], NDArrayFloat] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
 
     def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:
@@ -211,6 +213,14 @@ class GroundTruth:
         if geometry is None:
             geometry = self._geometry[key] = LaneletGeometry.of(lanelet)
         return geometry
+
+    def _samples(self, geometry: LaneletGeometry, side: str) -> NDArrayFloat:
+        """A lanelet border ("left" or "right") resampled every ``step_m`` (cached)."""
+        key = (geometry.key, side)
+        samples = self._border_samples.get(key)
+        if samples is None:
+            samples = self._border_samples[key] = resample(getattr(geometry, side), self.config.step_m)[0]
+        return samples
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
         """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose."""
@@ -372,7 +382,7 @@ class GroundTruth:
 
             def border(side: str) -> RouteBorder:
                 own = {getattr(g, f"{side}_line") for g in lanelets}
-                parts = [getattr(g, side) for g in lanelets]
+                parts = [(getattr(g, side), self._samples(g, side)) for g in lanelets]
                 return RouteBorder(self.lines, parts, own | overlapping, config.step_m, reach)
 
             route = _Route(keys=keys, left=border("left"), right=border("right"))
