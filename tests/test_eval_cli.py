@@ -1,0 +1,136 @@
+"""``cold-eval`` end to end: output files and their schema, the paper's figures on the
+bundled maps, bad input, interrupts and crashes."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from cold_maps import eval_cli
+from cold_maps.evaluation import MapEvaluator
+from cold_maps.recording import METADATA_STATUS, read_detections, read_metadata
+from conftest import bundled_map
+
+RECORD_KEYS = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_m", "rmse_m", "max_error_m",
+               "p95_error_m", "perception_range_m", "frames", "fused_frames", "runtime_ms", "rejected", "fusibility"}
+
+
+@pytest.fixture(scope="module")
+def straight_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("straight") / "out"
+    status = eval_cli.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "2", "--gaps", "30",
+                            "--out", str(out)])
+    return status, out
+
+
+def _records(out: Path) -> dict:
+    document = json.loads((out / "metrics.json").read_text())
+    return document, {(r["map"], r["fusion"], r["interpolation"], r["d_s"], r["boundary"]): r
+                      for r in document["scenarios"]}
+
+
+def test_outputs_and_metrics_schema(straight_run):
+    status, out = straight_run
+    assert status == 0
+    document, records = _records(out)
+    assert document["partial"] is False
+    assert len(records) == 2 * (1 + 1 + 2)  # local, convoy, spline paper and hermite at d_s = 30
+    for record in records.values():
+        assert RECORD_KEYS <= set(record)
+        assert set(record["runtime_ms"]) == {"mean", "std", "max"}
+    with open(out / "frames.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == sum(r["frames"] for r in records.values())
+    summary = (out / "summary.md").read_text()
+    assert "| straight | spline | hermite | 30.0 | left |" in summary and "Runtime (Table I)" in summary
+    plots = {p.name for p in (out / "plots").iterdir()}
+    assert {"errors_straight_convoy.png", "overlay_straight_spline-paper-d30.png"} <= plots
+
+
+def test_mcap_channels_and_detections(straight_run):
+    _, out = straight_run
+    from mcap.reader import make_reader
+
+    with open(out / "run.mcap", "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    topics = {c.topic for c in summary.channels.values()}
+    assert {"/gt", "/fused", "/metrics", "/cold/detections", "/detections/ego", "/detections/coop60"} <= topics
+    frames = list(read_detections(out / "run.mcap"))
+    assert [f for f, _ in frames] == list(range(8))  # 2 routes x 4 frames, indices continue across routes
+    assert all(d["left"].shape[1] == 2 for _, group in frames for d in group)
+    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"
+
+
+def test_paper_figures(tmp_path):
+    out = tmp_path / "paper"
+    assert eval_cli.main(["--paper", "--frames", "12", "--no-mcap", "--no-plots", "--out", str(out)]) == 0
+    _, records = _records(out)
+
+    def worst(map_name, fusion, interpolation, d_s, key="max_error_m"):
+        return max(records[(map_name, fusion, interpolation, d_s, b)][key] for b in ("left", "right"))
+
+    for interpolation in ("paper", "hermite"):
+        for d_s, reach in ((30.0, 90.0), (50.0, 110.0)):
+            assert worst("straight", "spline", interpolation, d_s) <= 0.05
+            assert worst("straight", "spline", interpolation, d_s, "perception_range_m") == pytest.approx(reach, abs=0.5)
+    for map_name in ("straight", "curve90", "rural"):
+        # convoy fusion keeps the local error; local range 30 m, convoy 55 m
+        assert worst(map_name, "convoy", "", 0.0) == pytest.approx(worst(map_name, "local", "", 0.0), abs=0.002)
+        assert worst(map_name, "convoy", "", 0.0, "perception_range_m") == pytest.approx(55.0, abs=1.0)
+    assert worst("curve90", "spline", "hermite", 20.0) <= 0.25
+    assert worst("rural", "spline", "hermite", 20.0) <= 0.25
+    assert 0.2 < worst("curve90", "spline", "paper", 20.0) < 1.2  # the paper: 0.7 m
+    summary = (out / "summary.md").read_text()
+    assert "Table II vs the paper, `hermite` interpolation" in summary and "Longest gap" in summary
+
+
+def _one_line_error(capsys, status):
+    err = capsys.readouterr().err.strip()
+    assert status == 1 and err.count("\n") == 0 and "Traceback" not in err
+    return err
+
+
+def test_missing_map(tmp_path, capsys):
+    status = eval_cli.main(["--map", str(tmp_path / "nope.xodr"), "--out", str(tmp_path / "out")])
+    assert "nope.xodr" in _one_line_error(capsys, status)
+    assert not (tmp_path / "out" / "metrics.json").exists()
+
+
+def test_route_too_short(tmp_path, capsys):
+    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--frames", "5000", "--out", str(tmp_path / "o")])
+    assert "no drivable route" in _one_line_error(capsys, status)
+    assert not (tmp_path / "o" / "metrics.json").exists()
+
+
+def test_unwritable_output_folder(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--out", str(blocker / "out")])
+    assert "output folder" in _one_line_error(capsys, status)
+
+
+@pytest.mark.parametrize("exception, code", [(KeyboardInterrupt, 130), (RuntimeError, 1)])
+def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys, exception, code):
+    original = MapEvaluator._frame
+    calls = []
+
+    def failing(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise exception("stop")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(MapEvaluator, "_frame", failing)
+    out = tmp_path / "out"
+    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--frames", "10", "--routes", "1", "--out", str(out)])
+    assert status == code
+    assert "partial" in capsys.readouterr().err
+    document, records = _records(out)
+    assert document["partial"] is True
+    assert records[("curve90", "local", "", 0.0, "left")]["frames"] == 2
+    assert "PARTIAL RUN" in (out / "summary.md").read_text()
+    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
+    assert not (out / "run.mcap.partial").exists()
