@@ -46,7 +46,7 @@ from cold_maps.sensor_errors import SensorErrorModel
 
 if TYPE_CHECKING:
     from cold_maps.recording import Recorder
-    from gt_matching import GroundTruth
+    from gt_matching import GroundTruth, LaneMatch
 
 LOG = logging.getLogger("cold_maps.evaluation")
 
@@ -208,14 +208,12 @@ class GroundTruthMeter:
             self._trees.move_to_end(key)
         return found
 
-    def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
-                reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
-        """Errors of a lane (borders ``(N, 2)`` world frame, driving order) whose sender
-        stands at ``pose`` (x m, y m, yaw rad). The GT lanelets are those matched to
-        ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
-        or to the lane itself; the errors are always against Lanelet2's borders. Raises
-        ``gt_matching.MatchingError``."""
-        match = self.ground_truth.match(*(reference or (left, right)), pose)
+    def match(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float]) -> LaneMatch:
+        """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``)."""
+        return self.ground_truth.match(left, right, pose)
+
+    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
+        """Closest-point errors and range of a lane against the GT borders of ``match``."""
         results = []
         for side, (points, border) in enumerate(((left, match.left_gt), (right, match.right_gt))):
             tree, arc = self._tree(match.lanelet_ids, side, border)
@@ -223,6 +221,15 @@ class GroundTruthMeter:
             results.append((distances, float(arc[index[-1]] - arc[index[0]])))
         return Measurement(results[0][0], results[1][0], results[0][1], results[1][1],
                            match.left_gt, match.right_gt, match.matched)
+
+    def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
+                reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
+        """Errors of a lane (borders ``(N, 2)`` world frame, driving order) whose sender
+        stands at ``pose`` (x m, y m, yaw rad). The GT lanelets are those matched to
+        ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
+        or to the lane itself; the errors are always against Lanelet2's borders. Raises
+        ``gt_matching.MatchingError``."""
+        return self.errors(self.match(*(reference or (left, right)), pose), left, right)
 
 
 @dataclass(frozen=True)
@@ -471,7 +478,7 @@ class MapEvaluator:
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime)
             return None
-        measured = self._measure(result.left, result.right, _pose(ego.detection), self._true_lane(ego.state, other.state))
+        measured = self._measure(result.left, result.right, _pose(ego.detection), self.true_lane(ego.state, other.state))
         if isinstance(measured, str):
             reject(measured, True, runtime)
             return None
@@ -483,7 +490,7 @@ class MapEvaluator:
                                {"left": result.left, "right": result.right})
         return result.left, result.right
 
-    def _true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
+    def true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
         """The lane a fusion of ``other`` into the ego should reproduce: the other's track
         to its detection end when it drives on from the ego's lanes (coop, turn), else the
         ego's own lanes as far ahead."""

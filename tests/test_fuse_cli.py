@@ -1,0 +1,97 @@
+"""``cold-fuse``: re-fusing a cold-eval recording reproduces its errors, detections from
+another source are fused, bad recordings are refused with one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cold_maps import eval_cli, fuse_cli
+from cold_maps.recording import METADATA_STATUS, Recorder, read_detections, read_metadata
+from conftest import bundled_map
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec")
+    assert eval_cli.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "1", "--gaps", "30",
+                          "--interpolation", "paper", "--no-distractors", "--no-plots", "--out", str(out)]) == 0
+    return out
+
+
+def _scenarios(folder):
+    document = json.loads((folder / "metrics.json").read_text())
+    return {(r["fusion"], r["boundary"]): r for r in document["scenarios"]}
+
+
+def test_refusion_reproduces_cold_eval(recording, tmp_path):
+    report = tmp_path / "report"
+    status = fuse_cli.main(["--input", str(recording / "run.mcap"), "-o", str(tmp_path / "re.mcap"),
+                            "--report", str(report)])
+    assert status == 0
+    before, after = _scenarios(recording), _scenarios(report)
+    for key in (("local", "left"), ("convoy", "right"), ("spline", "left")):
+        for metric in ("mean_error_m", "max_error_m", "perception_range_m"):
+            assert after[key][metric] == pytest.approx(before[key][metric], abs=1e-9)
+        assert after[key]["fused_frames"] == before[key]["fused_frames"] == 4
+    frames = list(read_detections(tmp_path / "re.mcap"))
+    assert len(frames) == 4 and {d["sender"] for d in frames[0][1]} == {"ego", "coop25", "coop60"}
+    assert read_metadata(tmp_path / "re.mcap")[METADATA_STATUS]["status"] == "complete"
+
+
+def test_fuses_detections_from_another_source(tmp_path):
+    """Two straight detections written by hand: 'car0' at x = 0 and 'car1' at x = 20 m,
+    lane borders at y = ±2 m; convoy fusion spans x = 0 ... 50 m."""
+    path = tmp_path / "other.mcap"
+    xs = np.arange(0.0, 30.01, 0.1)
+    left, right = np.column_stack((xs, np.full_like(xs, 2.0))), np.column_stack((xs, np.full_like(xs, -2.0)))
+    with Recorder(path) as recorder:
+        for frame in range(3):
+            recorder.write_detection(frame * 0.1, frame, "car0", (0.0, 0.0, 0.0), left, right, ego=True)
+            recorder.write_detection(frame * 0.1, frame, "car1", (20.0, 0.0, 0.0), left, right)
+    out = tmp_path / "fused.mcap"
+    assert fuse_cli.main(["--input", str(path), "-o", str(out), "--ego", "car0"]) == 0
+    from mcap.reader import make_reader
+
+    with open(out, "rb") as stream:
+        fused = [json.loads(m.data) for _, c, m in make_reader(stream).iter_messages(topics=["/fused"])]
+    assert len(fused) == 3
+    line = next(e for e in fused[0]["entities"] if e["id"] == "car1-left")["lines"][0]["points"]
+    assert (line[0]["x"], line[-1]["x"]) == pytest.approx((0.0, 50.0))
+    assert all(p["y"] == pytest.approx(2.0) for p in line)
+
+
+def _fails(capsys, argv):
+    status = fuse_cli.main(argv)
+    err = capsys.readouterr().err.strip()
+    assert status == 1 and "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_not_an_mcap(tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("hello")
+    assert "not an MCAP" in _fails(capsys, ["--input", str(bad), "-o", str(tmp_path / "o.mcap")])
+    assert not (tmp_path / "o.mcap").exists()
+
+
+def test_foreign_mcap(tmp_path, capsys):
+    from mcap.writer import Writer
+
+    foreign = tmp_path / "foreign.mcap"
+    with open(foreign, "wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        schema = writer.register_schema(name="x", encoding="jsonschema", data=b"{}")
+        channel = writer.register_channel(topic="/camera", message_encoding="json", schema_id=schema)
+        writer.add_message(channel, log_time=0, publish_time=0, data=b"{}")
+        writer.finish()
+    assert "/cold/detections" in _fails(capsys, ["--input", str(foreign), "-o", str(tmp_path / "o.mcap")])
+
+
+def test_same_input_and_output_and_unwritable_output(recording, tmp_path, capsys):
+    rec = str(recording / "run.mcap")
+    assert "overwrite" in _fails(capsys, ["--input", rec, "-o", rec])
+    assert "cannot create" in _fails(capsys, ["--input", rec, "-o", str(tmp_path / "missing" / "o.mcap")])
