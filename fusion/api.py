@@ -1,4 +1,8 @@
-"""Public entry points: :func:`fuse` and :func:`is_fusible`."""
+"""Public entry points: :func:`fuse` and :func:`is_fusible`.
+
+Internally everything runs in the ego vehicle frame (the coop detection is moved there in
+one transform, the result to the world frame in another); all checks are frame-invariant.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +13,8 @@ import numpy as np
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_check, lane_ends, paper_check, relative_pose
-from fusion.geometry import EndFit, to_world
-from fusion.spline import hermite_lane, lane_end_fits, paper_gap
+from fusion.geometry import EndFit, to_world, transform
+from fusion.spline import hermite_lane, lane_end_fits, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, Source
 
 DEFAULT_PARAMS = FusionParams()
@@ -18,19 +22,35 @@ _MODES = ("auto", "convoy", "spline")
 _INTERPOLATIONS = ("paper", "hermite")
 
 Borders = tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]
+Parts = list[tuple[NDArrayFloat, Source]]
 
 
-def _world_borders(ego: LaneDetection, coop: LaneDetection) -> Borders:
+def _ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, float]:
+    """(ego left, ego right, coop left, coop right) in the ego vehicle frame, and x_rel [m]."""
     for name, det in (("ego", ego), ("coop", coop)):
         if not isinstance(det, LaneDetection):
             raise InvalidDetectionError(f"{name} must be a LaneDetection, got {type(det).__name__}")
-    return (to_world(ego.left, ego.pose), to_world(ego.right, ego.pose),
-            to_world(coop.left, coop.pose), to_world(coop.right, coop.pose))
+    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
+    coop_points = transform(coop.points, x_rel, y_rel, psi_rel)
+    n_left = coop.left.shape[0]
+    return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), x_rel
 
 
-def _convoy_reason(ego: LaneDetection, coop: LaneDetection, starts: tuple[OverlapStart, OverlapStart],
-                   params: FusionParams) -> str:
-    x_rel = relative_pose(ego.pose, coop.pose)[0]
+class _EndFits:
+    """Least-squares end fits of the four borders, computed once on first use."""
+
+    def __init__(self, borders: Borders, params: FusionParams):
+        self._borders, self._params = borders, params
+        self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
+
+    def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+        if self._fits is None:
+            el, er, cl, cr = self._borders
+            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m, self._params.spacing_m)
+        return self._fits
+
+
+def _convoy_reason(x_rel: float, starts: tuple[OverlapStart, OverlapStart], params: FusionParams) -> str:
     if x_rel <= 0.0:
         return f"coop vehicle is not ahead of the ego (x_rel = {x_rel:.2f} m)"
     for side, start in zip(("left", "right"), starts):
@@ -43,28 +63,8 @@ def _convoy_reason(ego: LaneDetection, coop: LaneDetection, starts: tuple[Overla
     return ""
 
 
-class _EndFits:
-    """Least-squares end fits of the four borders, computed once on first use."""
-
-    def __init__(self, borders: Borders, params: FusionParams):
-        self._borders, self._params, self._fits = borders, params, None
-
-    def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
-        if self._fits is None:
-            el, er, cl, cr = self._borders
-            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m, self._params.spacing_m)
-        return self._fits
-
-
-def _spline_reason(ego: LaneDetection, coop: LaneDetection, fits: _EndFits, ends: LaneEnds,
-                   params: FusionParams) -> str:
-    if params.fusibility == "paper":
-        return paper_check(ego.pose, coop.pose, ends, params)
-    return geometric_check(ego.pose, coop.pose, ends, params, fits)
-
-
 def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams, borders: Borders,
-            fits: _EndFits) -> tuple[FusionKind, str, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+            x_rel: float, fits: _EndFits) -> tuple[FusionKind, str, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
     if mode not in _MODES:
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
@@ -72,12 +72,14 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     ends = lane_ends(*borders)
     kind: FusionKind = ("convoy" if ends.gap_m <= 0.0 else "spline") if mode == "auto" else mode
     if kind == "spline":
-        return kind, _spline_reason(ego, coop, fits, ends, params), ends, None
-    el, er, cl, cr = borders
+        if params.fusibility == "paper":
+            return kind, paper_check(ego.pose, coop.pose, ends, params), ends, None
+        return kind, geometric_check(ego.pose, coop.pose, ends, params, fits), ends, None
     if ends.gap_m > 0.0:
         return kind, f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", ends, None
+    el, er, cl, cr = borders
     starts = (overlap_start(el, cl), overlap_start(er, cr))
-    return kind, _convoy_reason(ego, coop, starts, params), ends, starts
+    return kind, _convoy_reason(x_rel, starts, params), ends, starts
 
 
 def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,
@@ -88,15 +90,20 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
     for spline fusion with ``params.fusibility`` (``"geometric"`` by default, see
     :func:`fusion.fusibility.geometric_check`; ``"paper"`` for the paper's pose cases).
     """
-    borders = _world_borders(ego, coop)
-    _, reason, _, _ = _decide(ego, coop, mode, params, borders, _EndFits(borders, params))
+    borders, x_rel = _ego_frame_borders(ego, coop)
+    _, reason, _, _ = _decide(ego, coop, mode, params, borders, x_rel, _EndFits(borders, params))
     return not reason, reason
 
 
-def _labelled(*parts: tuple[NDArrayFloat, Source]) -> tuple[NDArrayFloat, np.ndarray]:
-    points = np.concatenate([p for p, _ in parts])
-    labels = np.concatenate([np.full(p.shape[0], src, dtype=np.int8) for p, src in parts])
-    return points, labels
+def _result(ego: LaneDetection, left: Parts, right: Parts, kind: FusionKind, gap_m: float,
+            reason: str = "") -> FusionResult:
+    """Result from ego-frame parts: one concatenation and one transform to the world frame."""
+    parts = left + right
+    counts = [points.shape[0] for points, _ in parts]
+    world = to_world(np.concatenate([points for points, _ in parts]), ego.pose)
+    labels = np.repeat(np.array([source for _, source in parts], dtype=np.int8), counts)
+    n_left = sum(counts[: len(left)])
+    return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason)
 
 
 def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
@@ -106,30 +113,29 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     ``mode``: ``"auto"`` (convoy fusion when the detections overlap, spline fusion across a
     gap), ``"convoy"`` or ``"spline"``. ``interpolation`` for the gap: ``"paper"`` (natural
     cubic spline through ego[-3], ego[-1], apex, coop[0], coop[2]) or ``"hermite"`` (G1
-    cubic with least-squares end headings, exact on circular arcs). A pair that is not
-    fusible returns the ego lane with ``kind="none"`` and the reason; malformed input raises
-    :class:`fusion.FusionError`. Output borders are in the world frame.
+    line and circular arc with least-squares end headings, exact on circular arcs). A pair
+    that is not fusible returns the ego lane with ``kind="none"`` and the reason; malformed
+    input raises :class:`fusion.FusionError`. Output borders are in the world frame.
     """
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    borders = _world_borders(ego, coop)
+    borders, x_rel = _ego_frame_borders(ego, coop)
     fits = _EndFits(borders, params)
-    kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, fits)
+    kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, cl, cr = borders
     if reason:
-        return FusionResult(el, er, np.zeros(el.shape[0], np.int8), np.zeros(er.shape[0], np.int8),
-                            "none", ends.gap_m, reason)
+        return _result(ego, [(el, Source.EGO)], [(er, Source.EGO)], "none", ends.gap_m, reason)
     if kind == "convoy":
-        left, left_src = convoy_border(el, cl, starts[0], params.coop_weight, params.convoy_blend_offset_m)
-        right, right_src = convoy_border(er, cr, starts[1], params.coop_weight, params.convoy_blend_offset_m)
-        return FusionResult(left, right, left_src, right_src, "convoy", ends.gap_m)
+        assert starts is not None
+        w, blend = params.coop_weight, params.convoy_blend_offset_m
+        return _result(ego, convoy_border(el, cl, starts[0], w, blend), convoy_border(er, cr, starts[1], w, blend),
+                       "convoy", ends.gap_m)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
-        gaps = tuple(paper_gap(e, c, params.apex_min_turn_rad, params.apex_ratio, params.spacing_m, uniform)
-                     for e, c in ((el, cl), (er, cr)))
+        gap_left, gap_right = sample_pieces(
+            [paper_pieces(e, c, params.apex_min_turn_rad, params.apex_ratio, uniform) for e, c in ((el, cl), (er, cr))],
+            params.spacing_m)
     else:
-        gaps = hermite_lane(fits(), params.spacing_m)
-    (left, left_src), (right, right_src) = (
-        _labelled((e, Source.EGO), (gap, Source.INTERPOLATED), (c, Source.COOP))
-        for e, gap, c in ((el, gaps[0], cl), (er, gaps[1], cr)))
-    return FusionResult(left, right, left_src, right_src, "spline", ends.gap_m)
+        gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
+    return _result(ego, [(el, Source.EGO), (gap_left, Source.INTERPOLATED), (cl, Source.COOP)],
+                   [(er, Source.EGO), (gap_right, Source.INTERPOLATED), (cr, Source.COOP)], "spline", ends.gap_m)

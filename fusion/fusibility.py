@@ -18,6 +18,7 @@ from fusion.geometry import EndFit, end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
 _CHORD_WINDOW_M = 4.0
+_MIN_GAP_M = 1e-6
 _MIN_ARC_CURVATURE = 1.0 / 100.0
 _CURVATURE_SLACK = 0.10
 _CURVATURE_SAMPLES = 9
@@ -30,8 +31,8 @@ class LaneEnds:
 
     Fields: ``p_end``/``p_start`` centre points [m]; ``t_end``/``t_start`` unit tangents
     (driving direction); ``width_m`` ego lane width at its end [m]; ``gap_m`` signed
-    centre-line gap (Euclidean length, negative when the coop start is not ahead of the ego
-    end along ``t_end``).
+    centre-line gap (Euclidean length, negative when the coop start is not more than 1 µm
+    ahead of the ego end along ``t_end``).
     """
 
     p_end: NDArrayFloat
@@ -61,7 +62,7 @@ def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArra
     length = math.hypot(d[0], d[1])
     along = d[0] * t_end[0] + d[1] * t_end[1]
     width = math.hypot(*(ego_left[-1] - ego_right[-1]))
-    return LaneEnds(p_end, p_start, t_end, t_start, width, length if along > 0.0 else -length)
+    return LaneEnds(p_end, p_start, t_end, t_start, width, length if along > _MIN_GAP_M else -length)
 
 
 def relative_pose(ego: Pose2D, coop: Pose2D) -> tuple[float, float, float]:

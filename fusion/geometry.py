@@ -13,10 +13,15 @@ _SIGMA_FLOOR_M = 0.002
 _CI_FACTOR = 2.5
 
 
+def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
+    """Points of a frame at ``(x, y, yaw)`` (relative to a parent frame) in the parent frame."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return points @ np.array(((c, s), (-s, c))) + (x, y)
+
+
 def to_world(points: NDArrayFloat, pose: Pose2D) -> NDArrayFloat:
     """Vehicle-frame points of a vehicle at ``pose`` in the world frame."""
-    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-    return points @ np.array([[c, s], [-s, c]]) + (pose.x, pose.y)
+    return transform(points, pose.x, pose.y, pose.yaw)
 
 
 def wrap_angle(angle: float) -> float:
@@ -34,37 +39,48 @@ def cumulative_length(points: NDArrayFloat) -> NDArrayFloat:
 
 
 def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArrayFloat) -> tuple[float, float, int]:
-    """Closest point of ``polyline`` to ``point``.
+    """Closest point of ``polyline`` to ``point`` (near its nearest vertex).
 
     Returns ``(s, distance, segment)``: arc length of the foot point [m], its distance [m] and
-    the index of the segment holding it.
+    the index of the segment holding it. Only the two segments at the nearest vertex are
+    examined, which is exact for polylines sampled finer than their curvature radius.
     """
-    seg = polyline[1:] - polyline[:-1]
-    rel = point - polyline[:-1]
-    seg_len2 = np.einsum("ij,ij->i", seg, seg)
-    t = np.clip(np.einsum("ij,ij->i", rel, seg) / seg_len2, 0.0, 1.0)
-    diff = rel - seg * t[:, None]
-    dist2 = np.einsum("ij,ij->i", diff, diff)
-    k = int(np.argmin(dist2))
-    s = float(arclength[k] + t[k] * (arclength[k + 1] - arclength[k]))
-    return s, math.sqrt(float(dist2[k])), k
+    rel = polyline - point
+    k = int(np.einsum("ij,ij->i", rel, rel).argmin())
+    px, py = float(point[0]), float(point[1])
+    best = (math.inf, 0.0, 0)
+    for i in (k - 1, k):
+        if i < 0 or i + 1 >= polyline.shape[0]:
+            continue
+        ax, ay = float(polyline[i, 0]), float(polyline[i, 1])
+        dx, dy = float(polyline[i + 1, 0]) - ax, float(polyline[i + 1, 1]) - ay
+        seg2 = dx * dx + dy * dy
+        t = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / seg2)) if seg2 > 0.0 else 0.0
+        dist = math.hypot(ax + t * dx - px, ay + t * dy - py)
+        if dist < best[0]:
+            best = (dist, float(arclength[i] + t * (arclength[i + 1] - arclength[i])), i)
+    return best[1], best[0], best[2]
 
 
 def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
     """Unit tangent ``(dx, dy)`` at the last (``at_end``) or first point, by a chord.
 
-    The chord spans about ``window_m`` of the polyline (at least one segment); it points in
-    driving direction.
+    The chord spans about ``window_m`` of the polyline (at least one segment), assuming
+    roughly even spacing; it points in driving direction.
     """
     n = points.shape[0]
-    approx_step = float(np.hypot(*(points[-1] - points[0]))) / (n - 1) or 1.0
+    x0, y0, x1, y1 = float(points[0, 0]), float(points[0, 1]), float(points[-1, 0]), float(points[-1, 1])
+    approx_step = math.hypot(x1 - x0, y1 - y0) / (n - 1) or 1.0
     k = min(n - 1, max(1, int(round(window_m / approx_step))))
-    vec = points[-1] - points[-1 - k] if at_end else points[k] - points[0]
-    norm = math.hypot(vec[0], vec[1])
+    if at_end:
+        vx, vy = x1 - float(points[-1 - k, 0]), y1 - float(points[-1 - k, 1])
+    else:
+        vx, vy = float(points[k, 0]) - x0, float(points[k, 1]) - y0
+    norm = math.hypot(vx, vy)
     if norm == 0.0:
-        vec = points[-1] - points[0]
-        norm = math.hypot(vec[0], vec[1]) or 1.0
-    return float(vec[0] / norm), float(vec[1] / norm)
+        vx, vy = x1 - x0, y1 - y0
+        norm = math.hypot(vx, vy) or 1.0
+    return vx / norm, vy / norm
 
 
 @dataclass(frozen=True)
@@ -145,26 +161,6 @@ def noise_level(points: NDArrayFloat, count: int) -> float:
         return 0.0
     d2 = tail[:-2] - 2.0 * tail[1:-1] + tail[2:]
     return math.sqrt(float(np.einsum("ij,ij->", d2, d2)) / (12.0 * d2.shape[0]))
-
-
-def sample_curve(evaluate, t_start: float, t_end: float, length_hint_m: float, spacing_m: float,
-                 oversample: int = 4) -> NDArrayFloat:
-    """Points of a parametric curve strictly between its ends, at most ``spacing_m`` apart.
-
-    ``evaluate`` maps an array of parameters in ``[t_start, t_end]`` to ``(M, 2)`` points.
-    The curve is measured on a grid ``oversample`` times finer than the output step implied
-    by ``length_hint_m`` (a rough curve length), then sampled at equal arc-length steps
-    ``≤ spacing_m``; the two ends themselves are not returned.
-    """
-    n_grid = max(8, math.ceil(length_hint_m / spacing_m) * oversample)
-    grid_t = np.linspace(t_start, t_end, n_grid + 1)
-    grid_s = cumulative_length(evaluate(grid_t))
-    total = float(grid_s[-1])
-    n_steps = math.ceil(total / spacing_m * (1.0 + 1e-3))
-    if n_steps < 2:
-        return np.empty((0, 2))
-    target = np.linspace(0.0, total, n_steps + 1)[1:-1]
-    return evaluate(np.interp(target, grid_s, grid_t))
 
 
 def distance_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:

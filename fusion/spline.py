@@ -1,7 +1,10 @@
 """Gap interpolation for spline fusion (paper sec. III-B) and the G1 Hermite variant.
 
-Both work on one border in the world frame and return the points strictly inside the gap,
-at most ``spacing_m`` apart, from the ego border's last point to the coop border's first.
+Both work on the borders of one lane in a common frame and return, per border, the points
+strictly inside the gap, at most ``spacing_m`` apart, from the ego border's last point to the
+coop border's first. The hot path avoids scipy: the paper's spline has at most five knots,
+so its tridiagonal system is solved in closed form on floats, and all curve pieces of both
+borders are sampled by arc length in one vectorised pass (:func:`sample_pieces`).
 """
 
 from __future__ import annotations
@@ -11,21 +14,68 @@ from typing import Final, Sequence
 
 import numpy as np
 
-from fusion.geometry import EndFit, fit_end, noise_level, sample_curve
+from fusion.geometry import EndFit, fit_end, noise_level
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
 _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
+_GRID: Final[int] = 128
+_TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
+_TAU_POWERS: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4))
+_POWERS: Final[NDArrayFloat] = np.arange(4.0)
+
+Piece = list[list[float]]  # power-basis coefficients [[a_x, a_y], [b_x, b_y], [c_x, c_y], [d_x, d_y]], τ ∈ [0, 1]
 
 
 def _cross(ax: float, ay: float, bx: float, by: float) -> float:
     return ax * by - ay * bx
 
 
-def estimate_apex(p_end: NDArrayFloat, d_end: tuple[float, float], p_start: NDArrayFloat,
-                  d_start: tuple[float, float], ratio: float) -> NDArrayFloat | None:
+def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[NDArrayFloat]:
+    """Sample chains of cubic pieces by arc length; one ``(K, 2)`` array per chain.
+
+    ``pieces[b]`` is the chain of border b: cubic pieces a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1],
+    joined end to start. Each chain is measured on a 128-step grid per piece, then sampled at
+    equal arc-length steps ≤ ``spacing_m`` strictly between its two ends (ends excluded), by
+    evaluating the pieces exactly at the interpolated parameters. All chains are processed in
+    one vectorised pass.
+    """
+    flat = [piece for chain in pieces for piece in chain]
+    if not flat:
+        return [np.empty((0, 2)) for _ in pieces]
+    coeffs = np.array(flat)
+    n_pieces = coeffs.shape[0]
+    grid = np.einsum("gk,pkd->pgd", _TAU_POWERS, coeffs)
+    step = grid[:, 1:] - grid[:, :-1]
+    s = np.zeros((n_pieces, _GRID + 1))
+    np.cumsum(np.sqrt(np.einsum("pgd,pgd->pg", step, step)), axis=1, out=s[:, 1:])
+    lengths = s[:, -1].tolist()
+    starts, total = [], 0.0
+    for length in lengths:
+        starts.append(total)
+        total += length
+    s += np.array(starts)[:, None]
+    targets, counts, first = [], [], 0
+    for chain in pieces:
+        start = starts[first] if chain else 0.0
+        length = sum(lengths[first:first + len(chain)])
+        first += len(chain)
+        n_steps = math.ceil(length / spacing_m * (1.0 + 1e-3)) if length > 0.0 else 0
+        counts.append(max(0, n_steps - 1))
+        if n_steps > 1:
+            targets.append(start + (length / n_steps) * np.arange(1, n_steps))
+    if not targets:
+        return [np.empty((0, 2)) for _ in pieces]
+    q = np.interp(np.concatenate(targets), s.ravel(), (np.arange(n_pieces)[:, None] + _TAU).ravel())
+    index = np.minimum(q.astype(np.intp), n_pieces - 1)
+    points = np.einsum("kj,kjd->kd", np.power.outer(q - index, _POWERS), coeffs[index])
+    return np.split(points, np.cumsum(counts)[:-1])
+
+
+def estimate_apex(p_end: tuple[float, float], d_end: tuple[float, float], p_start: tuple[float, float],
+                  d_start: tuple[float, float], ratio: float) -> tuple[float, float] | None:
     """Paper's apex estimate P_c = P_i + ratio·(P_j − P_i) (eq. 2).
 
     P_i is the intersection of the ego end tangent line (point ``p_end``, direction ``d_end``)
@@ -33,103 +83,99 @@ def estimate_apex(p_end: NDArrayFloat, d_end: tuple[float, float], p_start: NDAr
     chord ``p_end → p_start``. Returns ``None`` when the tangents are parallel or P_i does not
     lie ahead of the ego end and behind the coop start (no single curve between them).
     """
-    chord = p_start - p_end
+    cx, cy = p_start[0] - p_end[0], p_start[1] - p_end[1]
     denom = _cross(d_end[0], d_end[1], d_start[0], d_start[1])
     if abs(denom) < 1e-9:
         return None
-    a = _cross(chord[0], chord[1], d_start[0], d_start[1]) / denom
-    b = _cross(d_end[0], d_end[1], chord[0], chord[1]) / denom
+    a = _cross(cx, cy, d_start[0], d_start[1]) / denom
+    b = _cross(d_end[0], d_end[1], cx, cy) / denom
     if a <= 0.0 or b <= 0.0:
         return None
-    p_i = p_end + a * np.asarray(d_end)
-    c2 = float(chord @ chord)
-    p_j = p_end + chord * (float((p_i - p_end) @ chord) / c2)
-    return p_i + ratio * (p_j - p_i)
+    ix, iy = p_end[0] + a * d_end[0], p_end[1] + a * d_end[1]
+    t = ((ix - p_end[0]) * cx + (iy - p_end[1]) * cy) / (cx * cx + cy * cy)
+    jx, jy = p_end[0] + t * cx, p_end[1] + t * cy
+    return ix + ratio * (jx - ix), iy + ratio * (jy - iy)
 
 
-def natural_spline_moments(h: NDArrayFloat, y: NDArrayFloat) -> NDArrayFloat:
+def natural_spline_moments(h: Sequence[float], y: Sequence[float]) -> list[float]:
     """Second derivatives M of the natural cubic spline through ``y`` (knot steps ``h``).
 
     Solves the paper's tridiagonal system (eq. 4) with M_0 = M_n = 0 by the Thomas
-    algorithm; ``y`` is ``(n+1, d)``, the result ``(n+1, d)``.
+    algorithm on floats (a handful of knots: no numpy call overhead).
     """
-    n = h.shape[0]
-    moments = np.zeros_like(y)
+    n = len(h)
+    moments = [0.0] * (n + 1)
     if n < 2:
         return moments
-    slope = np.diff(y, axis=0) / h[:, None]
-    rhs = slope[1:] - slope[:-1]
-    diag = (h[:-1] + h[1:]) / 3.0
-    off = h[1:-1] / 6.0
-    m = n - 1
-    c = np.empty(m)
-    d = np.empty_like(rhs)
-    c[0] = (off[0] / diag[0]) if m > 1 else 0.0
-    d[0] = rhs[0] / diag[0]
-    for i in range(1, m):
-        denom = diag[i] - off[i - 1] * c[i - 1]
-        c[i] = off[i] / denom if i < m - 1 else 0.0
-        d[i] = (rhs[i] - off[i - 1] * d[i - 1]) / denom
-    for i in range(m - 2, -1, -1):
-        d[i] = d[i] - c[i] * d[i + 1]
-    moments[1:-1] = d
+    slope = [(y[i + 1] - y[i]) / h[i] for i in range(n)]
+    c, d = [0.0] * (n - 1), [0.0] * (n - 1)
+    for i in range(n - 1):
+        diag = (h[i] + h[i + 1]) / 3.0
+        rhs = slope[i + 1] - slope[i]
+        if i > 0:
+            sub = h[i] / 6.0
+            diag -= sub * c[i - 1]
+            rhs -= sub * d[i - 1]
+        c[i] = h[i + 1] / 6.0 / diag
+        d[i] = rhs / diag
+    for i in range(n - 2, -1, -1):
+        moments[i + 1] = d[i] - c[i] * moments[i + 2]
     return moments
 
 
-def paper_gap(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, apex_ratio: float,
-              spacing_m: float, uniform: bool = False) -> NDArrayFloat:
-    """The paper's spline through ego[-3], ego[-1], (apex), coop[0], coop[2], sampled in the gap.
+def paper_pieces(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float, apex_ratio: float,
+                 uniform: bool = False) -> list[Piece]:
+    """Gap pieces of the paper's spline through ego[-3], ego[-1], (apex), coop[0], coop[2].
 
     The spline is parametric in cumulative chord length (a 90° curve is not a function
-    y(x)), or in the knot index with ``uniform``, with natural boundary conditions. The apex P_c is added when the end directions
-    ego[-3]→ego[-1] and coop[0]→coop[2] differ by more than ``apex_min_turn_rad``.
+    y(x)), or in the knot index with ``uniform``, with natural boundary conditions. The apex
+    P_c is added when the end directions ego[-3]→ego[-1] and coop[0]→coop[2] differ by more
+    than ``apex_min_turn_rad``. Returns the power-basis pieces from ego[-1] to coop[0].
     """
-    e0, e1 = ego[max(0, ego.shape[0] - 3)], ego[-1]
-    c0, c1 = coop[0], coop[min(2, coop.shape[0] - 1)]
+    e0 = (float(ego[max(0, ego.shape[0] - 3), 0]), float(ego[max(0, ego.shape[0] - 3), 1]))
+    e1 = (float(ego[-1, 0]), float(ego[-1, 1]))
+    c0 = (float(coop[0, 0]), float(coop[0, 1]))
+    c1 = (float(coop[min(2, coop.shape[0] - 1), 0]), float(coop[min(2, coop.shape[0] - 1), 1]))
+    ne = math.hypot(e1[0] - e0[0], e1[1] - e0[1]) or 1.0
+    nc = math.hypot(c1[0] - c0[0], c1[1] - c0[1]) or 1.0
+    de = ((e1[0] - e0[0]) / ne, (e1[1] - e0[1]) / ne)
+    dc = ((c1[0] - c0[0]) / nc, (c1[1] - c0[1]) / nc)
     knots = [e0, e1]
-    de, dc = e1 - e0, c1 - c0
-    ne, nc = math.hypot(de[0], de[1]) or 1.0, math.hypot(dc[0], dc[1]) or 1.0
-    de_u, dc_u = (de[0] / ne, de[1] / ne), (dc[0] / nc, dc[1] / nc)
-    turn = math.atan2(_cross(*de_u, *dc_u), de_u[0] * dc_u[0] + de_u[1] * dc_u[1])
-    if abs(turn) > apex_min_turn_rad:
-        apex = estimate_apex(e1, de_u, c0, dc_u, apex_ratio)
+    if abs(math.atan2(_cross(*de, *dc), de[0] * dc[0] + de[1] * dc[1])) > apex_min_turn_rad:
+        apex = estimate_apex(e1, de, c0, dc, apex_ratio)
         if apex is not None:
             knots.append(apex)
     knots += [c0, c1]
-    q = np.array(knots)
-    chords = np.hypot(*np.diff(q, axis=0).T)
-    keep = np.concatenate(([True], chords > _MIN_KNOT_STEP_M))
-    if not keep.all():
-        q, chords = q[keep], chords[keep[1:]]
-    h = np.ones_like(chords) if uniform else chords
-    t = np.concatenate(([0.0], np.cumsum(h)))
-    moments = natural_spline_moments(h, q)
+    kept = [knots[0]]
+    for knot in knots[1:]:
+        if math.hypot(knot[0] - kept[-1][0], knot[1] - kept[-1][1]) > _MIN_KNOT_STEP_M:
+            kept.append(knot)
+    if e1 not in kept or c0 not in kept:
+        return []
+    chords = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(kept[:-1], kept[1:])]
+    h = [1.0] * len(chords) if uniform else chords
+    mx = natural_spline_moments(h, [k[0] for k in kept])
+    my = natural_spline_moments(h, [k[1] for k in kept])
+    first, last = kept.index(e1), kept.index(c0)
+    pieces = []
+    for i in range(first, last):
+        hi = h[i]
+        piece = [[0.0, 0.0] for _ in range(4)]
+        for axis, m in ((0, mx), (1, my)):
+            y0, y1 = kept[i][axis], kept[i + 1][axis]
+            piece[0][axis] = y0
+            piece[1][axis] = (y1 - y0) - hi * hi * (2.0 * m[i] + m[i + 1]) / 6.0
+            piece[2][axis] = m[i] * hi * hi / 2.0
+            piece[3][axis] = (m[i + 1] - m[i]) * hi * hi / 6.0
+        pieces.append(piece)
+    return pieces
 
-    def evaluate(u: NDArrayFloat) -> NDArrayFloat:
-        i = np.clip(np.searchsorted(t, u, side="right") - 1, 0, h.shape[0] - 1)
-        hi = h[i][:, None]
-        a = (t[i + 1][:, None] - u[:, None])
-        b = (u[:, None] - t[i][:, None])
-        return ((moments[i] * a**3 + moments[i + 1] * b**3) / (6.0 * hi)
-                + (q[i] / hi - moments[i] * hi / 6.0) * a
-                + (q[i + 1] / hi - moments[i + 1] * hi / 6.0) * b)
 
-    first, last = 1, q.shape[0] - 2
-    return sample_curve(evaluate, float(t[first]), float(t[last]), float(chords[first:last].sum()), spacing_m)
-
-
-def _bezier_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
-                spacing_m: float) -> NDArrayFloat:
-    """Cubic Bézier with arms of a third of the chord (straight or S-shaped transition)."""
+def _bezier_piece(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat) -> Piece:
+    """Power basis of the cubic Bézier with arms of a third of the chord (straight or S-shaped)."""
     arm = math.hypot(*(p3 - p0)) / 3.0
-    ctrl = np.array([p0, p0 + arm * d0, p3 - arm * d1, p3])
-
-    def evaluate(u: NDArrayFloat) -> NDArrayFloat:
-        v = 1.0 - u
-        basis = np.stack((v**3, 3.0 * v * v * u, 3.0 * v * u * u, u**3), axis=1)
-        return basis @ ctrl
-
-    return sample_curve(evaluate, 0.0, 1.0, 3.0 * arm, spacing_m)
+    p1, p2 = p0 + arm * d0, p3 - arm * d1
+    return [list(p0), list(3.0 * (p1 - p0)), list(3.0 * (p2 - 2.0 * p1 + p0)), list(p3 - 3.0 * p2 + 3.0 * p1 - p0)]
 
 
 def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
@@ -167,7 +213,7 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
 
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
                 spacing_m: float) -> NDArrayFloat:
-    """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``), world frame.
+    """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``).
 
     The two tangent lines meet at P_i, at distance a from p0 and b from p3. The curve is the
     largest circular arc tangent to both lines (tangent length m = min(a, b), radius
@@ -182,11 +228,11 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     denom = _cross(d0[0], d0[1], d1[0], d1[1])
     turn = math.atan2(denom, float(d0 @ d1))
     if abs(turn) < _MIN_ARC_TURN_RAD:
-        return _bezier_gap(p0, d0, p3, d1, spacing_m)
+        return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
     b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
     if a <= 0.0 or b <= 0.0:
-        return _bezier_gap(p0, d0, p3, d1, spacing_m)
+        return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     m = min(a, b)
     radius = m / math.tan(abs(turn) / 2.0)
     kappa = math.copysign(1.0 / radius, turn)

@@ -7,7 +7,7 @@ counter-clockwise from x); the *vehicle* frame is ISO 8855 (x forward, y left). 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Final, Literal
 
@@ -103,6 +103,8 @@ class LaneDetection:
             fewer than two distinct points, NaN or inf raise ``InvalidDetectionError``.
         stamp: detection time [s] (informative; the fusion is static, no time alignment).
         sender: identifier of the sending vehicle (informative).
+        points: both borders stacked, left then right, ``(N_left + N_right, 2)`` [m, vehicle
+            frame]; ``left`` and ``right`` are read-only views of it (set on construction).
     """
 
     pose: Pose2D
@@ -110,12 +112,17 @@ class LaneDetection:
     right: NDArrayFloat
     stamp: float = 0.0
     sender: str = ""
+    points: NDArrayFloat = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.pose, Pose2D):
             raise InvalidDetectionError(f"LaneDetection.pose must be a Pose2D, got {type(self.pose).__name__}")
-        object.__setattr__(self, "left", validated_border("LaneDetection.left", self.left))
-        object.__setattr__(self, "right", validated_border("LaneDetection.right", self.right))
+        left = validated_border("LaneDetection.left", self.left)
+        right = validated_border("LaneDetection.right", self.right)
+        points = _frozen(np.concatenate((left, right)))
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "left", points[: left.shape[0]])
+        object.__setattr__(self, "right", points[left.shape[0]:])
         if not math.isfinite(float(self.stamp)):
             raise InvalidDetectionError(f"LaneDetection.stamp must be finite, got {self.stamp!r}")
 

@@ -46,18 +46,19 @@ def test_natural_spline_moments_match_scipy() -> None:
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.2, 3.0, 6))
     y = rng.normal(size=(6, 2))
-    moments = natural_spline_moments(np.diff(t), y)
     reference = CubicSpline(t, y, bc_type="natural")(t, 2)
-    np.testing.assert_allclose(moments, reference, atol=1e-10)
+    for axis in (0, 1):
+        moments = natural_spline_moments(np.diff(t).tolist(), y[:, axis].tolist())
+        np.testing.assert_allclose(moments, reference[:, axis], atol=1e-10)
 
 
 def test_apex_closed_form_for_a_right_angle() -> None:
-    apex = estimate_apex(np.array([0.0, 0.0]), (1.0, 0.0), np.array([16.0, -16.0]), (0.0, -1.0), 0.4)
+    apex = estimate_apex((0.0, 0.0), (1.0, 0.0), (16.0, -16.0), (0.0, -1.0), 0.4)
     # P_i = (16, 0), P_j = chord midpoint (8, -8): P_c = P_i + 0.4·(P_j − P_i)
     np.testing.assert_allclose(apex, [12.8, -3.2], atol=1e-12)
-    assert estimate_apex(np.array([0.0, 0.0]), (1.0, 0.0), np.array([10.0, 1.0]), (1.0, 0.0), 0.4) is None
+    assert estimate_apex((0.0, 0.0), (1.0, 0.0), (10.0, 1.0), (1.0, 0.0), 0.4) is None
     # tangents meeting behind the ego end: no curve between them
-    assert estimate_apex(np.array([0.0, 0.0]), (1.0, 0.0), np.array([10.0, -5.0]), (0.6, 0.8), 0.4) is None
+    assert estimate_apex((0.0, 0.0), (1.0, 0.0), (10.0, -5.0), (0.6, 0.8), 0.4) is None
 
 
 @pytest.mark.parametrize("turn_deg", [15.0, 60.0, 90.0, 120.0])
