@@ -46,7 +46,7 @@ class _EndFits:
     def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
         if self._fits is None:
             el, er, cl, cr = self._borders
-            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m, self._params.spacing_m)
+            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
         return self._fits
 
 

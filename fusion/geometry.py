@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -98,69 +99,74 @@ class EndFit:
     curvature_sigma: float
 
 
-def fit_end(points: NDArrayFloat, at_end: bool, windows_m: tuple[float, ...], sigma_m: float) -> EndFit:
-    """End point and unit tangent of a border by least-squares quadratics, adaptive window.
+def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
+             noise_window_m: float) -> list[EndFit]:
+    """Least-squares end point, tangent and curvature of several borders at once.
 
-    Fits ``y = a + b·x + c·x²`` to the points within each of ``windows_m`` (increasing) of
-    the last (``at_end``) or first point, in a frame whose x axis is the chord of the shortest
-    window and whose origin is that point. The quadratic term removes most of the bias a
-    line fit has on a curve, and longer windows average the noise but are biased where the
-    curvature changes. The window is chosen by the intersection-of-confidence-intervals
-    rule: the longest window whose slope interval b ± 2.5·σ_b (σ_b from the detection noise
-    ``sigma_m``) still intersects those of all shorter windows. The curvature comes from the
-    shortest window (least biased by a curvature change, so with noise it is uncertain and
-    ``curvature_sigma`` says so). With fewer than four points
-    in the shortest window: the end point, the chord direction and zero curvature of
-    infinite uncertainty.
+    For each border, fits ``y = a + b·x + c·x²`` to the points within each of ``windows_m``
+    (increasing) of its last (``at_end``) or first point, in a frame whose x axis is the
+    chord of the shortest window (driving direction) and whose origin is that point. The
+    quadratic term removes most of the bias a line fit has on a curve; longer windows
+    average the noise but are biased where the curvature changes. The window is chosen by
+    the intersection-of-confidence-intervals rule: the longest window whose slope interval
+    b ± 2.5·σ_b still intersects those of all shorter windows, with σ_b from the detection
+    noise σ (estimated from second differences over ``noise_window_m`` of all borders,
+    assuming ~0.1 m spacing; a smooth curve contributes < 1 mm). The curvature comes from the
+    shortest window (least biased, so with noise it is uncertain and ``curvature_sigma`` says
+    so). A border whose shortest window holds fewer than four points gets its end point, the
+    chord direction and zero curvature of infinite uncertainty. All borders share one
+    vectorised pass.
     """
-    cx, cy = end_direction(points, at_end, windows_m[0])
-    n = points.shape[0]
-    origin = points[-1] if at_end else points[0]
-    approx_step = float(np.hypot(*(points[-1] - points[0]))) / (n - 1) or 1.0
-    counts = np.minimum(n, np.rint(np.asarray(windows_m) / approx_step).astype(np.intp) + 1)
-    counts = counts[counts >= 4]
-    if counts.shape[0] == 0:
-        return EndFit(origin, (cx, cy), 0.0, math.inf)
-    k_max = int(counts[-1])
-    rel = (points[n - k_max:][::-1] if at_end else points[:k_max]) - origin
-    x = rel[:, 0] * cx + rel[:, 1] * cy
-    y = rel[:, 1] * cx - rel[:, 0] * cy
+    n_ends = len(borders)
+    counts, chords, origins = [], [], []
+    for points, end in zip(borders, at_end):
+        n = points.shape[0]
+        step = math.hypot(float(points[-1, 0] - points[0, 0]), float(points[-1, 1] - points[0, 1])) / (n - 1) or 1.0
+        counts.append([min(n, int(round(w / step)) + 1) for w in windows_m])
+        chords.append(end_direction(points, end, windows_m[0]))
+        origins.append(points[-1] if end else points[0])
+    k_max = max(c[-1] for c in counts)
+    windows = np.zeros((n_ends, k_max, 2))
+    for e, (points, end) in enumerate(zip(borders, at_end)):
+        m = min(k_max, points.shape[0])
+        windows[e, :m] = points[:-m - 1:-1] if end else points[:m]
+    n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
+    d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
+    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.einsum("ekd,ekd->", d2, d2)) / (12.0 * n_ends * max(1, n_noise - 2))))
+    direction = np.array(chords)
+    rel = windows - windows[:, :1]
+    x = np.einsum("ekd,ed->ek", rel, direction)
+    y = np.einsum("ekd,ed->ek", rel, direction[:, ::-1] * (-1.0, 1.0))
     x2 = x * x
-    sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=1)[:, counts - 1]
-    s1, s2, s3, s4, t0, t1, t2 = sums
-    k = counts.astype(np.float64)
+    sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=2)
+    idx = np.array(counts) - 1
+    s1, s2, s3, s4, t0, t1, t2 = sums[:, np.arange(n_ends)[:, None], idx]
+    k = idx + 1.0
     m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
     det = k * m0 - s1 * m1 + s2 * m2
-    ok = np.abs(det) > 1e-12 * np.maximum(1.0, s4 * s4)
-    if not ok[0]:
-        return EndFit(origin, (cx, cy), 0.0, math.inf)
+    ok = (k >= 4.0) & (np.abs(det) > 1e-12 * np.maximum(1.0, s4 * s4))
     det = np.where(ok, det, 1.0)
     a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
     b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
     c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
-    sigma = max(sigma_m, _SIGMA_FLOOR_M)
     half = _CI_FACTOR * sigma * np.sqrt(np.abs((k * s4 - s2 * s2) / det))
-    lo = np.maximum.accumulate(b - half)
-    hi = np.minimum.accumulate(b + half)
-    valid = (lo <= hi) & ok
-    j = int(np.argmin(valid)) - 1 if not valid.all() else valid.shape[0] - 1
-    j = max(j, 0)
-    slope = float(b[j])
-    norm = math.hypot(1.0, slope)
-    point = origin + float(a[j]) * np.array((-cy, cx))
-    scale = 2.0 / math.hypot(1.0, float(b[0])) ** 3
-    c_sigma = sigma * math.sqrt(abs(float((k[0] * s2[0] - s1[0] * s1[0]) / det[0])))
-    return EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm), scale * float(c[0]), scale * c_sigma)
-
-
-def noise_level(points: NDArrayFloat, count: int) -> float:
-    """Detection noise σ per coordinate [m] estimated from second differences of ``count``
-    points at the end of ``points`` (a smooth curve sampled every 0.1 m contributes < 1 mm)."""
-    tail = points[-count:]
-    if tail.shape[0] < 3:
-        return 0.0
-    d2 = tail[:-2] - 2.0 * tail[1:-1] + tail[2:]
-    return math.sqrt(float(np.einsum("ij,ij->", d2, d2)) / (12.0 * d2.shape[0]))
+    valid = (np.maximum.accumulate(b - half, axis=1) <= np.minimum.accumulate(b + half, axis=1)) & ok
+    c_sigma = sigma * np.sqrt(np.abs((k[:, 0] * s2[:, 0] - s1[:, 0] * s1[:, 0]) / det[:, 0]))
+    fits = []
+    for e in range(n_ends):
+        cx, cy = chords[e]
+        row = valid[e].tolist()
+        if not row[0]:
+            fits.append(EndFit(origins[e], (cx, cy), 0.0, math.inf))
+            continue
+        j = row.index(False) - 1 if False in row else len(row) - 1
+        slope, b0 = float(b[e, j]), float(b[e, 0])
+        norm = math.hypot(1.0, slope)
+        scale = 2.0 / math.hypot(1.0, b0) ** 3
+        point = origins[e] + float(a[e, j]) * np.array((-cy, cx))
+        fits.append(EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm),
+                           scale * float(c[e, 0]), scale * float(c_sigma[e])))
+    return fits
 
 
 def distance_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:

@@ -14,7 +14,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
-from fusion.geometry import EndFit, fit_end, noise_level
+from fusion.geometry import EndFit, fit_ends
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
@@ -198,17 +198,15 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float) -> tuple[NDArrayFloat
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
-                  window_m: float | None, spacing_m: float) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+                  window_m: float | None) -> tuple[EndFit, EndFit, EndFit, EndFit]:
     """End fits of (ego left, ego right) at their ends and (coop left, coop right) at their starts.
 
     Windows: ``window_m``, or with ``None`` adaptive among 2–6 m from the noise σ estimated
-    on the last/first 5 m of the four borders (:func:`fusion.geometry.fit_end`).
+    on the last/first 5 m of the four borders (:func:`fusion.geometry.fit_ends`).
     """
-    count = max(3, int(round(_NOISE_SAMPLE_M / spacing_m)))
-    sigma = (sum(noise_level(b, count) for b in ego) + sum(noise_level(b[::-1], count) for b in coop)) / 4.0
     windows = _WINDOWS_M if window_m is None else (window_m,)
-    return (fit_end(ego[0], True, windows, sigma), fit_end(ego[1], True, windows, sigma),
-            fit_end(coop[0], False, windows, sigma), fit_end(coop[1], False, windows, sigma))
+    fits = fit_ends((ego[0], ego[1], coop[0], coop[1]), (True, True, False, False), windows, _NOISE_SAMPLE_M)
+    return fits[0], fits[1], fits[2], fits[3]
 
 
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,

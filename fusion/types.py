@@ -155,7 +155,7 @@ class FusionParams:
             :func:`fusion.is_fusible`) or ``"paper"`` (the paper's three pose cases).
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
-            2–6 m from the detection noise (see :func:`fusion.geometry.fit_end`).
+            2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).
     """
 
     t_pos_m: float = 0.40
