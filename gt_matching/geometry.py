@@ -96,7 +96,7 @@ class LaneletGeometry:
 
 class MapLines:
     """Every border line string of a map, each once, in its stored orientation: vertices,
-    bounding boxes, and samples every ``step_m`` built on first use."""
+    bounding boxes, and samples every ``step_m`` and their KD-trees built on first use."""
 
     def __init__(self, lanelet_map: Any) -> None:
         self.slot_of_line: dict[int, int] = {}
@@ -112,6 +112,7 @@ class MapLines:
             [np.concatenate((v.min(axis=0), v.max(axis=0))) for v in self.vertices], dtype=np.float64
         )
         self._samples: dict[tuple[int, float], NDArrayFloat] = {}
+        self._trees: dict[tuple[int, float], cKDTree] = {}
 
     def slots(self, lines: set[int]) -> NDArrayInt:
         """Slots of the given line string ids that belong to the map."""
@@ -124,6 +125,16 @@ class MapLines:
         hi = boxes[:, None, 2:] + reach_m
         overlap = np.all((self.boxes[None, :, :2] <= hi) & (self.boxes[None, :, 2:] >= lo), axis=2)
         return np.flatnonzero(np.any(overlap, axis=0))
+
+    def tree(self, slot: int, step_m: float) -> cKDTree:
+        """KD-tree of the samples every ``step_m`` of line ``slot`` (cached)."""
+        from scipy.spatial import cKDTree
+
+        key = (slot, step_m)
+        found = self._trees.get(key)
+        if found is None:
+            found = self._trees[key] = cKDTree(self.samples(slot, step_m))
+        return found
 
     def samples(self, slot: int, step_m: float) -> NDArrayFloat:
         """Points every ``step_m`` along line ``slot`` (cached)."""

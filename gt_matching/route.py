@@ -9,13 +9,20 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from gt_matching.geometry import MapLines
-from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, closest_distances, windowed_distances
+from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, windowed_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 #: Every this many GT samples seed the closest-point search (KD-tree).
 GUESS_STRIDE: Final = 3
+#: Every this many detected points look up their nearest coarse sample; the others
+#: interpolate its arc length along the detection.
+ANCHOR_STRIDE: Final = 10
+#: Arc length either side of an interpolated seed searched for the nearest sample, m.
+ANCHOR_REACH_M: Final = 0.1
+#: Points farther than this from the border are searched from their own coarse sample, m.
+REFINE_DISTANCE_M: Final = 1.0
 #: Spacing of the samples of nearby lines that bound their distance to the border, m.
 CLEARANCE_STEP_M: Final = 0.5
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
@@ -30,8 +37,8 @@ class BorderDistances:
         distances: per point, m (exact, or to the GT resampled every ``step_m``).
         arc_m: per point, arc length of its closest GT point along the border, m.
         other_closer: per point, True when a border of another lane (not this GT border,
-            not a lanelet overlapping the route; exact distance) is closer than the
-            resampled GT border by more than the margin.
+            not a lanelet overlapping the route) is closer than this GT border by more than
+            the margin (both resampled every ``step_m``).
     """
 
     distances: NDArrayFloat
@@ -71,10 +78,9 @@ class RouteBorder:
         guess = np.unique(np.append(np.arange(0, len(self.samples), GUESS_STRIDE), len(self.samples) - 1))
         self._guess_arc = self.sample_arc[guess]
         self._guess_tree = cKDTree(self.samples[guess])
-        # The closest sample lies within half a guess gap (+ one step) of the guess's arc
-        # length; joints between lanelets may repeat a sample.
-        self._sample_reach_m = (GUESS_STRIDE / 2.0 + 1.0) * step_m
-        self._window = int(2.0 * self._sample_reach_m / step_m) + 1 + len(parts)
+        self._complex_samples = self.samples[:, 0] + 1j * self.samples[:, 1]
+        # A window may hold a repeated sample where two lanelets join.
+        self._joints = min(len(parts), 2)
         boxes = np.array([np.concatenate((v.min(axis=0), v.max(axis=0))) for v, _ in parts])
         near = lines.near(boxes, reach_m)
         self._lines = lines
@@ -93,51 +99,71 @@ class RouteBorder:
             self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
 
     def _other_closer(self, points: NDArrayFloat, limits: NDArrayFloat) -> NDArrayBool:
-        """Whether another line comes closer to each point than its limit (m): a lower
-        bound from the coarse samples first, then exact distances to the lines near the
-        few points it cannot rule out."""
+        """Whether another line's samples every ``step_m`` come closer to each point than
+        its limit (m): a lower bound from the coarse samples first, then the KD-trees of
+        the few lines near the points it cannot rule out."""
         closer = np.zeros(len(points), dtype=bool)
         if self._coarse_tree is None:
             return closer
-        coarse_distance = self._coarse_tree.query(points)[0]
-        for i in np.flatnonzero(coarse_distance - CLEARANCE_STEP_M / 2.0 < limits):
-            near = self._coarse_tree.query_ball_point(points[i], limits[i] + CLEARANCE_STEP_M / 2.0)
-            for slot in np.unique(self._coarse_owner[near]):
-                if closest_distances(points[i : i + 1], self._lines.vertices[int(slot)])[0][0] < limits[i]:
-                    closer[i] = True
-                    break
+        half = CLEARANCE_STEP_M / 2.0
+        open_ = np.flatnonzero(self._coarse_tree.query(points)[0] - half < limits)
+        if len(open_) == 0:
+            return closer
+        near = self._coarse_tree.query_ball_point(points[open_], limits[open_] + half)
+        for slot in np.unique(self._coarse_owner[np.concatenate([np.asarray(n, dtype=np.int64) for n in near])]):
+            distances = self._lines.tree(int(slot), self.step_m).query(points[open_])[0]
+            closer[open_] |= distances < limits[open_]
         return closer
 
-    def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
-        """Closest-point distances of ``points`` (world frame, m) to this border.
-
-        The nearest of every ``GUESS_STRIDE``-th sample (KD-tree) seeds both searches: the
-        resampled distance is the smallest to the samples around its arc length, the exact
-        one the smallest to the segments within one guess gap of it. Both equal a global
-        search wherever the border's radius of curvature exceeds the distance. Only points far
-        enough off the border to possibly be closer to another line (by the clearance of
-        the nearest checkpoint: distance to another line >= clearance - distance to the
-        checkpoint) are checked against the other lines.
-        """
-        _, guess = self._guess_tree.query(points)
-        guess_arc = self._guess_arc[guess]
-        first = np.searchsorted(self.sample_arc, guess_arc - self._sample_reach_m)
-        around = np.minimum(first[:, None] + np.arange(self._window), len(self.samples) - 1)
-        gaps = self.samples[around] - points[:, None, :]
-        sample_distances = np.hypot(gaps[..., 0], gaps[..., 1])
+    def _nearest_samples(
+        self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
+    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
+        """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
+        length ``seed_arc``, that sample's index, and whether it lies inside the window (a
+        minimum on the window's edge may continue outside it)."""
+        last = len(self.samples) - 1
+        width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
+        first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
+        around = np.minimum(first[:, None] + np.arange(width), last)
+        sample_distances = np.abs(self._complex_samples[around] - (points[:, 0] + 1j * points[:, 1])[:, None])
         closest = np.argmin(sample_distances, axis=1)
         rows = np.arange(len(points))
-        resampled = sample_distances[rows, closest]
-        other_closer = np.zeros(len(points), dtype=bool)
-        after = np.minimum(np.searchsorted(self._checkpoint_arc, guess_arc), len(self._clearance) - 1)
+        inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
+        return sample_distances[rows, closest], around[rows, closest], inside
+
+    def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
+        """Closest-point distances of ``points`` (world frame, m, in driving order) to this
+        border.
+
+        Every ``ANCHOR_STRIDE``-th point finds its nearest coarse sample (KD-tree over every
+        ``GUESS_STRIDE``-th sample); the arc lengths of the points between are interpolated
+        along the detection, and each point takes the nearest sample within
+        ``ANCHOR_REACH_M`` of that. Points whose nearest sample is on the window's edge or
+        that lie farther than ``REFINE_DISTANCE_M`` are searched again from their own
+        nearest coarse sample. The exact distance is the smallest to the segments within
+        two steps of the nearest sample. Both equal a global search wherever the border's
+        radius of curvature exceeds the distance. Only points far enough off the border to
+        possibly be closer to another line (by the clearance of the checkpoints around the
+        nearest sample) are checked against the other lines.
+        """
+        anchors = np.unique(np.append(np.arange(0, len(points), ANCHOR_STRIDE), len(points) - 1))
+        along = arc_lengths(points)
+        seed = np.interp(along, along[anchors], self._guess_arc[self._guess_tree.query(points[anchors])[1]])
+        resampled, sample, inside = self._nearest_samples(points, seed, ANCHOR_REACH_M)
+        redo = np.flatnonzero(~inside | (resampled > REFINE_DISTANCE_M))
+        if len(redo):
+            own_seed = self._guess_arc[self._guess_tree.query(points[redo])[1]]
+            resampled[redo], sample[redo], _ = self._nearest_samples(
+                points[redo], own_seed, (GUESS_STRIDE / 2.0 + 1.0) * self.step_m
+            )
+        arc = self.sample_arc[sample]
+        after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
         clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
-        slack = GUESS_STRIDE * self.step_m + CLEARANCE_SPACING_M
-        suspect = 2.0 * resampled > clearance + other_margin_m - slack
+        suspect = 2.0 * resampled > clearance + other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
+        other_closer = np.zeros(len(points), dtype=bool)
         if np.any(suspect):
             other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - other_margin_m)
         if exact:
-            exact_distance, arc = windowed_distances(points, self.vertices, guess_arc, GUESS_STRIDE * self.step_m)
+            exact_distance, arc = windowed_distances(points, self.vertices, arc, 2.0 * self.step_m)
             return BorderDistances(distances=exact_distance, arc_m=arc, other_closer=other_closer)
-        return BorderDistances(
-            distances=resampled, arc_m=self.sample_arc[around[rows, closest]], other_closer=other_closer
-        )
+        return BorderDistances(distances=resampled, arc_m=arc, other_closer=other_closer)
