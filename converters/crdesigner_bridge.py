@@ -39,12 +39,16 @@ class SourceLanelet:
         left, right: (N, 2) borders in the inertial frame (m), ordered in driving
             direction; ``left`` is on the left of a driver.
         types: CommonRoad lanelet type values, e.g. {"urban", "intersection"}.
+        left_marking, right_marking: CommonRoad line markings of the borders ("dashed",
+            "solid", "no_marking", "curb", ...; "unknown" when crdesigner has none).
     """
 
     id: int
     left: NDArrayFloat
     right: NDArrayFloat
     types: frozenset[str]
+    left_marking: str = "unknown"
+    right_marking: str = "unknown"
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -120,6 +124,8 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             left=np.asarray(lanelet.left_vertices, dtype=np.float64)[:, :2],
             right=np.asarray(lanelet.right_vertices, dtype=np.float64)[:, :2],
             types=frozenset(str(t.value) for t in lanelet.lanelet_type),
+            left_marking=str(lanelet.line_marking_left_vertices.value),
+            right_marking=str(lanelet.line_marking_right_vertices.value),
         )
         for lanelet in scenario.lanelet_network.lanelets
     ]

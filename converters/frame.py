@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Final
 if TYPE_CHECKING:
     import lanelet2.projection
 
-FORMAT_VERSION: Final[int] = 1
+FORMAT_VERSION: Final[int] = 2
 """Version of our OSM layout and frame convention; part of the cache key."""
 
 GENERATOR: Final[str] = f"cold-maps-converters/{FORMAT_VERSION}"

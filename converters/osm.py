@@ -45,6 +45,23 @@ _SUBTYPES: Final[tuple[tuple[str, str], ...]] = (
 )
 """CommonRoad lanelet type → Lanelet2 subtype, most specific first; default "road"."""
 
+_MARKINGS: Final[dict[str, dict[str, str]]] = {
+    "dashed": {"type": "line_thin", "subtype": "dashed"},
+    "dashed_dashed": {"type": "line_thin", "subtype": "dashed"},
+    "broad_dashed": {"type": "line_thick", "subtype": "dashed"},
+    "solid": {"type": "line_thin", "subtype": "solid"},
+    "broad_solid": {"type": "line_thick", "subtype": "solid"},
+    "solid_solid": {"type": "line_thin", "subtype": "solid_solid"},
+    "solid_dashed": {"type": "line_thin", "subtype": "solid_solid"},
+    "dashed_solid": {"type": "line_thin", "subtype": "solid_solid"},
+    "curb": {"type": "curbstone", "subtype": "high"},
+    "lowered_curb": {"type": "curbstone", "subtype": "low"},
+    "no_marking": {"type": "virtual"},
+}
+"""CommonRoad line marking → Lanelet2 way tags (lane changes follow from these under
+lanelet2's traffic rules). Mixed solid/dashed become solid_solid: CommonRoad does not
+say which side is which. "unknown" gets no tags (no lane change)."""
+
 TYPES_TAG: Final[str] = "commonroad:types"
 """Lanelet tag listing the CommonRoad lanelet types (comma-separated, sorted)."""
 
@@ -93,7 +110,14 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
     leftness = np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
     if leftness >= 0.0:
         return lanelet
-    return SourceLanelet(id=lanelet.id, left=lanelet.right, right=lanelet.left, types=lanelet.types)
+    return SourceLanelet(
+        id=lanelet.id,
+        left=lanelet.right,
+        right=lanelet.left,
+        types=lanelet.types,
+        left_marking=lanelet.right_marking,
+        right_marking=lanelet.left_marking,
+    )
 
 
 def simplify(points: NDArrayFloat, tolerance: float) -> npt.NDArray[np.bool_]:
@@ -143,10 +167,14 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     starts = np.cumsum([0] + [len(border) for border in borders])
     ways: dict[tuple[int, ...], int] = {}
     way_points: list[NDArrayInt] = []
+    way_tags: list[dict[str, str]] = []
     members: list[tuple[int, int]] = []
     for index, lanelet in enumerate(lanelets):
         pair = []
-        for side, position in (("left", 2 * index), ("right", 2 * index + 1)):
+        for side, position, marking in (
+            ("left", 2 * index, lanelet.left_marking),
+            ("right", 2 * index + 1, lanelet.right_marking),
+        ):
             points = _without_repeats(point_index[starts[position] : starts[position + 1]])
             if len(points) < 2:
                 raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {MERGE_TOLERANCE_M} m")
@@ -155,6 +183,9 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
                 way = ways[points] = len(way_points)
                 chain = np.asarray(points)
                 way_points.append(chain[simplify(coordinates[chain], SIMPLIFY_TOLERANCE_M)])
+                way_tags.append({})
+            if not way_tags[way]:
+                way_tags[way] = _MARKINGS.get(marking, {})
             pair.append(way)
         members.append((pair[0], pair[1]))
     used = np.unique(np.concatenate(way_points))
@@ -175,6 +206,8 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
         element = etree.SubElement(root, "way", id=str(way_id_base + way))
         for point in chain:
             etree.SubElement(element, "nd", ref=str(node_id[point]))
+        for key, value in way_tags[way].items():
+            etree.SubElement(element, "tag", k=key, v=value)
     for lanelet, (left, right) in zip(lanelets, members):
         element = etree.SubElement(root, "relation", id=str(lanelet.id))
         etree.SubElement(element, "member", type="way", role="left", ref=str(way_id_base + left))

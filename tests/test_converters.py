@@ -450,3 +450,21 @@ def test_check_subcommand_exit_codes(straight_map, tmp_path, monkeypatch, capsys
     assert "ground truth: TRUSTWORTHY (0 of 6 lanes" in capsys.readouterr().out
     assert run_check(parser.parse_args([str(straight_map), "--threshold", "1e-6"])) == 3
     assert "NOT TRUSTWORTHY" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("road_mark", "subtype", "lane_change"), [("broken", "dashed", True), ("solid", "solid", False)])
+def test_road_marks_become_way_tags_that_govern_lane_changes(tmp_path, road_mark, subtype, lane_change) -> None:
+    """Lane -1's roadMark is on its outer border, the one it shares with lane -2."""
+    width = '<lane id="-1" type="driving" level="false"><link/><width sOffset="0" a="3.5" b="0" c="0" d="0"/>'
+    mark = f'<roadMark sOffset="0" type="{road_mark}" weight="standard" color="standard" width="0.12"/>'
+    path = tmp_path / "marked.xodr"
+    path.write_text(synthetic_xodr().replace(width, width + mark))
+    lanelet_map, graph = converters.load_lanelet2(path, cache=False)
+    shared = [ll for ll in lanelet_map.laneletLayer if ll.rightBound.attributes.get("subtype") == subtype]
+    assert len(shared) == 2  # lane -1 of both roads
+    for lanelet in shared:
+        assert lanelet.rightBound.attributes["type"] == "line_thin"
+        neighbour = graph.right(lanelet)
+        assert (neighbour is not None) == lane_change
+        if lane_change:
+            assert neighbour.leftBound.id == lanelet.rightBound.id
