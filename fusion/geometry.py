@@ -47,7 +47,7 @@ def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArra
     examined, which is exact for polylines sampled finer than their curvature radius.
     """
     rel = polyline - point
-    k = int(np.einsum("ij,ij->i", rel, rel).argmin())
+    k = int(np.hypot(rel[:, 0], rel[:, 1]).argmin())
     px, py = float(point[0]), float(point[1])
     best = (math.inf, 0.0, 0)
     for i in (k - 1, k):
@@ -132,40 +132,48 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         windows[e, :m] = points[:-m - 1:-1] if end else points[:m]
     n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
-    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.einsum("ekd,ekd->", d2, d2)) / (12.0 * n_ends * max(1, n_noise - 2))))
+    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2)) / (12.0 * n_ends * max(1, n_noise - 2))))
     direction = np.array(chords)
     rel = windows - windows[:, :1]
-    x = np.einsum("ekd,ed->ek", rel, direction)
-    y = np.einsum("ekd,ed->ek", rel, direction[:, ::-1] * (-1.0, 1.0))
+    x = (rel @ direction[:, :, None])[:, :, 0]
+    y = (rel @ (direction[:, ::-1] * (-1.0, 1.0))[:, :, None])[:, :, 0]
     x2 = x * x
     sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=2)
     idx = np.array(counts) - 1
-    s1, s2, s3, s4, t0, t1, t2 = sums[:, np.arange(n_ends)[:, None], idx]
-    k = idx + 1.0
-    m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
-    det = k * m0 - s1 * m1 + s2 * m2
-    ok = (k >= 4.0) & (np.abs(det) > 1e-12 * np.maximum(1.0, s4 * s4))
-    det = np.where(ok, det, 1.0)
-    a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
-    b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
-    c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
-    half = _CI_FACTOR * sigma * np.sqrt(np.abs((k * s4 - s2 * s2) / det))
-    valid = (np.maximum.accumulate(b - half, axis=1) <= np.minimum.accumulate(b + half, axis=1)) & ok
-    c_sigma = sigma * np.sqrt(np.abs((k[:, 0] * s2[:, 0] - s1[:, 0] * s1[:, 0]) / det[:, 0]))
+    sums = sums[:, np.arange(n_ends)[:, None], idx].tolist()
     fits = []
     for e in range(n_ends):
         cx, cy = chords[e]
-        row = valid[e].tolist()
-        if not row[0]:
-            fits.append(EndFit(origins[e], (cx, cy), 0.0, math.inf))
+        fallback = EndFit(origins[e], (cx, cy), 0.0, math.inf)
+        chosen: tuple[float, float] | None = None
+        curvature = curvature_sigma = 0.0
+        lo, hi = -math.inf, math.inf
+        for w in range(len(windows_m)):
+            k = float(counts[e][w])
+            s1, s2, s3, s4, t0, t1, t2 = (row[e][w] for row in sums)
+            m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
+            det = k * m0 - s1 * m1 + s2 * m2
+            if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
+                break
+            b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
+            half = _CI_FACTOR * sigma * math.sqrt(abs((k * s4 - s2 * s2) / det))
+            lo, hi = max(lo, b - half), min(hi, b + half)
+            if lo > hi:
+                break
+            a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+            chosen = (a, b)
+            if w == 0:
+                c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
+                scale = 2.0 / math.hypot(1.0, b) ** 3
+                curvature = scale * c
+                curvature_sigma = scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
+        if chosen is None:
+            fits.append(fallback)
             continue
-        j = row.index(False) - 1 if False in row else len(row) - 1
-        slope, b0 = float(b[e, j]), float(b[e, 0])
+        offset, slope = chosen
         norm = math.hypot(1.0, slope)
-        scale = 2.0 / math.hypot(1.0, b0) ** 3
-        point = origins[e] + float(a[e, j]) * np.array((-cy, cx))
-        fits.append(EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm),
-                           scale * float(c[e, 0]), scale * float(c_sigma[e])))
+        point = origins[e] + offset * np.array((-cy, cx))
+        fits.append(EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm), curvature, curvature_sigma))
     return fits
 
 

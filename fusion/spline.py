@@ -47,10 +47,10 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         return [np.empty((0, 2)) for _ in pieces]
     coeffs = np.array(flat)
     n_pieces = coeffs.shape[0]
-    grid = np.einsum("gk,pkd->pgd", _TAU_POWERS, coeffs)
+    grid = _TAU_POWERS @ coeffs
     step = grid[:, 1:] - grid[:, :-1]
     s = np.zeros((n_pieces, _GRID + 1))
-    np.cumsum(np.sqrt(np.einsum("pgd,pgd->pg", step, step)), axis=1, out=s[:, 1:])
+    np.cumsum(np.hypot(step[:, :, 0], step[:, :, 1]), axis=1, out=s[:, 1:])
     lengths = s[:, -1].tolist()
     starts, total = [], 0.0
     for length in lengths:
@@ -70,7 +70,7 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         return [np.empty((0, 2)) for _ in pieces]
     q = np.interp(np.concatenate(targets), s.ravel(), (np.arange(n_pieces)[:, None] + _TAU).ravel())
     index = np.minimum(q.astype(np.intp), n_pieces - 1)
-    points = np.einsum("kj,kjd->kd", np.power.outer(q - index, _POWERS), coeffs[index])
+    points = (np.power.outer(q - index, _POWERS)[:, None, :] @ coeffs[index])[:, 0]
     return np.split(points, np.cumsum(counts)[:-1])
 
 
