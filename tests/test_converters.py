@@ -460,7 +460,7 @@ def test_road_marks_become_way_tags_that_govern_lane_changes(tmp_path, road_mark
     path = tmp_path / "marked.xodr"
     path.write_text(synthetic_xodr().replace(width, width + mark))
     lanelet_map, graph = converters.load_lanelet2(path, cache=False)
-    shared = [ll for ll in lanelet_map.laneletLayer if ll.rightBound.attributes.get("subtype") == subtype]
+    shared = [ll for ll in lanelet_map.laneletLayer if dict(ll.rightBound.attributes).get("subtype") == subtype]
     assert len(shared) == 2  # lane -1 of both roads
     for lanelet in shared:
         assert lanelet.rightBound.attributes["type"] == "line_thin"
