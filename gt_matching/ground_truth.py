@@ -28,7 +28,7 @@ from gt_matching.polyline import (
     mid_line,
     resample,
 )
-from gt_matching.route import RouteBorder
+from gt_matching.route import CLEARANCE_STEP_M, RouteBorder
 
 #: More candidate lanelet sequences than this for one detection is an error.
 MAX_SEQUENCES: Final = 4096
@@ -122,8 +122,11 @@ def _ids(lanelets: Sequence[LaneletGeometry]) -> tuple[int, ...]:
 
 
 class GroundTruth:
-    """A Lanelet2 map prepared for matching detections: lanelet geometry, every border
-    resampled into a KD-tree, and assembled routes, all built once and reused per frame.
+    """A Lanelet2 map prepared for matching detections: built once, reused per frame.
+
+    Construction extracts every lanelet's geometry and border samples and every line
+    string's samples and KD-tree; lanelet sequences matched by frames are assembled on
+    first use and kept (LRU, ``ROUTE_CACHE_SIZE``).
 
     The map must not change after construction.
     """
@@ -150,6 +153,13 @@ class GroundTruth:
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
         self._border_samples: dict[tuple[LaneletKey, str], NDArrayFloat] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
+        for lanelet in lanelet_map.laneletLayer:
+            geometry = self._lanelet(lanelet)
+            self._samples(geometry, "left")
+            self._samples(geometry, "right")
+        for slot in range(len(self.lines.vertices)):
+            self.lines.samples(slot, CLEARANCE_STEP_M)
+            self.lines.tree(slot, self.config.step_m)
 
     def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:
         """Ground truth of a detected lane given its borders (``(N, 2)``, world frame,

@@ -75,7 +75,8 @@ class RouteBorder:
             [offset + np.minimum(np.arange(len(samples)) * step_m, arc_lengths(vertices)[-1])
              for offset, (vertices, samples) in zip(offsets, parts)]
         )
-        guess = np.unique(np.append(np.arange(0, len(self.samples), GUESS_STRIDE), len(self.samples) - 1))
+        guess = np.arange(0, len(self.samples) + GUESS_STRIDE - 1, GUESS_STRIDE)
+        guess[-1] = len(self.samples) - 1
         self._guess_arc = self.sample_arc[guess]
         self._guess_tree = cKDTree(self.samples[guess])
         self._complex_samples = self.samples[:, 0] + 1j * self.samples[:, 1]
@@ -146,7 +147,8 @@ class RouteBorder:
         possibly be closer to another line (by the clearance of the checkpoints around the
         nearest sample) are checked against the other lines.
         """
-        anchors = np.unique(np.append(np.arange(0, len(points), ANCHOR_STRIDE), len(points) - 1))
+        anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
+        anchors[-1] = len(points) - 1
         along = arc_lengths(points)
         seed = np.interp(along, along[anchors], self._guess_arc[self._guess_tree.query(points[anchors])[1]])
         resampled, sample, inside = self._nearest_samples(points, seed, ANCHOR_REACH_M)
