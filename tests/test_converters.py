@@ -359,19 +359,43 @@ def test_importing_converters_does_not_import_crdesigner_or_lanelet2() -> None:
 
 @pytest.fixture(scope="session")
 def town01_checked(town01_path: Path, tmp_path_factory: pytest.TempPathFactory):
-    """Town01 converted once into a session cache, and its cross-check report."""
+    """Town01 converted once (its CommonRoad lanelets kept, the OSM stored in a session
+    cache), the cross-check report and the loaded map from that cache."""
     from cold_maps.gt_check import check_map
+    from converters.crdesigner_bridge import odr_to_lanelets
+    from converters.osm import build_osm
 
     cache = tmp_path_factory.mktemp("cache")
+    lanelets, geo_reference = odr_to_lanelets(town01_path)
+    target = cache_path(town01_path.read_bytes(), crdesigner_version(), cache)
+    atomic_write(target, build_osm(lanelets, geo_reference=geo_reference, source=str(town01_path)))
     report = check_map(town01_path, cache_dir=cache)
     lanelet_map, graph = converters.load_lanelet2(town01_path, cache_dir=cache)
-    return report, lanelet_map, graph
+    return report, lanelet_map, graph, lanelets
+
+
+def test_town01_lanelet2_borders_are_the_commonroad_vertices(town01_checked) -> None:
+    """Every CommonRoad vertex lies on its lanelet's border within the merge + thinning
+    tolerances, and every non-sidewalk lanelet keeps its driving direction."""
+    from converters.osm import SIMPLIFY_TOLERANCE_M
+    from gt_matching.polyline import closest_distances
+
+    _, lanelet_map, _, lanelets = town01_checked
+    worst = 0.0
+    for source in lanelets:
+        lanelet = lanelet_map.laneletLayer[source.id]
+        for vertices, border in ((source.left, lanelet.leftBound), (source.right, lanelet.rightBound)):
+            converted = xy(border)
+            worst = max(worst, float(closest_distances(vertices, converted)[0].max()))
+            if "sidewalk" not in source.types:
+                assert np.linalg.norm(converted[0] - vertices[0]) <= MERGE_TOLERANCE_M
+    assert worst <= MERGE_TOLERANCE_M + SIMPLIFY_TOLERANCE_M
 
 
 def test_town01_ground_truth_agrees_with_our_sampling(town01_checked) -> None:
     from cold_maps.gt_check import format_report
 
-    report, lanelet_map, _ = town01_checked
+    report, lanelet_map, _, _ = town01_checked
     assert report.lanes and report.trustworthy and report.exit_code == 0
     assert len({lane.lanelet_id for lane in report.lanes}) > 0.9 * len(report.lanes)
     medians = np.array([lane.median_m for lane in report.lanes])
@@ -381,7 +405,7 @@ def test_town01_ground_truth_agrees_with_our_sampling(town01_checked) -> None:
 
 
 def test_town01_routes_between_any_two_road_lanelets(town01_checked) -> None:
-    _, lanelet_map, graph = town01_checked
+    _, lanelet_map, graph, _ = town01_checked
     roads = sorted((ll for ll in lanelet_map.laneletLayer if ll.attributes["subtype"] == "road"), key=lambda ll: ll.id)
     assert all(graph.following(ll) and graph.previous(ll) for ll in roads)
     rng = np.random.default_rng(7)
@@ -468,3 +492,18 @@ def test_road_marks_become_way_tags_that_govern_lane_changes(tmp_path, road_mark
         assert (neighbour is not None) == lane_change
         if lane_change:
             assert neighbour.leftBound.id == lanelet.rightBound.id
+
+
+def test_crdesigner_warnings_are_silenced_unless_verbose(tmp_path) -> None:
+    import logging
+    import warnings
+
+    path = tmp_path / "geoid.xodr"
+    path.write_text(synthetic_xodr("+proj=tmerc +lat_0=0 +lon_0=0 +geoidgrids=egm96_15.gtx +units=m"))
+    before = logging.root.manager.disable
+    for verbose, expected in ((False, 0), (True, 1)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            converters.load_lanelet2(path, cache=False, verbose=verbose)
+        assert min(sum("geoidgrids" in str(w.message) for w in caught), 1) == expected
+        assert logging.root.manager.disable == before
