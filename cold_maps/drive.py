@@ -45,7 +45,6 @@ MAX_BRANCHES: Final[int] = 2
 """Branch (turning) tracks built per drive at most."""
 
 Role = Literal["ego", "coop", "turn", "adjacent", "opposite", "behind"]
-ROLES: Final[tuple[str, ...]] = ("ego", "coop", "turn", "adjacent", "opposite", "behind")
 
 
 class DriveError(ValueError):
@@ -218,7 +217,8 @@ class Drive:
 
 
 def required_route_length(frames: int, leads_m: Sequence[float], *, behind_m: float = 0.0,
-                          speed_mps: float = DEFAULT_SPEED_MPS, rate_hz: float = FRAME_RATE_HZ, sensor_range_m: float = SENSOR_RANGE_M) -> float:
+                          speed_mps: float = DEFAULT_SPEED_MPS, rate_hz: float = FRAME_RATE_HZ,
+                          sensor_range_m: float = SENSOR_RANGE_M) -> float:
     """Route length (m) an ego needs for ``frames`` frames with vehicles ``leads_m`` ahead
     and room for one ``behind_m`` behind it."""
     if frames < 1:
@@ -233,7 +233,8 @@ def _map_name(graph: LaneGraph) -> str:
     return str(graph.odr_map.path or "<map>")
 
 
-def covering_routes(graph: LaneGraph, count: int, length_m: float, rng: np.random.Generator) -> list[tuple[LaneKey, ...]]:
+def covering_routes(graph: LaneGraph, count: int, length_m: float,
+                    rng: np.random.Generator) -> list[tuple[LaneKey, ...]]:
     """``count`` random routes of at least ``length_m``, each starting, where it can, on a
     lane no earlier route covers, so the routes spread over the map's driving lanes.
 
@@ -261,7 +262,8 @@ def covering_routes(graph: LaneGraph, count: int, length_m: float, rng: np.rando
     return routes
 
 
-def route_from_start(graph: LaneGraph, start: LaneKey, length_m: float, rng: np.random.Generator) -> tuple[LaneKey, ...]:
+def route_from_start(graph: LaneGraph, start: LaneKey, length_m: float,
+                     rng: np.random.Generator) -> tuple[LaneKey, ...]:
     """A random route of at least ``length_m`` from ``start``; DriveError when none exists."""
     lanes = random_route(graph, length_m, rng, start=start)
     if lanes is None:

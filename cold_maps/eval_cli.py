@@ -15,10 +15,13 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Final, Sequence
+from typing import Callable, Final, Sequence
 
 from cold_maps.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
-from cold_maps.evaluation import INTERPOLATIONS, MapPlan, scenarios_for
+from cold_maps.evaluation import INTERPOLATIONS, Collector, MapPlan, scenarios_for
+from cold_maps.report import ScenarioResult
+
+SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
 PROG: Final[str] = "cold-eval"
 DEFAULT_OUT: Final[str] = "out/cold-eval"
@@ -76,13 +79,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _interpolations(args: argparse.Namespace) -> tuple[str, ...]:
+    return INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+
+
 def _plans(args: argparse.Namespace) -> list[MapPlan]:
     from cold_maps.sensor_errors import SensorErrorModel
 
     errors = SensorErrorModel(**{name: getattr(args, name) for name in (
         "lateral_offset_m", "noise_sigma_m", "heading_bias_rad", "range_jitter_sigma_m", "drop_probability",
         "pose_sigma_xy_m", "pose_sigma_yaw_rad")})
-    interpolations = INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+    interpolations = _interpolations(args)
     if args.paper:
         from dataclasses import replace
 
@@ -99,10 +106,12 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
             for path in args.map]
 
 
-def _sections(paper: bool, interpolations: Sequence[str]):  # noqa: ANN202 - the summary-section callback
+def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
+    """The extra summary sections: Table II per interpolation and the longest gap for
+    ``--paper``, the runtime table (Table I) always."""
     from cold_maps.paper import gap_limit_markdown, runtime_markdown, table_ii_markdown
 
-    def sections(collector, results):  # noqa: ANN001, ANN202
+    def sections(collector: Collector, results: list[ScenarioResult]) -> list[tuple[str, str]]:
         found = []
         if paper:
             found += [(f"Table II vs the paper, `{name}` interpolation", table_ii_markdown(results, name))
@@ -125,8 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
                              run_params={k: str(v) for k, v in sorted(vars(args).items())})
-        interpolations = INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
-        run = run_evaluation(plans, options, extra_sections=_sections(args.paper, interpolations))
+        run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted before the run started; nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -15,7 +15,7 @@ import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, Mapping, Sequence, TextIO
+from typing import Any, Callable, Final, Mapping, Sequence, TextIO
 
 from cold_maps.evaluation import Collector, MapEvaluator, MapPlan
 from cold_maps.progress import ProgressBar
@@ -137,7 +137,8 @@ class RunResult:
 
 
 def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
-                   extra_sections: Any = None) -> RunResult:
+                   extra_sections: Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]] | None = None,
+                   ) -> RunResult:
     """Prepares every map (routes, ground truth), then evaluates them all into one MCAP and
     one report. ``extra_sections(collector, results)`` returns more (title, markdown)
     summary sections. Bad input raises before any output file is opened; an exception

@@ -54,6 +54,11 @@ INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
 TREE_CACHE_SIZE: Final[int] = 64
 DISPLAY_STEP_M: Final[float] = 0.5
 """Spacing (m) of the GT and fused polylines drawn in the MCAP (raw detections stay exact)."""
+OVERLAY_MARGIN_M: Final[float] = 10.0
+"""The overlay plot shows the GT this far (m) around the detections and the fused lane."""
+DETECTION_DECIMALS: Final[int] = 6
+"""Detected border points are rounded to 1 µm (the sensor's resolution): the recorded
+``cold.LaneDetection`` JSON is then short and exactly what was fused."""
 RELATION_MARGIN_M: Final[float] = 5.0
 """Slack (m) on the longest lane distance at which a coop counts as ahead of the ego."""
 
@@ -293,14 +298,15 @@ class Sensed:
 
 def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
           stamp_s: float = 0.0) -> Sensed:
-    """The detection of a vehicle: the sensor on its track, then the error models; the
-    ego's pose carries no localisation error (it is the reference)."""
+    """The detection of a vehicle: the sensor on its track, then the error models, points
+    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference)."""
     raw = sensor.detect(state.track.strip, state.station)
     if raw is None:
         return Sensed(state, None)
     borders = errors.apply(raw.left, raw.right, rng)
     if borders is None:
         return Sensed(state, None)
+    borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name))
@@ -407,7 +413,7 @@ class MapEvaluator:
                     continue
                 fused = self._pair(collector, scenario, ego, other, index, stamp, metrics)
                 if fused is not None:
-                    fused_lines.update({f"{scenario.label}-{side}": line for side, line in zip(("left", "right"), fused)})
+                    fused_lines[f"{scenario.label}-left"], fused_lines[f"{scenario.label}-right"] = fused
         if recorder is not None:
             for name, item in sensed.items():
                 if item.detection is not None:
@@ -478,7 +484,8 @@ class MapEvaluator:
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime)
             return None
-        measured = self._measure(result.left, result.right, _pose(ego.detection), self.true_lane(ego.state, other.state))
+        measured = self._measure(result.left, result.right, _pose(ego.detection),
+                                 self.true_lane(ego.state, other.state))
         if isinstance(measured, str):
             reject(measured, True, runtime)
             return None
@@ -518,8 +525,17 @@ class MapEvaluator:
         label = (self.plan.name, scenario.label)
         kept = collector.overlays.get(label)
         if kept is None or worst > kept.max_error_m:
-            collector.overlays[label] = Overlay(index, worst, {"left": measured.left_gt, "right": measured.right_gt},
-                                                detections, fused)
+            shown = np.vstack([*fused.values(), *(b for pair in detections.values() for b in pair)])
+            low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
+            gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
+            collector.overlays[label] = Overlay(index, worst, gt, detections, fused)
+
+
+def _crop(line: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat) -> NDArrayFloat:
+    """The stretch of ``line`` from its first to its last point inside the box [low, high],
+    plus one point on either side."""
+    inside = np.flatnonzero(np.all((line >= low) & (line <= high), axis=1))
+    return line if inside.size < 2 else line[max(inside[0] - 1, 0): inside[-1] + 2]
 
 
 def _for_display(lines: dict[str, NDArrayFloat]) -> dict[str, NDArrayFloat]:

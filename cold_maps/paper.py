@@ -42,7 +42,8 @@ def paper_speed(route_length_m: float, gaps_m: Sequence[float], frames: int) -> 
     farthest coop (r_lane + d_s) and its detection ahead of the last ego frame."""
     usable = route_length_m - (SENSOR_RANGE_M + max(gaps_m)) - SENSOR_RANGE_M - ROUTE_MARGIN_M
     if usable <= 0 or frames < 2:
-        raise ValueError(f"route of {route_length_m:.0f} m leaves no room for {frames} frames with d_s = {max(gaps_m)} m")
+        raise ValueError(f"route of {route_length_m:.0f} m leaves no room for {frames} frames "
+                         f"with d_s = {max(gaps_m)} m")
     return usable / (frames - 1) * FRAME_RATE_HZ
 
 

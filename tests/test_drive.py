@@ -82,7 +82,8 @@ def test_distractors_stand_beside_the_lane_ahead(straight_drive):
 
 def test_lane_relation_separates_coops_from_distractors(straight, straight_drive):
     states = straight_drive.states(5)
-    truth = {name: lane_relation(straight, states["ego"], state, 85.0) for name, state in states.items() if name != "ego"}
+    truth = {name: lane_relation(straight, states["ego"], state, 85.0)
+             for name, state in states.items() if name != "ego"}
     assert truth == {"coop25": True, "coop60": True, "behind60": False, "adjacent60": False, "opposite60": False}
     assert not lane_relation(straight, states["ego"], states["coop60"], 59.0)  # farther than allowed
 

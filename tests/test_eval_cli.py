@@ -75,7 +75,8 @@ def test_paper_figures(tmp_path):
     for interpolation in ("paper", "hermite"):
         for d_s, reach in ((30.0, 90.0), (50.0, 110.0)):
             assert worst("straight", "spline", interpolation, d_s) <= 0.05
-            assert worst("straight", "spline", interpolation, d_s, "perception_range_m") == pytest.approx(reach, abs=0.5)
+            reached = worst("straight", "spline", interpolation, d_s, "perception_range_m")
+            assert reached == pytest.approx(reach, abs=0.5)
     for map_name in ("straight", "curve90", "rural"):
         # convoy fusion keeps the local error; local range 30 m, convoy 55 m
         assert worst(map_name, "convoy", "", 0.0) == pytest.approx(worst(map_name, "local", "", 0.0), abs=0.002)

@@ -12,7 +12,6 @@ import fusion
 from cold_maps.drive import build_drive
 from cold_maps.evaluation import (
     Collector,
-    GroundTruthMeter,
     MapEvaluator,
     MapPlan,
     Scenario,
