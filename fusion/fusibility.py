@@ -27,7 +27,7 @@ _ARC_TOLERANCE_LANES = 0.75
 
 @dataclass(frozen=True)
 class LaneEnds:
-    """Where the ego detection ends and the coop detection starts (world frame).
+    """Where the ego detection ends and the coop detection starts (one common frame).
 
     Fields: ``p_end``/``p_start`` centre points [m]; ``t_end``/``t_start`` unit tangents
     (driving direction); ``width_m`` ego lane width at its end [m]; ``gap_m`` signed
@@ -35,8 +35,8 @@ class LaneEnds:
     ahead of the ego end along ``t_end``).
     """
 
-    p_end: NDArrayFloat
-    p_start: NDArrayFloat
+    p_end: tuple[float, float]
+    p_start: tuple[float, float]
     t_end: tuple[float, float]
     t_start: tuple[float, float]
     width_m: float
@@ -51,17 +51,19 @@ def _mean_direction(a: tuple[float, float], b: tuple[float, float]) -> tuple[flo
 
 def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArrayFloat,
               coop_right: NDArrayFloat) -> LaneEnds:
-    """Centre-line end of the ego lane and start of the coop lane, in the world frame."""
-    p_end = 0.5 * (ego_left[-1] + ego_right[-1])
-    p_start = 0.5 * (coop_left[0] + coop_right[0])
+    """Centre-line end of the ego lane and start of the coop lane, in the borders' frame."""
+    (lx, ly), (rx, ry) = ego_left[-1].tolist(), ego_right[-1].tolist()
+    (clx, cly), (crx, cry) = coop_left[0].tolist(), coop_right[0].tolist()
+    p_end = (0.5 * (lx + rx), 0.5 * (ly + ry))
+    p_start = (0.5 * (clx + crx), 0.5 * (cly + cry))
     t_end = _mean_direction(end_direction(ego_left, True, _CHORD_WINDOW_M),
                             end_direction(ego_right, True, _CHORD_WINDOW_M))
     t_start = _mean_direction(end_direction(coop_left, False, _CHORD_WINDOW_M),
                               end_direction(coop_right, False, _CHORD_WINDOW_M))
-    d = p_start - p_end
-    length = math.hypot(d[0], d[1])
-    along = d[0] * t_end[0] + d[1] * t_end[1]
-    width = math.hypot(*(ego_left[-1] - ego_right[-1]))
+    dx, dy = p_start[0] - p_end[0], p_start[1] - p_end[1]
+    length = math.hypot(dx, dy)
+    along = dx * t_end[0] + dy * t_end[1]
+    width = math.hypot(lx - rx, ly - ry)
     return LaneEnds(p_end, p_start, t_end, t_start, width, length if along > _MIN_GAP_M else -length)
 
 
@@ -137,7 +139,7 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     turn = math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
     if abs(turn) > math.pi / 2 + params.t_psi_rad:
         return f"coop lane heading differs by {math.degrees(turn):.1f} deg (more than 90 deg + t_psi): not the same direction"
-    d = ends.p_start - ends.p_end
+    d = (ends.p_start[0] - ends.p_end[0], ends.p_start[1] - ends.p_end[1])
     phi = math.atan2(t0[0] * d[1] - t0[1] * d[0], t0[0] * d[0] + t0[1] * d[1])
     lo, hi = min(0.0, turn), max(0.0, turn)
     outside = max(lo - phi, phi - hi, 0.0)
@@ -173,7 +175,7 @@ def _curvature_range(a: EndFit, b: EndFit) -> tuple[float, float] | None:
     return kappa - spread, kappa + spread
 
 
-def _arc_line_mismatch(p_from: NDArrayFloat, psi_from: float, p_to: NDArrayFloat, psi_to: float,
+def _arc_line_mismatch(p_from: tuple[float, float], psi_from: float, p_to: tuple[float, float], psi_to: float,
                        turn: float, kappas: tuple[float, float]) -> float:
     """Smallest lateral offset of ``p_to`` from the line (heading ``psi_to``) reached by an arc
     leaving ``p_from`` at ``psi_from`` with a curvature in ``kappas`` turning by ``turn``."""

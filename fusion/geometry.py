@@ -140,7 +140,7 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     x2 = x * x
     sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=2)
     idx = np.array(counts) - 1
-    sums = sums[:, np.arange(n_ends)[:, None], idx].tolist()
+    cells = sums[:, np.arange(n_ends)[:, None], idx].transpose(1, 2, 0).tolist()
     fits = []
     for e in range(n_ends):
         cx, cy = chords[e]
@@ -150,7 +150,7 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         lo, hi = -math.inf, math.inf
         for w in range(len(windows_m)):
             k = float(counts[e][w])
-            s1, s2, s3, s4, t0, t1, t2 = (row[e][w] for row in sums)
+            s1, s2, s3, s4, t0, t1, t2 = cells[e][w]
             m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
             det = k * m0 - s1 * m1 + s2 * m2
             if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):

@@ -25,12 +25,21 @@ _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
 _TAU_POWERS: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4))
 _POWERS: Final[NDArrayFloat] = np.arange(4.0)
+_PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
 
 Piece = list[list[float]]  # power-basis coefficients [[a_x, a_y], [b_x, b_y], [c_x, c_y], [d_x, d_y]], τ ∈ [0, 1]
 
 
 def _cross(ax: float, ay: float, bx: float, by: float) -> float:
     return ax * by - ay * bx
+
+
+def _parameter_grid(n_pieces: int) -> NDArrayFloat:
+    """Global parameter (piece index + τ) of the sampling grid of ``n_pieces`` pieces."""
+    grid = _PARAMETER_GRIDS.get(n_pieces)
+    if grid is None:
+        grid = _PARAMETER_GRIDS[n_pieces] = (np.arange(n_pieces)[:, None] + _TAU).ravel()
+    return grid
 
 
 def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[NDArrayFloat]:
@@ -57,21 +66,30 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         starts.append(total)
         total += length
     s += np.array(starts)[:, None]
-    targets, counts, first = [], [], 0
+    steps, first_target, counts, first = [], [], [], 0
     for chain in pieces:
-        start = starts[first] if chain else 0.0
         length = sum(lengths[first:first + len(chain)])
-        first += len(chain)
         n_steps = math.ceil(length / spacing_m * (1.0 + 1e-3)) if length > 0.0 else 0
         counts.append(max(0, n_steps - 1))
-        if n_steps > 1:
-            targets.append(start + (length / n_steps) * np.arange(1, n_steps))
-    if not targets:
+        steps.append(length / n_steps if n_steps else 0.0)
+        first_target.append(starts[first] if chain else 0.0)
+        first += len(chain)
+    n_total = sum(counts)
+    if n_total == 0:
         return [np.empty((0, 2)) for _ in pieces]
-    q = np.interp(np.concatenate(targets), s.ravel(), (np.arange(n_pieces)[:, None] + _TAU).ravel())
+    k = np.arange(1.0, n_total + 1.0)
+    offset = 0
+    for count, start, step_m in zip(counts, first_target, steps):
+        k[offset:offset + count] = start + step_m * (k[offset:offset + count] - offset)
+        offset += count
+    q = np.interp(k, s.ravel(), _parameter_grid(n_pieces))
     index = np.minimum(q.astype(np.intp), n_pieces - 1)
     points = (np.power.outer(q - index, _POWERS)[:, None, :] @ coeffs[index])[:, 0]
-    return np.split(points, np.cumsum(counts)[:-1])
+    out, offset = [], 0
+    for count in counts:
+        out.append(points[offset:offset + count])
+        offset += count
+    return out
 
 
 def estimate_apex(p_end: tuple[float, float], d_end: tuple[float, float], p_start: tuple[float, float],
