@@ -34,12 +34,14 @@ def _convert_bytes(xodr: Path, verbose: bool) -> bytes:
     return build_osm(lanelets, geo_reference=geo_reference, source=str(xodr))
 
 
-def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool) -> Path:
-    """The cache file of ``xodr``, converting and storing it first on a miss."""
+def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool) -> tuple[Path, bool]:
+    """The cache file of ``xodr`` and whether it was there already (else it is converted
+    and stored first)."""
     target = cache_path(_read(xodr), crdesigner_version(), cache_dir)
-    if not target.is_file():
-        atomic_write(target, _convert_bytes(xodr, verbose))
-    return target
+    if target.is_file():
+        return target, True
+    atomic_write(target, _convert_bytes(xodr, verbose))
+    return target, False
 
 
 def convert(
@@ -57,7 +59,7 @@ def convert(
     """
     xodr, out = Path(xodr_path), Path(osm_path)
     if cache:
-        data = _read(_cached_osm(xodr, cache_dir, verbose))
+        data = _read(_cached_osm(xodr, cache_dir, verbose)[0])
     else:
         data = _convert_bytes(xodr, verbose)
     atomic_write(out, data)
@@ -91,7 +93,14 @@ def load_lanelet2(
     if suffix != ".xodr":
         raise ConversionError(str(source), f"unknown map type {suffix or '(no suffix)'!r}: expected .xodr or .osm")
     if cache:
-        return _load_osm(_cached_osm(source, cache_dir, verbose), source=source)
+        cached, hit = _cached_osm(source, cache_dir, verbose)
+        try:
+            return _load_osm(cached, source=source)
+        except ConversionError:
+            if not hit:
+                raise
+        cached.unlink(missing_ok=True)  # a damaged cache entry: convert again
+        return _load_osm(_cached_osm(source, cache_dir, verbose)[0], source=source)
     with tempfile.TemporaryDirectory(prefix="cold-maps-") as folder:
         osm = Path(folder) / "map.osm"
         osm.write_bytes(_convert_bytes(source, verbose))

@@ -280,6 +280,16 @@ def test_stray_temporary_file_is_ignored_and_cleared(straight_map, tmp_path, mon
     assert sorted(p.name for p in cache.iterdir()) == ["unrelated.txt"]
 
 
+def test_damaged_cache_entry_is_converted_again(straight_map, tmp_path) -> None:
+    cache = tmp_path / "cache"
+    key = cache_path(straight_map.read_bytes(), crdesigner_version(), cache)
+    cache.mkdir()
+    key.write_bytes(b'<osm version="0.6" generator="cold-maps-converters/2"><node id="1" lat=')
+    lanelet_map, _ = converters.load_lanelet2(straight_map, cache_dir=cache)
+    assert len(lanelet_map.laneletLayer) == 6
+    assert key.read_bytes().count(b"<relation ") == 6
+
+
 def test_failed_write_leaves_neither_target_nor_temporary(tmp_path, monkeypatch) -> None:
     target = tmp_path / "out" / "map.osm"
 

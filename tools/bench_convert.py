@@ -42,7 +42,6 @@ def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
     import lanelet2.io
 
     from converters import frame, load_lanelet2
-    from converters.api import _load_osm
     from converters.cache import cache_path
     from converters.crdesigner_bridge import crdesigner_version, odr_to_lanelets
     from converters.osm import build_osm
@@ -58,7 +57,7 @@ def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
             osm = Path(folder) / "stage.osm"
             osm.write_bytes(data)
             written = time.perf_counter()
-            _load_osm(osm)
+            load_lanelet2(osm)
             stages["crdesigner OpenDRIVE → CommonRoad"].append(built - start)
             stages["OSM build"].append(written - built)
             stages["load + routing graph"].append(time.perf_counter() - written)
