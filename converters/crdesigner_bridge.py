@@ -70,7 +70,8 @@ def read_geo_reference(path: Path) -> str:
         data = path.read_bytes()
     except OSError as exc:
         raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
-    if b"<!DOCTYPE" in data[:4096]:
+    root_start = data.find(b"<OpenDRIVE")
+    if b"<!DOCTYPE" in data[: root_start if root_start >= 0 else len(data)]:
         raise ConversionError(str(path), "a DOCTYPE is not allowed in an OpenDRIVE map")
     try:
         root = etree.fromstring(data, _hardened_parser())

@@ -324,6 +324,7 @@ def test_cache_folder_precedence(tmp_path, monkeypatch) -> None:
         (None, "cannot read the map"),
         ("<OpenDRIVE><header", "not well-formed XML"),
         ('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "b">]><OpenDRIVE/>', "DOCTYPE is not allowed"),
+        (f"<!--{'x' * 5000}--><!DOCTYPE x [<!ENTITY a \"b\">]><OpenDRIVE a='&a;'/>", "DOCTYPE is not allowed"),
         ("<osm/>", "root element is <osm>, not <OpenDRIVE>"),
         ('<OpenDRIVE><header revMajor="1" revMinor="4"/></OpenDRIVE>', "no lanelets"),
         (synthetic_xodr().replace(' length="60.0">', ">", 1), "converter crashed"),
