@@ -8,7 +8,7 @@ from typing import Final
 
 import numpy as np
 
-from fusion.geometry import cumulative_length, project_point
+from fusion.geometry import project_point
 from fusion.types import NDArrayFloat, Source
 
 _HEADING_HALF_WINDOW: Final[int] = 5
@@ -29,9 +29,9 @@ class OverlapStart:
     heading_diff_rad: float
 
 
-def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat) -> OverlapStart:
-    """Project the coop border start onto the ego border (see :class:`OverlapStart`)."""
-    s_ego = cumulative_length(ego)
+def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat, s_ego: NDArrayFloat) -> OverlapStart:
+    """Project the coop border start onto the ego border, whose vertices lie at arc lengths
+    ``s_ego`` (see :class:`OverlapStart`)."""
     s0, offset, k = project_point(coop[0], ego, s_ego)
     a, b = max(0, k - _HEADING_HALF_WINDOW), min(ego.shape[0] - 1, k + 1 + _HEADING_HALF_WINDOW)
     c = min(coop.shape[0] - 1, 2 * _HEADING_HALF_WINDOW)
@@ -41,11 +41,12 @@ def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat) -> OverlapStart:
     return OverlapStart(s_ego, s0, offset, abs(diff))
 
 
-def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, start: OverlapStart, coop_weight: float,
-                  blend_offset_m: float) -> list[tuple[NDArrayFloat, Source]]:
+def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
+                  coop_weight: float, blend_offset_m: float) -> list[tuple[NDArrayFloat, Source]]:
     """Fuse one ego border with the coop border that starts inside it.
 
-    The coop start projects onto the ego border at arc length s0 (``start``). Ego points
+    The coop start projects onto the ego border at arc length s0 (``start``); ``s_coop`` are
+    the arc lengths of the coop vertices. Ego points
     before s0 are kept; each ego point in the overlap, at arc length s, is paired with the
     coop point at arc length s − s0 along the coop border (arc-length pairing, not array
     index) and replaced by (1 − w)·P_ego + w·P_coop with w = ``coop_weight``; the rest of the
@@ -54,7 +55,6 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, start: OverlapStart, co
     no jump. Returns the parts in order with their :class:`Source` labels.
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
-    s_coop = cumulative_length(coop)
     first = int(np.searchsorted(s_ego, s0))
     overlap_end = min(float(s_ego[-1]) - s0, float(s_coop[-1]))
     stop = int(np.searchsorted(s_ego, s0 + overlap_end, side="right"))

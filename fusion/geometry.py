@@ -39,6 +39,16 @@ def cumulative_length(points: NDArrayFloat) -> NDArrayFloat:
     return out
 
 
+def stacked_lengths(points: NDArrayFloat, n_first: int) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """:func:`cumulative_length` of ``points[:n_first]`` and ``points[n_first:]`` in one pass."""
+    step = points[1:] - points[:-1]
+    seg = np.hypot(step[:, 0], step[:, 1])
+    out = np.zeros(points.shape[0])
+    np.cumsum(seg[: n_first - 1], out=out[1:n_first])
+    np.cumsum(seg[n_first:], out=out[n_first + 1:])
+    return out[:n_first], out[n_first:]
+
+
 def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArrayFloat) -> tuple[float, float, int]:
     """Closest point of ``polyline`` to ``point`` (near its nearest vertex).
 
