@@ -140,7 +140,7 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     for e, (points, end) in enumerate(zip(borders, at_end)):
         m = min(k_max, points.shape[0])
         windows[e, :m] = points[:-m - 1:-1] if end else points[:m]
-    n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
+    n_noise = min(k_max, min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
     sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2)) / (12.0 * n_ends * max(1, n_noise - 2))))
     direction = np.array(chords)

@@ -83,10 +83,12 @@ def test_arbitrary_input_gives_finite_output_or_a_fusion_error(ego_pose, coop_po
                                                                interpolation, fusibility) -> None:
     try:
         ego, coop = LaneDetection(ego_pose, el, er), LaneDetection(coop_pose, cl, cr)
-        result = fusion.fuse(ego, coop, mode=mode, interpolation=interpolation,
-                             params=fusion.FusionParams(fusibility=fusibility, d_i_m=500.0))
+        loose = fusion.FusionParams(fusibility=fusibility, d_i_m=500.0, t_pos_m=50.0, t_psi_rad=3.0)
+        result = fusion.fuse(ego, coop, mode=mode, interpolation=interpolation, params=loose)
+        ok, reason = fusion.is_fusible(ego, coop, fusion.FusionParams(fusibility=fusibility), mode=mode)
     except FusionError:
         return
+    assert ok == (not reason)
     assert result.kind in ("convoy", "spline", "none")
     assert (result.kind == "none") == bool(result.reason)
     for array in (result.left, result.right):
