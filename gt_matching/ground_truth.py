@@ -26,9 +26,8 @@ from gt_matching.polyline import (
     as_polyline,
     closest_distances,
     mid_line,
-    resample,
 )
-from gt_matching.route import CLEARANCE_STEP_M, RouteBorder
+from gt_matching.route import CLEARANCE_STEP_M, BorderPart, RouteBorder
 
 #: More candidate lanelet sequences than this for one detection is an error.
 MAX_SEQUENCES: Final = 4096
@@ -151,12 +150,12 @@ class GroundTruth:
         )
         self.lines = MapLines(lanelet_map)
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
-        self._border_samples: dict[tuple[LaneletKey, str], NDArrayFloat] = {}
+        self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
-            self._samples(geometry, "left")
-            self._samples(geometry, "right")
+            self._part(geometry, "left")
+            self._part(geometry, "right")
         for slot in range(len(self.lines.vertices)):
             self.lines.samples(slot, CLEARANCE_STEP_M)
             self.lines.tree(slot, self.config.step_m)
@@ -224,13 +223,13 @@ class GroundTruth:
             geometry = self._geometry[key] = LaneletGeometry.of(lanelet)
         return geometry
 
-    def _samples(self, geometry: LaneletGeometry, side: str) -> NDArrayFloat:
-        """A lanelet border ("left" or "right") resampled every ``step_m`` (cached)."""
+    def _part(self, geometry: LaneletGeometry, side: str) -> BorderPart:
+        """A lanelet border ("left" or "right") prepared for routes (cached)."""
         key = (geometry.key, side)
-        samples = self._border_samples.get(key)
-        if samples is None:
-            samples = self._border_samples[key] = resample(getattr(geometry, side), self.config.step_m)[0]
-        return samples
+        part = self._parts.get(key)
+        if part is None:
+            part = self._parts[key] = BorderPart.of(getattr(geometry, side), self.config.step_m)
+        return part
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
         """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose."""
@@ -392,7 +391,7 @@ class GroundTruth:
 
             def border(side: str) -> RouteBorder:
                 own = {getattr(g, f"{side}_line") for g in lanelets}
-                parts = [(getattr(g, side), self._samples(g, side)) for g in lanelets]
+                parts = [self._part(g, side) for g in lanelets]
                 return RouteBorder(self.lines, parts, own | overlapping, config.step_m, reach)
 
             route = _Route(keys=keys, left=border("left"), right=border("right"))

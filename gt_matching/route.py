@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from gt_matching.geometry import MapLines
-from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, windowed_distances
+from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, resample, windowed_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -46,6 +46,34 @@ class BorderDistances:
     other_closer: NDArrayBool
 
 
+@dataclass(frozen=True, eq=False)
+class BorderPart:
+    """One lanelet's left or right border in driving order, prepared once per map.
+
+    Fields:
+        vertices: ``(N, 2)`` vertices, world frame, m.
+        samples: points every ``step_m`` along it, ends included, m.
+        sample_arc_m: arc length of each sample, m.
+        box: bounding box (x min, y min, x max, y max), m.
+    """
+
+    vertices: NDArrayFloat
+    samples: NDArrayFloat
+    sample_arc_m: NDArrayFloat
+    box: NDArrayFloat
+
+    @classmethod
+    def of(cls, vertices: NDArrayFloat, step_m: float) -> BorderPart:
+        """Samples of a border polyline (m) every ``step_m``."""
+        samples, _ = resample(vertices, step_m)
+        return cls(
+            vertices=vertices,
+            samples=samples,
+            sample_arc_m=np.minimum(np.arange(len(samples)) * step_m, arc_lengths(vertices)[-1]),
+            box=np.concatenate((vertices.min(axis=0), vertices.max(axis=0))),
+        )
+
+
 class RouteBorder:
     """The left or right GT border of a lanelet sequence (the lanelets' borders joined in
     driving order) and its samples every ``step_m``, with what is needed to find each
@@ -54,26 +82,26 @@ class RouteBorder:
     def __init__(
         self,
         lines: MapLines,
-        parts: list[tuple[NDArrayFloat, NDArrayFloat]],
+        parts: list[BorderPart],
         ignored: set[int],
         step_m: float,
         reach_m: float,
     ) -> None:
-        """``parts``: per lanelet in driving order, its border vertices and their samples
-        every ``step_m`` (ends included), m; ``ignored``: line string ids that are never
-        another lane's border (this border's own lines and those of lanelets overlapping
-        the route); ``reach_m``: lines farther than this from the border are never closer
-        than it for a point within ``reach_m / 2``."""
+        """``parts``: the lanelets' borders in driving order, sampled every ``step_m``;
+        ``ignored``: line string ids that are never another lane's border (this border's
+        own lines and those of lanelets overlapping the route); ``reach_m``: lines farther
+        than this from the border are never closer than it for a point within
+        ``reach_m / 2``."""
         from scipy.spatial import cKDTree
 
         self.step_m = step_m
-        self.vertices: NDArrayFloat = np.concatenate([vertices for vertices, _ in parts])
-        self.samples: NDArrayFloat = np.concatenate([samples for _, samples in parts])
+        self.vertices: NDArrayFloat = np.concatenate([part.vertices for part in parts])
+        self.samples: NDArrayFloat = np.concatenate([part.samples for part in parts])
         cum = arc_lengths(self.vertices)
-        offsets = cum[np.cumsum([0] + [len(vertices) for vertices, _ in parts[:-1]])]
+        arc_offsets = cum[np.cumsum([0] + [len(part.vertices) for part in parts[:-1]])]
+        self._sample_offsets = np.cumsum([0] + [len(part.samples) for part in parts[:-1]])
         self.sample_arc: NDArrayFloat = np.concatenate(
-            [offset + np.minimum(np.arange(len(samples)) * step_m, arc_lengths(vertices)[-1])
-             for offset, (vertices, samples) in zip(offsets, parts)]
+            [offset + part.sample_arc_m for offset, part in zip(arc_offsets, parts)]
         )
         guess = np.arange(0, len(self.samples) + GUESS_STRIDE - 1, GUESS_STRIDE)
         guess[-1] = len(self.samples) - 1
@@ -82,8 +110,7 @@ class RouteBorder:
         self._complex_samples = self.samples[:, 0] + 1j * self.samples[:, 1]
         # A window may hold a repeated sample where two lanelets join.
         self._joints = min(len(parts), 2)
-        boxes = np.array([np.concatenate((v.min(axis=0), v.max(axis=0))) for v, _ in parts])
-        near = lines.near(boxes, reach_m)
+        near = lines.near(np.array([part.box for part in parts]), reach_m)
         self._lines = lines
         self._others: NDArrayInt = near[~np.isin(near, lines.slots(ignored))]
         last = len(self.samples) - 1
@@ -98,6 +125,11 @@ class RouteBorder:
             self._coarse_owner = np.repeat(self._others, [len(c) for c in coarse])
             self._coarse_tree = cKDTree(np.concatenate(coarse), balanced_tree=False, compact_nodes=False)
             self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
+
+    def _seed_arc(self, points: NDArrayFloat) -> NDArrayFloat:
+        """Arc length (m) of each point's nearest coarse sample."""
+        arc: NDArrayFloat = self._guess_arc[self._guess_tree.query(points)[1]]
+        return arc
 
     def _other_closer(self, points: NDArrayFloat, limits: NDArrayFloat) -> NDArrayBool:
         """Whether another line's samples every ``step_m`` come closer to each point than
@@ -120,8 +152,9 @@ class RouteBorder:
         self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
-        length ``seed_arc``, that sample's index, and whether it lies inside the window (a
-        minimum on the window's edge may continue outside it)."""
+        length ``seed_arc``, that sample's index, and whether the window is trustworthy:
+        the minimum is not on its edge (it may continue outside) and the window does not
+        span a joint between lanelets (borders may kink there, with a second minimum)."""
         last = len(self.samples) - 1
         width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
         first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
@@ -130,7 +163,9 @@ class RouteBorder:
         closest = np.argmin(sample_distances, axis=1)
         rows = np.arange(len(points))
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
-        return sample_distances[rows, closest], around[rows, closest], inside
+        joints = self._sample_offsets[1:]
+        smooth = np.searchsorted(joints, first, side="right") == np.searchsorted(joints, around[:, -1], side="right")
+        return sample_distances[rows, closest], around[rows, closest], inside & smooth
 
     def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
@@ -150,11 +185,11 @@ class RouteBorder:
         anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
         anchors[-1] = len(points) - 1
         along = arc_lengths(points)
-        seed = np.interp(along, along[anchors], self._guess_arc[self._guess_tree.query(points[anchors])[1]])
+        seed = np.interp(along, along[anchors], self._seed_arc(points[anchors]))
         resampled, sample, inside = self._nearest_samples(points, seed, ANCHOR_REACH_M)
         redo = np.flatnonzero(~inside | (resampled > REFINE_DISTANCE_M))
         if len(redo):
-            own_seed = self._guess_arc[self._guess_tree.query(points[redo])[1]]
+            own_seed = self._seed_arc(points[redo])
             resampled[redo], sample[redo], _ = self._nearest_samples(
                 points[redo], own_seed, (GUESS_STRIDE / 2.0 + 1.0) * self.step_m
             )
