@@ -43,6 +43,8 @@ ROUTE_MARGIN_M: Final[float] = 5.0
 """Extra route length (m) beyond what the vehicles and their sensors need."""
 MAX_BRANCHES: Final[int] = 2
 """Branch (turning) tracks built per drive at most."""
+MAX_COVER_ROUTES: Final[int] = 1000
+"""Most routes drawn to cover a map's lanes."""
 
 Role = Literal["ego", "coop", "turn", "adjacent", "opposite", "behind"]
 
@@ -233,14 +235,16 @@ def _map_name(graph: LaneGraph) -> str:
     return str(graph.odr_map.path or "<map>")
 
 
-def covering_routes(graph: LaneGraph, count: int, length_m: float,
+def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
                     rng: np.random.Generator) -> list[tuple[LaneKey, ...]]:
-    """``count`` random routes of at least ``length_m``, each starting, where it can, on a
-    lane no earlier route covers, so the routes spread over the map's driving lanes.
+    """Random routes of at least ``length_m``, each starting, where it can, on a lane no
+    earlier route covers, so the routes spread over the map's driving lanes: ``count`` of
+    them, or (``count`` None) as many as it takes to cover every lane a route of that
+    length can start on (at most ``MAX_COVER_ROUTES``).
 
     Raises DriveError naming the map when no route is that long.
     """
-    if count < 1:
+    if count is not None and count < 1:
         raise ValueError(f"routes: expected at least 1, got {count!r}")
     if not graph.lanes:
         raise DriveError(f"{_map_name(graph)}: the map has no driving lanes")
@@ -251,9 +255,12 @@ def covering_routes(graph: LaneGraph, count: int, length_m: float,
         raise DriveError(f"{_map_name(graph)}: no drivable route of {length_m:.0f} m (longest {best:.0f} m); "
                          "use fewer --frames")
     covered: set[LaneKey] = set()
-    routes = []
-    for _ in range(count):
-        pool = [lane for lane in startable if lane not in covered] or startable
+    routes: list[tuple[LaneKey, ...]] = []
+    while len(routes) < (MAX_COVER_ROUTES if count is None else count):
+        pool = [lane for lane in startable if lane not in covered]
+        if not pool and count is None:
+            break
+        pool = pool or startable
         start = pool[int(rng.integers(len(pool)))]
         lanes = random_route(graph, length_m, rng, start=start, longest=longest)
         assert lanes is not None  # start is drivable for length_m

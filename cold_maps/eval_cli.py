@@ -37,6 +37,10 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _routes(text: str) -> int | None:
+    return None if text == "all" else _positive_int(text)
+
+
 def _gaps(text: str) -> tuple[float, ...]:
     try:
         gaps = tuple(float(part) for part in text.split(","))
@@ -54,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument("--map", action="append", type=Path, metavar="MAP.xodr", help="OpenDRIVE map (repeatable)")
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
     parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT})")
-    parser.add_argument("--routes", type=_positive_int, default=DEFAULT_ROUTES, help="routes per map (default 3)")
+    parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
+                        help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
     parser.add_argument("--frames", type=_positive_int, default=None,
                         help=f"frames per route (default {DEFAULT_FRAMES}; --paper: 300)")
     parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")

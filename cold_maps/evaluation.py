@@ -66,6 +66,7 @@ FusionName = Literal["local", "convoy", "spline"]
 
 _REASONS: Final[tuple[tuple[str, str], ...]] = (
     ("not ahead", "coop_not_ahead"),
+    ("no overlap on the same lane", "other_lane"),
     ("no overlap", "no_overlap"),
     ("no gap", "no_gap"),
     ("exceeds d_i", "gap_too_long"),
@@ -73,7 +74,6 @@ _REASONS: Final[tuple[tuple[str, str], ...]] = (
     ("heads", "heading_mismatch"),
     ("matches none", "pose_case"),
     ("another lane", "other_lane"),
-    ("no overlap on the same lane", "other_lane"),
 )
 
 
@@ -133,7 +133,7 @@ class MapPlan:
         path: the OpenDRIVE file.
         scenarios: the fusion set-ups.
         frames: frames per drive.
-        routes: drives (routes) on the map.
+        routes: drives (routes) on the map; None for as many as cover its lanes.
         seed: seed of the route choice and of the error models.
         speed_mps: ego speed (m/s); frames at ``FRAME_RATE_HZ``.
         start_lane: the lane every route starts on, or None for routes spread over the map.
@@ -146,7 +146,7 @@ class MapPlan:
     path: Path
     scenarios: tuple[Scenario, ...]
     frames: int = 100
-    routes: int = 3
+    routes: int | None = 3
     seed: int = 0
     speed_mps: float = DEFAULT_SPEED_MPS
     start_lane: LaneKey | None = None
@@ -354,7 +354,8 @@ class MapEvaluator:
         if plan.start_lane is None:
             routes = covering_routes(self.graph, plan.routes, length, self.rng)
         else:
-            routes = [route_from_start(self.graph, plan.start_lane, length, self.rng) for _ in range(plan.routes)]
+            routes = [route_from_start(self.graph, plan.start_lane, length, self.rng)
+                      for _ in range(plan.routes or 1)]
         covered = {lane for route in routes for lane in route}
         self.coverage = (len(covered), len(self.graph.lanes))
         return [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads, distractor_leads_m=distractor_leads,

@@ -145,3 +145,13 @@ def test_coop_station_lead_and_chord_on_the_curve(curve90, lead, frame):
     ego, coop = states["ego"], states[f"coop{lead:g}"]
     assert coop.station - ego.station == pytest.approx(lead)
     assert np.hypot(*(_xy(coop) - _xy(ego))) <= lead + 1e-9  # a chord is never longer than its arc
+
+
+def test_covering_routes_until_every_startable_lane_is_covered(junction):
+    from cold_maps.routing import longest_route_lengths
+
+    routes = covering_routes(junction, None, 120.0, np.random.default_rng(5))
+    longest = longest_route_lengths(junction)
+    startable = {lane for lane in junction.lanes if longest[lane] >= 120.0}
+    assert startable <= {lane for route in routes for lane in route}
+    assert len(routes) <= len(startable)
