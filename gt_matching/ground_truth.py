@@ -38,6 +38,9 @@ GROUND_TRUTH_CACHE_SIZE: Final = 4
 #: A lanelet sequence fits a detection when at least this share of the detection's
 #: centreline samples lie within ``max_distance_m`` of the sequence's centreline.
 MIN_FIT_SHARE: Final = 0.5
+#: The detection follows another lane when a sequence from a lanelet off the sender's
+#: pose fits it better (mean capped centreline distance) by more than this, m.
+OTHER_LANE_GAIN_M: Final = 0.5
 
 Pose = tuple[float, float, float]
 """Sender pose (x m, y m, yaw rad), world frame."""
@@ -199,8 +202,6 @@ class GroundTruth:
             )
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
             metrics.append(BorderMetrics.from_distances(found.distances, unmatched, found.arc_m[-1] - found.arc_m[0]))
-        if mismatch is None and (metrics[0].length_m < 0.0 or metrics[1].length_m < 0.0):
-            mismatch = f"detection runs against the driving direction of lanelets {_ids(sequence.lanelets)}"
         return LaneMetrics(
             left=metrics[0],
             right=metrics[1],
@@ -290,7 +291,7 @@ class GroundTruth:
         own = next(sequences[i] for i in order if sequences[i].candidate.on_pose)
         pose_ids = tuple(sorted(c.geometry.key[0] for c in candidates if c.on_pose))
         mismatch = None
-        if not best.candidate.on_pose:
+        if own.score_m - best.score_m > OTHER_LANE_GAIN_M:
             mismatch = (
                 f"detection follows lanelets {_ids(best.lanelets)}, not the lane of the sender at pose "
                 f"{_describe(pose)} (lanelets {pose_ids})"
@@ -301,6 +302,10 @@ class GroundTruth:
                 f"{own.fit_share:.0%} of its centreline lies within {config.max_distance_m} m of lanelets "
                 f"{_ids(own.lanelets)}"
             )
+        else:
+            _, ends = closest_distances(centre[[0, -1]], np.concatenate([g.centre for g in own.lanelets]))
+            if ends[1] < ends[0]:
+                mismatch = f"detection runs against the driving direction of lanelets {_ids(own.lanelets)}"
         return own, pose_ids, mismatch
 
     def _sequences(

@@ -108,17 +108,6 @@ def windowed_distances(
     return segment_distances(points, vertices, segments)
 
 
-def heading_at(polyline: NDArrayFloat, s: float) -> float:
-    """Direction (rad, counter-clockwise from x) of the segment at arc length ``s``."""
-    cum = arc_lengths(polyline)
-    seg_len = np.diff(cum)
-    seg = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(polyline) - 2))
-    while seg_len[seg] <= ZERO_LENGTH_M and seg > 0:
-        seg -= 1
-    dx, dy = polyline[seg + 1] - polyline[seg]
-    return float(np.arctan2(dy, dx))
-
-
 def angle_difference(a: float, b: float) -> float:
     """|a - b| wrapped to [0, pi], rad."""
     return abs((a - b + np.pi) % (2.0 * np.pi) - np.pi)

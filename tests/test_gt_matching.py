@@ -18,7 +18,6 @@ from gt_matching.synthetic import LaneletMapBuilder, arc, offset_polyline, strai
 WIDTH_M = 3.5
 HALF_M = WIDTH_M / 2.0
 VERTEX_STEP_M = 0.1
-DETECTION_STEP_M = 0.1
 
 
 @dataclass(frozen=True)
@@ -232,6 +231,7 @@ def test_reversed_detection_is_flagged(junction: JunctionMap) -> None:
     metrics = junction.gt.evaluate(right[::-1], left[::-1], (5.0, 0.0, 0.0))
     assert not metrics.matched and "against the driving direction" in metrics.mismatch
     assert metrics.left.length_m == pytest.approx(-30.0, abs=0.02)
+    assert not junction.gt.match(right[::-1], left[::-1], (5.0, 0.0, 0.0)).matched
 
 
 def test_outliers_are_counted_and_kept(junction: JunctionMap) -> None:
