@@ -12,7 +12,6 @@ crash (partial outputs marked as such); 130 when interrupted.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
@@ -27,7 +26,6 @@ PROG: Final[str] = "cold-eval"
 DEFAULT_OUT: Final[str] = "out/cold-eval"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
-EXIT_INTERRUPTED: Final[int] = 130
 
 
 def _positive_int(text: str) -> int:
@@ -131,22 +129,16 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
-                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    from cold_maps.eval_run import RunOptions, run_evaluation
+    from cold_maps.eval_run import EXIT_INTERRUPTED, RunOptions, configure_logging, run_evaluation, startup_failure
 
+    configure_logging(args.verbose)
     try:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
                              run_params={k: str(v) for k, v in sorted(vars(args).items())})
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted before the run started; nothing written", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
-        logging.getLogger(PROG).debug("failed", exc_info=True)
-        print(f"{PROG}: {exc}", file=sys.stderr)
-        return 1
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
+        return startup_failure(PROG, exc)
     if isinstance(run.error, KeyboardInterrupt):
         print(f"{PROG}: interrupted; partial report in {args.out}", file=sys.stderr)
         return EXIT_INTERRUPTED

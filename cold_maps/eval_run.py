@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +33,26 @@ LOG = logging.getLogger("cold_maps.eval_run")
 
 MCAP_NAME: Final[str] = "run.mcap"
 PLOTS_DIR: Final[str] = "plots"
+
+
+EXIT_FAILURE: Final[int] = 1
+EXIT_INTERRUPTED: Final[int] = 130
+
+
+def configure_logging(verbose: int) -> None:
+    """Logging to stderr: warnings, ``-v`` info, ``-vv`` debug."""
+    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)],
+                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+
+
+def startup_failure(prog: str, exc: BaseException) -> int:
+    """One line on stderr for a failure before any output was written; the exit status."""
+    if isinstance(exc, KeyboardInterrupt):
+        print(f"{prog}: interrupted before the run started; nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    logging.getLogger(prog).debug("failed", exc_info=exc)
+    print(f"{prog}: {exc}", file=sys.stderr)
+    return EXIT_FAILURE
 
 
 class OutputError(Exception):

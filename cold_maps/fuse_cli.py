@@ -24,7 +24,6 @@ from typing import Any, Final, Sequence
 import numpy as np
 
 PROG: Final[str] = "cold-fuse"
-EXIT_INTERRUPTED: Final[int] = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -179,10 +178,10 @@ def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(args.verbose, 2)],
-                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    from cold_maps.eval_run import EXIT_INTERRUPTED, configure_logging, startup_failure
     from cold_maps.recording import Recorder, read_detections
 
+    configure_logging(args.verbose)
     error: BaseException | None = None
     try:
         if args.input.resolve() == args.output.resolve():
@@ -202,13 +201,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
                       "interpolation": args.interpolation, "d_i_m": params.d_i_m}
         recorder = Recorder(args.output, map_path=map_path or "", params=run_params).__enter__()
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted before the run started; nothing written", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except Exception as exc:  # noqa: BLE001 - bad input is reported as one line
-        logging.getLogger(PROG).debug("failed", exc_info=True)
-        print(f"{PROG}: {exc}", file=sys.stderr)
-        return 1
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
+        return startup_failure(PROG, exc)
     count = 0
     try:
         for frame, detections in frames:
