@@ -135,3 +135,30 @@ def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys
     assert "PARTIAL RUN" in (out / "summary.md").read_text()
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
     assert not (out / "run.mcap.partial").exists()
+
+
+def test_sigint_finalises_the_recording(tmp_path):
+    """A real Ctrl-C (SIGINT) on the command line: exit 130, MCAP finalised as partial,
+    report marked partial."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "cold_maps.eval_cli", "--map", str(bundled_map("rural")), "--frames", "1500",
+         "--routes", "1", "--no-plots", "--out", str(out)],
+        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1])
+    deadline = time.monotonic() + 60
+    while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    os.kill(process.pid, signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
+    document, _ = _records(out)
+    assert document["partial"] is True
