@@ -85,7 +85,7 @@ def load_lanelet2(
     suffix = source.suffix.lower()
     if suffix == ".osm":
         generator = read_generator(source)
-        if generator != frame.GENERATOR:
+        if not generator.startswith(frame.GENERATOR_PREFIX):
             raise ConversionError(
                 str(source), f"written by {generator or 'an unknown tool'!r}, not {frame.GENERATOR}: frame unknown"
             )

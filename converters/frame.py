@@ -21,8 +21,12 @@ if TYPE_CHECKING:
 FORMAT_VERSION: Final[int] = 2
 """Version of our OSM layout and frame convention; part of the cache key."""
 
-GENERATOR: Final[str] = f"cold-maps-converters/{FORMAT_VERSION}"
-"""Value of the ``generator`` attribute of ``<osm>`` in every file we write."""
+GENERATOR_PREFIX: Final[str] = "cold-maps-converters/"
+"""Start of the ``generator`` attribute of ``<osm>`` in every file we write; every
+format version shares the frame convention below."""
+
+GENERATOR: Final[str] = f"{GENERATOR_PREFIX}{FORMAT_VERSION}"
+"""``generator`` attribute of the files this version writes."""
 
 PROJECTOR_CLASS: Final[str] = "MercatorProjector"
 """``lanelet2.projection`` class that maps our files to the inertial frame."""
