@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Callable, Final, Sequence
 
 from cold_maps.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
-from cold_maps.evaluation import INTERPOLATIONS, Collector, MapPlan, scenarios_for
+from cold_maps.evaluation import INTERPOLATIONS, Collector, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.report import ScenarioResult
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
@@ -100,9 +100,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 
         plans = paper_plans(frames=args.frames or PAPER_FRAMES, seed=args.seed, interpolations=interpolations)
         return [replace(plan, errors=errors) for plan in plans]
-    import fusion
-
-    params = fusion.FusionParams(d_i_m=max(fusion.DEFAULT_PARAMS.d_i_m, max(args.gaps) + 1.0))
+    params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)
     return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, routes=args.routes, seed=args.seed,
                     speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params)

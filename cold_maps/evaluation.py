@@ -125,6 +125,12 @@ def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
     return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
 
 
+def params_for_gaps(gaps_m: Sequence[float]) -> fusion.FusionParams:
+    """Fusion parameters whose longest bridged gap d_i (default 50 m) admits every gap
+    asked for, with 1 m to spare (a gap set along the lane is measured as a chord)."""
+    return fusion.FusionParams(d_i_m=max(fusion.DEFAULT_PARAMS.d_i_m, max(gaps_m, default=0.0) + 1.0))
+
+
 @dataclass(frozen=True)
 class MapPlan:
     """What to evaluate on one map.

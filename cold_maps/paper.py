@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Final, Mapping, Sequence
 
 from cold_maps.drive import FRAME_RATE_HZ, ROUTE_MARGIN_M
-from cold_maps.evaluation import Collector, MapPlan, load_graph, scenarios_for
+from cold_maps.evaluation import Collector, MapPlan, load_graph, params_for_gaps, scenarios_for
 from cold_maps.lane_graph import LaneKey
 from cold_maps.report import PAPER_TABLE_I_MS, ScenarioResult, paper_comparison_markdown
 from cold_maps.routing import longest_route_lengths
@@ -60,7 +60,7 @@ def paper_plans(maps_dir: Path = BUNDLED_MAPS_DIR, *, frames: int = PAPER_FRAMES
         length = length if math.isfinite(length) else frames * 10.0
         plans.append(MapPlan(path, scenarios_for(gaps, interpolations), frames=frames, routes=1, seed=seed,
                              speed_mps=paper_speed(length, gaps, frames), start_lane=PAPER_START_LANE,
-                             distractors=False, road_type=ROAD_TYPES[name]))
+                             distractors=False, params=params_for_gaps(gaps), road_type=ROAD_TYPES[name]))
     return plans
 
 

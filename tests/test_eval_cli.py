@@ -77,6 +77,8 @@ def test_paper_figures(tmp_path):
             assert worst("straight", "spline", interpolation, d_s) <= 0.05
             reached = worst("straight", "spline", interpolation, d_s, "perception_range_m")
             assert reached == pytest.approx(reach, abs=0.5)
+            record = records[("straight", "spline", interpolation, d_s, "left")]
+            assert record["fused_frames"] == record["frames"] == 12  # d_s = 50 m is within d_i
     for map_name in ("straight", "curve90", "rural"):
         # convoy fusion keeps the local error; local range 30 m, convoy 55 m
         assert worst(map_name, "convoy", "", 0.0) == pytest.approx(worst(map_name, "local", "", 0.0), abs=0.002)
