@@ -18,7 +18,7 @@ import numpy.typing as npt
 from gt_matching.config import MatchingConfig
 from gt_matching.errors import MatchingError
 from gt_matching.geometry import LaneletGeometry, LaneletKey, MapLines
-from gt_matching.metrics import BorderMetrics, LaneMetrics
+from gt_matching.metrics import BorderErrors, LaneErrors, LaneMetrics
 from gt_matching.polyline import (
     NDArrayFloat,
     angle_difference,
@@ -53,6 +53,7 @@ class LaneMatch:
     Fields:
         lanelet_ids: GT lanelets in driving order; their borders cover the detection plus
             ``margin_m`` on both ends where the map allows.
+        route_key: (lanelet id, inverted) per GT lanelet: the key of the assembled borders.
         left_gt: GT left border, ``(M, 2)`` world frame, m, in driving order.
         right_gt: GT right border, ``(K, 2)`` world frame, m, in driving order.
         left_gt_samples, right_gt_samples: the GT borders resampled every ``step_m``
@@ -64,6 +65,7 @@ class LaneMatch:
     """
 
     lanelet_ids: tuple[int, ...]
+    route_key: tuple[LaneletKey, ...]
     left_gt: NDArrayFloat
     right_gt: NDArrayFloat
     left_gt_samples: NDArrayFloat
@@ -171,6 +173,7 @@ class GroundTruth:
         route = self._route(sequence.lanelets)
         return LaneMatch(
             lanelet_ids=_ids(sequence.lanelets),
+            route_key=route.keys,
             left_gt=route.left.vertices,
             right_gt=route.right.vertices,
             left_gt_samples=route.left.samples,
@@ -180,37 +183,31 @@ class GroundTruth:
             mismatch=mismatch,
         )
 
-    def evaluate(
-        self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float], *, exact: bool = False
-    ) -> LaneMetrics:
-        """Closest-point error metrics of a detected lane against its ground truth.
+    def errors(self, left: npt.ArrayLike, right: npt.ArrayLike, match: LaneMatch, *, exact: bool = False) -> LaneErrors:
+        """Per-point closest-point errors of a detected lane against the GT of ``match``
+        (from ``match()`` on this lane, or on a reference lane that it should follow).
 
         ``exact`` False: distances to the GT resampled every ``config.step_m`` (the paper's
         method, floor up to ``step_m / 2``); True: point-to-segment distances to the GT
         polyline.
         """
-        left_xy, right_xy, pose_ = self._inputs(left, right, pose)
-        sequence, _, mismatch = self._select(left_xy, right_xy, pose_)
-        route = self._route(sequence.lanelets)
+        left_xy, right_xy = as_polyline("left border", left), as_polyline("right border", right)
+        route = self._route([self._geometry[key] for key in match.route_key])
         config = self.config
-        metrics = []
+        borders = []
         for points, border in ((left_xy, route.left), (right_xy, route.right)):
-            found = border.distances(
-                points,
-                exact=exact,
-                other_margin_m=config.other_border_margin_m,
-            )
+            found = border.distances(points, exact=exact, other_margin_m=config.other_border_margin_m)
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
-            metrics.append(BorderMetrics.from_distances(found.distances, unmatched, found.arc_m[-1] - found.arc_m[0]))
-        return LaneMetrics(
-            left=metrics[0],
-            right=metrics[1],
-            lanelet_ids=_ids(sequence.lanelets),
-            matched=mismatch is None,
-            mismatch=mismatch,
-            exact=exact,
-            step_m=config.step_m,
-        )
+            borders.append(BorderErrors(distances_m=found.distances, arc_m=found.arc_m, unmatched=unmatched))
+        return LaneErrors(left=borders[0], right=borders[1], match=match, exact=exact, step_m=config.step_m)
+
+    def evaluate(
+        self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float], *, exact: bool = False
+    ) -> LaneMetrics:
+        """Closest-point error metrics of a detected lane (borders ``(N, 2)``, world frame,
+        driving order; sender at ``pose`` (x, y, yaw)) against its ground truth: ``match``,
+        then ``errors``, summarised."""
+        return self.errors(left, right, self.match(left, right, pose), exact=exact).metrics()
 
     def _inputs(
         self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]

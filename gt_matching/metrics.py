@@ -1,12 +1,17 @@
-"""Closest-point error metrics of a detected lane against its ground truth."""
+"""Closest-point errors of a detected lane against its ground truth: per point, and
+summarised per border."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gt_matching.polyline import NDArrayBool, NDArrayFloat
+
+if TYPE_CHECKING:
+    from gt_matching.ground_truth import LaneMatch
 
 
 @dataclass(frozen=True)
@@ -73,3 +78,54 @@ class LaneMetrics:
     mismatch: str | None
     exact: bool
     step_m: float
+
+
+@dataclass(frozen=True)
+class BorderErrors:
+    """Per-point errors of one detected border against its GT border.
+
+    Fields:
+        distances_m: ``(N,)`` closest-point distance of each detected point, m.
+        arc_m: ``(N,)`` arc length along the GT border of each point's closest GT point, m.
+        unmatched: ``(N,)`` True where the point matches no GT (see
+            ``BorderMetrics.unmatched_points``).
+    """
+
+    distances_m: NDArrayFloat
+    arc_m: NDArrayFloat
+    unmatched: NDArrayBool
+
+    def metrics(self) -> BorderMetrics:
+        """The summary statistics; the length runs from the first point to the last."""
+        return BorderMetrics.from_distances(self.distances_m, self.unmatched, float(self.arc_m[-1] - self.arc_m[0]))
+
+
+@dataclass(frozen=True)
+class LaneErrors:
+    """Per-point errors of one detected lane in one frame.
+
+    Fields:
+        left, right: errors of the left and right border.
+        match: the ground truth the errors are against.
+        exact: True for point-to-segment distances to the GT polyline, False for
+            distances to the GT resampled every ``step_m``.
+        step_m: GT resampling distance, m.
+    """
+
+    left: BorderErrors
+    right: BorderErrors
+    match: LaneMatch
+    exact: bool
+    step_m: float
+
+    def metrics(self) -> LaneMetrics:
+        """Summary statistics per border, with the match verdict."""
+        return LaneMetrics(
+            left=self.left.metrics(),
+            right=self.right.metrics(),
+            lanelet_ids=self.match.lanelet_ids,
+            matched=self.match.matched,
+            mismatch=self.match.mismatch,
+            exact=self.exact,
+            step_m=self.step_m,
+        )

@@ -4,6 +4,7 @@ closest-point distances of detected points to it."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
@@ -23,10 +24,24 @@ ANCHOR_STRIDE: Final = 10
 ANCHOR_REACH_M: Final = 0.1
 #: Points farther than this from the border are searched from their own coarse sample, m.
 REFINE_DISTANCE_M: Final = 1.0
+#: A border vertex turning by more than this is a kink: a nearest-sample window that
+#: spans it is settled by a global search, rad.
+KINK_RAD: Final = 0.02
 #: Spacing of the samples of nearby lines that bound their distance to the border, m.
 CLEARANCE_STEP_M: Final = 0.5
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
 CLEARANCE_SPACING_M: Final = 1.0
+
+
+def _kinks(vertices: NDArrayFloat) -> NDArrayBool:
+    """Per interior vertex, whether the polyline turns there by more than ``KINK_RAD``
+    (a zero-length segment next to it counts as a kink)."""
+    ahead = np.diff(vertices, axis=0)
+    before, after = ahead[:-1], ahead[1:]
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    dot = np.einsum("ij,ij->i", before, after)
+    degenerate = (np.hypot(*before.T) == 0.0) | (np.hypot(*after.T) == 0.0)
+    return degenerate | (np.abs(np.arctan2(cross, dot)) > KINK_RAD)
 
 
 @dataclass(frozen=True)
@@ -103,6 +118,7 @@ class RouteBorder:
         self.sample_arc: NDArrayFloat = np.concatenate(
             [offset + part.sample_arc_m for offset, part in zip(arc_offsets, parts)]
         )
+        self._break_arc = np.sort(np.concatenate((arc_offsets[1:], cum[1:-1][_kinks(self.vertices)])))
         guess = np.arange(0, len(self.samples) + GUESS_STRIDE - 1, GUESS_STRIDE)
         guess[-1] = len(self.samples) - 1
         self._guess_arc = self.sample_arc[guess]
@@ -125,6 +141,13 @@ class RouteBorder:
             self._coarse_owner = np.repeat(self._others, [len(c) for c in coarse])
             self._coarse_tree = cKDTree(np.concatenate(coarse), balanced_tree=False, compact_nodes=False)
             self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
+
+    @cached_property
+    def _fine_tree(self) -> cKDTree:
+        """KD-tree of all samples, built on first use (points the windows cannot settle)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.samples)
 
     def _seed_arc(self, points: NDArrayFloat) -> NDArrayFloat:
         """Arc length (m) of each point's nearest coarse sample."""
@@ -152,9 +175,10 @@ class RouteBorder:
         self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
-        length ``seed_arc``, that sample's index, and whether the window is trustworthy:
-        the minimum is not on its edge (it may continue outside) and the window does not
-        span a joint between lanelets (borders may kink there, with a second minimum)."""
+        length ``seed_arc``, that sample's index, and whether the window settles it: the
+        minimum is not on its edge (it may continue outside), and no kink or lanelet joint
+        lies within twice the distance (+ a step) of it, where another minimum may start
+        (any closer sample lies within twice the distance of the one found)."""
         last = len(self.samples) - 1
         width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
         first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
@@ -163,9 +187,11 @@ class RouteBorder:
         closest = np.argmin(sample_distances, axis=1)
         rows = np.arange(len(points))
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
-        joints = self._sample_offsets[1:]
-        smooth = np.searchsorted(joints, first, side="right") == np.searchsorted(joints, around[:, -1], side="right")
-        return sample_distances[rows, closest], around[rows, closest], inside & smooth
+        distance, sample = sample_distances[rows, closest], around[rows, closest]
+        arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
+        breaks = self._break_arc
+        smooth = np.searchsorted(breaks, arc - reach) == np.searchsorted(breaks, arc + reach, side="right")
+        return distance, sample, inside & smooth
 
     def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
@@ -174,13 +200,13 @@ class RouteBorder:
         Every ``ANCHOR_STRIDE``-th point finds its nearest coarse sample (KD-tree over every
         ``GUESS_STRIDE``-th sample); the arc lengths of the points between are interpolated
         along the detection, and each point takes the nearest sample within
-        ``ANCHOR_REACH_M`` of that. Points whose nearest sample is on the window's edge or
-        that lie farther than ``REFINE_DISTANCE_M`` are searched again from their own
-        nearest coarse sample. The exact distance is the smallest to the segments within
-        two steps of the nearest sample. Both equal a global search wherever the border's
-        radius of curvature exceeds the distance. Only points far enough off the border to
-        possibly be closer to another line (by the clearance of the checkpoints around the
-        nearest sample) are checked against the other lines.
+        ``ANCHOR_REACH_M`` of that. Where that window cannot settle it (minimum on its
+        edge, a kink or lanelet joint near it, or the point farther than
+        ``REFINE_DISTANCE_M``) a KD-tree over all samples answers. The exact distance is the
+        smallest to the segments within two steps of the nearest sample (twice the
+        distance for the points the KD-tree answered). Only points far enough off the
+        border to possibly be closer to another line (by the clearance of the checkpoints
+        around the nearest sample) are checked against the other lines.
         """
         anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
         anchors[-1] = len(points) - 1
@@ -189,10 +215,7 @@ class RouteBorder:
         resampled, sample, inside = self._nearest_samples(points, seed, ANCHOR_REACH_M)
         redo = np.flatnonzero(~inside | (resampled > REFINE_DISTANCE_M))
         if len(redo):
-            own_seed = self._seed_arc(points[redo])
-            resampled[redo], sample[redo], _ = self._nearest_samples(
-                points[redo], own_seed, (GUESS_STRIDE / 2.0 + 1.0) * self.step_m
-            )
+            resampled[redo], sample[redo] = self._fine_tree.query(points[redo])
         arc = self.sample_arc[sample]
         after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
         clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
@@ -201,6 +224,11 @@ class RouteBorder:
         if np.any(suspect):
             other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - other_margin_m)
         if exact:
-            exact_distance, arc = windowed_distances(points, self.vertices, arc, 2.0 * self.step_m)
-            return BorderDistances(distances=exact_distance, arc_m=arc, other_closer=other_closer)
+            exact_distance, exact_arc = windowed_distances(points, self.vertices, arc, 2.0 * self.step_m)
+            if len(redo):
+                # The closest GT point is within the sample's distance of the point, so
+                # within twice that of the sample (along a border, arc ~ chord).
+                reach = 2.0 * float(np.max(resampled[redo])) + 2.0 * self.step_m
+                exact_distance[redo], exact_arc[redo] = windowed_distances(points[redo], self.vertices, arc[redo], reach)
+            return BorderDistances(distances=exact_distance, arc_m=exact_arc, other_closer=other_closer)
         return BorderDistances(distances=resampled, arc_m=arc, other_closer=other_closer)
