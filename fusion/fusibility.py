@@ -21,7 +21,6 @@ _CHORD_WINDOW_M = 4.0
 _MIN_GAP_M = 1e-6
 _MIN_ARC_CURVATURE = 1.0 / 100.0
 _CURVATURE_SLACK = 0.10
-_CURVATURE_SAMPLES = 7
 _ARC_TOLERANCE_LANES = 0.75
 
 
@@ -119,15 +118,13 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
        may be at most half the ego lane width (measured at the ego end). On a straight this
        is a lateral offset test that rejects the adjacent lane (a full lane width off) while
        tolerating heading noise over a 50 m gap and the shift of an S-bend;
-    4. curved ends: a detection that ends (or starts) inside a curve fixes the arc radius;
-       the lane continues on that arc to the other heading and then runs straight, and the
-       other end must lie within 3/4 of the lane width of that line
-       (:func:`curved_end_mismatch`; the adjacent lane of a curve lies a full lane width
-       off). ``end_fits`` returns the least-squares fits of (ego left, ego right) ends and
-       (coop left, coop right) starts (:func:`fusion.spline.lane_end_fits`); the check is
-       skipped without them, when |Δψ| ≤ t_Ψ, and when both ends are straight (then any arc
-       position fits: an adjacent lane is not distinguishable from the same lane bending
-       later).
+    4. one arc: when both detection ends lie in the same curve, the coop start must lie
+       within 3/4 of the lane width of where that arc leads (:func:`curved_end_mismatch`;
+       the adjacent lane of a curve lies a full lane width off). ``end_fits`` returns the
+       least-squares fits of the (ego left, ego right) ends and (coop left, coop right)
+       starts (:func:`fusion.spline.lane_end_fits`); the check is skipped without them, when
+       |Δψ| ≤ t_Ψ, and when an end is straight: then the curve may start anywhere in the gap
+       and the adjacent lane cannot be told from the same lane bending a little later.
     """
     x_rel, _, _ = relative_pose(ego, coop)
     if x_rel <= 0.0:
@@ -155,59 +152,45 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     return ""
 
 
-def _arc_chord(psi: float, kappa: float, turn: float) -> tuple[float, float]:
-    """Chord of an arc starting with heading ``psi`` and curvature ``kappa`` turning by ``turn``."""
-    return ((math.sin(psi + turn) - math.sin(psi)) / kappa, (math.cos(psi) - math.cos(psi + turn)) / kappa)
-
-
 def _mean_heading(a: EndFit, b: EndFit) -> float:
     return math.atan2(a.direction[1] + b.direction[1], a.direction[0] + b.direction[0])
 
 
-def _curvature_range(a: EndFit, b: EndFit) -> tuple[float, float] | None:
-    """Plausible centre curvatures [1/m] at an end from two border fits: κ ± (3σ + 25 %),
-    or ``None`` unless clearly curved (|κ| ≥ 1/100 m⁻¹ and ≥ 3σ)."""
-    kappa = 0.5 * (a.curvature + b.curvature)
-    sigma = 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
-    if abs(kappa) < max(_MIN_ARC_CURVATURE, 3.0 * sigma):
-        return None
-    spread = 3.0 * sigma + _CURVATURE_SLACK * abs(kappa)
-    return kappa - spread, kappa + spread
+def _curvature(a: EndFit, b: EndFit) -> tuple[float, float]:
+    """Centre curvature [1/m] at an end from its two border fits, and its σ [1/m]."""
+    return 0.5 * (a.curvature + b.curvature), 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
 
 
 def _arc_line_mismatch(p_from: tuple[float, float], psi_from: float, p_to: tuple[float, float], psi_to: float,
-                       turn: float, kappas: tuple[float, float]) -> float:
-    """Smallest lateral offset of ``p_to`` from the line (heading ``psi_to``) reached by an arc
-    leaving ``p_from`` at ``psi_from`` with a curvature in ``kappas`` turning by ``turn``."""
-    best = math.inf
-    for i in range(_CURVATURE_SAMPLES):
-        kappa = kappas[0] + (kappas[1] - kappas[0]) * i / (_CURVATURE_SAMPLES - 1)
-        if kappa * turn <= 0.0:
-            continue
-        cx, cy = _arc_chord(psi_from, kappa, turn)
-        rx, ry = p_to[0] - p_from[0] - cx, p_to[1] - p_from[1] - cy
-        best = min(best, abs(math.cos(psi_to) * ry - math.sin(psi_to) * rx))
-    return best
+                       turn: float, radii: tuple[float, float]) -> float:
+    """Smallest lateral offset of ``p_to`` from the straight (heading ``psi_to``) that follows an
+    arc leaving ``p_from`` at ``psi_from`` and turning by ``turn``, over the radii in ``radii``
+    [m]. The offset is affine in the radius, so the minimum is taken in closed form."""
+    vx, vy = math.sin(psi_from + turn) - math.sin(psi_from), math.cos(psi_from) - math.cos(psi_from + turn)
+    dx, dy = p_to[0] - p_from[0], p_to[1] - p_from[1]
+    c, s = math.cos(psi_to), math.sin(psi_to)
+    base, slope = c * dy - s * dx, (c * vy - s * vx) * math.copysign(1.0, turn)
+    lo, hi = base - slope * radii[0], base - slope * radii[1]
+    return 0.0 if lo * hi <= 0.0 else min(abs(lo), abs(hi))
 
 
 def curved_end_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
-    """Smallest lateral mismatch [m] of the line-arc models a curved detection end implies.
+    """Lateral mismatch [m] of the coop start with the arc both detection ends lie on.
 
-    If the ego end lies in a curve (fitted centre curvature clearly non-zero), the lane
-    continues on an arc of that curvature (± 3σ + 25 %, for noise and a changing curvature)
-    until it reaches the coop heading and then runs straight: the coop start must lie on
-    that straight. Likewise backwards from a curved coop start. Returns the smallest
-    offset over the applicable models, 0 when no end is curved.
+    Applies when both ends are clearly curved (|κ| ≥ 1/100 m⁻¹ and ≥ 3σ) the way the lane
+    turns, with curvatures within 50 % of each other: the gap is then taken as the ego's arc
+    (its end curvature ± 10 % + 3σ); the lane follows it from the ego end to the coop
+    heading, and the coop start must lie on the straight through that point. Returns the smallest lateral offset over those radii, 0 when the rule does
+    not apply (a straight end leaves the arc's position in the gap open).
     """
     psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
-    k_end, k_start = _curvature_range(fits[0], fits[1]), _curvature_range(fits[2], fits[3])
-    if k_end is None and k_start is None:
-        return 0.0
     turn = wrap_angle(psi1 - psi0)
-    best = math.inf
-    if k_end is not None:
-        best = _arc_line_mismatch(ends.p_end, psi0, ends.p_start, psi1, turn, k_end)
-    if k_start is not None:
-        backwards = (-k_start[1], -k_start[0])  # reversed travel: curvature and turn change sign
-        best = min(best, _arc_line_mismatch(ends.p_start, psi1 + math.pi, ends.p_end, psi0, -turn, backwards))
-    return best if math.isfinite(best) else 0.0
+    (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
+    curved = all(abs(k) >= max(_MIN_ARC_CURVATURE, 3.0 * sd) and k * turn > 0.0 for k, sd in ((k0, s0), (k1, s1)))
+    if not curved or abs(k0 - k1) > 0.5 * max(abs(k0), abs(k1)):
+        return 0.0
+    k_hi = abs(k0) * (1.0 + _CURVATURE_SLACK) + 3.0 * s0
+    k_lo = abs(k0) * (1.0 - _CURVATURE_SLACK) - 3.0 * s0
+    if k_lo <= 0.0:
+        return 0.0
+    return _arc_line_mismatch(ends.p_end, psi0, ends.p_start, psi1, turn, (1.0 / k_hi, 1.0 / k_lo))

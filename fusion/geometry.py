@@ -25,6 +25,12 @@ def to_world(points: NDArrayFloat, pose: Pose2D) -> NDArrayFloat:
     return transform(points, pose.x, pose.y, pose.yaw)
 
 
+def _points_in(length_m: float, step_m: float, limit: int) -> int:
+    """round(length / step) capped at ``limit`` (``limit`` for a zero or tiny step)."""
+    ratio = length_m / step_m if step_m > 0.0 else math.inf
+    return limit if not ratio < limit else int(round(ratio))
+
+
 def wrap_angle(angle: float) -> float:
     """Angle wrapped to [-π, π) [rad]."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
@@ -81,8 +87,7 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
     """
     n = points.shape[0]
     x0, y0, x1, y1 = float(points[0, 0]), float(points[0, 1]), float(points[-1, 0]), float(points[-1, 1])
-    approx_step = math.hypot(x1 - x0, y1 - y0) / (n - 1) or 1.0
-    k = min(n - 1, max(1, int(round(window_m / approx_step))))
+    k = max(1, _points_in(window_m, math.hypot(x1 - x0, y1 - y0) / (n - 1), n - 1))
     if at_end:
         vx, vy = x1 - float(points[-1 - k, 0]), y1 - float(points[-1 - k, 1])
     else:
@@ -131,8 +136,8 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     counts, chords, origins = [], [], []
     for points, end in zip(borders, at_end):
         n = points.shape[0]
-        step = math.hypot(float(points[-1, 0] - points[0, 0]), float(points[-1, 1] - points[0, 1])) / (n - 1) or 1.0
-        counts.append([min(n, int(round(w / step)) + 1) for w in windows_m])
+        step = math.hypot(float(points[-1, 0] - points[0, 0]), float(points[-1, 1] - points[0, 1])) / (n - 1)
+        counts.append([_points_in(w, step, n - 1) + 1 for w in windows_m])
         chords.append(end_direction(points, end, windows_m[0]))
         origins.append(points[-1] if end else points[0])
     k_max = max(c[-1] for c in counts)
