@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Final, Mapping, Sequence, TextIO
 
+import numpy as np
+
 from cold_maps.evaluation import Collector, MapEvaluator, MapPlan
 from cold_maps.progress import ProgressBar
 from cold_maps.report import (
@@ -102,6 +104,26 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
     return written
 
 
+def false_fusion_markdown(collector: Collector) -> str:
+    """Per scenario with fusibility decisions: the fusions of pairs that are not on one lane
+    (their errors are in the main table) and the errors of the correct fusions alone."""
+    rows = []
+    for key, accumulator in collector.accumulators.items():
+        fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
+        if not fused:
+            continue
+        wrong = sum(1 for r in fused if not r.truly_fusible)
+        right = [r.errors_m for r in fused if r.truly_fusible]
+        errors = np.concatenate(right) if right else np.empty(0)
+        stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
+        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {key.boundary} | "
+                    f"{len(fused)} | {wrong} | {stats} |")
+    return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
+            "false fusions; their errors are included in the table above. The last two columns pool the "
+            "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | boundary | fused | false fusions | "
+            "mean [m] | max [m] |\n|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+
+
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
                   plots: bool = True) -> list[ScenarioResult]:
     """``frames.csv``, ``summary.md`` (the per-scenario table, notes, then ``sections``:
@@ -112,6 +134,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
     text = summary_markdown(results, partial=partial)
     if collector.notes:
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
+    sections = [*sections, ("False fusions", false_fusion_markdown(collector))]
     for title, body in sections:
         text += f"\n## {title}\n\n{body}"
     atomic_write_text(out / "summary.md", text)

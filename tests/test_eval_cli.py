@@ -164,3 +164,21 @@ def test_sigint_finalises_the_recording(tmp_path):
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
     document, _ = _records(out)
     assert document["partial"] is True
+
+
+def test_false_fusions_are_counted_and_kept_apart():
+    import numpy as np
+
+    from cold_maps.eval_run import false_fusion_markdown
+    from cold_maps.evaluation import Collector
+    from cold_maps.report import FrameRecord, ScenarioKey
+
+    collector = Collector()
+    key = ScenarioKey("m", "spline", "paper", 20.0, "left")
+    collector.add(key, FrameRecord(0, 0.0, "ego", "coop", np.array([0.1, 0.3]), predicted_fusible=True,
+                                   truly_fusible=True))
+    collector.add(key, FrameRecord(0, 0.0, "ego", "adjacent", np.array([3.5]), predicted_fusible=True,
+                                   truly_fusible=False))
+    collector.add(key, FrameRecord(1, 0.1, "ego", "opposite", np.empty(0), rejected="opposite_direction",
+                                   predicted_fusible=False, truly_fusible=False))
+    assert "| m | spline | paper | 20 | left | 2 | 1 | 0.200 | 0.300 |" in false_fusion_markdown(collector)
