@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-import numpy as np
 
 from fusion.geometry import EndFit, end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D

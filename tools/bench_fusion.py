@@ -1,0 +1,167 @@
+"""Latency of fusion.fuse on 300-point borders, side by side with a scipy baseline.
+
+The baseline implements the same steps straightforwardly (world-frame borders, nearest-point
+overlap search, arc-length pairing, scipy.interpolate.CubicSpline with natural boundary
+conditions, dense evaluation and arc-length resampling) without fusibility checks; for the
+Hermite rows it still runs the paper's spline, so its |Δ| column there is the difference of
+the two interpolations. Calls of the library and of the
+baseline alternate, so both see the same machine load. Also prints the Bézier exchange cost.
+
+Usage: .venv/bin/python tools/bench_fusion.py [--repeats 2000] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import fusion  # noqa: E402
+from fusion import bezier  # noqa: E402
+from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
+from fusion.geometry import cumulative_length, distance_to_polyline, to_world  # noqa: E402
+
+RADIUS_M = 20.0
+LENGTH_M = 29.9  # 300 points at 0.1 m
+
+
+def baseline_convoy(ego: fusion.LaneDetection, coop: fusion.LaneDetection, w_coop: float = 0.75) -> list[np.ndarray]:
+    """Convoy fusion written plainly: per border, world frame, brute-force overlap start."""
+    out = []
+    for e_v, c_v in ((ego.left, coop.left), (ego.right, coop.right)):
+        e, c = to_world(e_v, ego.pose), to_world(c_v, coop.pose)
+        s_e, s_c = cumulative_length(e), cumulative_length(c)
+        k = int(np.argmin(np.linalg.norm(e - c[0], axis=1)))
+        s0 = s_e[k]
+        keep = s_e < s0
+        overlap = (s_e >= s0) & (s_e - s0 <= s_c[-1])
+        u = s_e[overlap] - s0
+        paired = np.column_stack((np.interp(u, s_c, c[:, 0]), np.interp(u, s_c, c[:, 1])))
+        fused = (1 - w_coop) * e[overlap] + w_coop * paired
+        tail = c[s_c > s_e[-1] - s0]
+        out.append(np.vstack((e[keep], fused, tail)))
+    return out
+
+
+def baseline_spline(ego: fusion.LaneDetection, coop: fusion.LaneDetection) -> list[np.ndarray]:
+    """The paper's spline fusion with scipy.interpolate.CubicSpline (chord-length knots)."""
+    from scipy.interpolate import CubicSpline
+
+    out = []
+    for e_v, c_v in ((ego.left, coop.left), (ego.right, coop.right)):
+        e, c = to_world(e_v, ego.pose), to_world(c_v, coop.pose)
+        de, dc = e[-1] - e[-3], c[2] - c[0]
+        de, dc = de / np.linalg.norm(de), dc / np.linalg.norm(dc)
+        knots = [e[-3], e[-1]]
+        if abs(math.atan2(de[0] * dc[1] - de[1] * dc[0], de @ dc)) > math.radians(10.0):
+            a, b = np.linalg.solve(np.column_stack((de, dc)), c[0] - e[-1])
+            p_i = e[-1] + a * de
+            chord = c[0] - e[-1]
+            p_j = e[-1] + chord * ((p_i - e[-1]) @ chord) / (chord @ chord)
+            knots.append(p_i + 0.4 * (p_j - p_i))
+        knots += [c[0], c[2]]
+        q = np.array(knots)
+        t = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))))
+        spline = CubicSpline(t, q, bc_type="natural")
+        dense_t = np.linspace(t[1], t[-2], 2000)
+        s = cumulative_length(spline(dense_t))
+        n = math.ceil(s[-1] / 0.1)
+        gap = spline(np.interp(np.linspace(0.0, s[-1], n + 1)[1:-1], s, dense_t))
+        out.append(np.vstack((e, gap, c)))
+    return out
+
+
+def scenarios() -> dict[str, tuple[fusion.LaneDetection, fusion.LaneDetection, dict, object]]:
+    straight = AnalyticRoad([Segment(300.0)])
+    curve = AnalyticRoad([Segment(60.0), Segment(math.pi / 2 * RADIUS_M, -1 / RADIUS_M), Segment(60.0)])
+    apex = 60.0 + math.pi / 4 * RADIUS_M
+    lane = (0.0, -4.0)
+    return {
+        "convoy, straight, 10 m overlap": (detect(straight, 10.0, LENGTH_M, *lane), detect(straight, 30.0, LENGTH_M, *lane),
+                                           {}, baseline_convoy),
+        "convoy, 90° curve, 10 m overlap": (detect(curve, apex - 30.0, LENGTH_M, *lane),
+                                            detect(curve, apex - 10.0, LENGTH_M, *lane), {}, baseline_convoy),
+        "spline paper, straight, d_s 20 m": (detect(straight, 10.0, LENGTH_M, *lane),
+                                             detect(straight, 60.0, LENGTH_M, *lane), {}, baseline_spline),
+        "spline paper, 90° curve, d_s 20 m": (detect(curve, apex - 40.0, LENGTH_M, *lane),
+                                              detect(curve, apex + 10.0, LENGTH_M, *lane), {}, baseline_spline),
+        "spline paper, 90° curve, paper check": (detect(curve, apex - 40.0, LENGTH_M, *lane),
+                                                 detect(curve, apex + 10.0, LENGTH_M, *lane),
+                                                 {"params": fusion.FusionParams(fusibility="paper", t_psi_rad=math.pi)},
+                                                 baseline_spline),
+        "spline hermite, straight, d_s 20 m": (detect(straight, 10.0, LENGTH_M, *lane),
+                                               detect(straight, 60.0, LENGTH_M, *lane), {"interpolation": "hermite"},
+                                               baseline_spline),
+        "spline hermite, 90° curve, d_s 20 m": (detect(curve, apex - 40.0, LENGTH_M, *lane),
+                                                detect(curve, apex + 10.0, LENGTH_M, *lane),
+                                                {"interpolation": "hermite"}, baseline_spline),
+    }
+
+
+def stats(samples_ns: list[int]) -> dict[str, float]:
+    ms = np.array(samples_ns) / 1e6
+    return {"mean": float(ms.mean()), "sigma": float(ms.std()), "median": float(np.median(ms)), "max": float(ms.max())}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=2000, help="timed calls per scenario and implementation")
+    parser.add_argument("--json", type=Path, help="also write the figures as JSON")
+    args = parser.parse_args()
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"# fusion.fuse latency: {args.repeats} calls per row, Python {platform.python_version()}, "
+          f"numpy {np.__version__}, {os.cpu_count()} cores, load average {load:.2f}")
+    print("Wall-clock per call, and CPU time of the calling thread (excludes time the scheduler gives to other "
+          "processes on a shared machine).\n")
+    print("| scenario | points out | fuse mean [ms] | σ | median | max | fuse CPU mean [ms] | scipy baseline mean [ms] "
+          "| σ | max | baseline CPU mean [ms] | max |Δ| to baseline [m] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    report = {}
+    for name, (ego, coop, kwargs, baseline) in scenarios().items():
+        result = fusion.fuse(ego, coop, **kwargs)
+        assert result.kind != "none", result.reason
+        reference = baseline(ego, coop)
+        delta = max(float(distance_to_polyline(mine, ref).max()) for mine, ref in zip((result.left, result.right), reference))
+        for _ in range(50):
+            fusion.fuse(ego, coop, **kwargs)
+            baseline(ego, coop)
+        mine_ns, base_ns, mine_cpu, base_cpu = [], [], [], []
+        for _ in range(args.repeats):
+            c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
+            fusion.fuse(ego, coop, **kwargs)
+            c1, t1 = time.thread_time_ns(), time.perf_counter_ns()
+            baseline(ego, coop)
+            c2, t2 = time.thread_time_ns(), time.perf_counter_ns()
+            mine_ns.append(t1 - t0)
+            base_ns.append(t2 - t1)
+            mine_cpu.append(c1 - c0)
+            base_cpu.append(c2 - c1)
+        m, b, mc, bc = stats(mine_ns), stats(base_ns), stats(mine_cpu), stats(base_cpu)
+        report[name] = {"fuse": m, "baseline": b, "fuse_cpu": mc, "baseline_cpu": bc,
+                        "points": int(result.left.shape[0] + result.right.shape[0]), "max_delta_m": delta}
+        print(f"| {name} | {report[name]['points']} | {m['mean']:.3f} | {m['sigma']:.3f} | {m['median']:.3f} | "
+              f"{m['max']:.3f} | {mc['mean']:.3f} | {b['mean']:.3f} | {b['sigma']:.3f} | {b['max']:.3f} | "
+              f"{bc['mean']:.3f} | {delta:.4f} |")
+    print("\n# Bézier exchange (tolerance 0.05 m)\n| lane (30 m) | Bézier bytes | payload | sampled bytes | "
+          "segments | max decode error [m] |\n|---|---|---|---|---|---|")
+    for name, (ego, _, _, _) in list(scenarios().items())[:2]:
+        ex = bezier.exchange_stats(ego.left, ego.right)
+        report[f"bezier {name}"] = ex.__dict__
+        print(f"| {name.split(', ')[1]} | {ex.bezier_bytes} | {ex.payload_bytes} | {ex.sampled_bytes} | "
+              f"{ex.segments[0]}+{ex.segments[1]} | {ex.max_error_m:.4f} |")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2, default=list))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
