@@ -113,7 +113,7 @@ class Scenario:
 
 def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
                   sensor_range_m: float = SENSOR_RANGE_M) -> tuple[Scenario, ...]:
-    """local, convoy (headway d_v = 25 m) and spline for each interpolation and gap."""
+    """local, convoy (headway d_v = 25 m) and spline for each distinct interpolation and gap."""
     for gap in gaps_m:
         if not (math.isfinite(gap) and gap > 0):
             raise ValueError(f"spline gap d_s: expected a finite distance > 0 m, got {gap!r}")
@@ -121,7 +121,7 @@ def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
         if name not in INTERPOLATIONS:
             raise ValueError(f"interpolation: expected one of {INTERPOLATIONS}, got {name!r}")
     splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
-               for name in interpolations for gap in gaps_m]
+               for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
     return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
 
 
@@ -340,7 +340,7 @@ class MapEvaluator:
         self.plan = plan
         self.graph = graph or load_graph(plan.path)
         self.rng = np.random.default_rng(plan.seed)
-        self.drives = self._drives()
+        self.drives, self.coverage = self._drives()
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
@@ -351,7 +351,8 @@ class MapEvaluator:
         """Frames over all drives."""
         return sum(d.frames for d in self.drives)
 
-    def _drives(self) -> list[Drive]:
+    def _drives(self) -> tuple[list[Drive], tuple[int, int]]:
+        """The drives, and (lanes their routes cover, driving lanes of the map)."""
         plan = self.plan
         leads = plan.coop_leads_m
         distractor_leads = leads if plan.distractors else ()
@@ -363,9 +364,9 @@ class MapEvaluator:
             routes = [route_from_start(self.graph, plan.start_lane, length, self.rng)
                       for _ in range(plan.routes or 1)]
         covered = {lane for route in routes for lane in route}
-        self.coverage = (len(covered), len(self.graph.lanes))
-        return [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads, distractor_leads_m=distractor_leads,
-                            rng=self.rng, speed_mps=plan.speed_mps) for lanes in routes]
+        drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads, distractor_leads_m=distractor_leads,
+                              rng=self.rng, speed_mps=plan.speed_mps) for lanes in routes]
+        return drives, (len(covered), len(self.graph.lanes))
 
     def prepare(self) -> None:
         """Loads (or converts, cached) the Lanelet2 ground truth if not given."""

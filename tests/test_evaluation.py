@@ -59,6 +59,7 @@ def test_scenarios_leads_and_bad_input():
     assert [(s.interpolation, s.d_s, s.lead_m) for s in splines] == [
         ("paper", 20.0, 50.0), ("paper", 50.0, 80.0), ("hermite", 20.0, 50.0), ("hermite", 50.0, 80.0)]
     assert Scenario("spline", "hermite", 20.0, 50.0).label == "spline-hermite-d20"
+    assert len(scenarios_for([20.0, 20.0], ["paper", "paper"])) == 3
     with pytest.raises(ValueError, match="gap"):
         scenarios_for([0.0], ["paper"])
     with pytest.raises(ValueError, match="interpolation"):
