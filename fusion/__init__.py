@@ -7,11 +7,12 @@ Bézier exchange format (:mod:`fusion.bezier`). Frames: world = OpenDRIVE inerti
 vehicle = ISO 8855. See :func:`fuse`.
 """
 
+from fusion import bezier
 from fusion.api import DEFAULT_PARAMS, fuse, is_fusible
 from fusion.errors import BezierDecodeError, FusionError, InvalidDetectionError, InvalidParameterError
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Pose2D, Source
 
 __all__ = [
-    "DEFAULT_PARAMS", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
+    "DEFAULT_PARAMS", "bezier", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
     "InvalidParameterError", "LaneDetection", "NDArrayFloat", "NDArrayInt8", "Pose2D", "Source", "fuse", "is_fusible",
 ]

@@ -132,8 +132,9 @@ class FusionParams:
     """Parameters of :func:`fusion.fuse`; defaults are the paper's values where it gives one.
 
     Fields:
-        t_pos_m: lateral position tolerance of the fusibility check [m] (paper: 0.40).
-        t_psi_rad: orientation tolerance of the fusibility check [rad] (paper: 10°).
+        t_pos_m: lateral position tolerance |y_rel| of the paper's fusibility check [m]
+            (paper: 0.40; the geometric check uses fractions of the measured lane width).
+        t_psi_rad: orientation tolerance of the fusibility checks [rad] (paper: 10°).
         d_i_m: maximum gap d_s bridged by spline fusion [m] (default 50).
         apex_min_turn_rad: relative orientation above which the apex is estimated [rad]
             (paper: 10°).
@@ -152,7 +153,8 @@ class FusionParams:
         convoy_max_heading_rad: largest heading difference of the two borders at the
             overlap start [rad].
         fusibility: ``"geometric"`` (default, works across curves, see
-            :func:`fusion.is_fusible`) or ``"paper"`` (the paper's three pose cases).
+            :func:`fusion.fusibility.geometric_check`) or ``"paper"`` (the paper's three pose
+            cases, :func:`fusion.fusibility.paper_check`).
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
             2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).
