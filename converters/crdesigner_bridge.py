@@ -3,6 +3,9 @@
 crdesigner re-projects every vertex from the map's geoReference to pseudo-Mercator
 (``proj_string_odr``); we switch that off, so the CommonRoad vertices stay in the
 OpenDRIVE inertial frame (the ``<offset>`` of the geoReference is not applied either).
+We also skip its lane join/split "mirroring", which moves the borders of a lane that
+opens or closes from zero width (bundled highway.xodr: lane -4 off by up to 4 m), so the
+lanelets keep the OpenDRIVE borders.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -13,6 +16,7 @@ import io
 import logging
 import os
 import warnings
+from unittest import mock
 from dataclasses import dataclass
 from pathlib import Path
 from collections.abc import Iterator
@@ -141,6 +145,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
 def _run_crdesigner(path: Path):  # noqa: ANN202 - returns a commonroad Scenario
     from crdesigner.common.config.general_config import GeneralConfig
     from crdesigner.common.config.opendrive_config import OpenDriveConfig
+    from crdesigner.map_conversion.common.conversion_lanelet_network import ConversionLaneletNetwork
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion.network import Network
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
@@ -148,4 +153,10 @@ def _run_crdesigner(path: Path):  # noqa: ANN202 - returns a commonroad Scenario
     config.proj_string_odr = None
     network = Network(config)
     network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
-    return network.export_commonroad_scenario(GeneralConfig(), config)
+    # crdesigner keeps global state (an id counter) anyway: one conversion at a time.
+    with mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders):
+        return network.export_commonroad_scenario(GeneralConfig(), config)
+
+
+def _keep_borders(network: object) -> None:
+    """Replaces crdesigner's join/split border mirroring: borders stay as in OpenDRIVE."""

@@ -22,6 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import converters
+from conftest import bundled_map
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
@@ -284,7 +285,7 @@ def test_damaged_cache_entry_is_converted_again(straight_map, tmp_path) -> None:
     cache = tmp_path / "cache"
     key = cache_path(straight_map.read_bytes(), crdesigner_version(), cache)
     cache.mkdir()
-    key.write_bytes(b'<osm version="0.6" generator="cold-maps-converters/2"><node id="1" lat=')
+    key.write_bytes(b'<osm version="0.6" generator="cold-maps-converters/3"><node id="1" lat=')
     lanelet_map, _ = converters.load_lanelet2(straight_map, cache_dir=cache)
     assert len(lanelet_map.laneletLayer) == 6
     assert key.read_bytes().count(b"<relation ") == 6
@@ -518,3 +519,38 @@ def test_crdesigner_warnings_are_silenced_unless_verbose(tmp_path) -> None:
             converters.load_lanelet2(path, cache=False, verbose=verbose)
         assert min(sum("geoidgrids" in str(w.message) for w in caught), 1) == expected
         assert logging.root.manager.disable == before
+
+
+def test_opening_lane_keeps_its_opendrive_borders(tmp_path) -> None:
+    """Lane -2 opens from 0 to 3 m (smooth cubic); crdesigner would move its borders
+    ("mirroring" a split), the converter keeps them where OpenDRIVE puts them."""
+    c, d = 9.0 / LENGTH**2, -6.0 / LENGTH**3  # w(s) = 3·(3(s/L)² − 2(s/L)³)
+    text = synthetic_xodr().replace(
+        '<lane id="-2" type="driving" level="false"><link/><width sOffset="0" a="3.0" b="0" c="0" d="0"/>',
+        f'<lane id="-2" type="driving" level="false"><link/><width sOffset="0" a="0" b="0" c="{c!r}" d="{d!r}"/>',
+    )
+    path = tmp_path / "opening.xodr"
+    path.write_text(text)
+    lanelet_map, _ = converters.load_lanelet2(path, cache=False)
+    checked = 0
+    for lanelet in lanelet_map.laneletLayer:
+        left, right = xy(lanelet.leftBound), xy(lanelet.rightBound)
+        if np.mean(left[:, 0]) > 0.5 * ARC_OFFSET[0]:
+            continue
+        _, t_left = road_coordinates(1, left, 0.0, 0.0)
+        s_right, t_right = road_coordinates(1, right, 0.0, 0.0)
+        if np.mean(t_right) > -3.5 - 1e-6 or np.mean(t_left) > -1.0:
+            continue  # not lane -2
+        width = c * s_right**2 + d * s_right**3
+        assert np.abs(t_left + 3.5).max() <= MERGE_TOLERANCE_M
+        assert np.abs(t_right + 3.5 + width).max() <= MERGE_TOLERANCE_M
+        checked += 1
+    assert checked == 1
+
+
+def test_bundled_highway_ground_truth_is_trustworthy() -> None:
+    from cold_maps.gt_check import check_map
+
+    report = check_map(bundled_map("highway"), cache=False)
+    assert report.trustworthy and len(report.lanes) >= 20
+    assert max(lane.max_m for lane in report.lanes) <= 2 * MERGE_TOLERANCE_M
