@@ -400,6 +400,14 @@ class MapEvaluator:
                 frame_index += 1
                 if on_frame is not None:
                     on_frame()
+        unmatched = sum(r.rejected == "no_ground_truth" for key, a in collector.accumulators.items()
+                        if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
+                        for r in a.records)
+        if unmatched:
+            note = (f"{plan.name}: no ground truth for {unmatched} of {self.total_frames} ego detections (no "
+                    "Lanelet2 lanelet at the pose: the converted map does not overlay the OpenDRIVE map there)")
+            LOG.warning(note)
+            collector.notes.append(note)
         return frame_index
 
     def _frame(self, collector: Collector, drive: Drive, frame: int, index: int, recorder: Recorder | None) -> None:
