@@ -51,7 +51,8 @@ def _gaps(text: str) -> tuple[float, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval`` argument parser."""
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[1].replace("\n", " ").replace("``", ""))
+    description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
+    parser = argparse.ArgumentParser(prog=PROG, description=description)
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--map", action="append", type=Path, metavar="MAP.xodr", help="OpenDRIVE map (repeatable)")
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
