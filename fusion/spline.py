@@ -24,7 +24,6 @@ _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
 _TAU_POWERS: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4))
-_POWERS: Final[NDArrayFloat] = np.arange(4.0)
 _PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
 
 Piece = list[list[float]]  # power-basis coefficients [[a_x, a_y], [b_x, b_y], [c_x, c_y], [d_x, d_y]], τ ∈ [0, 1]
@@ -84,7 +83,13 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         offset += count
     q = np.interp(k, s.ravel(), _parameter_grid(n_pieces))
     index = np.minimum(q.astype(np.intp), n_pieces - 1)
-    points = (np.power.outer(q - index, _POWERS)[:, None, :] @ coeffs[index])[:, 0]
+    powers = np.empty((n_total, 4))
+    powers[:, 0] = 1.0
+    np.subtract(q, index, out=powers[:, 1])
+    np.multiply(powers[:, 1], powers[:, 1], out=powers[:, 2])
+    np.multiply(powers[:, 2], powers[:, 1], out=powers[:, 3])
+    every_piece = (powers @ coeffs.transpose(1, 0, 2).reshape(4, 2 * n_pieces)).reshape(n_total, n_pieces, 2)
+    points = every_piece[np.arange(n_total), index]
     out, offset = [], 0
     for count in counts:
         out.append(points[offset:offset + count])
