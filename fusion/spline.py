@@ -14,7 +14,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
-from fusion.geometry import EndFit, fit_ends
+from fusion.geometry import EndFit, fit_ends, norms
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
@@ -56,9 +56,8 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     coeffs = np.array(flat)
     n_pieces = coeffs.shape[0]
     grid = _TAU_POWERS @ coeffs
-    step = grid[:, 1:] - grid[:, :-1]
     s = np.zeros((n_pieces, _GRID + 1))
-    np.cumsum(np.hypot(step[:, :, 0], step[:, :, 1]), axis=1, out=s[:, 1:])
+    np.cumsum(norms(grid[:, 1:] - grid[:, :-1]), axis=1, out=s[:, 1:])
     lengths = s[:, -1].tolist()
     starts, total = [], 0.0
     for length in lengths:
