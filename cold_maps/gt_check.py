@@ -21,7 +21,7 @@ import numpy as np
 
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
-from gt_matching.polyline import NDArrayFloat, NDArrayInt, segment_distances
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, resample, windowed_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -35,8 +35,9 @@ STEP_M: Final[float] = 0.1
 SEARCH_RADIUS_M: Final[float] = 2.0
 """Lanelets with a border vertex this close (m) to one of a lane's border points are candidates."""
 
-NEAREST_VERTICES: Final[int] = 3
-"""The closest point is searched on the segments next to this many nearest vertices."""
+RESAMPLE_STEP_M: Final[float] = 0.25
+"""Lanelet borders are resampled this finely (m) to find where along them to search the
+closest segment (gt_matching's windowed search, reach = this step)."""
 
 EXIT_TRUSTWORTHY: Final[int] = 0
 EXIT_UNTRUSTWORTHY: Final[int] = 3
@@ -103,6 +104,19 @@ class CheckReport:
         return EXIT_TRUSTWORTHY if self.trustworthy else EXIT_UNTRUSTWORTHY
 
 
+@dataclass(frozen=True, eq=False)
+class _Border:
+    """One lanelet border in its driving order, with a KD-tree of its resampled points."""
+
+    vertices: NDArrayFloat
+    tree: cKDTree
+
+    def distances(self, points: NDArrayFloat) -> NDArrayFloat:
+        """Closest-point distance (m) of each point to this border."""
+        arc = self.tree.query(points)[1] * RESAMPLE_STEP_M
+        return windowed_distances(points, self.vertices, arc, RESAMPLE_STEP_M)[0]
+
+
 class _LaneletIndex:
     """Borders of every lanelet and one KD-tree over all their vertices."""
 
@@ -110,17 +124,20 @@ class _LaneletIndex:
         from scipy.spatial import cKDTree
 
         self.ids: list[int] = []
-        self.left: list[NDArrayFloat] = []
-        self.right: list[NDArrayFloat] = []
+        self.borders: list[tuple[_Border, _Border]] = []
         owners: list[NDArrayInt] = []
+        vertices: list[NDArrayFloat] = []
         for slot, lanelet in enumerate(lanelet_map.laneletLayer):
+            pair = []
+            for line in (lanelet.leftBound, lanelet.rightBound):
+                xy = np.array([(p.x, p.y) for p in line], dtype=np.float64)
+                pair.append(_Border(xy, cKDTree(resample(xy, RESAMPLE_STEP_M)[0])))
+                vertices.append(xy)
+                owners.append(np.full(len(xy), slot, dtype=np.int64))
             self.ids.append(int(lanelet.id))
-            for border, store in ((lanelet.leftBound, self.left), (lanelet.rightBound, self.right)):
-                store.append(np.array([(p.x, p.y) for p in border], dtype=np.float64))
-                owners.append(np.full(len(store[-1]), slot, dtype=np.int64))
+            self.borders.append((pair[0], pair[1]))
         self.owner = np.concatenate(owners)
-        self.tree: cKDTree = cKDTree(np.vstack([v for pair in zip(self.left, self.right) for v in pair]))
-        self.trees = [(cKDTree(left), cKDTree(right)) for left, right in zip(self.left, self.right)]
+        self.tree: cKDTree = cKDTree(np.vstack(vertices))
 
     def candidates(self, points: NDArrayFloat) -> set[int]:
         """Slots of lanelets with a border vertex within SEARCH_RADIUS_M of any point."""
@@ -128,30 +145,13 @@ class _LaneletIndex:
         return {int(self.owner[i]) for hits in near for i in hits}
 
 
-def _distances(points: NDArrayFloat, vertices: NDArrayFloat, tree: cKDTree) -> NDArrayFloat:
-    """Closest-point distance (m) of each point to the polyline ``vertices``, searched on
-    the segments next to the NEAREST_VERTICES nearest vertices."""
-    if len(vertices) < 2:
-        return np.full(len(points), np.inf)
-    count = min(NEAREST_VERTICES, len(vertices))
-    nearest = tree.query(points, k=count)[1].reshape(len(points), count)
-    segments = np.clip(np.concatenate((nearest - 1, nearest), axis=1), 0, len(vertices) - 2)
-    return segment_distances(points, vertices, segments)[0]
-
-
 def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
     inner, outer = samples.inner[:, :2], samples.outer[:, :2]
     best: tuple[float, int, NDArrayFloat] | None = None
     for slot in index.candidates(np.vstack((inner, outer))):
-        left_tree, right_tree = index.trees[slot]
-        inner_border, inner_tree, outer_border, outer_tree = (
-            (index.left[slot], left_tree, index.right[slot], right_tree)
-            if rule == "RHT"
-            else (index.right[slot], right_tree, index.left[slot], left_tree)
-        )
-        distances = np.concatenate(
-            (_distances(inner, inner_border, inner_tree), _distances(outer, outer_border, outer_tree))
-        )
+        left, right = index.borders[slot]
+        inner_border, outer_border = (left, right) if rule == "RHT" else (right, left)
+        distances = np.concatenate((inner_border.distances(inner), outer_border.distances(outer)))
         score = float(np.median(distances))
         if best is None or score < best[0]:
             best = (score, slot, distances)
