@@ -3,6 +3,7 @@ frame (two 90 m borders sampled every 0.1 m) on a generated grid map of a few hu
 lanelets, against baselines without the per-map caches, in the same run.
 
 Usage: .venv/bin/python tools/bench_gt_matching.py [--drives 40] [--frames-per-drive 10]
+       [--map ../shared/maps/carla/Town04.xodr]
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gt_matching import GroundTruth  # noqa: E402
-from gt_matching.polyline import NDArrayFloat, arc_lengths, resample  # noqa: E402
+from gt_matching.polyline import NDArrayFloat, arc_lengths  # noqa: E402
 from gt_matching.synthetic import grid_network  # noqa: E402
 
 DETECTION_M = 90.0
@@ -28,35 +29,52 @@ ROUTE_M = 130.0
 FRAME_ADVANCE_M = 1.0
 
 
-def crop(polyline: NDArrayFloat, start_m: float, length_m: float) -> NDArrayFloat:
-    """``length_m`` of ``polyline`` from arc length ``start_m``, resampled every DETECTION_STEP_M."""
-    samples, _ = resample(polyline, DETECTION_STEP_M)
-    s = np.arange(len(samples)) * DETECTION_STEP_M
-    return samples[(s >= start_m) & (s <= start_m + length_m)]
+def paired(left: NDArrayFloat, right: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Both borders sampled at the same fractions of their lengths, about every
+    DETECTION_STEP_M of the longer one (as a lane sensor pairs them)."""
+    cum_left, cum_right = arc_lengths(left), arc_lengths(right)
+    fractions = np.linspace(0.0, 1.0, int(np.ceil(max(cum_left[-1], cum_right[-1]) / DETECTION_STEP_M)) + 1)
+
+    def at(line: NDArrayFloat, cum: NDArrayFloat) -> NDArrayFloat:
+        return np.column_stack([np.interp(fractions * cum[-1], cum, line[:, k]) for k in (0, 1)])
+
+    return at(left, cum_left), at(right, cum_right)
 
 
 def drives(lanelet_map: object, graph: object, count: int, frames: int, rng: np.random.Generator) -> list[tuple]:
-    """Frames (left, right, pose) of ``count`` random drives along the routing graph,
-    ``frames`` per drive, advancing FRAME_ADVANCE_M per frame; borders carry N(0, NOISE_M)
-    noise per coordinate; the pose is the lane centre at the detection start."""
-    lanelets = list(lanelet_map.laneletLayer)
+    """Frames (left, right, pose) of ``count`` random drives along the routing graph from
+    lanelets vehicles may use, ``frames`` per drive, advancing FRAME_ADVANCE_M per frame;
+    borders DETECTION_M long with N(0, NOISE_M) noise per coordinate; the pose is the lane
+    centre at the detection start, heading along it."""
+    import lanelet2
+
+    rules = lanelet2.traffic_rules.create(
+        lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
+    )
+    lanelets = [ll for ll in lanelet_map.laneletLayer if rules.canPass(ll)]
     out = []
     while len(out) < count * frames:
         route = [lanelets[rng.integers(len(lanelets))]]
-        while sum(arc_lengths(np.array([(p.x, p.y) for p in ll.leftBound]))[-1] for ll in route) < ROUTE_M:
+        pairs = [paired(*(np.array([(p.x, p.y) for p in line]) for line in (route[0].leftBound, route[0].rightBound)))]
+        length = float(arc_lengths(0.5 * (pairs[0][0] + pairs[0][1]))[-1])
+        while length < ROUTE_M:
             following = graph.following(route[-1])
             if not following:
                 break
             route.append(following[rng.integers(len(following))])
-        borders = [np.vstack([np.array([(p.x, p.y) for p in getattr(ll, side)]) for ll in route]) for side in ("leftBound", "rightBound")]
-        if min(arc_lengths(b)[-1] for b in borders) < ROUTE_M:
+            pair = paired(*(np.array([(p.x, p.y) for p in line]) for line in (route[-1].leftBound, route[-1].rightBound)))
+            pairs.append((pair[0][1:], pair[1][1:]))
+            length += float(arc_lengths(0.5 * (pair[0] + pair[1]))[-1])
+        if length < ROUTE_M:
             continue
+        left, right = (np.vstack([pair[side] for pair in pairs]) for side in (0, 1))
+        s = arc_lengths(0.5 * (left + right))
         for frame in range(frames):
-            left, right = (crop(b, frame * FRAME_ADVANCE_M, DETECTION_M) for b in borders)
-            mid, ahead = 0.5 * (left[0] + right[0]), 0.5 * (left[5] + right[5])
-            yaw = float(np.arctan2(ahead[1] - mid[1], ahead[0] - mid[0]))
-            noisy = (b + rng.normal(0.0, NOISE_M, b.shape) for b in (left, right))
-            out.append((*noisy, (float(mid[0]), float(mid[1]), yaw)))
+            keep = (s >= frame * FRAME_ADVANCE_M) & (s <= frame * FRAME_ADVANCE_M + DETECTION_M)
+            mid = 0.5 * (left[keep] + right[keep])
+            yaw = float(np.arctan2(mid[5, 1] - mid[0, 1], mid[5, 0] - mid[0, 0]))
+            noisy = (b[keep] + rng.normal(0.0, NOISE_M, b[keep].shape) for b in (left, right))
+            out.append((*noisy, (float(mid[0, 0]), float(mid[0, 1]), yaw)))
     return out
 
 
@@ -90,7 +108,8 @@ def stats(name: str, wall: list[float], cpu: list[float]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--grid", type=int, default=6, help="junctions per side of the grid map")
+    parser.add_argument("--grid", type=int, default=6, help="junctions per side of the generated grid map")
+    parser.add_argument("--map", help="an .xodr map to use instead (converted to Lanelet2 by converters, cached)")
     parser.add_argument("--drives", type=int, default=40)
     parser.add_argument("--frames-per-drive", type=int, default=10)
     parser.add_argument("--baseline-frames", type=int, default=30, help="frames for the slow baselines")
@@ -98,14 +117,19 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
 
-    map_ms, _, (lanelet_map, graph) = timed(lambda: grid_network(args.grid, args.grid))
+    if args.map:
+        from converters import load_lanelet2
+
+        map_ms, _, (lanelet_map, graph) = timed(lambda: load_lanelet2(args.map))
+    else:
+        map_ms, _, (lanelet_map, graph) = timed(lambda: grid_network(args.grid, args.grid))
     frames = drives(lanelet_map, graph, args.drives + 1, args.frames_per_drive, rng)
     warm_up, frames = frames[0], frames[args.frames_per_drive :]
     gt_ms, _, gt = timed(lambda: GroundTruth(lanelet_map, graph))
     gt.evaluate(*warm_up)
     print(
-        f"map: {len(lanelet_map.laneletLayer)} lanelets, {len(gt.lines.vertices)} border line strings; "
-        f"generated in {map_ms:.0f} ms, GroundTruth built in {gt_ms:.0f} ms; GT step {gt.config.step_m} m"
+        f"map: {args.map or 'grid'}, {len(lanelet_map.laneletLayer)} lanelets, {len(gt.lines.vertices)} border line "
+        f"strings; loaded in {map_ms:.0f} ms, GroundTruth built in {gt_ms:.0f} ms; GT step {gt.config.step_m} m"
     )
     print(
         f"frames: {len(frames)} ({args.drives} drives, {FRAME_ADVANCE_M} m apart), borders "
