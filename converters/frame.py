@@ -12,6 +12,8 @@ latitude and longitude are therefore not geographic positions for georeferenced 
 
 from __future__ import annotations
 
+import json
+import shlex
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
@@ -68,11 +70,11 @@ class LoadRecipe:
         code = (
             "import lanelet2; from lanelet2.io import Origin; "
             f"from lanelet2.projection import {self.projector}; "
-            f"m = lanelet2.io.load({self.osm_path!r}, "
+            f"m = lanelet2.io.load({json.dumps(self.osm_path)}, "
             f"{self.projector}(Origin({self.origin_lat_deg!r}, {self.origin_lon_deg!r}))); "
-            "print(len(m.laneletLayer), 'lanelets')"
+            'print(len(m.laneletLayer), "lanelets")'
         )
-        return f'python -c "{code}"'
+        return f"python -c {shlex.quote(code)}"
 
     def describe(self) -> str:
         """Human-readable recipe: file, projector, origin and the load command."""
