@@ -13,6 +13,7 @@ Usage: .venv/bin/python tools/bench_fusion.py [--repeats 2000] [--json out.json]
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import math
 import os
@@ -121,7 +122,7 @@ def main() -> int:
     print(f"# fusion.fuse latency: {args.repeats} calls per row, Python {platform.python_version()}, "
           f"numpy {np.__version__}, {os.cpu_count()} cores, load average {load:.2f}")
     print("Wall-clock per call, and CPU time of the calling thread (excludes time the scheduler gives to other "
-          "processes on a shared machine).\n")
+          "processes on a shared machine); garbage collection off while timing, as in timeit.\n")
     print("| scenario | points out | fuse mean [ms] | σ | median | max | fuse CPU mean [ms] | scipy baseline mean [ms] "
           "| σ | max | baseline CPU mean [ms] | max |Δ| to baseline [m] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -135,6 +136,7 @@ def main() -> int:
             fusion.fuse(ego, coop, **kwargs)
             baseline(ego, coop)
         mine_ns, base_ns, mine_cpu, base_cpu = [], [], [], []
+        gc.disable()  # as timeit does: no collector pauses inside the timed calls
         for _ in range(args.repeats):
             c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
             fusion.fuse(ego, coop, **kwargs)
@@ -145,6 +147,7 @@ def main() -> int:
             base_ns.append(t2 - t1)
             mine_cpu.append(c1 - c0)
             base_cpu.append(c2 - c1)
+        gc.enable()
         m, b, mc, bc = stats(mine_ns), stats(base_ns), stats(mine_cpu), stats(base_cpu)
         report[name] = {"fuse": m, "baseline": b, "fuse_cpu": mc, "baseline_cpu": bc,
                         "points": int(result.left.shape[0] + result.right.shape[0]), "max_delta_m": delta}
