@@ -5,7 +5,8 @@ crdesigner re-projects every vertex from the map's geoReference to pseudo-Mercat
 OpenDRIVE inertial frame (the ``<offset>`` of the geoReference is not applied either).
 We also skip its lane join/split "mirroring", which moves the borders of a lane that
 opens or closes from zero width (bundled highway.xodr: lane -4 off by up to 4 m), so the
-lanelets keep the OpenDRIVE borders.
+lanelets keep the OpenDRIVE borders. And we record, before crdesigner renumbers its
+lanelets and forgets where they came from, the OpenDRIVE lanes each lanelet covers.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -20,7 +21,7 @@ from unittest import mock
 from dataclasses import dataclass
 from pathlib import Path
 from collections.abc import Iterator
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -45,6 +46,8 @@ class SourceLanelet:
         types: CommonRoad lanelet type values, e.g. {"urban", "intersection"}.
         left_marking, right_marking: CommonRoad line markings of the borders ("dashed",
             "solid", "no_marking", "curb", ...; "unknown" when crdesigner has none).
+        opendrive_lanes: the OpenDRIVE lanes the lanelet covers, in driving order, as
+            (road id, lane-section index, lane id); empty for crosswalks.
     """
 
     id: int
@@ -53,6 +56,7 @@ class SourceLanelet:
     types: frozenset[str]
     left_marking: str = "unknown"
     right_marking: str = "unknown"
+    opendrive_lanes: tuple[tuple[str, int, int], ...] = ()
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -120,7 +124,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     geo_reference = read_geo_reference(path)
     with _quiet(verbose):
         try:
-            scenario = _run_crdesigner(path)
+            scenario, sources = _run_crdesigner(path)
         except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
             raise ConversionError(str(path), f"converter crashed: {type(exc).__name__}: {exc}") from exc
     lanelets = [
@@ -131,6 +135,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             types=frozenset(str(t.value) for t in lanelet.lanelet_type),
             left_marking=str(lanelet.line_marking_left_vertices.value),
             right_marking=str(lanelet.line_marking_right_vertices.value),
+            opendrive_lanes=sources.get(int(lanelet.lanelet_id), ()),
         )
         for lanelet in scenario.lanelet_network.lanelets
     ]
@@ -142,20 +147,40 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     return lanelets, geo_reference
 
 
-def _run_crdesigner(path: Path):  # noqa: ANN202 - returns a commonroad Scenario
+def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]]]:
+    """crdesigner's CommonRoad scenario of ``path`` and, per lanelet id, its OpenDRIVE lanes."""
     from crdesigner.common.config.general_config import GeneralConfig
     from crdesigner.common.config.opendrive_config import OpenDriveConfig
     from crdesigner.map_conversion.common.conversion_lanelet_network import ConversionLaneletNetwork
-    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion.network import Network
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion import network as network_module
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
     config = OpenDriveConfig()
     config.proj_string_odr = None
-    network = Network(config)
+    network = network_module.Network(config)
     network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
+    sources: dict[int, tuple[tuple[str, int, int], ...]] = {}
+    to_base = network_module.convert_to_base_lanelet_network
+
+    def recording_to_base(conversion_network: Any) -> Any:
+        for lanelet in conversion_network.lanelets:
+            group = getattr(lanelet, "parametric_lane_group", None)
+            ids = [] if group is None else [lane.id_ for lane in group.parametric_lanes]
+            sources[int(lanelet.lanelet_id)] = tuple(dict.fromkeys(_opendrive_lane(i) for i in ids))
+        return to_base(conversion_network)
+
     # crdesigner keeps global state (an id counter) anyway: one conversion at a time.
-    with mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders):
-        return network.export_commonroad_scenario(GeneralConfig(), config)
+    with (
+        mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders),
+        mock.patch.object(network_module, "convert_to_base_lanelet_network", recording_to_base),
+    ):
+        return network.export_commonroad_scenario(GeneralConfig(), config), sources
+
+
+def _opendrive_lane(parametric_lane_id: str) -> tuple[str, int, int]:
+    """(road id, section index, lane id) of crdesigner's "road.section.lane.width.mark" id."""
+    road, section, lane = parametric_lane_id.split(".")[:3]
+    return road, int(section), int(lane)
 
 
 def _keep_borders(network: object) -> None:

@@ -12,6 +12,7 @@ routing needs), and no point moves farther than that. Each way is then thinned
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Final
 
@@ -65,18 +66,39 @@ say which side is which. "unknown" gets no tags (no lane change)."""
 TYPES_TAG: Final[str] = "commonroad:types"
 """Lanelet tag listing the CommonRoad lanelet types (comma-separated, sorted)."""
 
+OPENDRIVE_TAG: Final[str] = "opendrive:lanes"
+"""Lanelet tag listing the OpenDRIVE lanes it covers: "road:section:lane" joined by ";"."""
 
-def lanelet_attributes(types: frozenset[str]) -> dict[str, str]:
-    """Lanelet2 tags of a lanelet with these CommonRoad types."""
-    subtype = next((l2 for cr, l2 in _SUBTYPES if cr in types), "road")
-    urban = "urban" in types or "intersection" in types
-    return {
+
+def opendrive_lanes_tag(lanes: Sequence[tuple[str, int, int]]) -> str:
+    """The ``OPENDRIVE_TAG`` value of these (road id, section index, lane id)."""
+    return ";".join(f"{road}:{section}:{lane}" for road, section, lane in lanes)
+
+
+def parse_opendrive_lanes_tag(value: str) -> tuple[tuple[str, int, int], ...]:
+    """Inverse of ``opendrive_lanes_tag`` (road ids may contain ":"; the last two fields are ints)."""
+    lanes = []
+    for item in filter(None, value.split(";")):
+        road, section, lane = item.rsplit(":", 2)
+        lanes.append((road, int(section), int(lane)))
+    return tuple(lanes)
+
+
+def lanelet_attributes(lanelet: SourceLanelet) -> dict[str, str]:
+    """Lanelet2 tags of a lanelet: type, subtype and location from its CommonRoad types,
+    the types themselves and the OpenDRIVE lanes it covers (when known)."""
+    subtype = next((l2 for cr, l2 in _SUBTYPES if cr in lanelet.types), "road")
+    urban = "urban" in lanelet.types or "intersection" in lanelet.types
+    tags = {
         "type": "lanelet",
         "subtype": subtype,
         "location": "urban" if urban else "nonurban",
         "one_way": "yes",
-        TYPES_TAG: ",".join(sorted(types)),
+        TYPES_TAG: ",".join(sorted(lanelet.types)),
     }
+    if lanelet.opendrive_lanes:
+        tags[OPENDRIVE_TAG] = opendrive_lanes_tag(lanelet.opendrive_lanes)
+    return tags
 
 
 def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
@@ -110,11 +132,10 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
     leftness = np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
     if leftness >= 0.0:
         return lanelet
-    return SourceLanelet(
-        id=lanelet.id,
+    return replace(
+        lanelet,
         left=lanelet.right,
         right=lanelet.left,
-        types=lanelet.types,
         left_marking=lanelet.right_marking,
         right_marking=lanelet.left_marking,
     )
@@ -212,7 +233,7 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
         element = etree.SubElement(root, "relation", id=str(lanelet.id))
         etree.SubElement(element, "member", type="way", role="left", ref=str(way_id_base + left))
         etree.SubElement(element, "member", type="way", role="right", ref=str(way_id_base + right))
-        for key, value in lanelet_attributes(lanelet.types).items():
+        for key, value in lanelet_attributes(lanelet).items():
             etree.SubElement(element, "tag", k=key, v=value)
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 

@@ -26,7 +26,15 @@ from conftest import bundled_map
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
-from converters.osm import MERGE_TOLERANCE_M, left_on_left, merge_points, simplify
+from converters.osm import (
+    MERGE_TOLERANCE_M,
+    OPENDRIVE_TAG,
+    left_on_left,
+    merge_points,
+    opendrive_lanes_tag,
+    parse_opendrive_lanes_tag,
+    simplify,
+)
 
 HEADING = 0.3
 LENGTH = 60.0
@@ -129,6 +137,7 @@ def test_synthetic_borders_on_analytic_borders_in_driving_direction(synthetic_ma
         centre_t = 0.5 * (np.mean(t_left) + np.mean(t_right))
         lane = next(i for i, (a, b) in LANE_T.items() if min(a, b) < centre_t < max(a, b))
         seen.add((road, lane))
+        assert dict(lanelet.attributes)[OPENDRIVE_TAG] == f"{road}:0:{lane}"
         along_s = (lane < 0) == (variant.rule == "RHT")
         assert (s_left[-1] > s_left[0]) == along_s, f"{name}: road {road} lane {lane} runs the wrong way"
         assert s_left.min() > -1e-6 and s_left.max() < LENGTH + 1e-6
@@ -224,6 +233,12 @@ def test_simplify_drops_collinear_vertices_and_keeps_corners() -> None:
     assert np.flatnonzero(simplify(corner, 1e-6)).tolist() == [0, 20, 21]
 
 
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.text(min_size=1).filter(lambda t: ";" not in t), st.integers(0, 99), st.integers(-9, 9))))
+def test_opendrive_lanes_tag_round_trips(lanes) -> None:
+    assert parse_opendrive_lanes_tag(opendrive_lanes_tag(lanes)) == tuple(lanes)
+
+
 def test_left_on_left_swaps_only_lanelets_whose_left_border_is_on_the_right() -> None:
     s = np.linspace(0.0, 10.0, 11)
     centre = np.column_stack((s, 0.1 * s**2))
@@ -285,7 +300,7 @@ def test_damaged_cache_entry_is_converted_again(straight_map, tmp_path) -> None:
     cache = tmp_path / "cache"
     key = cache_path(straight_map.read_bytes(), crdesigner_version(), cache)
     cache.mkdir()
-    key.write_bytes(b'<osm version="0.6" generator="cold-maps-converters/3"><node id="1" lat=')
+    key.write_bytes(b'<osm version="0.6" generator="cold-maps-converters/4"><node id="1" lat=')
     lanelet_map, _ = converters.load_lanelet2(straight_map, cache_dir=cache)
     assert len(lanelet_map.laneletLayer) == 6
     assert key.read_bytes().count(b"<relation ") == 6
