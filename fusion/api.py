@@ -103,7 +103,7 @@ def _result(ego: LaneDetection, left: Parts, right: Parts, kind: FusionKind, gap
     parts = left + right
     counts = [points.shape[0] for points, _ in parts]
     world = to_world(np.concatenate([points for points, _ in parts]), ego.pose)
-    labels = np.repeat(np.array([source for _, source in parts], dtype=np.int8), counts)
+    labels = np.repeat(np.array([int(source) for _, source in parts], dtype=np.int8), counts)
     n_left = sum(counts[: len(left)])
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason)
 

@@ -17,7 +17,9 @@ _CI_FACTOR = 2.5
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
     """Points of a frame at ``(x, y, yaw)`` (relative to a parent frame) in the parent frame."""
     c, s = math.cos(yaw), math.sin(yaw)
-    return points @ np.array(((c, s), (-s, c))) + (x, y)
+    out = points @ np.array(((c, s), (-s, c)))
+    out += (x, y)
+    return out
 
 
 def to_world(points: NDArrayFloat, pose: Pose2D) -> NDArrayFloat:
