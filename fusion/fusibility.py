@@ -10,17 +10,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Final, Sequence
 
 
 from fusion.geometry import EndFit, end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
-_CHORD_WINDOW_M = 4.0
-_MIN_GAP_M = 1e-6
-_MIN_ARC_CURVATURE = 1.0 / 100.0
-_CURVATURE_SLACK = 0.10
-_ARC_TOLERANCE_LANES = 0.75
+_CHORD_WINDOW_M: Final[float] = 4.0
+_MIN_GAP_M: Final[float] = 1e-6
+_MIN_ARC_CURVATURE: Final[float] = 1.0 / 100.0
+_CURVATURE_SLACK: Final[float] = 0.10
+_ARC_TOLERANCE_LANES: Final[float] = 0.75
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ import numpy as np
 
 from fusion.types import NDArrayFloat, Pose2D
 
-_SIGMA_FLOOR_M = 0.002
-_CI_FACTOR = 2.5
+_SIGMA_FLOOR_M: Final[float] = 0.002
+_CI_FACTOR: Final[float] = 2.5
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
