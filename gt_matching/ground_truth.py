@@ -196,7 +196,7 @@ class GroundTruth:
         config = self.config
         borders = []
         for points, border in ((left_xy, route.left), (right_xy, route.right)):
-            found = border.distances(points, exact=exact, other_margin_m=config.other_border_margin_m)
+            found = border.distances(points, exact=exact)
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
             borders.append(BorderErrors(distances_m=found.distances, arc_m=found.arc_m, unmatched=unmatched))
         return LaneErrors(left=borders[0], right=borders[1], match=match, exact=exact, step_m=config.step_m)
@@ -394,7 +394,9 @@ class GroundTruth:
             def border(side: str) -> RouteBorder:
                 own = {getattr(g, f"{side}_line") for g in lanelets}
                 parts = [self._part(g, side) for g in lanelets]
-                return RouteBorder(self.lines, parts, own | overlapping, config.step_m, reach)
+                return RouteBorder(
+                    self.lines, parts, own | overlapping, config.step_m, reach, config.other_border_margin_m
+                )
 
             route = _Route(keys=keys, left=border("left"), right=border("right"))
             self._routes[keys] = route

@@ -30,7 +30,7 @@ KINK_RAD: Final = 0.02
 #: Spacing of the samples of nearby lines that bound their distance to the border, m.
 CLEARANCE_STEP_M: Final = 0.5
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
-CLEARANCE_SPACING_M: Final = 1.0
+CLEARANCE_SPACING_M: Final = 0.25
 
 
 def _kinks(vertices: NDArrayFloat) -> NDArrayBool:
@@ -101,15 +101,18 @@ class RouteBorder:
         ignored: set[int],
         step_m: float,
         reach_m: float,
+        other_margin_m: float,
     ) -> None:
         """``parts``: the lanelets' borders in driving order, sampled every ``step_m``;
         ``ignored``: line string ids that are never another lane's border (this border's
         own lines and those of lanelets overlapping the route); ``reach_m``: lines farther
         than this from the border are never closer than it for a point within
-        ``reach_m / 2``."""
+        ``reach_m / 2``; ``other_margin_m``: how much closer another lane's border must be
+        for a point to count as unmatched."""
         from scipy.spatial import cKDTree
 
         self.step_m = step_m
+        self.other_margin_m = other_margin_m
         self.vertices: NDArrayFloat = np.concatenate([part.vertices for part in parts])
         self.samples: NDArrayFloat = np.concatenate([part.samples for part in parts])
         cum = arc_lengths(self.vertices)
@@ -138,9 +141,17 @@ class RouteBorder:
         self._coarse_tree: cKDTree | None = None
         if len(self._others):
             coarse = [lines.samples(int(slot), CLEARANCE_STEP_M) for slot in self._others]
-            self._coarse_owner = np.repeat(self._others, [len(c) for c in coarse])
-            self._coarse_tree = cKDTree(np.concatenate(coarse), balanced_tree=False, compact_nodes=False)
-            self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
+            owner = np.repeat(self._others, [len(c) for c in coarse])
+            points = np.concatenate(coarse)
+            # Samples of other lines this close to the border (e.g. a neighbour's border
+            # drawn on top of this one) can never be closer than it by the margin:
+            # d(p, o) >= d(p, border) - coincidence and d_resampled <= d + step / 2.
+            coincident = (other_margin_m - step_m / 2.0) / 2.0
+            apart = self._guess_tree.query(points)[0] > coincident
+            if np.any(apart):
+                self._coarse_owner = owner[apart]
+                self._coarse_tree = cKDTree(points[apart], balanced_tree=False, compact_nodes=False)
+                self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
 
     @cached_property
     def _fine_tree(self) -> cKDTree:
@@ -193,7 +204,7 @@ class RouteBorder:
         smooth = np.searchsorted(breaks, arc - reach) == np.searchsorted(breaks, arc + reach, side="right")
         return distance, sample, inside & smooth
 
-    def distances(self, points: NDArrayFloat, *, exact: bool, other_margin_m: float) -> BorderDistances:
+    def distances(self, points: NDArrayFloat, *, exact: bool) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
         border.
 
@@ -219,10 +230,10 @@ class RouteBorder:
         arc = self.sample_arc[sample]
         after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
         clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
-        suspect = 2.0 * resampled > clearance + other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
+        suspect = 2.0 * resampled > clearance + self.other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
         other_closer = np.zeros(len(points), dtype=bool)
         if np.any(suspect):
-            other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - other_margin_m)
+            other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - self.other_margin_m)
         if exact:
             exact_distance, exact_arc = windowed_distances(points, self.vertices, arc, 2.0 * self.step_m)
             if len(redo):
