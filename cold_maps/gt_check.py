@@ -1,9 +1,10 @@
 """Cross-check of the Lanelet2 ground truth against our own OpenDRIVE border sampling.
 
 Every lane of the checked types is sampled by ``cold_maps.opendrive.sampling`` and
-matched to the converted lanelet whose borders lie closest to it (crdesigner 0.8.5 drops
-the OpenDRIVE road/section/lane ids when it renumbers and concatenates lanelets, so
-the match is geometric). The disagreement of a lane is the distance from each of our
+matched to a converted lanelet: among the lanelets whose ``opendrive:lanes`` tag names
+the lane (the converter records it; crdesigner itself drops the ids), else among all
+lanelets near it (maps converted by other tools), the one whose borders lie closest.
+The disagreement of a lane is the distance from each of our
 border points to the matched lanelet's corresponding border polyline: the inner border
 is the lanelet's left one in RHT, its right one in LHT. A lane over the threshold, or
 with no lanelet near it, makes the ground truth untrustworthy.
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
@@ -21,6 +23,7 @@ import numpy as np
 
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
+from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
 from gt_matching.polyline import NDArrayFloat, NDArrayInt, resample, windowed_distances
 
 if TYPE_CHECKING:
@@ -51,6 +54,8 @@ class LaneCheck:
     Fields:
         road_id, section, lane_id: the OpenDRIVE lane (section index in the road).
         lanelet_id: id of the matched Lanelet2 lanelet, None when none is near.
+        matched_by: "id" (the lanelet's opendrive:lanes tag names this lane),
+            "geometry" (no lanelet names it: nearest borders) or "" (unmatched).
         median_m, max_m: median and largest distance (m) of our border points (both
             borders) to the lanelet's borders; inf when unmatched.
         points: number of our border points compared.
@@ -60,6 +65,7 @@ class LaneCheck:
     section: int
     lane_id: int
     lanelet_id: int | None
+    matched_by: str
     median_m: float
     max_m: float
     points: int
@@ -125,6 +131,7 @@ class _LaneletIndex:
 
         self.ids: list[int] = []
         self.borders: list[tuple[_Border, _Border]] = []
+        self.by_lane: dict[tuple[str, int, int], list[int]] = {}
         owners: list[NDArrayInt] = []
         vertices: list[NDArrayFloat] = []
         for slot, lanelet in enumerate(lanelet_map.laneletLayer):
@@ -136,19 +143,35 @@ class _LaneletIndex:
                 owners.append(np.full(len(xy), slot, dtype=np.int64))
             self.ids.append(int(lanelet.id))
             self.borders.append((pair[0], pair[1]))
+            for lane in parse_opendrive_lanes_tag(dict(lanelet.attributes).get(OPENDRIVE_TAG, "")):
+                self.by_lane.setdefault(lane, []).append(slot)
         self.owner = np.concatenate(owners)
         self.tree: cKDTree = cKDTree(np.vstack(vertices))
 
-    def candidates(self, points: NDArrayFloat) -> set[int]:
-        """Slots of lanelets with a border vertex within SEARCH_RADIUS_M of any point."""
+    def candidates(self, samples: LaneBorderSamples, points: NDArrayFloat) -> tuple[str, set[int]]:
+        """How the lane is matched ("id" or "geometry") and the candidate lanelet slots:
+        those whose tag names the lane, else those with a border vertex within
+        SEARCH_RADIUS_M of one of ``points``."""
+        named = self.by_lane.get((_crdesigner_road_id(samples.road_id), samples.section, samples.lane_id))
+        if named:
+            return "id", set(named)
         near = self.tree.query_ball_point(points, r=SEARCH_RADIUS_M)
-        return {int(self.owner[i]) for hits in near for i in hits}
+        return "geometry", {int(self.owner[i]) for hits in near for i in hits}
+
+
+def _crdesigner_road_id(road_id: str) -> str:
+    """The road id as crdesigner writes it (it parses road ids as integers)."""
+    try:
+        return str(int(road_id))
+    except ValueError:
+        return road_id
 
 
 def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
     inner, outer = samples.inner[:, :2], samples.outer[:, :2]
     best: tuple[float, int, NDArrayFloat] | None = None
-    for slot in index.candidates(np.vstack((inner, outer))):
+    matched_by, candidates = index.candidates(samples, np.vstack((inner, outer)))
+    for slot in candidates:
         left, right = index.borders[slot]
         inner_border, outer_border = (left, right) if rule == "RHT" else (right, left)
         distances = np.concatenate((inner_border.distances(inner), outer_border.distances(outer)))
@@ -157,13 +180,14 @@ def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> 
             best = (score, slot, distances)
     points = 2 * len(samples.s)
     if best is None:
-        return LaneCheck(samples.road_id, samples.section, samples.lane_id, None, np.inf, np.inf, points)
+        return LaneCheck(samples.road_id, samples.section, samples.lane_id, None, "", np.inf, np.inf, points)
     _, slot, distances = best
     return LaneCheck(
         samples.road_id,
         samples.section,
         samples.lane_id,
         index.ids[slot],
+        matched_by,
         float(np.median(distances)),
         float(np.max(distances)),
         points,
@@ -232,16 +256,18 @@ def format_report(report: CheckReport) -> str:
             f"per-lane median disagreement: median {_mm(float(np.median(medians)))} mm, "
             f"max {_mm(float(medians.max()))} mm; largest single point {_mm(float(maxima.max()))} mm"
         )
+    by = Counter(lane.matched_by for lane in report.lanes)
+    lines.append(f"lanes matched by OpenDRIVE id: {by['id']}, by geometry: {by['geometry']}, unmatched: {by['']}")
     failing = report.failing
     verdict = "TRUSTWORTHY" if report.trustworthy else "NOT TRUSTWORTHY"
     reason = f"{len(failing)} of {len(report.lanes)} lanes over {_mm(report.threshold_m)} mm or unmatched"
     lines.append(f"ground truth: {verdict} ({reason if report.lanes else 'no lane checked'})")
     if failing:
-        lines.append(f"{'road':>8} {'section':>7} {'lane':>5} {'lanelet':>8} {'median mm':>10} {'max mm':>10}")
+        lines.append(f"{'road':>8} {'section':>7} {'lane':>5} {'lanelet':>8} {'match':>8} {'median mm':>10} {'max mm':>10}")
         for lane in failing:
             lanelet = "none" if lane.lanelet_id is None else str(lane.lanelet_id)
             lines.append(
-                f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} "
+                f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} {lane.matched_by or '-':>8} "
                 f"{_mm(lane.median_m):>10} {_mm(lane.max_m):>10}"
             )
     return "\n".join(lines)

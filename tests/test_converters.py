@@ -424,7 +424,7 @@ def test_town01_ground_truth_agrees_with_our_sampling(town01_checked) -> None:
 
     report, lanelet_map, _, _ = town01_checked
     assert report.lanes and report.trustworthy and report.exit_code == 0
-    assert len({lane.lanelet_id for lane in report.lanes}) > 0.9 * len(report.lanes)
+    assert {lane.matched_by for lane in report.lanes} == {"id"}
     medians = np.array([lane.median_m for lane in report.lanes])
     assert np.all(medians <= 5e-3) and np.median(medians) <= 1e-3
     assert "TRUSTWORTHY" in format_report(report) and "NOT" not in format_report(report)
@@ -475,16 +475,37 @@ def test_check_measures_a_known_lateral_shift_and_lists_every_lane(synthetic_map
             assert shift * math.cos(LENGTH / RADIUS) - 1e-3 <= lane.median_m <= shift + 1e-3
     text = format_report(report)
     assert "NOT TRUSTWORTHY (6 of 6 lanes" in text
-    assert any(line.split()[:3] == ["1", "0", "-2"] and line.split()[4] == "80.00" for line in text.splitlines())
+    assert any(line.split()[:3] == ["1", "0", "-2"] and line.split()[4:6] == ["id", "80.00"] for line in text.splitlines())
+
+
+def _renumbered(text: str) -> str:
+    """The synthetic map with roads 1, 2 renamed 31, 32 (ids no lanelet tag names)."""
+    return text.replace('id="1" junction', 'id="31" junction').replace('id="2" junction', 'id="32" junction')
+
+
+def test_check_matches_by_opendrive_id_else_by_geometry(synthetic_maps) -> None:
+    from cold_maps.gt_check import check_lanelet_map, format_report
+
+    _, lanelet_map = synthetic_maps["no-georef"]
+    variant = synthetic_maps["no-georef"][0]
+    text = synthetic_xodr("", "RHT", variant.x0, variant.y0)
+    by_id = check_lanelet_map(_parsed(text), lanelet_map)
+    by_geometry = check_lanelet_map(_parsed(_renumbered(text)), lanelet_map)
+    assert {lane.matched_by for lane in by_id.lanes} == {"id"}
+    assert {lane.matched_by for lane in by_geometry.lanes} == {"geometry"}
+    assert by_geometry.trustworthy
+    assert [lane.lanelet_id for lane in by_id.lanes] == [lane.lanelet_id for lane in by_geometry.lanes]
+    assert "by OpenDRIVE id: 0, by geometry: 6, unmatched: 0" in format_report(by_geometry)
 
 
 def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
     from cold_maps.gt_check import check_lanelet_map, format_report
 
-    variant, lanelet_map = synthetic_maps["no-georef"]
-    report = check_lanelet_map(_parsed(synthetic_xodr("", "RHT", 5000.0, 5000.0)), lanelet_map)
-    assert all(lane.lanelet_id is None and lane.max_m == math.inf for lane in report.lanes)
-    assert "none" in format_report(report).splitlines()[-1]
+    _, lanelet_map = synthetic_maps["no-georef"]
+    far = _renumbered(synthetic_xodr("", "RHT", 5000.0, 5000.0))
+    report = check_lanelet_map(_parsed(far), lanelet_map)
+    assert all(lane.lanelet_id is None and lane.matched_by == "" and lane.max_m == math.inf for lane in report.lanes)
+    assert report.exit_code == 3 and "none" in format_report(report).splitlines()[-1]
     with pytest.raises(ValueError, match="threshold"):
         check_lanelet_map(_parsed(synthetic_xodr()), lanelet_map, threshold_m=float("nan"))
 
