@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
                         help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
     parser.add_argument("--frames", type=_positive_int, default=None,
-                        help=f"frames per route (default {DEFAULT_FRAMES}; --paper: 300)")
+                        help=f"frames per route (default {DEFAULT_FRAMES}; --paper: the whole route at 1 m per frame)")
     parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")
     parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
@@ -97,9 +97,9 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     if args.paper:
         from dataclasses import replace
 
-        from cold_maps.paper import PAPER_FRAMES, paper_plans
+        from cold_maps.paper import paper_plans
 
-        plans = paper_plans(frames=args.frames or PAPER_FRAMES, seed=args.seed, interpolations=interpolations)
+        plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
         return [replace(plan, errors=errors) for plan in plans]
     params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)

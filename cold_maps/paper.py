@@ -2,10 +2,11 @@
 
 Each map is driven end to end on lane -1 of road 1 (the lane along +s, maps/README.md)
 by an ego and one cooperative vehicle, with no distractors, as in the paper's two-vehicle
-scenarios. The frames are spread over the whole route (the ego advances
-``(route length - needed ahead) / (frames - 1)`` per frame; the fusion is static, so only
-the sampling of the road changes). Gaps d_s: straight 30 and 50 m, 90° curve 20 m, rural
-20 m plus a sweep to 50 m for the longest gap that keeps the maximum error bounded.
+scenarios, at the default 10 m/s with frames at 10 Hz (1 m per frame): the ego drives from
+the route start until the farthest coop's detection (r_lane + d_s + r_lane ahead) reaches
+the route end, so every stretch of the road is seen at the same 1 m frame spacing.
+Gaps d_s: straight 30 and 50 m, 90° curve 20 m, rural 20 m plus a sweep to 50 m for the
+longest gap that keeps the maximum error bounded.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Final, Mapping, Sequence
 
-from cold_maps.drive import FRAME_RATE_HZ, ROUTE_MARGIN_M
+from cold_maps.drive import DEFAULT_SPEED_MPS, FRAME_RATE_HZ, ROUTE_MARGIN_M
 from cold_maps.evaluation import Collector, MapPlan, load_graph, params_for_gaps, scenarios_for
 from cold_maps.lane_graph import LaneKey
 from cold_maps.report import PAPER_TABLE_I_MS, ScenarioResult, paper_comparison_markdown
@@ -23,7 +24,6 @@ from cold_maps.sensor import SENSOR_RANGE_M
 
 BUNDLED_MAPS_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "maps"
 PAPER_START_LANE: Final[LaneKey] = LaneKey("1", 0, -1)
-PAPER_FRAMES: Final[int] = 300
 PAPER_GAPS_M: Final[Mapping[str, tuple[float, ...]]] = {
     "straight": (30.0, 50.0),
     "curve90": (20.0,),
@@ -37,19 +37,22 @@ MAX_ERROR_LIMIT_M: Final[float] = 0.75
 """Error bound of the longest-gap table (m)."""
 
 
-def paper_speed(route_length_m: float, gaps_m: Sequence[float], frames: int) -> float:
-    """Speed (m/s) that spreads ``frames`` frames over a route, leaving room for the
-    farthest coop (r_lane + d_s) and its detection ahead of the last ego frame."""
+def paper_frame_count(route_length_m: float, gaps_m: Sequence[float], speed_mps: float = DEFAULT_SPEED_MPS,
+                      limit: int | None = None) -> int:
+    """Frames (at ``FRAME_RATE_HZ``) an ego at ``speed_mps`` drives on a route while the
+    farthest coop (r_lane + d_s ahead) and its detection stay on it; at most ``limit``."""
     usable = route_length_m - (SENSOR_RANGE_M + max(gaps_m)) - SENSOR_RANGE_M - ROUTE_MARGIN_M
-    if usable <= 0 or frames < 2:
-        raise ValueError(f"route of {route_length_m:.0f} m leaves no room for {frames} frames "
-                         f"with d_s = {max(gaps_m)} m")
-    return usable / (frames - 1) * FRAME_RATE_HZ
+    if usable <= 0:
+        raise ValueError(f"route of {route_length_m:.0f} m is too short for d_s = {max(gaps_m)} m")
+    fitting = int(math.floor(usable * FRAME_RATE_HZ / speed_mps + 1e-9)) + 1
+    return fitting if limit is None else min(fitting, limit)
 
 
-def paper_plans(maps_dir: Path = BUNDLED_MAPS_DIR, *, frames: int = PAPER_FRAMES, seed: int = 0,
+def paper_plans(maps_dir: Path = BUNDLED_MAPS_DIR, *, frames: int | None = None, seed: int = 0,
+                speed_mps: float = DEFAULT_SPEED_MPS,
                 interpolations: Sequence[str] = ("paper", "hermite")) -> list[MapPlan]:
-    """One plan per paper map (straight, curve90, rural) in ``maps_dir``."""
+    """One plan per paper map (straight, curve90, rural) in ``maps_dir``: the whole route
+    at ``speed_mps`` (default 10 m/s) and 10 Hz, or its first ``frames`` frames."""
     plans = []
     for name, gaps in PAPER_GAPS_M.items():
         path = maps_dir / f"{name}.xodr"
@@ -57,9 +60,11 @@ def paper_plans(maps_dir: Path = BUNDLED_MAPS_DIR, *, frames: int = PAPER_FRAMES
         if PAPER_START_LANE not in graph.lengths:
             raise ValueError(f"{path}: no driving lane {tuple(PAPER_START_LANE)} to start the paper's drive on")
         length = longest_route_lengths(graph)[PAPER_START_LANE]
-        length = length if math.isfinite(length) else frames * 10.0
-        plans.append(MapPlan(path, scenarios_for(gaps, interpolations), frames=frames, routes=1, seed=seed,
-                             speed_mps=paper_speed(length, gaps, frames), start_lane=PAPER_START_LANE,
+        if not math.isfinite(length):
+            raise ValueError(f"{path}: the paper's drive needs a route with an end, found a loop")
+        plans.append(MapPlan(path, scenarios_for(gaps, interpolations),
+                             frames=paper_frame_count(length, gaps, speed_mps, limit=frames), routes=1,
+                             seed=seed, speed_mps=speed_mps, start_lane=PAPER_START_LANE,
                              distractors=False, params=params_for_gaps(gaps), road_type=ROAD_TYPES[name]))
     return plans
 

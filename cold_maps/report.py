@@ -61,7 +61,7 @@ P95_PERCENT: Final[float] = 95.0
 # The paper's results (cold-fusion-paper.tex, sec. IV "Results"). Table II: per road type and
 # method, (mean error m, max error m) for the left and right border. The paper's "MSE" is
 # its eq. 1, the mean of |P_s - P_GT|, i.e. our mean_error_m. Methods: "local" = l_ego,
-# "convoy" / "spline" = l_coll. The spline used d_s = 30 m on the straight lane and
+# "convoy" / "spline" = l_coll. The spline column used d_s = 30 m on the straight lane and
 # d_s = 20 m on the 90° curve and the rural road (sec. IV-B text).
 PAPER_TABLE_II: Final[Mapping[tuple[str, str], Mapping[str, tuple[float, float]]]] = {
     ("straight", "local"): {"left": (0.005, 0.010), "right": (0.005, 0.011)},
@@ -74,10 +74,14 @@ PAPER_TABLE_II: Final[Mapping[tuple[str, str], Mapping[str, tuple[float, float]]
     ("rural", "convoy"): {"left": (0.005, 0.010), "right": (0.005, 0.010)},
     ("rural", "spline"): {"left": (0.023, 0.560), "right": (0.020, 0.572)},
 }
-# Table II, last row: perception range (m) per method, (low, high).
-PAPER_PERCEPTION_RANGE_M: Final[Mapping[str, tuple[float, float]]] = {
-    "local": (30.0, 30.0), "convoy": (55.0, 55.0), "spline": (80.0, 90.0)}
 PAPER_SPLINE_D_S_M: Final[Mapping[str, float]] = {"straight": 30.0, "right_curve_90": 20.0, "rural": 20.0}
+# Spline errors the text quotes for other gaps, (mean, max) per border, NaN = not given:
+# "even for higher interpolation distances up to 50 m the maximum deviation ... was about 0.05 m".
+PAPER_SPLINE_TEXT: Final[Mapping[tuple[str, float], tuple[float, float]]] = {("straight", 50.0): (math.nan, 0.05)}
+# Perception range (m): Table II's last row for local and convoy; for the spline the text's
+# figure per gap ("80 m" at d_s = 20, "90 m" at 30, "110 m" at 50), i.e. 2 r_lane + d_s.
+PAPER_PERCEPTION_RANGE_M: Final[Mapping[str, float]] = {"local": 30.0, "convoy": 55.0}
+PAPER_SPLINE_RANGE_M: Final[Mapping[float, float]] = {20.0: 80.0, 30.0: 90.0, 50.0: 110.0}
 # Table I: fusion runtime (ms) on the rural road, 300 frames: (mean, σ, max).
 PAPER_TABLE_I_MS: Final[Mapping[str, tuple[float, float, float]]] = {
     "convoy": (2.23, 0.42, 3.66), "spline": (3.62, 0.70, 6.62)}
@@ -432,35 +436,39 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     return "".join(parts)
 
 
+def _paper_errors(road: str, key: ScenarioKey) -> tuple[float, float]:
+    """The paper's (mean, max) error for a scenario, NaN where the paper gives none."""
+    if key.fusion != "spline" or key.d_s == PAPER_SPLINE_D_S_M[road]:
+        return PAPER_TABLE_II[(road, key.fusion)][key.boundary]
+    return PAPER_SPLINE_TEXT.get((road, key.d_s), (math.nan, math.nan))
+
+
+def _paper_range(key: ScenarioKey) -> float:
+    if key.fusion == "spline":
+        return PAPER_SPLINE_RANGE_M.get(key.d_s, math.nan)
+    return PAPER_PERCEPTION_RANGE_M[key.fusion]
+
+
 def paper_comparison_markdown(results: Sequence[ScenarioResult], road_types: Mapping[str, str]) -> str:
-    """Side-by-side tables of our results and the paper's Table II (errors, range) and
-    Table I (runtime), for the maps in ``road_types`` (map -> "straight" |
-    "right_curve_90" | "rural")."""
+    """Our results side by side with the paper's Table II (errors, perception range) and
+    the figures its text quotes for other gaps, for the maps in ``road_types`` (map ->
+    "straight" | "right_curve_90" | "rural"); "–" where the paper gives no figure."""
     for name, road in road_types.items():
         if road not in PAPER_SPLINE_D_S_M:
             raise ReportError(f"road type of map {name!r}: expected one of {tuple(PAPER_SPLINE_D_S_M)}, got {road!r}")
-    error_rows, runtime_rows = [], []
+    rows = []
     for r in sorted(results, key=_sort_key):
         road = road_types.get(r.key.map)
         if road is None:
             continue
-        paper_mean, paper_max = PAPER_TABLE_II[(road, r.key.fusion)][r.key.boundary]
-        low, high = PAPER_PERCEPTION_RANGE_M[r.key.fusion]
-        paper_d_s = _fmt(PAPER_SPLINE_D_S_M[road], 1) if r.key.fusion == "spline" else "–"
-        error_rows.append([r.key.map, road, r.key.fusion, _fmt(r.key.d_s, 1), paper_d_s, r.key.boundary,
-                           _fmt(r.mean_error_m), _fmt(paper_mean), _fmt(r.max_error_m), _fmt(paper_max),
-                           _fmt(r.perception_range_m, 1), f"{low:.0f}" if low == high else f"{low:.0f}–{high:.0f}"])
-        if r.key.fusion in PAPER_TABLE_I_MS:
-            ours = (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max)
-            runtime_rows.append([r.key.map, r.key.fusion, _fmt(r.key.d_s, 1), r.key.boundary,
-                                 " / ".join(_fmt(v, 2) for v in ours),
-                                 " / ".join(_fmt(v, 2) for v in PAPER_TABLE_I_MS[r.key.fusion])])
-    errors = _table(["map", "road type", "fusion", "d_s [m]", "paper d_s [m]", "boundary", "mean [m]",
-                     "paper mean [m]", "max [m]", "paper max [m]", "range [m]", "paper range [m]"], error_rows)
-    runtime = _table(["map", "fusion", "d_s [m]", "boundary", "runtime mean / σ / max [ms]",
-                      "paper Table I [ms]"], runtime_rows)
-    return ("Paper: Table II (mean = its eq. 1 \"MSE\", max) and Table I (runtime, rural road, "
-            "AMD Ryzen 7 5700X).\n\n" + errors + "\n" + runtime)
+        paper_mean, paper_max = _paper_errors(road, r.key)
+        rows.append([r.key.map, road, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,
+                     _fmt(r.mean_error_m), _fmt(paper_mean), _fmt(r.max_error_m), _fmt(paper_max),
+                     _fmt(r.perception_range_m, 1), _fmt(_paper_range(r.key), 0)])
+    return ("Paper: Table II (mean = its eq. 1 \"MSE\", max, perception range) and the figures its text "
+            "quotes for other gaps.\n\n"
+            + _table(["map", "road type", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "paper mean [m]",
+                      "max [m]", "paper max [m]", "range [m]", "paper range [m]"], rows))
 
 
 def write_summary_md(path: str | os.PathLike[str], results: Sequence[ScenarioResult], *, partial: bool = False,

@@ -66,7 +66,8 @@ def test_mcap_channels_and_detections(straight_run):
 
 def test_paper_figures(tmp_path):
     out = tmp_path / "paper"
-    assert eval_cli.main(["--paper", "--frames", "12", "--no-mcap", "--no-plots", "--out", str(out)]) == 0
+    # 25 m per frame over each whole route (the default is 1 m per frame at 10 m/s)
+    assert eval_cli.main(["--paper", "--speed", "250", "--no-mcap", "--no-plots", "--out", str(out)]) == 0
     _, records = _records(out)
 
     def worst(map_name, fusion, interpolation, d_s, key="max_error_m"):
@@ -78,7 +79,7 @@ def test_paper_figures(tmp_path):
             reached = worst("straight", "spline", interpolation, d_s, "perception_range_m")
             assert reached == pytest.approx(reach, abs=0.5)
             record = records[("straight", "spline", interpolation, d_s, "left")]
-            assert record["fused_frames"] == record["frames"] == 12  # d_s = 50 m is within d_i
+            assert record["fused_frames"] == record["frames"] == 36  # d_s = 50 m is within d_i
     for map_name in ("straight", "curve90", "rural"):
         # convoy fusion keeps the local error; local range 30 m, convoy 55 m
         assert worst(map_name, "convoy", "", 0.0) == pytest.approx(worst(map_name, "local", "", 0.0), abs=0.002)

@@ -149,13 +149,22 @@ def test_a_failed_write_keeps_the_old_file_and_leaves_no_temp(tmp_path, monkeypa
         write_report(tmp_path / "nowhere", [])
 
 
-def test_paper_comparison_puts_our_values_next_to_tables_i_and_ii():
+def test_paper_comparison_puts_our_values_next_to_the_papers():
     curve = ScenarioAccumulator(ScenarioKey("curve90", "spline", "paper", 20.0, "right"))
     curve.add(FrameRecord(0, 0.0, "ego", "coop1", np.array([0.1, 0.3]), 81.0, 3.0))
-    text = paper_comparison_markdown([curve.result()], {"curve90": "right_curve_90"})
-    assert "| curve90 | right_curve_90 | spline | 20.0 | 20.0 | right | 0.200 | 0.030 | 0.300 | 0.707 | 81.0 | 80–90 |" \
+    straight = ScenarioAccumulator(ScenarioKey("straight", "spline", "hermite", 50.0, "left"))
+    straight.add(FrameRecord(0, 0.0, "ego", "coop1", np.array([0.01, 0.02]), 110.0, 3.0))
+    rural = ScenarioAccumulator(ScenarioKey("rural", "spline", "paper", 40.0, "left"))
+    rural.add(FrameRecord(0, 0.0, "ego", "coop1", np.array([0.5]), 100.0, 3.0))
+    types = {"curve90": "right_curve_90", "straight": "straight", "rural": "rural"}
+    text = paper_comparison_markdown([curve.result(), straight.result(), rural.result()], types)
+    # Table II at the paper's own gap, with its 2 r_lane + d_s range
+    assert "| curve90 | right_curve_90 | spline | paper | 20.0 | right | 0.200 | 0.030 | 0.300 | 0.707 | 81.0 | 80 |" \
         in text
-    assert "| curve90 | spline | 20.0 | right | 3.00 / – / 3.00 | 3.62 / 0.70 / 6.62 |" in text
+    # the text's figures at d_s = 50 m on the straight lane: max only, range 110 m
+    assert "| straight | straight | spline | hermite | 50.0 | left | 0.015 | – | 0.020 | 0.050 | 110.0 | 110 |" in text
+    # a gap the paper quotes nothing for
+    assert "| rural | rural | spline | paper | 40.0 | left | 0.500 | – | 0.500 | – | 100.0 | – |" in text
     with pytest.raises(ReportError, match="road type of map 'x'"):
         paper_comparison_markdown([], {"x": "motorway"})
 
