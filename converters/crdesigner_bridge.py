@@ -16,12 +16,13 @@ import contextlib
 import io
 import logging
 import os
+import threading
 import warnings
-from unittest import mock
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Iterator
 from typing import Any, Final
+from unittest import mock
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +34,10 @@ NDArrayFloat = npt.NDArray[np.float64]
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
 """Largest OpenDRIVE file we hand to the converter (bytes)."""
+
+_ONE_AT_A_TIME: Final[threading.Lock] = threading.Lock()
+"""crdesigner keeps global state (an id counter) and we patch two of its functions
+during a conversion: one conversion at a time per process."""
 
 
 @dataclass(frozen=True)
@@ -169,8 +174,8 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
             sources[int(lanelet.lanelet_id)] = tuple(dict.fromkeys(_opendrive_lane(i) for i in ids))
         return to_base(conversion_network)
 
-    # crdesigner keeps global state (an id counter) anyway: one conversion at a time.
     with (
+        _ONE_AT_A_TIME,
         mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders),
         mock.patch.object(network_module, "convert_to_base_lanelet_network", recording_to_base),
     ):
