@@ -12,7 +12,8 @@ from typing import Any, Final
 
 import numpy as np
 
-from gt_matching.polyline import NDArrayFloat
+from gt_matching.geometry import line_xy
+from gt_matching.polyline import NDArrayFloat, arc_lengths
 
 #: Positions closer than this share one Lanelet2 point, m.
 POINT_RESOLUTION_M: Final = 1e-6
@@ -161,3 +162,17 @@ def grid_network(
                         builder.add_lane(points, lane_width_m, headings)
     return builder.build()
 
+
+
+def sequence_borders(lanelets: list[Any], step_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Left and right borders of a lanelet sequence (driving order) as a lane sensor pairs
+    them: each lanelet's borders sampled at the same fractions of their lengths, about
+    every ``step_m`` of the longer one; ``(N, 2)`` each, m, world frame."""
+    lefts, rights = [], []
+    for i, lanelet in enumerate(lanelets):
+        left, right = line_xy(lanelet.leftBound, f"lanelet {lanelet.id}"), line_xy(lanelet.rightBound, f"lanelet {lanelet.id}")
+        cum_left, cum_right = arc_lengths(left), arc_lengths(right)
+        fractions = np.linspace(0.0, 1.0, int(np.ceil(max(cum_left[-1], cum_right[-1]) / step_m)) + 1)[1 if i else 0 :]
+        for line, cum, out in ((left, cum_left, lefts), (right, cum_right, rights)):
+            out.append(np.column_stack([np.interp(fractions * cum[-1], cum, line[:, k]) for k in (0, 1)]))
+    return np.vstack(lefts), np.vstack(rights)

@@ -20,25 +20,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gt_matching import GroundTruth  # noqa: E402
 from gt_matching.polyline import NDArrayFloat, arc_lengths  # noqa: E402
-from gt_matching.synthetic import grid_network  # noqa: E402
+from gt_matching.geometry import LaneletGeometry  # noqa: E402
+from gt_matching.synthetic import grid_network, sequence_borders  # noqa: E402
 
 DETECTION_M = 90.0
 DETECTION_STEP_M = 0.1
 NOISE_M = 0.05
 ROUTE_M = 130.0
 FRAME_ADVANCE_M = 1.0
-
-
-def paired(left: NDArrayFloat, right: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
-    """Both borders sampled at the same fractions of their lengths, about every
-    DETECTION_STEP_M of the longer one (as a lane sensor pairs them)."""
-    cum_left, cum_right = arc_lengths(left), arc_lengths(right)
-    fractions = np.linspace(0.0, 1.0, int(np.ceil(max(cum_left[-1], cum_right[-1]) / DETECTION_STEP_M)) + 1)
-
-    def at(line: NDArrayFloat, cum: NDArrayFloat) -> NDArrayFloat:
-        return np.column_stack([np.interp(fractions * cum[-1], cum, line[:, k]) for k in (0, 1)])
-
-    return at(left, cum_left), at(right, cum_right)
 
 
 def drives(lanelet_map: object, graph: object, count: int, frames: int, rng: np.random.Generator) -> list[tuple]:
@@ -55,20 +44,15 @@ def drives(lanelet_map: object, graph: object, count: int, frames: int, rng: np.
     out = []
     while len(out) < count * frames:
         route = [lanelets[rng.integers(len(lanelets))]]
-        pairs = [paired(*(np.array([(p.x, p.y) for p in line]) for line in (route[0].leftBound, route[0].rightBound)))]
-        length = float(arc_lengths(0.5 * (pairs[0][0] + pairs[0][1]))[-1])
-        while length < ROUTE_M:
+        length = LaneletGeometry.of(route[0]).length_m
+        while length < ROUTE_M and graph.following(route[-1]):
             following = graph.following(route[-1])
-            if not following:
-                break
             route.append(following[rng.integers(len(following))])
-            pair = paired(*(np.array([(p.x, p.y) for p in line]) for line in (route[-1].leftBound, route[-1].rightBound)))
-            pairs.append((pair[0][1:], pair[1][1:]))
-            length += float(arc_lengths(0.5 * (pair[0] + pair[1]))[-1])
-        if length < ROUTE_M:
-            continue
-        left, right = (np.vstack([pair[side] for pair in pairs]) for side in (0, 1))
+            length += LaneletGeometry.of(route[-1]).length_m
+        left, right = sequence_borders(route, DETECTION_STEP_M)
         s = arc_lengths(0.5 * (left + right))
+        if s[-1] < ROUTE_M:
+            continue
         for frame in range(frames):
             keep = (s >= frame * FRAME_ADVANCE_M) & (s <= frame * FRAME_ADVANCE_M + DETECTION_M)
             mid = 0.5 * (left[keep] + right[keep])
