@@ -25,8 +25,9 @@ class MatchingConfig:
         max_distance_m: a detected point farther than this from its GT border is unmatched;
             a lanelet whose centreline is farther than this from every detection
             centreline sample is not followed, m.
-        other_border_margin_m: a detected point is also unmatched when a border of the map
-            outside its GT border is closer than its GT border by more than this, m.
+        other_border_margin_m: a detected point is also unmatched when a border of another
+            lane (any line of the map but its GT border and the borders of lanelets that
+            overlap the GT lanelets) is closer than its GT border by more than this, m.
         margin_m: the GT route extends this far beyond both ends of the detection, m.
         score_step_m: spacing of the detection centreline samples that score candidate
             lanelet sequences, m.

@@ -56,8 +56,9 @@ class LaneMatch:
         route_key: (lanelet id, inverted) per GT lanelet: the key of the assembled borders.
         left_gt: GT left border, ``(M, 2)`` world frame, m, in driving order.
         right_gt: GT right border, ``(K, 2)`` world frame, m, in driving order.
-        left_gt_samples, right_gt_samples: the GT borders resampled every ``step_m``
-            (ends included), m; the points closest-point errors are measured to.
+        left_gt_samples, right_gt_samples: each GT lanelet's border resampled every
+            ``step_m`` (ends included), joined: spacing <= ``step_m``, m; the points
+            closest-point errors are measured to.
         pose_lanelet_ids: lanelets the sender's pose is on (several when ambiguous).
         matched: False when the detection does not follow the sender's lane; the GT is
             then the sender's lane that fits the detection best.
@@ -192,6 +193,9 @@ class GroundTruth:
         polyline.
         """
         left_xy, right_xy = as_polyline("left border", left), as_polyline("right border", right)
+        unknown = [key for key in match.route_key if key not in self._geometry]
+        if unknown:
+            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
         route = self._route([self._geometry[key] for key in match.route_key])
         config = self.config
         borders = []
@@ -321,7 +325,6 @@ class GroundTruth:
         config = self.config
         graph = self.routing_graph
         cap = config.max_distance_m
-
         reach = config.margin_m + cap
 
         def near(geometry: LaneletGeometry, taken: Sequence[LaneletGeometry], joint: NDArrayFloat, end: NDArrayFloat) -> bool:

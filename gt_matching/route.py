@@ -22,10 +22,10 @@ GUESS_STRIDE: Final = 3
 ANCHOR_STRIDE: Final = 10
 #: Arc length either side of an interpolated seed searched for the nearest sample, m.
 ANCHOR_REACH_M: Final = 0.1
-#: Points farther than this from the border are searched from their own coarse sample, m.
+#: Points farther than this from the border are searched globally (KD-tree), m.
 REFINE_DISTANCE_M: Final = 1.0
-#: A border vertex turning by more than this is a kink: a nearest-sample window that
-#: spans it is settled by a global search, rad.
+#: A border vertex turning by more than this is a kink: points whose nearest sample lies
+#: near one are searched globally (a second minimum may start there), rad.
 KINK_RAD: Final = 0.02
 #: Spacing of the samples of nearby lines that bound their distance to the border, m.
 CLEARANCE_STEP_M: Final = 0.5
@@ -117,7 +117,6 @@ class RouteBorder:
         self.samples: NDArrayFloat = np.concatenate([part.samples for part in parts])
         cum = arc_lengths(self.vertices)
         arc_offsets = cum[np.cumsum([0] + [len(part.vertices) for part in parts[:-1]])]
-        self._sample_offsets = np.cumsum([0] + [len(part.samples) for part in parts[:-1]])
         self.sample_arc: NDArrayFloat = np.concatenate(
             [offset + part.sample_arc_m for offset, part in zip(arc_offsets, parts)]
         )
