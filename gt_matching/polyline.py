@@ -113,15 +113,21 @@ def angle_difference(a: float, b: float) -> float:
     return abs((a - b + np.pi) % (2.0 * np.pi) - np.pi)
 
 
+def at_fractions(polyline: NDArrayFloat, fractions: NDArrayFloat) -> NDArrayFloat:
+    """Points at the given fractions (0..1) of the polyline's length, m."""
+    cum = arc_lengths(polyline)
+    s = fractions * cum[-1]
+    return np.column_stack((np.interp(s, cum, polyline[:, 0]), np.interp(s, cum, polyline[:, 1])))
+
+
+def paired_fractions(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
+    """Fractions that sample two borders about every ``step_m`` of the longer one (>= 2)."""
+    longer = max(arc_lengths(left)[-1], arc_lengths(right)[-1])
+    return np.linspace(0.0, 1.0, max(2, int(np.ceil(longer / step_m)) + 1))
+
+
 def mid_line(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
     """Mid-line of two borders, sampled at equal fractions of their lengths, about every
     ``step_m`` of the longer border (at least 2 points), m."""
-    cum_left, cum_right = arc_lengths(left), arc_lengths(right)
-    count = max(2, int(np.ceil(max(cum_left[-1], cum_right[-1]) / step_m)) + 1)
-    fractions = np.linspace(0.0, 1.0, count)
-
-    def at_fractions(line: NDArrayFloat, cum: NDArrayFloat) -> NDArrayFloat:
-        s = fractions * cum[-1]
-        return np.column_stack((np.interp(s, cum, line[:, 0]), np.interp(s, cum, line[:, 1])))
-
-    return 0.5 * (at_fractions(left, cum_left) + at_fractions(right, cum_right))
+    fractions = paired_fractions(left, right, step_m)
+    return 0.5 * (at_fractions(left, fractions) + at_fractions(right, fractions))

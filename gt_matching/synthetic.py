@@ -13,7 +13,7 @@ from typing import Any, Final
 import numpy as np
 
 from gt_matching.geometry import line_xy
-from gt_matching.polyline import NDArrayFloat, arc_lengths
+from gt_matching.polyline import NDArrayFloat, at_fractions, paired_fractions
 
 #: Positions closer than this share one Lanelet2 point, m.
 POINT_RESOLUTION_M: Final = 1e-6
@@ -171,8 +171,7 @@ def sequence_borders(lanelets: list[Any], step_m: float) -> tuple[NDArrayFloat, 
     lefts, rights = [], []
     for i, lanelet in enumerate(lanelets):
         left, right = line_xy(lanelet.leftBound, f"lanelet {lanelet.id}"), line_xy(lanelet.rightBound, f"lanelet {lanelet.id}")
-        cum_left, cum_right = arc_lengths(left), arc_lengths(right)
-        fractions = np.linspace(0.0, 1.0, int(np.ceil(max(cum_left[-1], cum_right[-1]) / step_m)) + 1)[1 if i else 0 :]
-        for line, cum, out in ((left, cum_left, lefts), (right, cum_right, rights)):
-            out.append(np.column_stack([np.interp(fractions * cum[-1], cum, line[:, k]) for k in (0, 1)]))
+        fractions = paired_fractions(left, right, step_m)[1 if i else 0 :]
+        lefts.append(at_fractions(left, fractions))
+        rights.append(at_fractions(right, fractions))
     return np.vstack(lefts), np.vstack(rights)

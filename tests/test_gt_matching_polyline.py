@@ -1,0 +1,57 @@
+"""gt_matching.polyline: resampling, closest-point distances and fractions in closed form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gt_matching.polyline import (
+    angle_difference,
+    at_fractions,
+    closest_distances,
+    mid_line,
+    resample,
+    windowed_distances,
+)
+
+L_SHAPE = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]])  # 7 m long, corner at 3 m
+
+
+def test_resample_spacing_ends_and_segments() -> None:
+    samples, segment = resample(L_SHAPE, 0.4)
+    assert len(samples) == math.ceil(7.0 / 0.4) + 1
+    np.testing.assert_allclose(samples[[0, -1]], L_SHAPE[[0, -1]])
+    np.testing.assert_allclose(samples[8], [3.0, 0.2])  # 3.2 m along: 0.2 m up the second leg
+    assert segment[7] == 0 and segment[8] == 1
+    gaps = np.hypot(*np.diff(samples, axis=0).T)
+    assert np.all(gaps <= 0.4 + 1e-12)
+    assert gaps[-1] == pytest.approx(0.2)  # 7 = 17 * 0.4 + 0.2
+
+
+def test_closest_distances_closed_form() -> None:
+    points = np.array([[1.0, -2.0], [5.0, 1.0], [-3.0, -4.0], [3.0, 6.0]])
+    distances, arc = closest_distances(points, L_SHAPE)
+    np.testing.assert_allclose(distances, [2.0, 2.0, 5.0, 2.0])
+    np.testing.assert_allclose(arc, [1.0, 4.0, 0.0, 7.0])
+
+
+def test_windowed_equals_brute_force_within_reach() -> None:
+    points = np.array([[1.0, -0.5], [3.5, 2.0]])
+    near = np.array([1.1, 4.9])
+    np.testing.assert_allclose(windowed_distances(points, L_SHAPE, near, 0.5), closest_distances(points, L_SHAPE))
+
+
+def test_at_fractions_and_mid_line() -> None:
+    np.testing.assert_allclose(at_fractions(L_SHAPE, np.array([0.0, 3.0 / 7.0, 0.5, 1.0])),
+                               [[0.0, 0.0], [3.0, 0.0], [3.0, 0.5], [3.0, 4.0]])
+    left = np.array([[0.0, 1.0], [10.0, 1.0]])
+    right = np.array([[0.0, -3.0], [5.0, -3.0], [10.0, -3.0]])
+    centre = mid_line(left, right, 2.5)
+    np.testing.assert_allclose(centre, np.column_stack((np.linspace(0.0, 10.0, 5), np.full(5, -1.0))))
+
+
+@pytest.mark.parametrize(("a", "b", "expected"), [(0.1, -0.1, 0.2), (math.pi - 0.1, -math.pi + 0.1, 0.2), (0.0, math.pi, math.pi)])
+def test_angle_difference_wraps(a: float, b: float, expected: float) -> None:
+    assert angle_difference(a, b) == pytest.approx(expected)
