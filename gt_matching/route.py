@@ -142,14 +142,16 @@ class RouteBorder:
             coarse = [lines.samples(int(slot), CLEARANCE_STEP_M) for slot in self._others]
             owner = np.repeat(self._others, [len(c) for c in coarse])
             points = np.concatenate(coarse)
-            # Samples of other lines this close to the border (e.g. a neighbour's border
-            # drawn on top of this one) can never be closer than it by the margin:
-            # d(p, o) >= d(p, border) - coincidence and d_resampled <= d + step / 2.
+            # Samples of other lines farther than the reach never matter; those this close
+            # to the border (e.g. a neighbour's border drawn on top of this one) can never
+            # be closer than it by the margin: d(p, o) >= d(p, border) - coincidence and
+            # d_resampled <= d + step / 2.
             coincident = (other_margin_m - step_m / 2.0) / 2.0
-            apart = self._guess_tree.query(points)[0] > coincident
+            gap = self._guess_tree.query(points, distance_upper_bound=reach_m + CLEARANCE_STEP_M)[0]
+            apart = (gap > coincident) & np.isfinite(gap)
             if np.any(apart):
                 self._coarse_owner = owner[apart]
-                self._coarse_tree = cKDTree(points[apart], balanced_tree=False, compact_nodes=False)
+                self._coarse_tree = cKDTree(points[apart])
                 self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
 
     @cached_property
