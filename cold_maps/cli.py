@@ -231,6 +231,30 @@ def write_atomically(path: Path, write: Callable[[TextIO], None]) -> None:
         raise
 
 
+def _configure_convert(parser: argparse.ArgumentParser) -> None:
+    from converters.api import configure_convert
+
+    configure_convert(parser)
+
+
+def _run_convert(args: argparse.Namespace) -> int:
+    from converters.api import run_convert
+
+    return run_convert(args)
+
+
+def _configure_check(parser: argparse.ArgumentParser) -> None:
+    from cold_maps.gt_check import configure_check
+
+    configure_check(parser)
+
+
+def _run_check(args: argparse.Namespace) -> int:
+    from cold_maps.gt_check import run_check
+
+    return run_check(args)
+
+
 COMMANDS: Final[tuple[Command, ...]] = (
     Command("info", "summarise a map: roads, lanes, junctions, geometry", _configure_info, _run_info),
     Command(
@@ -239,16 +263,31 @@ COMMANDS: Final[tuple[Command, ...]] = (
         _configure_export,
         _run_export,
     ),
+    Command(
+        "convert",
+        "convert to a Lanelet2 OSM file in the OpenDRIVE frame and print how to load it",
+        _configure_convert,
+        _run_convert,
+    ),
+    Command(
+        "check",
+        "compare the converted Lanelet2 ground truth with our borders per lane (exit 3: not trustworthy)",
+        _configure_check,
+        _run_check,
+    ),
 )
 
 
-def build_parser(commands: Sequence[Command] = COMMANDS) -> argparse.ArgumentParser:
-    """The argument parser with one subparser per command."""
+def build_parser(commands: Sequence[Command] = COMMANDS, selected: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser with one subparser per command. When ``selected`` names a
+    command, only that one is configured, so a command never imports another's modules."""
     parser = _Parser(prog=PROG, description="Tools on OpenDRIVE maps for collective lane detection.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    names = {command.name for command in commands}
     for command in commands:
         configure = sub.add_parser(command.name, help=command.help, description=command.help)
-        command.configure(configure)
+        if selected not in names or command.name == selected:
+            command.configure(configure)
         configure.set_defaults(run=command.run)
     return parser
 
@@ -260,7 +299,9 @@ def _one_line(exc: BaseException) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-maps``; returns the exit status."""
     try:
-        args = build_parser().parse_args(argv)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        selected = next((arg for arg in argv if not arg.startswith("-")), None)
+        args = build_parser(selected=selected).parse_args(argv)
         return int(args.run(args))
     except UsageError as exc:
         print(_one_line(exc), file=sys.stderr)

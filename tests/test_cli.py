@@ -1,4 +1,4 @@
-"""``cold-maps`` CLI: info and export (CSV, GeoJSON), one-line errors, atomic output."""
+"""``cold-maps`` CLI: info, export (CSV, GeoJSON), convert, check; one-line errors, atomic output."""
 
 from __future__ import annotations
 
@@ -154,7 +154,8 @@ def test_map_info_counts_of_a_hand_built_map() -> None:
 def test_info_is_fast_to_import_and_reports_the_georeference(town04_path: Path) -> None:
     code = (
         "import sys; from cold_maps.cli import main; rc = main(['info', sys.argv[1]]); "
-        "heavy = [m for m in ('crdesigner', 'lanelet2', 'matplotlib', 'mcap') if m in sys.modules]; "
+        "heavy = [m for m in ('crdesigner', 'lanelet2', 'matplotlib', 'mcap', 'converters', 'cold_maps.gt_check') "
+        "if m in sys.modules]; "
         "print('heavy:', heavy); sys.exit(rc)"
     )
     result = subprocess.run(
@@ -214,3 +215,56 @@ def test_errors_are_one_line(tmp_path: Path, straight_map: Path, args: list[str]
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], result.stderr
     assert result.stdout == ""
+
+
+def test_convert_writes_an_osm_that_plain_lanelet2_loads_in_the_opendrive_frame(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import lanelet2
+    from lanelet2.io import Origin
+    from lanelet2.projection import MercatorProjector
+
+    from cold_maps.opendrive.sampling import sample_road
+
+    xodr = bundled_map("curve90")
+    osm = tmp_path / "curve90.osm"
+    assert main(["convert", str(xodr), "-o", str(osm), "--no-cache"]) == 0
+    printed = capsys.readouterr().out
+    assert "MercatorProjector" in printed and "Origin(0.0, 0.0)" in printed
+    lanelet_map = lanelet2.io.load(str(osm), MercatorProjector(Origin(0.0, 0.0)))
+    segments = np.array([
+        ((a.x, a.y), (b.x, b.y))
+        for ll in lanelet_map.laneletLayer
+        for bound in (list(ll.leftBound), list(ll.rightBound))
+        for a, b in zip(bound, bound[1:])
+    ])
+    road = load_opendrive(xodr).roads["1"]
+    ours = np.concatenate([np.concatenate((b.inner[:, :2], b.outer[:, :2])) for b in sample_road(road, step=1.0)])
+    start, direction = segments[:, 0], segments[:, 1] - segments[:, 0]
+    along = np.einsum("psk,sk->ps", ours[:, None, :] - start[None], direction) / np.einsum("sk,sk->s", direction, direction)
+    foot = start[None] + np.clip(along, 0.0, 1.0)[..., None] * direction[None]
+    distance = np.min(np.linalg.norm(ours[:, None, :] - foot, axis=2), axis=1)
+    # the frame is the OpenDRIVE frame: our border points lie on the lanelet borders, up to the
+    # chord sag of the converter's 0.5 m vertex spacing on the curve's 16 m inner border
+    assert np.median(distance) < 1e-6
+    assert distance.max() <= 0.5**2 / (8 * 16.0) + 1e-4
+
+
+def test_check_passes_a_bundled_map_and_fails_at_a_zero_threshold(capsys: pytest.CaptureFixture[str]) -> None:
+    xodr = str(bundled_map("junction"))
+    assert main(["check", xodr]) == 0
+    assert "ground truth: TRUSTWORTHY" in capsys.readouterr().out
+    # the converter samples curves every 0.5 m, so some lane disagrees by more than 1 µm
+    assert main(["check", xodr, "--threshold", "1e-6"]) == 3
+    assert "NOT TRUSTWORTHY" in capsys.readouterr().out
+
+
+def test_convert_and_check_of_a_broken_file_fail_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    broken = tmp_path / "broken.xodr"
+    broken.write_text("<OpenDRIVE><header")
+    out = tmp_path / "broken.osm"
+    for args in (["convert", str(broken), "-o", str(out)], ["check", str(broken)]):
+        assert main(args) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "broken.xodr" in err
+    assert not out.exists()
