@@ -16,6 +16,10 @@ if TYPE_CHECKING:
 
 #: Sampling distance of lanelet mid-lines (scoring lanelet sequences), m.
 CENTRE_STEP_M: Final = 0.1
+#: Coarse sampling distance of all lines (finding the lines near a border), m.
+COARSE_STEP_M: Final = 0.5
+#: Coarse samples per chunk (a chunk is found or not as a whole).
+CHUNK_SAMPLES: Final = 20
 
 LaneletKey = tuple[int, bool]
 """A lanelet as (id, inverted): a bidirectional lanelet is driven in either orientation."""
@@ -96,9 +100,12 @@ class LaneletGeometry:
 
 class MapLines:
     """Every border line string of a map, each once, in its stored orientation: vertices,
-    bounding boxes, and samples every ``step_m`` and their KD-trees built on first use."""
+    samples every ``COARSE_STEP_M`` grouped in chunks of ``CHUNK_SAMPLES`` (to find the
+    pieces of lines near a place), and samples every ``step_m`` with their KD-trees."""
 
     def __init__(self, lanelet_map: Any) -> None:
+        from scipy.spatial import cKDTree
+
         self.slot_of_line: dict[int, int] = {}
         self.vertices: list[NDArrayFloat] = []
         for lanelet in lanelet_map.laneletLayer:
@@ -108,9 +115,22 @@ class MapLines:
                     self.vertices.append(line_xy(line, f"lanelet {lanelet.id}"))
         if not self.vertices:
             raise MatchingError("lanelet map has no lanelets")
-        self.boxes: NDArrayFloat = np.array(
-            [np.concatenate((v.min(axis=0), v.max(axis=0))) for v in self.vertices], dtype=np.float64
+        coarse = [resample(vertices, COARSE_STEP_M)[0] for vertices in self.vertices]
+        #: Samples every COARSE_STEP_M of all lines, and the slot of each.
+        self.coarse: NDArrayFloat = np.concatenate(coarse)
+        self.coarse_owner: NDArrayInt = np.repeat(np.arange(len(coarse)), [len(c) for c in coarse])
+        sizes = np.array([len(c) for c in coarse])
+        chunks = -(-sizes // CHUNK_SAMPLES)
+        within = np.concatenate([np.arange(0, size, CHUNK_SAMPLES) for size in sizes])
+        line_start = np.repeat(np.cumsum(sizes) - sizes, chunks)
+        self._chunk_start = line_start + within
+        self._chunk_stop = line_start + np.minimum(within + CHUNK_SAMPLES, np.repeat(sizes, chunks))
+        centres = np.array([self.coarse[a:b].mean(axis=0) for a, b in zip(self._chunk_start, self._chunk_stop)])
+        self._chunk_radius = max(
+            float(np.max(np.hypot(*(self.coarse[a:b] - centre).T)))
+            for a, b, centre in zip(self._chunk_start, self._chunk_stop, centres)
         )
+        self._chunk_tree = cKDTree(centres)
         self._samples: dict[tuple[int, float], NDArrayFloat] = {}
         self._trees: dict[tuple[int, float], cKDTree] = {}
 
@@ -118,13 +138,16 @@ class MapLines:
         """Slots of the given line string ids that belong to the map."""
         return np.array([self.slot_of_line[line] for line in lines if line in self.slot_of_line], dtype=np.int64)
 
-    def near(self, boxes: NDArrayFloat, reach_m: float) -> NDArrayInt:
-        """Slots of the lines whose bounding box comes within ``reach_m`` of any of ``boxes``
-        (``(K, 4)``: x min, y min, x max, y max)."""
-        lo = boxes[:, None, :2] - reach_m
-        hi = boxes[:, None, 2:] + reach_m
-        overlap = np.all((self.boxes[None, :, :2] <= hi) & (self.boxes[None, :, 2:] >= lo), axis=2)
-        return np.flatnonzero(np.any(overlap, axis=0))
+    def coarse_near(self, points: NDArrayFloat, reach_m: float) -> NDArrayInt:
+        """Indices into ``coarse`` of every sample within ``reach_m`` of a point (and of
+        some farther ones: whole chunks are returned)."""
+        near = self._chunk_tree.query_ball_point(points, reach_m + self._chunk_radius)
+        chunks = np.unique(np.concatenate([np.asarray(n, dtype=np.int64) for n in near]))
+        if len(chunks) == 0:
+            return np.empty(0, dtype=np.int64)
+        lengths = self._chunk_stop[chunks] - self._chunk_start[chunks]
+        first = np.cumsum(lengths) - lengths
+        return np.repeat(self._chunk_start[chunks] - first, lengths) + np.arange(lengths.sum())
 
     def tree(self, slot: int, step_m: float) -> cKDTree:
         """KD-tree of the samples every ``step_m`` of line ``slot`` (cached)."""

@@ -27,7 +27,7 @@ from gt_matching.polyline import (
     closest_distances,
     mid_line,
 )
-from gt_matching.route import CLEARANCE_STEP_M, BorderPart, RouteBorder
+from gt_matching.route import BorderPart, RouteBorder
 
 #: More candidate lanelet sequences than this for one detection is an error.
 MAX_SEQUENCES: Final = 4096
@@ -163,7 +163,6 @@ class GroundTruth:
             self._part(geometry, "left")
             self._part(geometry, "right")
         for slot in range(len(self.lines.vertices)):
-            self.lines.samples(slot, CLEARANCE_STEP_M)
             self.lines.tree(slot, self.config.step_m)
 
     def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
-from gt_matching.geometry import MapLines
+from gt_matching.geometry import COARSE_STEP_M, MapLines
 from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, resample, windowed_distances
 
 if TYPE_CHECKING:
@@ -27,8 +27,8 @@ REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
 #: near one are searched globally (a second minimum may start there), rad.
 KINK_RAD: Final = 0.02
-#: Spacing of the samples of nearby lines that bound their distance to the border, m.
-CLEARANCE_STEP_M: Final = 0.5
+#: Spacing along the border of the points around which other lines are looked up, m.
+LOOKOUT_SPACING_M: Final = 5.0
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
 CLEARANCE_SPACING_M: Final = 0.25
 
@@ -69,13 +69,11 @@ class BorderPart:
         vertices: ``(N, 2)`` vertices, world frame, m.
         samples: points every ``step_m`` along it, ends included, m.
         sample_arc_m: arc length of each sample, m.
-        box: bounding box (x min, y min, x max, y max), m.
     """
 
     vertices: NDArrayFloat
     samples: NDArrayFloat
     sample_arc_m: NDArrayFloat
-    box: NDArrayFloat
 
     @classmethod
     def of(cls, vertices: NDArrayFloat, step_m: float) -> BorderPart:
@@ -85,7 +83,6 @@ class BorderPart:
             vertices=vertices,
             samples=samples,
             sample_arc_m=np.minimum(np.arange(len(samples)) * step_m, arc_lengths(vertices)[-1]),
-            box=np.concatenate((vertices.min(axis=0), vertices.max(axis=0))),
         )
 
 
@@ -128,9 +125,7 @@ class RouteBorder:
         self._complex_samples = self.samples[:, 0] + 1j * self.samples[:, 1]
         # A window may hold a repeated sample where two lanelets join.
         self._joints = min(len(parts), 2)
-        near = lines.near(np.array([part.box for part in parts]), reach_m)
         self._lines = lines
-        self._others: NDArrayInt = near[~np.isin(near, lines.slots(ignored))]
         last = len(self.samples) - 1
         spaced = np.searchsorted(self.sample_arc, np.arange(0.0, self.sample_arc[-1], CLEARANCE_SPACING_M))
         checkpoints = np.unique(np.append(np.minimum(spaced, last), last))
@@ -138,21 +133,22 @@ class RouteBorder:
         self._clearance = np.full(len(checkpoints), np.inf)
         self._coarse_owner: NDArrayInt = np.empty(0, dtype=np.int64)
         self._coarse_tree: cKDTree | None = None
-        if len(self._others):
-            coarse = [lines.samples(int(slot), CLEARANCE_STEP_M) for slot in self._others]
-            owner = np.repeat(self._others, [len(c) for c in coarse])
-            points = np.concatenate(coarse)
+        lookouts = np.searchsorted(self.sample_arc, np.arange(0.0, self.sample_arc[-1], LOOKOUT_SPACING_M))
+        lookouts = self.samples[np.append(np.minimum(lookouts, last), last)]
+        near = lines.coarse_near(lookouts, reach_m + COARSE_STEP_M + LOOKOUT_SPACING_M / 2.0)
+        near = near[~np.isin(lines.coarse_owner[near], lines.slots(ignored))]
+        if len(near):
             # Samples of other lines farther than the reach never matter; those this close
             # to the border (e.g. a neighbour's border drawn on top of this one) can never
             # be closer than it by the margin: d(p, o) >= d(p, border) - coincidence and
             # d_resampled <= d + step / 2.
             coincident = (other_margin_m - step_m / 2.0) / 2.0
-            gap = self._guess_tree.query(points, distance_upper_bound=reach_m + CLEARANCE_STEP_M)[0]
-            apart = (gap > coincident) & np.isfinite(gap)
-            if np.any(apart):
-                self._coarse_owner = owner[apart]
-                self._coarse_tree = cKDTree(points[apart])
-                self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - CLEARANCE_STEP_M / 2.0
+            gap = self._guess_tree.query(lines.coarse[near], distance_upper_bound=reach_m + COARSE_STEP_M)[0]
+            near = near[(gap > coincident) & np.isfinite(gap)]
+        if len(near):
+            self._coarse_owner = lines.coarse_owner[near]
+            self._coarse_tree = cKDTree(lines.coarse[near])
+            self._clearance = self._coarse_tree.query(self.samples[checkpoints])[0] - COARSE_STEP_M / 2.0
 
     @cached_property
     def _fine_tree(self) -> cKDTree:
@@ -173,7 +169,7 @@ class RouteBorder:
         closer = np.zeros(len(points), dtype=bool)
         if self._coarse_tree is None:
             return closer
-        half = CLEARANCE_STEP_M / 2.0
+        half = COARSE_STEP_M / 2.0
         open_ = np.flatnonzero(self._coarse_tree.query(points)[0] - half < limits)
         if len(open_) == 0:
             return closer

@@ -293,3 +293,12 @@ def test_config_rejects_bad_thresholds() -> None:
         MatchingConfig(step_m=0.0)
     with pytest.raises(ValueError, match="margin_m must be finite"):
         MatchingConfig(margin_m=float("inf"))
+
+
+def test_coarse_near_returns_every_line_sample_within_reach(junction: JunctionMap) -> None:
+    lines = junction.gt.lines
+    rng = np.random.default_rng(3)
+    for point in rng.uniform((-10.0, -60.0), (110.0, 70.0), (100, 2)):
+        found = set(lines.coarse_near(point[None], 3.0).tolist())
+        within = np.flatnonzero(np.hypot(*(lines.coarse - point).T) <= 3.0)
+        assert set(within.tolist()) <= found
