@@ -16,9 +16,7 @@ import csv
 import io
 import json
 import math
-import os
 import sys
-import tempfile
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +24,7 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
+from cold_maps.atomic_io import atomic_output
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.model import OpenDriveMap
@@ -212,23 +211,11 @@ def _run_export(args: argparse.Namespace) -> int:
 
 
 def write_atomically(path: Path, write: Callable[[TextIO], None]) -> None:
-    """Write a text file through a temporary file in its folder, renamed into place.
-
-    The folder is created when missing; on any failure the temporary file is removed and
-    ``path`` is left as it was.
-    """
+    """Write a text file atomically (:func:`cold_maps.atomic_io.atomic_output`), creating
+    its folder when missing; on any failure ``path`` is left as it was."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as out:
-            write(out)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temp, 0o666 & ~umask)
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path, "w") as out:
+        write(out)
 
 
 def _configure_convert(parser: argparse.ArgumentParser) -> None:

@@ -52,8 +52,6 @@ LOG = logging.getLogger("cold_maps.evaluation")
 
 INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
 TREE_CACHE_SIZE: Final[int] = 64
-DISPLAY_STEP_M: Final[float] = 0.5
-"""Spacing (m) of the GT and fused polylines drawn in the MCAP (raw detections stay exact)."""
 OVERLAY_MARGIN_M: Final[float] = 10.0
 """The overlay plot shows the GT this far (m) around the detections and the fused lane."""
 DETECTION_DECIMALS: Final[int] = 6
@@ -436,8 +434,8 @@ class MapEvaluator:
                     recorder.write_detection(stamp, index, name, _pose(item.detection), item.detection.left,
                                              item.detection.right, ego=name == "ego")
             if gt_lines:
-                recorder.write_gt(stamp, _for_display(gt_lines))
-            recorder.write_fused(stamp, _for_display(fused_lines))
+                recorder.write_gt(stamp, gt_lines)
+            recorder.write_fused(stamp, fused_lines)
             recorder.write_metrics(stamp, index, metrics)
 
     def _local(self, collector: Collector, scenario: Scenario, ego: Sensed, index: int, stamp: float,
@@ -457,7 +455,9 @@ class MapEvaluator:
             return {}
         self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
         self._keep_overlay(collector, scenario, index, measured, {"ego": (left, right)}, {})
-        return {"left": measured.left_gt, "right": measured.right_gt}
+        shown = np.vstack((left, right))
+        low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
+        return {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
 
     def _measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float],
                  reference: tuple[NDArrayFloat, NDArrayFloat]) -> Measurement | str:
@@ -552,12 +552,6 @@ def _crop(line: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat) -> NDArrayF
     plus one point on either side."""
     inside = np.flatnonzero(np.all((line >= low) & (line <= high), axis=1))
     return line if inside.size < 2 else line[max(inside[0] - 1, 0): inside[-1] + 2]
-
-
-def _for_display(lines: dict[str, NDArrayFloat]) -> dict[str, NDArrayFloat]:
-    from gt_matching.polyline import resample
-
-    return {name: resample(line, DISPLAY_STEP_M)[0] for name, line in lines.items()}
 
 
 def load_graph(path: Path) -> LaneGraph:

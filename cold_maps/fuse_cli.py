@@ -86,9 +86,7 @@ class Refuser:
         """Fuses one recorded frame and writes it to ``recorder``."""
         import fusion
 
-        from gt_matching.polyline import resample
-
-        from cold_maps.evaluation import DISPLAY_STEP_M, reason_category
+        from cold_maps.evaluation import reason_category
 
         stamp = detections[0]["stamp_s"]
         lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
@@ -127,7 +125,7 @@ class Refuser:
             if hasattr(measured, "left_errors_m"):
                 metrics[f"{sender}_left_max_error_m"] = float(np.max(measured.left_errors_m))
                 metrics[f"{sender}_right_max_error_m"] = float(np.max(measured.right_errors_m))
-        recorder.write_fused(stamp, {k: resample(v, DISPLAY_STEP_M)[0] for k, v in fused_lines.items()})
+        recorder.write_fused(stamp, fused_lines)
         recorder.write_metrics(stamp, frame, metrics)
 
     def _measure(self, left: np.ndarray, right: np.ndarray, pose: tuple[float, float, float],

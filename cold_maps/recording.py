@@ -49,6 +49,7 @@ STATUS_COMPLETE: Final[str] = "complete"
 STATUS_PARTIAL: Final[str] = "partial"
 LINE_THICKNESS_M: Final[float] = 0.15
 DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
+DISPLAY_TOLERANCE_M: Final[float] = 1e-3  # SceneUpdate lines simplified to within this distance
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 
 RGBA = tuple[float, float, float, float]
@@ -237,13 +238,42 @@ def _time_msg(ns: int) -> dict[str, int]:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
+def simplify_polyline(points: NDArrayFloat, tolerance_m: float = DISPLAY_TOLERANCE_M) -> NDArrayFloat:
+    """Douglas-Peucker: a subset of an (N, 2) polyline's points (end points kept, order
+    kept) such that every dropped point lies within ``tolerance_m`` of the segment that
+    replaces it (segment, not line: a polyline that doubles back keeps its turning point)."""
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) < 3:
+        return points
+    keep = np.zeros(len(points), dtype=bool)
+    keep[[0, -1]] = True
+    spans = [(0, len(points) - 1)]
+    while spans:
+        first, last = spans.pop()
+        if last - first < 2:
+            continue
+        chord = points[last] - points[first]
+        offsets = points[first + 1: last] - points[first]
+        squared = float(chord @ chord)
+        along = np.clip(offsets @ chord / squared, 0.0, 1.0) if squared > 0.0 else np.zeros(len(offsets))
+        gap = offsets - along[:, None] * chord
+        distance = np.hypot(gap[:, 0], gap[:, 1])
+        worst = int(np.argmax(distance))
+        if distance[worst] > tolerance_m:
+            split = first + 1 + worst
+            keep[split] = True
+            spans += [(first, split), (split, last)]
+    return points[keep]
+
+
 def _line_entity(entity_id: str, ns: int, points: NDArrayFloat, color: RGBA) -> dict[str, Any]:
     line = {
         "type": 0,
         "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
         "thickness": LINE_THICKNESS_M,
         "scale_invariant": False,
-        "points": [{"x": x, "y": y, "z": 0.0} for x, y in np.round(points, DISPLAY_DECIMALS).tolist()],
+        "points": [{"x": x, "y": y, "z": 0.0}
+                   for x, y in np.round(simplify_polyline(points), DISPLAY_DECIMALS).tolist()],
         "color": dict(zip("rgba", color)),
         "colors": [],
         "indices": [],

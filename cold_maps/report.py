@@ -40,7 +40,6 @@ import io
 import json
 import math
 import os
-import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +47,7 @@ from typing import Any, Final, Iterable, Literal, Mapping, Sequence
 
 import numpy as np
 
+from cold_maps.atomic_io import atomic_output
 from cold_maps.lane_strip import NDArrayFloat
 
 Fusion = Literal["local", "convoy", "spline"]
@@ -335,21 +335,12 @@ class ScenarioAccumulator:
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Writes ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Writes ``data`` to ``path`` atomically (:func:`cold_maps.atomic_io.atomic_output`)."""
     path = Path(path)
-    try:
-        handle, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise ReportError(f"{path}: cannot write: {exc.strerror}") from exc
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
+    if not path.parent.is_dir():
+        raise ReportError(f"{path}: cannot write: no folder {path.parent}")
+    with atomic_output(path, "wb") as stream:
+        stream.write(data)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:

@@ -23,6 +23,7 @@ from cold_maps.recording import (
     RecordingError,
     read_detections,
     read_metadata,
+    simplify_polyline,
 )
 
 FRAMES = 3
@@ -115,10 +116,11 @@ def test_scene_updates_are_line_strips_in_the_map_frame_at_the_world_pose(record
     assert entities["left"]["frame_id"] == "map" and line["type"] == 0
     assert entities["left"]["timestamp"] == {"sec": 0, "nsec": 200_000_000}
     # ego at (10, 5) heading north: vehicle (x, 1.75) -> world (10 - 1.75, 5 + x)
+    # a straight border is drawn as its two end points (1 mm simplification, 0.1 mm rounding)
     left, _ = lane(2)
     points = np.array([[p["x"], p["y"], p["z"]] for p in line["points"]])
-    np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=0.5e-4)  # display rounding: 0.1 mm
-    np.testing.assert_allclose(points[:, 1], 5.0 + left[:, 0], atol=0.5e-4)
+    np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=0.5e-4)
+    np.testing.assert_allclose(points[:, 1], 5.0 + left[[0, -1], 0], atol=0.5e-4)
     np.testing.assert_array_equal(points[:, 2], 0.0)
     metrics = [p for topic, _, p, _ in messages if topic == "/metrics"]
     assert metrics[1] == {"stamp_s": 0.1, "frame": 1, "mean_error_m": 0.01, "max_error_m": None, "fused": 1.0}
@@ -240,3 +242,37 @@ def test_raw_detections_round_trip_bit_exactly(left, right, pose, frame):
     np.testing.assert_array_equal(detection["left"], np.array(left))
     np.testing.assert_array_equal(detection["right"], np.array(right))
     assert tuple(detection["pose"].values()) == pose
+
+
+def _distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    start, direction = line[:-1], np.diff(line, axis=0)
+    along = np.einsum("psk,sk->ps", points[:, None, :] - start[None], direction)
+    along = np.clip(along / np.maximum(np.einsum("sk,sk->s", direction, direction), 1e-300), 0.0, 1.0)
+    foot = start[None] + along[..., None] * direction[None]
+    return np.min(np.linalg.norm(points[:, None, :] - foot, axis=2), axis=1)
+
+
+def test_simplify_collapses_a_straight_line_and_keeps_an_arc_within_tolerance() -> None:
+    x = np.linspace(0.0, 100.0, 1001)
+    assert simplify_polyline(np.column_stack((x, 0.5 * x + 3.0))).tolist() == [[0.0, 3.0], [100.0, 53.0]]
+    radius, tolerance = 16.0, 1e-3
+    phi = np.linspace(0.0, np.pi / 2, 252)
+    arc = np.column_stack((radius * np.cos(phi), radius * np.sin(phi)))
+    simple = simplify_polyline(arc, tolerance)
+    assert _distance_to_polyline(arc, simple).max() <= tolerance
+    # a chord of an arc with sag h spans sqrt(8 R h); halving spans, Douglas-Peucker uses at
+    # most twice the fewest chords that keep the sag
+    assert len(simple) - 1 <= 2 * math.ceil(radius * np.pi / 2 / math.sqrt(8 * radius * tolerance))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=1, max_size=40),
+       st.floats(1e-4, 1.0))
+def test_simplified_lines_keep_ends_order_and_tolerance(points: list[tuple[float, float]], tolerance: float) -> None:
+    line = np.array(points, dtype=np.float64)
+    simple = simplify_polyline(line, tolerance)
+    assert simple[0].tolist() == line[0].tolist() and simple[-1].tolist() == line[-1].tolist()
+    remaining = iter(line.tolist())
+    assert all(point in remaining for point in simple.tolist())  # an ordered subsequence of the line
+    if len(simple) >= 2:
+        assert _distance_to_polyline(line, simple).max() <= tolerance + 1e-9

@@ -1,0 +1,42 @@
+"""Atomic output files: written to a temporary file in the target folder, renamed into place.
+
+A reader never sees a half-written file, and a failure leaves the target as it was. The
+finished file gets the ordinary mode of a new file (0666 less the umask), not the private
+mode of a temporary file.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Literal
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextmanager
+def atomic_output(path: str | os.PathLike[str], mode: Literal["w", "wb"] = "w") -> Iterator[IO]:
+    """A stream to write ``path`` through: text (UTF-8, no newline translation) or binary.
+
+    On normal exit the data is flushed to disk and renamed onto ``path``; on any exception
+    the temporary file is removed and the exception propagates.
+    """
+    path = Path(path)
+    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    try:
+        with os.fdopen(handle, mode, **({"encoding": "utf-8", "newline": ""} if mode == "w" else {})) as stream:
+            yield stream
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.chmod(temp, 0o666 & ~_umask())
+        os.replace(temp, path)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
