@@ -93,6 +93,16 @@ def test_export_csv_columns_on_a_straight_road(tmp_path: Path, rule: str) -> Non
         np.testing.assert_allclose(y, centre_y + to_left * LANE_WIDTH_M / 2, atol=1e-4)
 
 
+def test_export_quotes_road_ids_with_commas_and_percent_signs(tmp_path: Path) -> None:
+    source = tmp_path / "odd.xodr"
+    source.write_text(straight_xodr("RHT").replace('id="7"', 'id="r%d,7"'))
+    out = tmp_path / "borders.csv"
+    assert main(["export", str(source), "--step", "5", "-o", str(out)]) == 0
+    header, borders = read_csv(out)
+    assert {key[0] for key in borders} == {"r%d,7"}
+    assert all(len(rows) == 11 for rows in borders.values())
+
+
 def _assert_left_is_left(borders: dict[tuple[str, int, int, str], np.ndarray]) -> int:
     """Cross-product check on every lane; returns the number of lanes checked."""
     lanes = {key[:3] for key in borders}
