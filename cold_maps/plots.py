@@ -22,6 +22,7 @@ from cold_maps.sensor_errors import check_polyline
 
 FIGURE_SIZE_IN: Final[tuple[float, float]] = (8.0, 4.5)
 DPI: Final[int] = 100
+OVERLAY_VIEW_MARGIN_M: Final[float] = 10.0
 
 
 def _figure() -> Any:
@@ -70,7 +71,9 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
                        fused: Mapping[str, NDArrayFloat], ego: str = "ego", title: str = "") -> None:
     """GT borders, each sender's (left, right) detection and the fused borders of one frame.
 
-    All polylines are ``(N, 2)`` in the world frame (m); ``ego`` names the ego sender.
+    All polylines are ``(N, 2)`` in the world frame (m); ``ego`` names the ego sender. The
+    view frames the detections and the fused lane (``OVERLAY_VIEW_MARGIN_M`` around them);
+    the GT is drawn where it passes through that view.
     """
     layers: list[tuple[NDArrayFloat, tuple[float, ...], str, float, str]] = []
     for name, points in gt.items():
@@ -90,7 +93,12 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
         axes.plot(points[:, 0], points[:, 1], color=color, linestyle=style, linewidth=width,
                   label=None if label in labelled else label)
         labelled.add(label)
-    axes.set_aspect("equal", adjustable="datalim")
+    framed = [points for points, _, _, _, label in layers if label != "ground truth"] or [layers[0][0]]
+    low = np.min([p.min(axis=0) for p in framed], axis=0) - OVERLAY_VIEW_MARGIN_M
+    high = np.max([p.max(axis=0) for p in framed], axis=0) + OVERLAY_VIEW_MARGIN_M
+    axes.set_xlim(low[0], high[0])
+    axes.set_ylim(low[1], high[1])
+    axes.set_aspect("equal", adjustable="box")
     axes.set_xlabel("x (east) [m]")
     axes.set_ylabel("y (north) [m]")
     axes.set_title(title)
