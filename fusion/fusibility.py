@@ -18,9 +18,12 @@ from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
 _CHORD_WINDOW_M: Final[float] = 4.0
 _MIN_GAP_M: Final[float] = 1e-6
-_MIN_ARC_CURVATURE: Final[float] = 1.0 / 100.0
-_CURVATURE_SLACK: Final[float] = 0.10
-_ARC_TOLERANCE_LANES: Final[float] = 0.75
+_MIN_ARC_CURVATURE: Final[float] = 1.0 / 1000.0
+_ARC_LENGTH_SLACK: Final[float] = 1.2
+_CURVATURE_SLACK: Final[float] = 0.02
+_CURVED_SIGMAS: Final[float] = 4.0
+_ARC_TOLERANCE_LANES: Final[float] = 0.5
+_CONE_DECIDES_LANES: Final[float] = 0.4
 
 
 @dataclass(frozen=True)
@@ -117,13 +120,18 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
        may be at most half the ego lane width (measured at the ego end). On a straight this
        is a lateral offset test that rejects the adjacent lane (a full lane width off) while
        tolerating heading noise over a 50 m gap and the shift of an S-bend;
-    4. one arc: when both detection ends lie in the same curve, the coop start must lie
-       within 3/4 of the lane width of where that arc leads (:func:`curved_end_mismatch`;
-       the adjacent lane of a curve lies a full lane width off). ``end_fits`` returns the
-       least-squares fits of the (ego left, ego right) ends and (coop left, coop right)
-       starts (:func:`fusion.spline.lane_end_fits`); the check is skipped without them, when
-       |Δψ| ≤ t_Ψ, and when an end is straight: then the curve may start anywhere in the gap
-       and the adjacent lane cannot be told from the same lane bending a little later.
+    4. arcs: where the cone is wider than 0.4 of the lane width (d_s·sin|Δψ| above that;
+       narrower, rule 3 already rejects a neighbour), a detection end that lies on an arc
+       (measured curvature, see :func:`fusion.geometry.fit_ends`) predicts the gap: the lane
+       follows that arc to the other end's heading, then goes straight. The coop start (from
+       a curved ego end) or the ego end (from a curved coop start, backwards) must lie within
+       half the lane width of that prediction (:func:`arc_mismatch`). This rejects the
+       neighbour lane when a curve starts or ends inside the gap, or both ends lie in one
+       curve, however gentle; the same lane is off only by a clothoid shift (L²/24R).
+       ``end_fits`` returns the least-squares fits of the (ego left, ego right) ends and (coop
+       left, coop right) starts (:func:`fusion.spline.lane_end_fits`); the rule is skipped
+       without them. Two straight ends (a whole curve inside the gap), clothoid ends and ends
+       curving opposite ways leave the radius in the gap open: only the cone applies then.
     """
     x_rel, _, _ = relative_pose(ego, coop)
     if x_rel <= 0.0:
@@ -143,8 +151,9 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     if excess > 0.5 * ends.width_m:
         return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
                 f"(more than half the lane width {ends.width_m:.2f} m): another lane")
-    if end_fits is not None and abs(turn) > params.t_psi_rad:
-        mismatch = curved_end_mismatch(ends, end_fits())
+    cone_width = ends.gap_m * math.sin(min(abs(turn), math.pi / 2))
+    if end_fits is not None and cone_width > _CONE_DECIDES_LANES * ends.width_m:
+        mismatch = arc_mismatch(ends, end_fits())
         if mismatch > _ARC_TOLERANCE_LANES * ends.width_m:
             return (f"a detection end lies on an arc that puts the coop start {mismatch:.2f} m off "
                     f"(more than {_ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m): another lane")
@@ -173,23 +182,49 @@ def _arc_line_mismatch(p_from: tuple[float, float], psi_from: float, p_to: tuple
     return 0.0 if lo * hi <= 0.0 else min(abs(lo), abs(hi))
 
 
-def curved_end_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
-    """Lateral mismatch [m] of the coop start with the arc both detection ends lie on.
+def _end_arc_radii(k: float, sd: float, turn: float, gap_m: float) -> tuple[float, float] | None:
+    """Radius interval [m] of an end's arc that turns the lane by ``turn`` inside the gap, or
+    ``None`` when the end is not clearly curved that way (|κ| < 1/1000 m⁻¹ or < 4σ, or the
+    other way) or its arc is too gentle to make the turn within 1.2·``gap_m`` (then the
+    curvature must change in the gap, and the end's arc says nothing about where the lane
+    goes)."""
+    k_feasible = abs(turn) / (_ARC_LENGTH_SLACK * gap_m)
+    if abs(k) < max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd, k_feasible) or k * turn <= 0.0:
+        return None
+    k_hi = abs(k) * (1.0 + _CURVATURE_SLACK) + 3.0 * sd
+    k_lo = max(abs(k) * (1.0 - _CURVATURE_SLACK) - 3.0 * sd, k_feasible)
+    return (1.0 / k_hi, 1.0 / k_lo) if k_lo < k_hi else None
 
-    Applies when both ends are clearly curved (|κ| ≥ 1/100 m⁻¹ and ≥ 3σ) the way the lane
-    turns, with curvatures within 50 % of each other: the gap is then taken as the ego's arc
-    (its end curvature ± 10 % + 3σ); the lane follows it from the ego end to the coop
-    heading, and the coop start must lie on the straight through that point. Returns the smallest lateral offset over those radii, 0 when the rule does
-    not apply (a straight end leaves the arc's position in the gap open).
+
+def arc_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
+    """Lateral mismatch [m] of the two detection ends with the arc a curved end lies on.
+
+    A detection end that is clearly curved the way the lane turns (see
+    :func:`_end_arc_radii`; curvature from the least-squares ``fits`` of (ego left, ego right,
+    coop left, coop right), ± 2 % + 3σ) predicts the gap: the lane goes on along that arc
+    until it reaches the other end's heading, then straight. From a curved ego end the coop
+    start must lie on that straight; from a curved coop start (followed backwards) the ego
+    end must. This covers a curve that starts or ends inside the gap (one end straight) and
+    both ends in one curve; the adjacent lane lies a lane width off either way, the same
+    lane within a clothoid shift (L²/24R). Two curved ends whose radius intervals overlap lie
+    on one arc (its radii: the intersection); otherwise (a compound curve) the smaller of the
+    two mismatches counts. 0 when no end applies, or when the ends curve opposite ways (an
+    S-bend in the gap).
     """
     psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
     turn = wrap_angle(psi1 - psi0)
     (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
-    curved = all(abs(k) >= max(_MIN_ARC_CURVATURE, 3.0 * sd) and k * turn > 0.0 for k, sd in ((k0, s0), (k1, s1)))
-    if not curved or abs(k0 - k1) > 0.5 * max(abs(k0), abs(k1)):
+    if k0 * k1 < 0.0 and abs(k0) >= 3.0 * s0 and abs(k1) >= 3.0 * s1:
         return 0.0
-    k_hi = abs(k0) * (1.0 + _CURVATURE_SLACK) + 3.0 * s0
-    k_lo = abs(k0) * (1.0 - _CURVATURE_SLACK) - 3.0 * s0
-    if k_lo <= 0.0:
-        return 0.0
-    return _arc_line_mismatch(ends.p_end, psi0, ends.p_start, psi1, turn, (1.0 / k_hi, 1.0 / k_lo))
+    ego_radii, coop_radii = _end_arc_radii(k0, s0, turn, ends.gap_m), _end_arc_radii(k1, s1, turn, ends.gap_m)
+    if ego_radii is not None and coop_radii is not None:
+        common = (max(ego_radii[0], coop_radii[0]), min(ego_radii[1], coop_radii[1]))
+        if common[0] <= common[1]:
+            ego_radii, coop_radii = common, None
+    mismatches = []
+    if ego_radii is not None:
+        mismatches.append(_arc_line_mismatch(ends.p_end, psi0, ends.p_start, psi1, turn, ego_radii))
+    if coop_radii is not None:
+        mismatches.append(_arc_line_mismatch(ends.p_start, psi1 + math.pi, ends.p_end, psi0 + math.pi, -turn,
+                                             coop_radii))
+    return min(mismatches, default=0.0)

@@ -12,6 +12,8 @@ from fusion.types import NDArrayFloat, Pose2D
 
 _SIGMA_FLOOR_M: Final[float] = 0.002
 _CI_FACTOR: Final[float] = 2.5
+_CURVATURE_CHANGE_SIGMAS: Final[float] = 3.0
+_CUBIC_ARC_BIAS: Final[float] = 0.05
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
@@ -118,6 +120,19 @@ class EndFit:
     curvature_sigma: float
 
 
+def _cubic_terms(x: NDArrayFloat, y: NDArrayFloat, counts: Sequence[int]) -> tuple[list[float], list[float]]:
+    """Cubic coefficient d of a least-squares ``y = a + b·x + c·x² + d·x³`` over the first
+    ``counts[e]`` points of each end (chord frame ``x``, ``y`` [m]), and σ_d per metre of noise."""
+    mask = np.arange(x.shape[1]) < np.array(counts)[:, None]
+    basis = np.stack((np.ones_like(x), x, x * x, x * x * x), axis=2) * mask[:, :, None]
+    normal = basis.transpose(0, 2, 1) @ basis
+    if np.any(np.abs(np.linalg.det(normal)) <= 1e-12):
+        return [0.0] * x.shape[0], [math.inf] * x.shape[0]
+    inverse = np.linalg.inv(normal)
+    d = (inverse[:, 3:] @ (basis.transpose(0, 2, 1) @ y[:, :, None]))[:, 0, 0]
+    return d.tolist(), np.sqrt(np.abs(inverse[:, 3, 3])).tolist()
+
+
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
              noise_window_m: float) -> list[EndFit]:
     """Least-squares end point, tangent and curvature of several borders at once.
@@ -131,10 +146,14 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     b ± 2.5·σ_b still intersects those of all shorter windows, with σ_b from the detection
     noise σ (estimated from second differences over ``noise_window_m`` of all borders,
     assuming ~0.1 m spacing; a smooth curve contributes < 1 mm). The curvature comes from the
-    shortest window (least biased, so with noise it is uncertain and ``curvature_sigma`` says
-    so). A border whose shortest window holds fewer than four points gets its end point, the
-    chord direction and zero curvature of infinite uncertainty. All borders share one
-    vectorised pass.
+    chosen window too (σ_κ falls with the window length to the power 2.5, so a long window
+    tells a 1/500 m⁻¹ curve from a straight); ``curvature_sigma`` is its σ, or infinite when
+    the longest window is no single arc: the cubic coefficient d of a cubic fit over it
+    differs from an arc's, κ³·x_L/6 (x_L the far end of the window; measured on arcs of
+    8–100 m radius), by more than 3σ_d + 0.05·|κ|³·L. A clothoid (d ≈ κ'/6 for a curvature
+    rate κ') or a junction of line and arc inside the window fails that test. A border whose
+    shortest window holds fewer than four points gets its end point, the chord direction and
+    zero curvature of infinite uncertainty. All borders share one vectorised pass.
     """
     n_ends = len(borders)
     counts, chords, origins = [], [], []
@@ -158,6 +177,9 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     y = (rel @ (direction[:, ::-1] * (-1.0, 1.0))[:, :, None])[:, :, 0]
     x2 = x * x
     sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=2)
+    last = [c[-1] for c in counts]
+    cubic, cubic_sigma = _cubic_terms(x, y, last)
+    x_far = x[np.arange(n_ends), np.array(last) - 1].tolist()
     idx = np.array(counts) - 1
     cells = sums[:, np.arange(n_ends)[:, None], idx].transpose(1, 2, 0).tolist()
     fits = []
@@ -175,17 +197,19 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
                 break
             b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
+            c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
+            scale = 2.0 / math.hypot(1.0, b) ** 3
+            window_curvature = (scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det)))
             half = _CI_FACTOR * sigma * math.sqrt(abs((k * s4 - s2 * s2) / det))
             lo, hi = max(lo, b - half), min(hi, b + half)
-            if lo > hi:
-                break
-            a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
-            chosen = (a, b)
-            if w == 0:
-                c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
-                scale = 2.0 / math.hypot(1.0, b) ** 3
-                curvature = scale * c
-                curvature_sigma = scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
+            if lo <= hi:
+                a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+                chosen = (a, b)
+                curvature, curvature_sigma = window_curvature
+        arc_cubic = curvature ** 3 * x_far[e] / 6.0
+        if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * cubic_sigma[e]
+                                        + _CUBIC_ARC_BIAS * abs(curvature) ** 3 * abs(x_far[e])):
+            curvature_sigma = math.inf
         if chosen is None:
             fits.append(fallback)
             continue
