@@ -21,7 +21,7 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Final, Literal, Sequence
+from typing import TYPE_CHECKING, Callable, Final, Literal, Sequence
 
 import numpy as np
 
@@ -51,7 +51,8 @@ if TYPE_CHECKING:
 LOG = logging.getLogger("cold_maps.evaluation")
 
 INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
-TREE_CACHE_SIZE: Final[int] = 64
+MATCH_CACHE_SIZE: Final[int] = 16
+"""Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
 OVERLAY_MARGIN_M: Final[float] = 10.0
 """The overlay plot shows the GT this far (m) around the detections and the fused lane."""
 DETECTION_DECIMALS: Final[int] = 6
@@ -193,42 +194,36 @@ class Measurement:
 
 
 class GroundTruthMeter:
-    """Closest-point errors of lanes against a ``gt_matching.GroundTruth``; the resampled
-    GT borders' KD-trees are cached per matched lanelet sequence."""
+    """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
+    (``GroundTruth.errors``: per-point distances to the GT borders resampled every
+    ``step_m``, samples and KD-trees cached per lanelet). Matches of the last few
+    reference lanes are kept: the scenarios of a frame share their coops' true lanes."""
 
     def __init__(self, ground_truth: GroundTruth) -> None:
         self.ground_truth = ground_truth
         self.step_m = ground_truth.config.step_m
-        self._trees: OrderedDict[tuple[tuple[int, ...], int], tuple[Any, NDArrayFloat]] = OrderedDict()
-
-    def _tree(self, ids: tuple[int, ...], side: int, border: NDArrayFloat) -> tuple[Any, NDArrayFloat]:
-        from scipy.spatial import cKDTree
-
-        from gt_matching.polyline import arc_lengths, resample
-
-        key = (ids, side)
-        found = self._trees.get(key)
-        if found is None:
-            samples, _ = resample(border, self.step_m)
-            found = self._trees[key] = (cKDTree(samples), arc_lengths(samples))
-            if len(self._trees) > TREE_CACHE_SIZE:
-                self._trees.popitem(last=False)
-        else:
-            self._trees.move_to_end(key)
-        return found
+        self._matches: OrderedDict[tuple[bytes, bytes, tuple[float, float, float]], LaneMatch] = OrderedDict()
 
     def match(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float]) -> LaneMatch:
-        """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``)."""
-        return self.ground_truth.match(left, right, pose)
+        """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``), from
+        the cache when the same borders and pose were matched lately."""
+        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
+        key = (left.tobytes(), right.tobytes(), tuple(pose))
+        found = self._matches.get(key)
+        if found is None:
+            found = self._matches[key] = self.ground_truth.match(left, right, pose)
+            if len(self._matches) > MATCH_CACHE_SIZE:
+                self._matches.popitem(last=False)
+        else:
+            self._matches.move_to_end(key)
+        return found
 
     def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``."""
-        results = []
-        for side, (points, border) in enumerate(((left, match.left_gt), (right, match.right_gt))):
-            tree, arc = self._tree(match.lanelet_ids, side, border)
-            distances, index = tree.query(points)
-            results.append((distances, float(arc[index[-1]] - arc[index[0]])))
-        return Measurement(results[0][0], results[1][0], results[0][1], results[1][1],
+        found = self.ground_truth.errors(left, right, match)
+        return Measurement(found.left.distances_m, found.right.distances_m,
+                           float(found.left.arc_m[-1] - found.left.arc_m[0]),
+                           float(found.right.arc_m[-1] - found.right.arc_m[0]),
                            match.left_gt, match.right_gt, match.matched)
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,

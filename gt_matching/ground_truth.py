@@ -126,6 +126,19 @@ def _ids(lanelets: Sequence[LaneletGeometry]) -> tuple[int, ...]:
     return tuple(g.key[0] for g in lanelets)
 
 
+def _sequence_arc(lanelets: Sequence[LaneletGeometry], points: NDArrayFloat) -> NDArrayFloat:
+    """Arc length (m) along the joined mid-lines of ``lanelets`` of each point's closest
+    mid-line vertex (KD-trees of the lanelets; the first lanelet wins a tie)."""
+    found = [g.centre_tree.query(points) for g in lanelets]
+    distances = np.array([d for d, _ in found])
+    nearest = np.argmin(distances, axis=0)
+    offsets = np.cumsum([0.0] + [g.length_m for g in lanelets[:-1]])
+    arc: NDArrayFloat = np.array(
+        [offsets[k] + lanelets[k].centre_arc_m[found[k][1][i]] for i, k in enumerate(nearest)], dtype=np.float64
+    )
+    return arc
+
+
 class GroundTruth:
     """A Lanelet2 map prepared for matching detections: built once, reused per frame.
 
@@ -229,7 +242,15 @@ class GroundTruth:
         key = (geometry.key, side)
         part = self._parts.get(key)
         if part is None:
-            part = self._parts[key] = BorderPart.of(getattr(geometry, side), self.config.step_m)
+            config = self.config
+            part = self._parts[key] = BorderPart.of(
+                getattr(geometry, side),
+                getattr(geometry, f"{side}_line"),
+                self.lines,
+                config.step_m,
+                2.0 * config.max_distance_m + config.other_border_margin_m,
+                config.other_border_margin_m,
+            )
         return part
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
@@ -303,7 +324,7 @@ class GroundTruth:
                 f"{_ids(own.lanelets)}"
             )
         else:
-            _, ends = closest_distances(centre[[0, -1]], np.concatenate([g.centre for g in own.lanelets]))
+            ends = _sequence_arc(own.lanelets, centre[[0, -1]])
             if ends[1] < ends[0]:
                 mismatch = f"detection runs against the driving direction of lanelets {_ids(own.lanelets)}"
         return own, pose_ids, mismatch
@@ -390,15 +411,10 @@ class GroundTruth:
                 if hasattr(other, "leftBound")
                 for line in (other.leftBound, other.rightBound)
             }
-            config = self.config
-            reach = 2.0 * config.max_distance_m + config.other_border_margin_m
 
             def border(side: str) -> RouteBorder:
                 own = {getattr(g, f"{side}_line") for g in lanelets}
-                parts = [self._part(g, side) for g in lanelets]
-                return RouteBorder(
-                    self.lines, parts, own | overlapping, config.step_m, reach, config.other_border_margin_m
-                )
+                return RouteBorder(self.lines, [self._part(g, side) for g in lanelets], own | overlapping)
 
             route = _Route(keys=keys, left=border("left"), right=border("right"))
             self._routes[keys] = route
