@@ -13,7 +13,7 @@ import numpy as np
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_check, lane_ends, paper_check, relative_pose
-from fusion.geometry import EndFit, stacked_lengths, to_world, transform
+from fusion.geometry import EndFit, to_world, transform
 from fusion.spline import hermite_lane, lane_end_fits, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, Source
 
@@ -25,16 +25,15 @@ Borders = tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]
 Parts = list[tuple[NDArrayFloat, Source]]
 
 
-def _ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, float, NDArrayFloat]:
-    """(ego left, ego right, coop left, coop right) in the ego vehicle frame, x_rel [m], and the
-    stacked coop borders (both coop borders are views of it)."""
+def _ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, float]:
+    """(ego left, ego right, coop left, coop right) in the ego vehicle frame, and x_rel [m]."""
     for name, det in (("ego", ego), ("coop", coop)):
         if not isinstance(det, LaneDetection):
             raise InvalidDetectionError(f"{name} must be a LaneDetection, got {type(det).__name__}")
     x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
     coop_points = transform(coop.points, x_rel, y_rel, psi_rel)
     n_left = coop.left.shape[0]
-    return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), x_rel, coop_points
+    return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), x_rel
 
 
 class _EndFits:
@@ -79,8 +78,8 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     if ends.gap_m > 0.0:
         return kind, f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", ends, None
     el, er, cl, cr = borders
-    s_el, s_er = stacked_lengths(ego.points, el.shape[0])
-    starts = (overlap_start(el, cl, s_el), overlap_start(er, cr, s_er))
+    n_left = el.shape[0]
+    starts = (overlap_start(el, cl, ego.arclength[:n_left]), overlap_start(er, cr, ego.arclength[n_left:]))
     return kind, _convoy_reason(x_rel, starts, params), ends, starts
 
 
@@ -92,7 +91,7 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
     for spline fusion with ``params.fusibility`` (``"geometric"`` by default, see
     :func:`fusion.fusibility.geometric_check`; ``"paper"`` for the paper's pose cases).
     """
-    borders, x_rel, _ = _ego_frame_borders(ego, coop)
+    borders, x_rel = _ego_frame_borders(ego, coop)
     _, reason, _, _ = _decide(ego, coop, mode, params, borders, x_rel, _EndFits(borders, params))
     return not reason, reason
 
@@ -121,7 +120,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     """
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    borders, x_rel, coop_points = _ego_frame_borders(ego, coop)
+    borders, x_rel = _ego_frame_borders(ego, coop)
     fits = _EndFits(borders, params)
     kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, cl, cr = borders
@@ -130,9 +129,9 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if kind == "convoy":
         assert starts is not None
         w, blend = params.coop_weight, params.convoy_blend_offset_m
-        s_cl, s_cr = stacked_lengths(coop_points, cl.shape[0])
-        return _result(ego, convoy_border(el, cl, s_cl, starts[0], w, blend),
-                       convoy_border(er, cr, s_cr, starts[1], w, blend), "convoy", ends.gap_m)
+        n_left = cl.shape[0]
+        return _result(ego, convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
+                       convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend), "convoy", ends.gap_m)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(

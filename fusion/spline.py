@@ -14,7 +14,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
-from fusion.geometry import EndFit, fit_ends, norms
+from fusion.geometry import EndFit, fit_ends
 from fusion.types import NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
@@ -23,7 +23,8 @@ _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
-_TAU_POWERS: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4))
+_TAU_POWERS_T: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4)).T.copy()
+_NO_TARGETS: Final[NDArrayFloat] = np.empty(0)
 _PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
 
 Piece = list[list[float]]  # power-basis coefficients [[a_x, a_y], [b_x, b_y], [c_x, c_y], [d_x, d_y]], τ ∈ [0, 1]
@@ -47,52 +48,53 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     ``pieces[b]`` is the chain of border b: cubic pieces a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1],
     joined end to start. Each chain is measured on a 128-step grid per piece, then sampled at
     equal arc-length steps ≤ ``spacing_m`` strictly between its two ends (ends excluded), by
-    evaluating the pieces exactly at the interpolated parameters. All chains are processed in
-    one vectorised pass.
+    evaluating the pieces exactly (Horner) at the interpolated parameters. All chains are
+    processed in one vectorised pass, with points as complex numbers (x + iy).
     """
     flat = [piece for chain in pieces for piece in chain]
     if not flat:
         return [np.empty((0, 2)) for _ in pieces]
-    coeffs = np.array(flat)
+    coeffs = np.array(flat).view(np.complex128)[:, :, 0]
     n_pieces = coeffs.shape[0]
-    grid = _TAU_POWERS @ coeffs
-    s = np.zeros((n_pieces, _GRID + 1))
-    np.cumsum(norms(grid[:, 1:] - grid[:, :-1]), axis=1, out=s[:, 1:])
+    s = np.empty((n_pieces, _GRID + 1))
+    s[:, 0] = 0.0
+    grid = coeffs @ _TAU_POWERS_T
+    np.cumsum(np.abs(grid[:, 1:] - grid[:, :-1]), axis=1, out=s[:, 1:])
     lengths = s[:, -1].tolist()
     starts, total = [], 0.0
     for length in lengths:
         starts.append(total)
         total += length
     s += np.array(starts)[:, None]
-    steps, first_target, counts, first = [], [], [], 0
+    targets, first = [], 0
     for chain in pieces:
         length = sum(lengths[first:first + len(chain)])
         n_steps = math.ceil(length / spacing_m * (1.0 + 1e-3)) if length > 0.0 else 0
-        counts.append(max(0, n_steps - 1))
-        steps.append(length / n_steps if n_steps else 0.0)
-        first_target.append(starts[first] if chain else 0.0)
+        if n_steps > 1:
+            targets.append(starts[first] + (length / n_steps) * np.arange(1.0, n_steps))
+        else:
+            targets.append(_NO_TARGETS)
         first += len(chain)
-    n_total = sum(counts)
-    if n_total == 0:
+    k = np.concatenate(targets)
+    if k.shape[0] == 0:
         return [np.empty((0, 2)) for _ in pieces]
-    k = np.arange(1.0, n_total + 1.0)
-    offset = 0
-    for count, start, step_m in zip(counts, first_target, steps):
-        k[offset:offset + count] = start + step_m * (k[offset:offset + count] - offset)
-        offset += count
     q = np.interp(k, s.ravel(), _parameter_grid(n_pieces))
-    index = np.minimum(q.astype(np.intp), n_pieces - 1)
-    powers = np.empty((n_total, 4))
-    powers[:, 0] = 1.0
-    np.subtract(q, index, out=powers[:, 1])
-    np.multiply(powers[:, 1], powers[:, 1], out=powers[:, 2])
-    np.multiply(powers[:, 2], powers[:, 1], out=powers[:, 3])
-    every_piece = (powers @ coeffs.transpose(1, 0, 2).reshape(4, 2 * n_pieces)).reshape(n_total, n_pieces, 2)
-    points = every_piece[np.arange(n_total), index]
+    index = q.astype(np.intp)
+    np.minimum(index, n_pieces - 1, out=index)
+    tau = q - index
+    a, b, c, d = np.ascontiguousarray(coeffs.T)
+    z = d.take(index)
+    z *= tau
+    z += c.take(index)
+    z *= tau
+    z += b.take(index)
+    z *= tau
+    z += a.take(index)
+    points = z.view(np.float64).reshape(-1, 2)
     out, offset = [], 0
-    for count in counts:
-        out.append(points[offset:offset + count])
-        offset += count
+    for target in targets:
+        out.append(points[offset:offset + target.shape[0]])
+        offset += target.shape[0]
     return out
 
 

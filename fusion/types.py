@@ -90,6 +90,17 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
     return _frozen(array)
 
 
+def stacked_arclength(points: NDArrayFloat, n_first: int) -> NDArrayFloat:
+    """Arc length [m] along ``points[:n_first]`` and along ``points[n_first:]``, each from 0,
+    in one pass over the stacked ``(N, 2)`` polylines."""
+    step = points[1:] - points[:-1]
+    seg = np.abs(step.view(np.complex128)[:, 0])
+    out = np.zeros(points.shape[0])
+    np.cumsum(seg[: n_first - 1], out=out[1:n_first])
+    np.cumsum(seg[n_first:], out=out[n_first + 1:])
+    return out
+
+
 @dataclass(frozen=True)
 class LaneDetection:
     """One vehicle's detection of one lane.
@@ -105,6 +116,9 @@ class LaneDetection:
         sender: identifier of the sending vehicle (informative).
         points: both borders stacked, left then right, ``(N_left + N_right, 2)`` [m, vehicle
             frame]; ``left`` and ``right`` are read-only views of it (set on construction).
+        arclength: ``(N_left + N_right,)`` arc length of every point of ``points`` along its
+            own border, from 0 at each border's first point [m] (set on construction; arc
+            length does not depend on the frame, so fusion reuses it in any frame).
     """
 
     pose: Pose2D
@@ -113,6 +127,7 @@ class LaneDetection:
     stamp: float = 0.0
     sender: str = ""
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
+    arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.pose, Pose2D):
@@ -123,6 +138,7 @@ class LaneDetection:
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "left", points[: left.shape[0]])
         object.__setattr__(self, "right", points[left.shape[0]:])
+        object.__setattr__(self, "arclength", _frozen(stacked_arclength(points, left.shape[0])))
         if not math.isfinite(float(self.stamp)):
             raise InvalidDetectionError(f"LaneDetection.stamp must be finite, got {self.stamp!r}")
 

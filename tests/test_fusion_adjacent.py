@@ -11,7 +11,7 @@ import pytest
 
 import fusion
 from fusion.analytic import AnalyticRoad, Segment, detect
-from fusion.geometry import fit_ends
+from fusion.geometry import fit_ends, to_world
 from fusion.spline import lane_end_fits
 
 WIDTH = 3.5
@@ -135,11 +135,13 @@ def test_end_on_a_straight_is_not_curved() -> None:
 def test_arc_mismatch_is_a_lane_width_for_the_neighbour() -> None:
     """Closed form: on one arc the neighbour's start lies exactly one lane width off the arc."""
     from fusion.fusibility import arc_mismatch, lane_ends
-    from fusion.api import _ego_frame_borders
 
     road = bend(140.0, 40.0, -1)
     ego = lane(road, CURVE_START + 5.0, 0)
     for index, expected in ((0, 0.0), (1, WIDTH), (-1, WIDTH)):
-        borders, _, _ = _ego_frame_borders(ego, lane(road, CURVE_START + 65.0, index))
-        mismatch = arc_mismatch(lane_ends(*borders), lane_end_fits(borders[:2], borders[2:], None))
+        coop = lane(road, CURVE_START + 65.0, index)
+        left, right = to_world(coop.left, coop.pose), to_world(coop.right, coop.pose)
+        ego_left, ego_right = to_world(ego.left, ego.pose), to_world(ego.right, ego.pose)
+        mismatch = arc_mismatch(lane_ends(ego_left, ego_right, left, right),
+                                lane_end_fits((ego_left, ego_right), (left, right), None))
         assert mismatch == pytest.approx(expected, abs=0.35)
