@@ -358,20 +358,35 @@ def _branches(graph: LaneGraph, ego: Track, length_m: float, rng: np.random.Gene
     return branches
 
 
-def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_distance_m: float) -> bool:
-    """True when ``coop`` stands on a lane the ego can drive to: ahead of it along the lane
-    graph by at most ``max_distance_m`` (m) of lane. Adjacent and opposite lanes, and
-    vehicles behind, are not."""
-    if coop.lane == ego.lane and coop.lane_offset_m > ego.lane_offset_m:
-        return coop.lane_offset_m - ego.lane_offset_m <= max_distance_m
-    start = graph.lengths[ego.lane] - ego.lane_offset_m
+def _reachable(graph: LaneGraph, lane: LaneKey, offset_m: float, coop: VehicleState, max_distance_m: float) -> bool:
+    """True when ``coop`` is ahead of the point ``offset_m`` into ``lane`` along the lane
+    graph, by at most ``max_distance_m`` (m) of lane."""
+    if coop.lane == lane and coop.lane_offset_m > offset_m:
+        return coop.lane_offset_m - offset_m <= max_distance_m
     best: dict[LaneKey, float] = {}
-    frontier = [(nxt, start) for nxt in graph.successors[ego.lane]]
+    frontier = [(nxt, graph.lengths[lane] - offset_m) for nxt in graph.successors[lane]]
     while frontier:
-        lane, entry = frontier.pop()
-        if entry > max_distance_m or best.get(lane, math.inf) <= entry:
+        nxt, entry = frontier.pop()
+        if entry > max_distance_m or best.get(nxt, math.inf) <= entry:
             continue
-        best[lane] = entry
-        frontier += [(nxt, entry + graph.lengths[lane]) for nxt in graph.successors[lane]]
+        best[nxt] = entry
+        frontier += [(after, entry + graph.lengths[nxt]) for after in graph.successors[nxt]]
     entry = best.get(coop.lane)
     return entry is not None and 0.0 < entry + coop.lane_offset_m <= max_distance_m
+
+
+def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_distance_m: float,
+                  detection_m: float = 0.0) -> bool:
+    """True when ``coop`` drives on the lane the ego detected: ahead of the ego along the
+    lane graph by at most ``max_distance_m`` (m) of lane, and either on the stretch of the
+    ego's track its detection covers (``detection_m`` ahead) or on a lane reachable from
+    where that detection ends. Adjacent and opposite lanes, vehicles behind, and a coop on
+    another branch of a fork the ego's detection has already passed are not."""
+    if not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
+        return False
+    track = ego.track
+    first, _ = track.lane_at(ego.station)
+    last, last_offset_m = track.lane_at(min(ego.station + detection_m, track.length))
+    if coop.lane in track.lanes[first: last + 1]:
+        return True
+    return _reachable(graph, track.lanes[last], last_offset_m, coop, max_distance_m)

@@ -469,7 +469,7 @@ class MapEvaluator:
               metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
         plan = self.plan
         keys = [scenario.key(plan.name, b) for b in ("left", "right")]
-        truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m)
+        truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m, self.sensor.range_m)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 

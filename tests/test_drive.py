@@ -100,7 +100,7 @@ def test_turning_coops_on_junction_branches(junction):
     assert branch == pytest.approx(junction.lengths[lanes[0]], rel=1e-3)
     turns = [v for v in drive.vehicles if v.role == "turn"]
     assert len(turns) == 2 and all(v.branch_station_m == pytest.approx(branch) for v in turns)
-    seen = 0
+    seen = related = 0
     for frame in range(drive.frames):
         states = drive.states(frame)
         ego_station = states["ego"].station
@@ -112,7 +112,13 @@ def test_turning_coops_on_junction_branches(junction):
                 state = states[vehicle.name]
                 assert state.lane != states["coop50"].lane
                 assert lane_relation(junction, states["ego"], state, 85.0)
-    assert seen > 0
+                # with a 30 m detection, the turning coop continues the detected lane only
+                # while that detection ends before the fork; past it the ego saw the
+                # straight branch, which the turning coop's lane does not continue
+                detected_past_fork = ego_station + 30.0 >= branch
+                assert lane_relation(junction, states["ego"], state, 85.0, 30.0) == (not detected_past_fork)
+                related += not detected_past_fork
+    assert seen > related > 0
 
 
 def test_required_route_length_closed_form():
