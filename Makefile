@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test bench maps clean
+.PHONY: setup run paper test maps clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,11 +15,13 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/cold-maps info maps/junction.xodr
-	$(BIN)/cold-maps export maps/junction.xodr --step 0.1 --format csv -o out/junction-borders.csv
+	$(BIN)/cold-eval --map maps/junction.xodr --out out/cold-eval
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q; status=$$?; [ $$status -eq 5 ] && echo 'pytest: no tests collected' && status=0; exit $$status
+
+paper: $(STAMP)
+	$(BIN)/cold-eval --paper --out out/paper
 
 maps: $(STAMP)
 	$(BIN)/python tools/make_maps.py
