@@ -240,6 +240,23 @@ def _run_check(args: argparse.Namespace) -> int:
     return run_check(args)
 
 
+def _configure_cache(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--clear", action="store_true", help="delete every cached conversion")
+
+
+def _run_cache(args: argparse.Namespace) -> int:
+    from converters.cache import CACHE_SUFFIX, cache_root, clear_cache
+
+    root = cache_root()
+    if args.clear:
+        print(f"{root}: removed {clear_cache()} file(s)")
+        return 0
+    entries = sorted(root.glob(f"*{CACHE_SUFFIX}")) if root.is_dir() else []
+    size_mb = sum(entry.stat().st_size for entry in entries) / 1e6
+    print(f"{root}: {len(entries)} cached conversion(s), {size_mb:.1f} MB (override with $COLD_MAPS_CACHE_DIR)")
+    return 0
+
+
 COMMANDS: Final[tuple[Command, ...]] = (
     Command("info", "summarise a map: roads, lanes, junctions, geometry", _configure_info, _run_info),
     Command(
@@ -260,6 +277,7 @@ COMMANDS: Final[tuple[Command, ...]] = (
         _configure_check,
         _run_check,
     ),
+    Command("cache", "show the Lanelet2 conversion cache, or --clear it", _configure_cache, _run_cache),
 )
 
 

@@ -278,3 +278,17 @@ def test_convert_and_check_of_a_broken_file_fail_in_one_line(tmp_path: Path, cap
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "broken.xodr" in err
     assert not out.exists()
+
+
+def test_cache_lists_and_clears_conversions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
+    assert main(["cache"]) == 0
+    assert "0 cached conversion(s)" in capsys.readouterr().out
+    assert main(["convert", str(bundled_map("straight")), "-o", str(tmp_path / "straight.osm")]) == 0
+    capsys.readouterr()
+    assert main(["cache"]) == 0
+    assert "1 cached conversion(s)" in capsys.readouterr().out
+    assert main(["cache", "--clear"]) == 0
+    assert "removed 1 file(s)" in capsys.readouterr().out
+    assert not list((tmp_path / "cache").glob("*.osm"))
