@@ -174,6 +174,17 @@ def test_last_section_ends_at_road_length_and_sections_can_be_empty_length() -> 
     assert [(sec.s, sec.s_end) for sec in road.lane_sections] == [(0.0, 10.0), (10.0, 10.0)]
 
 
+def test_zero_length_geometry_records_are_dropped() -> None:
+    data = minimal().replace(
+        b'<planView><geometry s="0" x="0" y="0" hdg="0" length="10"><line/></geometry>',
+        b'<planView><geometry s="0" x="0" y="0" hdg="0" length="0"><arc curvature="0.5"/></geometry>'
+        b'<geometry s="0" x="0" y="0" hdg="0" length="10"><line/></geometry>'
+        b'<geometry s="10" x="10" y="0" hdg="0" length="0.0"><line/></geometry>',
+    )
+    plan_view = parse_opendrive(data).roads["r"].plan_view
+    assert [(g.kind, g.s, g.length) for g in plan_view] == [("line", 0.0, 10.0)]
+
+
 def test_namespaced_file_is_read() -> None:
     data = minimal().replace(b"<OpenDRIVE>", b'<OpenDRIVE xmlns="http://www.asam.net/xsd/OpenDRIVE/1.8">')
     assert list(parse_opendrive(data).roads) == ["r"]

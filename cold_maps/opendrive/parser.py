@@ -8,7 +8,7 @@ its source line.
 Errors: malformed XML, entity declarations, wrong root, no header or roads, revMajor
 other than 1, missing or non-numeric (NaN, inf) required attributes, unknown
 enumeration values (contactPoint, elementType, rule, pRange, direction, junction type),
-geometry length <= 0, negative road length, a ``<geometry>`` without exactly one known
+negative geometry or road length, a ``<geometry>`` without exactly one known
 kind, a road without geometry or lane section or with two ``<planView>``/``<lanes>``/
 ``<link>``/``<elevationProfile>`` or two predecessors/successors, lane ids that are not
 consecutive from the reference line, a centre that is not exactly lane 0, a lane
@@ -16,7 +16,8 @@ section starting before 0 or after the road end, duplicate road or junction ids,
 links, road ``junction`` attributes and junction connections to ids that do not exist.
 Tolerated: a geometry ``s`` that differs from the running sum of lengths, a road length
 that differs from the sum of its geometry lengths, records and sections out of order
-(sorted by s, stably), zero-length lane sections, ``contactPoint`` on a link to a
+(sorted by s, stably), zero-length geometry records (dropped: they cover no s),
+zero-length lane sections, ``contactPoint`` on a link to a
 junction (dropped: the model has none for junctions), a missing road ``junction``
 attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``Lane``),
 a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor.
@@ -263,7 +264,7 @@ class _Reader:
                     raise self.error(f"more than one <{tag}> in road {road_id!r}", child)
                 seen.add(tag)
             if tag == "planView":
-                plan_view = [self.geometry(g) for g in child if g.tag == "geometry"]
+                plan_view = [geometry for g in child if g.tag == "geometry" and (geometry := self.geometry(g))]
             elif tag == "lanes":
                 lane_offsets = self.cubics((e for e in child if e.tag == "laneOffset"), "s")
                 sections = self.lane_sections(child, road_id, length)
@@ -304,17 +305,20 @@ class _Reader:
             return RoadLink("junction", element_id, None)
         return RoadLink("road", element_id, self.choice(element, "contactPoint", _CONTACT_POINTS))
 
-    def geometry(self, element: etree._Element) -> Geometry:
+    def geometry(self, element: etree._Element) -> Geometry | None:
+        """The record, or None for a zero-length one (it covers no s; real exporters write them)."""
         number = self.number
         start = self.numbers(element, ("s", "x", "y", "hdg", "length"))
         length = start[4]
-        if length <= 0.0:
-            raise self.error(f"geometry length must be > 0, got {length}", element)
+        if length < 0.0:
+            raise self.error(f"geometry length must be >= 0, got {length}", element)
         shapes = [child for child in element if child.tag in _GEOMETRY_KINDS]
         if len(shapes) != 1:
             found = "no known kind" if not shapes else f"{len(shapes)} kinds"
             expected = ", ".join(sorted(_GEOMETRY_KINDS))
             raise self.error(f"geometry has {found} (expected exactly one of {expected})", element)
+        if length == 0.0:
+            return None
         shape = shapes[0]
         kind = shape.tag
         if kind == "line":
