@@ -119,7 +119,8 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
        headings, so φ must lie between 0 and Δψ; the lateral excess of P1 outside that cone
        may be at most half the ego lane width (measured at the ego end). On a straight this
        is a lateral offset test that rejects the adjacent lane (a full lane width off) while
-       tolerating heading noise over a 50 m gap and the shift of an S-bend;
+       tolerating heading noise over a 50 m gap. When the two ends curve opposite ways (an
+       S-bend in the gap) the excess may grow by the bend's shift (:func:`s_bend_shift`);
     4. arcs: where the cone is wider than 0.4 of the lane width (d_s·sin|Δψ| above that;
        narrower, rule 3 already rejects a neighbour), a detection end that lies on an arc
        (measured curvature, see :func:`fusion.geometry.fit_ends`) predicts the gap: the lane
@@ -149,8 +150,10 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     outside = max(lo - phi, phi - hi, 0.0)
     excess = ends.gap_m * math.sin(min(outside, math.pi / 2))
     if excess > 0.5 * ends.width_m:
-        return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
-                f"(more than half the lane width {ends.width_m:.2f} m): another lane")
+        shift = s_bend_shift(ends.gap_m, end_fits()) if end_fits is not None else 0.0
+        if excess > 0.5 * ends.width_m + shift:
+            return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
+                    f"(more than half the lane width {ends.width_m:.2f} m + S-bend shift {shift:.2f} m): another lane")
     cone_width = ends.gap_m * math.sin(min(abs(turn), math.pi / 2))
     if end_fits is not None and cone_width > _CONE_DECIDES_LANES * ends.width_m:
         mismatch = arc_mismatch(ends, end_fits())
@@ -167,6 +170,25 @@ def _mean_heading(a: EndFit, b: EndFit) -> float:
 def _curvature(a: EndFit, b: EndFit) -> tuple[float, float]:
     """Centre curvature [1/m] at an end from its two border fits, and its σ [1/m]."""
     return 0.5 * (a.curvature + b.curvature), 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
+
+
+def _opposite_curves(k0: float, s0: float, k1: float, s1: float) -> bool:
+    """Whether two ends with curvatures ``k0``, ``k1`` (σ ``s0``, ``s1``) [1/m] clearly curve
+    opposite ways."""
+    clear = all(abs(k) >= max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd) for k, sd in ((k0, s0), (k1, s1)))
+    return clear and k0 * k1 < 0.0
+
+
+def s_bend_shift(gap_m: float, fits: Sequence[EndFit]) -> float:
+    """Lateral shift [m] an S-bend can put between the two end headings over ``gap_m``.
+
+    When the ego end and the coop start (least-squares ``fits`` of ego left, ego right, coop
+    left, coop right) clearly curve opposite ways, the lane reverses its curve inside the
+    gap; two arcs of curvature κ and −κ over L/2 each shift it by κ·L²/4 (κ the smaller of
+    the two measured |κ|). 0 otherwise.
+    """
+    (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
+    return min(abs(k0), abs(k1)) * gap_m * gap_m / 4.0 if _opposite_curves(k0, s0, k1, s1) else 0.0
 
 
 def _arc_line_mismatch(p_from: tuple[float, float], psi_from: float, p_to: tuple[float, float], psi_to: float,
@@ -214,7 +236,7 @@ def arc_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
     psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
     turn = wrap_angle(psi1 - psi0)
     (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
-    if k0 * k1 < 0.0 and abs(k0) >= 3.0 * s0 and abs(k1) >= 3.0 * s1:
+    if _opposite_curves(k0, s0, k1, s1):
         return 0.0
     ego_radii, coop_radii = _end_arc_radii(k0, s0, turn, ends.gap_m), _end_arc_radii(k1, s1, turn, ends.gap_m)
     if ego_radii is not None and coop_radii is not None:

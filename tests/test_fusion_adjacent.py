@@ -98,6 +98,17 @@ def test_right_angle_curves(radius: float, entry_m: float, gap: float) -> None:
                 assert not ok and "another lane" in reason, (s_end, reason)
 
 
+@pytest.mark.parametrize("gap", [20.0, 40.0, 50.0])
+def test_same_lane_through_a_reverse_curve(gap: float) -> None:
+    """Ego end in a left arc, coop start in the right arc after a clothoid (the rural map's
+    S-bend): the lane shifts by up to κ·L²/4 between the end headings and is accepted; a lane
+    width to the side of a straight is still rejected (test_fusion_fusibility)."""
+    road = AnalyticRoad([Segment(CURVE_START), Segment(40.0, 1 / 60.0), Segment(20.0, 1 / 60.0, -1 / 100.0),
+                         Segment(80.0, -1 / 100.0), Segment(100.0)])
+    ego_end = CURVE_START + 38.0
+    assert verdicts(road, ego_end, gap)[0] == (True, "")
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_noisy_same_lane_across_a_curve_start_is_accepted(seed: int) -> None:
     road = bend(100.0, 60.0, 1)
