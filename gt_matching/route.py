@@ -17,16 +17,25 @@ if TYPE_CHECKING:
 
 #: Every this many GT samples seed the closest-point search (KD-tree).
 GUESS_STRIDE: Final = 3
-#: Every this many detected points look up their nearest coarse sample; the others
+#: Coarse samples of a border (the exact nearest-sample search starts from them): every
+#: this many samples at least, and at most this many in all.
+MIN_COARSE_STRIDE: Final = 25
+MAX_COARSE_SAMPLES: Final = 256
+#: Every this many detected points look up their nearest sample; the others
 #: interpolate its arc length along the detection.
 ANCHOR_STRIDE: Final = 10
 #: Arc length either side of an interpolated seed searched for the nearest sample, m.
 ANCHOR_REACH_M: Final = 0.1
+#: Times a window whose minimum lies on its edge is moved to centre on that minimum.
+RECENTRE_PASSES: Final = 3
 #: Points farther than this from the border are searched globally (KD-tree), m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
 #: near one are searched globally (a second minimum may start there), rad.
 KINK_RAD: Final = 0.02
+#: Turning from which a break may start another minimum anywhere within twice the
+#: distance, rad (arctan 2: ``tan`` reaches 2 there).
+MAX_TAN_TURNING_RAD: Final = float(np.arctan(2.0))
 #: Spacing along the border of the points around which other lines are looked up, m.
 LOOKOUT_SPACING_M: Final = 5.0
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
@@ -35,15 +44,16 @@ CLEARANCE_SPACING_M: Final = 0.25
 CLEARANCE_BLOCK: Final = 1 << 20
 
 
-def _kinks(vertices: NDArrayFloat) -> NDArrayBool:
-    """Per interior vertex, whether the polyline turns there by more than ``KINK_RAD``
-    (a zero-length segment next to it counts as a kink)."""
+def _turning(vertices: NDArrayFloat) -> NDArrayFloat:
+    """Per interior vertex, the angle the polyline turns by there, rad (pi next to a
+    zero-length segment: its direction is unknown)."""
     ahead = np.diff(vertices, axis=0)
     before, after = ahead[:-1], ahead[1:]
     cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
     dot = np.einsum("ij,ij->i", before, after)
     degenerate = (np.hypot(*before.T) == 0.0) | (np.hypot(*after.T) == 0.0)
-    return degenerate | (np.abs(np.arctan2(cross, dot)) > KINK_RAD)
+    turning: NDArrayFloat = np.where(degenerate, np.pi, np.abs(np.arctan2(cross, dot)))
+    return turning
 
 
 def _spaced(sample_arc: NDArrayFloat, spacing_m: float) -> NDArrayInt:
@@ -136,13 +146,6 @@ class BorderPart:
         return cKDTree(self.samples[self.guess])
 
     @cached_property
-    def fine_tree(self) -> cKDTree:
-        """KD-tree of all samples."""
-        from scipy.spatial import cKDTree
-
-        return cKDTree(self.samples)
-
-    @cached_property
     def checkpoints(self) -> NDArrayInt:
         """Indices of the samples every ``CLEARANCE_SPACING_M``, the last included."""
         return _spaced(self.sample_arc_m, CLEARANCE_SPACING_M)
@@ -185,28 +188,6 @@ class BorderPart:
         return self.reach_m + COARSE_STEP_M / 2.0 - (GUESS_STRIDE - 1) * self.step_m
 
 
-def _nearest_over(
-    trees: list[cKDTree], points: NDArrayFloat, within: NDArrayFloat | None = None
-) -> tuple[NDArrayFloat, NDArrayInt, NDArrayInt]:
-    """Per point, the smallest distance over several KD-trees (m), the first tree that
-    has it, and the index in that tree (-1 where none is below ``within``, m, default
-    infinite: the distance stays ``within``). A tree is only asked for the points whose
-    best distance so far exceeds their distance to its bounding box, and only that far."""
-    best = np.full(len(points), np.inf) if within is None else within.astype(np.float64)
-    which = np.full(len(points), -1, dtype=np.int64)
-    index = np.full(len(points), -1, dtype=np.int64)
-    for k, tree in enumerate(trees):
-        outside = np.maximum(np.maximum(tree.mins - points, points - tree.maxes), 0.0)
-        ask = np.flatnonzero(np.hypot(outside[:, 0], outside[:, 1]) < best)
-        if len(ask) == 0:
-            continue
-        distances, found = tree.query(points[ask], distance_upper_bound=float(np.max(best[ask])))
-        better = distances < best[ask]
-        ask = ask[better]
-        best[ask], which[ask], index[ask] = distances[better], k, found[better]
-    return best, which, index
-
-
 class RouteBorder:
     """The left or right GT border of a lanelet sequence (the lanelets' borders joined in
     driving order) and its samples every ``step_m``, with what is needed to find each
@@ -229,16 +210,24 @@ class RouteBorder:
         self.samples: NDArrayFloat = np.concatenate([part.samples for part in parts])
         cum = arc_lengths(self.vertices)
         arc_offsets = cum[np.cumsum([0] + [len(part.vertices) for part in parts[:-1]])]
-        self._sample_offsets = np.cumsum([0] + [len(part.samples) for part in parts[:-1]])
         self.sample_arc: NDArrayFloat = np.concatenate(
             [offset + part.sample_arc_m for offset, part in zip(arc_offsets, parts)]
         )
-        self._break_arc = np.sort(np.concatenate((arc_offsets[1:], cum[1:-1][_kinks(self.vertices)])))
-        self._guess_arc = np.concatenate(
-            [offset + part.sample_arc_m[part.guess] for offset, part in zip(arc_offsets, parts)]
+        turning = _turning(self.vertices)
+        kinks = turning > KINK_RAD
+        break_arc = np.concatenate((arc_offsets[1:], cum[1:-1][kinks]))
+        order = np.argsort(break_arc, kind="stable")
+        self._break_arc = break_arc[order]
+        # Joints count as turning by pi: the borders of two lanelets may not meet.
+        break_turning = np.concatenate((np.full(len(parts) - 1, np.pi), turning[kinks]))[order]
+        self._break_turning_sum = np.concatenate(([0.0], np.cumsum(break_turning)))
+        self._sample_x, self._sample_y = self.samples[:, 0].copy(), self.samples[:, 1].copy()
+        stride = self._coarse_stride = max(MIN_COARSE_STRIDE, -(-len(self.samples) // MAX_COARSE_SAMPLES))
+        starts = np.cumsum([0] + [len(part.samples) for part in parts])
+        self._coarse_index = np.unique(
+            np.concatenate([np.append(np.arange(a, b, stride), b - 1) for a, b in zip(starts[:-1], starts[1:])])
         )
-        self._guess_offsets = np.cumsum([0] + [len(part.guess) for part in parts[:-1]])
-        self._complex_samples = self.samples[:, 0] + 1j * self.samples[:, 1]
+        self._coarse_half_m = (self._coarse_stride // 2 + 1) * self.step_m
         # A window may hold a repeated sample where two lanelets join.
         self._joints = min(len(parts), 2)
         self._checkpoint_arc = np.concatenate(
@@ -273,21 +262,37 @@ class RouteBorder:
             return np.empty(0, dtype=np.int64), None
         return lines.coarse_owner[near], cKDTree(lines.coarse[near])
 
-    def _global_nearest(
-        self, points: NDArrayFloat, distances: NDArrayFloat, samples: NDArrayInt
-    ) -> tuple[NDArrayFloat, NDArrayInt]:
+    def _nearest(self, points: NDArrayFloat, within: NDArrayFloat | None = None) -> tuple[NDArrayFloat, NDArrayInt]:
         """Distance (m) and index of each point's nearest sample over the whole border,
-        given the distance to some sample (``distances``, m; index ``samples``)."""
-        best, part, index = _nearest_over([p.fine_tree for p in self._parts], points, distances)
-        found = part >= 0
-        return best, np.where(found, self._sample_offsets[part] + index, samples)
+        exactly (ties: the lower index). ``within``: distances to some sample, if known, m.
 
-    def _seed_arc(self, points: NDArrayFloat) -> NDArrayFloat:
-        """Arc length (m) of each point's nearest coarse sample (every ``GUESS_STRIDE``-th
-        sample of each part)."""
-        _, part, index = _nearest_over([p.guess_tree for p in self._parts], points)
-        arc: NDArrayFloat = self._guess_arc[self._guess_offsets[part] + index]
-        return arc
+        Every sample lies within half a stride (+ a step) of a coarse sample of its part
+        (every ``_coarse_stride``-th sample of each part and each part's ends), so the
+        nearest one, at distance d, lies within that many samples of a coarse sample within
+        d + half a stride of the point, and d is at most the distance to the nearest coarse
+        sample (or ``within``)."""
+        coarse = self._squared_distances(points, self._coarse_index[None, :])
+        bound = np.sqrt(np.min(coarse, axis=1))
+        if within is not None:
+            bound = np.minimum(bound, within)
+        point, candidate = np.nonzero(coarse <= ((bound + self._coarse_half_m) ** 2)[:, None])
+        half = self._coarse_stride // 2 + 1
+        around = np.clip(self._coarse_index[candidate, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
+        squared = self._squared_distances(points[point], around)
+        best = np.argmin(squared, axis=1)
+        rows = np.arange(len(point))
+        distance, sample = np.sqrt(squared[rows, best]), around[rows, best]
+        order = np.lexsort((sample, distance, point))
+        first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
+        return distance[first], sample[first]
+
+    def _squared_distances(self, points: NDArrayFloat, samples: NDArrayInt) -> NDArrayFloat:
+        """Squared distance (m²) of each point (row) to the samples of its row of indices
+        (``(N, K)``, or ``(1, K)`` for the same samples for all)."""
+        dx = self._sample_x[samples] - points[:, :1]
+        dy = self._sample_y[samples] - points[:, 1:]
+        squared: NDArrayFloat = dx * dx + dy * dy
+        return squared
 
     def _other_closer(self, points: NDArrayFloat, limits: NDArrayFloat) -> NDArrayBool:
         """Whether another line's samples every ``step_m`` come closer to each point than
@@ -309,49 +314,84 @@ class RouteBorder:
 
     def _nearest_samples(
         self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
-    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
+    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
-        length ``seed_arc``, that sample's index, and whether the window settles it: the
-        minimum is not on its edge (it may continue outside), and no kink or lanelet joint
-        lies within twice the distance (+ a step) of it, where another minimum may start
-        (any closer sample lies within twice the distance of the one found)."""
+        length ``seed_arc``, that sample's index, whether it is inside the window (not on
+        an edge, where the minimum may continue outside), and whether no kink or lanelet
+        joint near it may start another minimum (``_clear_of_breaks``)."""
         last = len(self.samples) - 1
         width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
         first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
         around = np.minimum(first[:, None] + np.arange(width), last)
-        sample_distances = np.abs(self._complex_samples[around] - (points[:, 0] + 1j * points[:, 1])[:, None])
-        closest = np.argmin(sample_distances, axis=1)
+        squared = self._squared_distances(points, around)
+        closest = np.argmin(squared, axis=1)
         rows = np.arange(len(points))
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
-        distance, sample = sample_distances[rows, closest], around[rows, closest]
+        distance, sample = np.sqrt(squared[rows, closest]), around[rows, closest]
         arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         breaks = self._break_arc
-        smooth = np.searchsorted(breaks, arc - reach) == np.searchsorted(breaks, arc + reach, side="right")
-        return distance, sample, inside & smooth
+        low, high = np.searchsorted(breaks, arc - reach), np.searchsorted(breaks, arc + reach, side="right")
+        smooth = low == high
+        check = np.flatnonzero(~smooth)
+        if len(check):
+            smooth[check] = self._clear_of_breaks(arc[check], distance[check], low[check], high[check])
+        return distance, sample, inside, smooth
+
+    def _clear_of_breaks(
+        self, arc: NDArrayFloat, distance: NDArrayFloat, low: NDArrayInt, high: NDArrayInt
+    ) -> NDArrayBool:
+        """Whether none of the breaks ``low`` to ``high - 1`` (kinks, lanelet joints) can
+        start another minimum for a point ``distance`` (m) from the sample at ``arc`` (m).
+
+        Any closer sample lies within twice the distance of the one found, so only breaks
+        within ``2 * distance + step_m`` of it count. Where the border turns by a total of
+        Θ < arctan 2 from the sample up to a break, the normals of two minima meet at the
+        point only if the sample is within ``distance * tan(Θ)`` of the break (one kink of
+        Θ is the worst case), plus a step for the sampling; from arctan 2 on (a joint
+        counts as pi) the reach stays ``2 * distance + step_m``."""
+        breaks, turning_sum = self._break_arc, self._break_turning_sum
+        split = np.searchsorted(breaks, arc)
+        clear = np.ones(len(arc), dtype=bool)
+        for offset in range(int(np.max(high - low))):
+            index = np.minimum(low + offset, len(breaks) - 1)
+            turning = np.where(
+                index >= split, turning_sum[index + 1] - turning_sum[split], turning_sum[split] - turning_sum[index]
+            )
+            factor = np.where(turning < MAX_TAN_TURNING_RAD, np.tan(np.minimum(turning, MAX_TAN_TURNING_RAD)), 2.0)
+            far = np.abs(breaks[index] - arc) > distance * factor + self.step_m
+            clear &= far | (low + offset >= high)
+        return clear
 
     def distances(self, points: NDArrayFloat, *, exact: bool) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
         border.
 
-        Every ``ANCHOR_STRIDE``-th point finds its nearest coarse sample (KD-tree over every
-        ``GUESS_STRIDE``-th sample); the arc lengths of the points between are interpolated
+        Every ``ANCHOR_STRIDE``-th point finds its nearest sample (``_nearest``); the arc
+        lengths of the points between are interpolated
         along the detection, and each point takes the nearest sample within
-        ``ANCHOR_REACH_M`` of that. Where that window cannot settle it (minimum on its
-        edge, a kink or lanelet joint near it, or the point farther than
-        ``REFINE_DISTANCE_M``) a KD-tree over all samples answers. The exact distance is the
+        ``ANCHOR_REACH_M`` of that; a minimum on the window's edge moves the window there
+        (up to ``RECENTRE_PASSES`` times). Where that cannot settle it (minimum still on
+        the edge, a kink or lanelet joint near it, or the point farther than
+        ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is the
         smallest to the segments within two steps of the nearest sample (twice the
-        distance for the points the KD-tree answered). Only points far enough off the
+        distance for the points ``_nearest`` answered). Only points far enough off the
         border to possibly be closer to another line (by the clearance of the checkpoints
         around the nearest sample) are checked against the other lines.
         """
         anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
         anchors[-1] = len(points) - 1
         along = arc_lengths(points)
-        seed = np.interp(along, along[anchors], self._seed_arc(points[anchors]))
-        resampled, sample, inside = self._nearest_samples(points, seed, ANCHOR_REACH_M)
-        redo = np.flatnonzero(~inside | (resampled > REFINE_DISTANCE_M))
+        seed = np.interp(along, along[anchors], self.sample_arc[self._nearest(points[anchors])[1]])
+        resampled, sample, inside, smooth = self._nearest_samples(points, seed, ANCHOR_REACH_M)
+        for _ in range(RECENTRE_PASSES):
+            moved = np.flatnonzero(~inside & (resampled <= REFINE_DISTANCE_M))
+            if len(moved) == 0:
+                break
+            found = self._nearest_samples(points[moved], self.sample_arc[sample[moved]], ANCHOR_REACH_M)
+            resampled[moved], sample[moved], inside[moved], smooth[moved] = found
+        redo = np.flatnonzero(~(inside & smooth) | (resampled > REFINE_DISTANCE_M))
         if len(redo):
-            resampled[redo], sample[redo] = self._global_nearest(points[redo], resampled[redo], sample[redo])
+            resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
         arc = self.sample_arc[sample]
         after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
         clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
