@@ -27,7 +27,7 @@ _TAU_POWERS_T: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4)).T.copy()
 _NO_TARGETS: Final[NDArrayFloat] = np.empty(0)
 _PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
 
-Piece = list[list[float]]  # power-basis coefficients [[a_x, a_y], [b_x, b_y], [c_x, c_y], [d_x, d_y]], τ ∈ [0, 1]
+Piece = list[complex]  # power-basis coefficients [a, b, c, d] as x + iy: a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1]
 
 
 def _cross(ax: float, ay: float, bx: float, by: float) -> float:
@@ -46,39 +46,33 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     """Sample chains of cubic pieces by arc length; one ``(K, 2)`` array per chain.
 
     ``pieces[b]`` is the chain of border b: cubic pieces a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1],
-    joined end to start. Each chain is measured on a 128-step grid per piece, then sampled at
-    equal arc-length steps ≤ ``spacing_m`` strictly between its two ends (ends excluded), by
-    evaluating the pieces exactly (Horner) at the interpolated parameters. All chains are
-    processed in one vectorised pass, with points as complex numbers (x + iy).
+    joined end to start. All pieces are measured on one 128-step-per-piece grid (one running
+    arc length over every piece; the steps between chains are never sampled), then each chain
+    is sampled at equal arc-length steps ≤ ``spacing_m`` strictly between its two ends (ends
+    excluded), by evaluating the pieces exactly (Horner) at the interpolated parameters. All
+    chains are processed in one vectorised pass, with points as complex numbers (x + iy).
     """
     flat = [piece for chain in pieces for piece in chain]
     if not flat:
         return [np.empty((0, 2)) for _ in pieces]
-    coeffs = np.array(flat).view(np.complex128)[:, :, 0]
+    coeffs = np.array(flat, dtype=np.complex128)
     n_pieces = coeffs.shape[0]
-    s = np.empty((n_pieces, _GRID + 1))
-    s[:, 0] = 0.0
-    grid = coeffs @ _TAU_POWERS_T
-    np.cumsum(np.abs(grid[:, 1:] - grid[:, :-1]), axis=1, out=s[:, 1:])
-    lengths = s[:, -1].tolist()
-    starts, total = [], 0.0
-    for length in lengths:
-        starts.append(total)
-        total += length
-    s += np.array(starts)[:, None]
+    grid = (coeffs @ _TAU_POWERS_T).ravel()
+    s = np.empty(grid.shape[0])
+    s[0] = 0.0
+    np.cumsum(np.abs(grid[1:] - grid[:-1]), out=s[1:])
+    piece_start, piece_end = s[:: _GRID + 1].tolist(), s[_GRID:: _GRID + 1].tolist()
     targets, first = [], 0
     for chain in pieces:
-        length = sum(lengths[first:first + len(chain)])
+        start = piece_start[first] if chain else 0.0
+        length = piece_end[first + len(chain) - 1] - start if chain else 0.0
         n_steps = math.ceil(length / spacing_m * (1.0 + 1e-3)) if length > 0.0 else 0
-        if n_steps > 1:
-            targets.append(starts[first] + (length / n_steps) * np.arange(1.0, n_steps))
-        else:
-            targets.append(_NO_TARGETS)
+        targets.append(start + (length / n_steps) * np.arange(1.0, n_steps) if n_steps > 1 else _NO_TARGETS)
         first += len(chain)
     k = np.concatenate(targets)
     if k.shape[0] == 0:
         return [np.empty((0, 2)) for _ in pieces]
-    q = np.interp(k, s.ravel(), _parameter_grid(n_pieces))
+    q = np.interp(k, s, _parameter_grid(n_pieces))
     index = q.astype(np.intp)
     np.minimum(index, n_pieces - 1, out=index)
     tau = q - index
@@ -121,18 +115,20 @@ def estimate_apex(p_end: tuple[float, float], d_end: tuple[float, float], p_star
     return ix + ratio * (jx - ix), iy + ratio * (jy - iy)
 
 
-def natural_spline_moments(h: Sequence[float], y: Sequence[float]) -> list[float]:
+def natural_spline_moments(h: Sequence[float], y: Sequence[complex]) -> list[complex]:
     """Second derivatives M of the natural cubic spline through ``y`` (knot steps ``h``).
 
     Solves the paper's tridiagonal system (eq. 4) with M_0 = M_n = 0 by the Thomas
-    algorithm on floats (a handful of knots: no numpy call overhead).
+    algorithm on Python numbers (a handful of knots: no numpy call overhead); ``y`` may be
+    complex (x + iy: both coordinates at once).
     """
     n = len(h)
-    moments = [0.0] * (n + 1)
+    moments: list[complex] = [0.0] * (n + 1)
     if n < 2:
         return moments
     slope = [(y[i + 1] - y[i]) / h[i] for i in range(n)]
-    c, d = [0.0] * (n - 1), [0.0] * (n - 1)
+    c: list[float] = [0.0] * (n - 1)
+    d: list[complex] = [0.0] * (n - 1)
     for i in range(n - 1):
         diag = (h[i] + h[i + 1]) / 3.0
         rhs = slope[i + 1] - slope[i]
@@ -154,52 +150,43 @@ def paper_pieces(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float
     The spline is parametric in cumulative chord length (a 90° curve is not a function
     y(x)), or in the knot index with ``uniform``, with natural boundary conditions. The apex
     P_c is added when the end directions ego[-3]→ego[-1] and coop[0]→coop[2] differ by more
-    than ``apex_min_turn_rad``. Returns the power-basis pieces from ego[-1] to coop[0].
+    than ``apex_min_turn_rad``. Returns the power-basis pieces from ego[-1] to coop[0]; knots
+    are complex numbers x + iy, so one tridiagonal solve serves both coordinates.
     """
-    e0 = (float(ego[max(0, ego.shape[0] - 3), 0]), float(ego[max(0, ego.shape[0] - 3), 1]))
-    e1 = (float(ego[-1, 0]), float(ego[-1, 1]))
-    c0 = (float(coop[0, 0]), float(coop[0, 1]))
-    c1 = (float(coop[min(2, coop.shape[0] - 1), 0]), float(coop[min(2, coop.shape[0] - 1), 1]))
-    ne = math.hypot(e1[0] - e0[0], e1[1] - e0[1]) or 1.0
-    nc = math.hypot(c1[0] - c0[0], c1[1] - c0[1]) or 1.0
-    de = ((e1[0] - e0[0]) / ne, (e1[1] - e0[1]) / ne)
-    dc = ((c1[0] - c0[0]) / nc, (c1[1] - c0[1]) / nc)
+    e0, e1 = complex(*ego[max(0, ego.shape[0] - 3)].tolist()), complex(*ego[-1].tolist())
+    c0, c1 = complex(*coop[0].tolist()), complex(*coop[min(2, coop.shape[0] - 1)].tolist())
+    de = (e1 - e0) / (abs(e1 - e0) or 1.0)
+    dc = (c1 - c0) / (abs(c1 - c0) or 1.0)
     knots = [e0, e1]
-    if abs(math.atan2(_cross(*de, *dc), de[0] * dc[0] + de[1] * dc[1])) > apex_min_turn_rad:
-        apex = estimate_apex(e1, de, c0, dc, apex_ratio)
+    turn = dc * de.conjugate()
+    if abs(math.atan2(turn.imag, turn.real)) > apex_min_turn_rad:
+        apex = estimate_apex((e1.real, e1.imag), (de.real, de.imag), (c0.real, c0.imag), (dc.real, dc.imag),
+                             apex_ratio)
         if apex is not None:
-            knots.append(apex)
+            knots.append(complex(*apex))
     knots += [c0, c1]
     kept = [knots[0]]
     for knot in knots[1:]:
-        if math.hypot(knot[0] - kept[-1][0], knot[1] - kept[-1][1]) > _MIN_KNOT_STEP_M:
+        if abs(knot - kept[-1]) > _MIN_KNOT_STEP_M:
             kept.append(knot)
     if e1 not in kept or c0 not in kept:
         return []
-    chords = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(kept[:-1], kept[1:])]
-    h = [1.0] * len(chords) if uniform else chords
-    mx = natural_spline_moments(h, [k[0] for k in kept])
-    my = natural_spline_moments(h, [k[1] for k in kept])
-    first, last = kept.index(e1), kept.index(c0)
+    h = [1.0 if uniform else abs(b - a) for a, b in zip(kept[:-1], kept[1:])]
+    m = natural_spline_moments(h, kept)
     pieces = []
-    for i in range(first, last):
-        hi = h[i]
-        piece = [[0.0, 0.0] for _ in range(4)]
-        for axis, m in ((0, mx), (1, my)):
-            y0, y1 = kept[i][axis], kept[i + 1][axis]
-            piece[0][axis] = y0
-            piece[1][axis] = (y1 - y0) - hi * hi * (2.0 * m[i] + m[i + 1]) / 6.0
-            piece[2][axis] = m[i] * hi * hi / 2.0
-            piece[3][axis] = (m[i + 1] - m[i]) * hi * hi / 6.0
-        pieces.append(piece)
+    for i in range(kept.index(e1), kept.index(c0)):
+        h2 = h[i] * h[i]
+        pieces.append([kept[i], (kept[i + 1] - kept[i]) - h2 * (2.0 * m[i] + m[i + 1]) / 6.0, m[i] * h2 / 2.0,
+                       (m[i + 1] - m[i]) * h2 / 6.0])
     return pieces
 
 
 def _bezier_piece(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat) -> Piece:
     """Power basis of the cubic Bézier with arms of a third of the chord (straight or S-shaped)."""
-    arm = math.hypot(*(p3 - p0)) / 3.0
-    p1, p2 = p0 + arm * d0, p3 - arm * d1
-    return [list(p0), list(3.0 * (p1 - p0)), list(3.0 * (p2 - 2.0 * p1 + p0)), list(p3 - 3.0 * p2 + 3.0 * p1 - p0)]
+    a, b = complex(*p0.tolist()), complex(*p3.tolist())
+    arm = abs(b - a) / 3.0
+    c1, c2 = a + arm * complex(*d0.tolist()), b - arm * complex(*d1.tolist())
+    return [a, 3.0 * (c1 - a), 3.0 * (c2 - 2.0 * c1 + a), b - 3.0 * c2 + 3.0 * c1 - a]
 
 
 def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
