@@ -85,12 +85,14 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
     roughly even spacing; it points in driving direction.
     """
     n = points.shape[0]
-    x0, y0, x1, y1 = float(points[0, 0]), float(points[0, 1]), float(points[-1, 0]), float(points[-1, 1])
+    (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
     k = max(1, _points_in(window_m, math.hypot(x1 - x0, y1 - y0) / (n - 1), n - 1))
     if at_end:
-        vx, vy = x1 - float(points[-1 - k, 0]), y1 - float(points[-1 - k, 1])
+        px, py = points[-1 - k].tolist()
+        vx, vy = x1 - px, y1 - py
     else:
-        vx, vy = float(points[k, 0]) - x0, float(points[k, 1]) - y0
+        px, py = points[k].tolist()
+        vx, vy = px - x0, py - y0
     norm = math.hypot(vx, vy)
     if norm == 0.0:
         vx, vy = x1 - x0, y1 - y0
