@@ -14,6 +14,7 @@ _SIGMA_FLOOR_M: Final[float] = 0.002
 _CI_FACTOR: Final[float] = 2.5
 _CURVATURE_CHANGE_SIGMAS: Final[float] = 3.0
 _CUBIC_ARC_BIAS: Final[float] = 0.05
+_HANKEL: Final = np.add.outer(np.arange(4), np.arange(4))
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
@@ -115,17 +116,21 @@ class EndFit:
     curvature_sigma: float
 
 
-def _cubic_terms(x: NDArrayFloat, y: NDArrayFloat, counts: Sequence[int]) -> tuple[list[float], list[float]]:
-    """Cubic coefficient d of a least-squares ``y = a + b·x + c·x² + d·x³`` over the first
-    ``counts[e]`` points of each end (chord frame ``x``, ``y`` [m]), and σ_d per metre of noise."""
-    mask = np.arange(x.shape[1]) < np.array(counts)[:, None]
-    basis = np.stack((np.ones_like(x), x, x * x, x * x * x), axis=2) * mask[:, :, None]
-    normal = basis.transpose(0, 2, 1) @ basis
-    if np.any(np.abs(np.linalg.det(normal)) <= 1e-12):
-        return [0.0] * x.shape[0], [math.inf] * x.shape[0]
-    inverse = np.linalg.inv(normal)
-    d = (inverse[:, 3:] @ (basis.transpose(0, 2, 1) @ y[:, :, None]))[:, 0, 0]
-    return d.tolist(), np.sqrt(np.abs(inverse[:, 3, 3])).tolist()
+def _cubic_terms(count: NDArrayFloat, sums: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Cubic coefficient d of a least-squares ``y = a + b·x + c·x² + d·x³`` per end, and σ_d per
+    metre of noise, by Cramer's rule on the normal equations. ``count`` (E,) holds the number
+    of points, ``sums`` (10, E) the sums of x, x², x³, x⁴, y, y·x, y·x², x⁵, x⁶, y·x³ over them."""
+    powers = np.stack((count, sums[0], sums[1], sums[2], sums[3], sums[7], sums[8]))
+    normal = powers[_HANKEL].transpose(2, 0, 1)
+    systems = np.zeros((count.shape[0], 3, 4, 4))
+    systems[:, 0] = normal
+    systems[:, 1] = normal
+    systems[:, 1, :, 3] = sums[[4, 5, 6, 9]].T
+    systems[:, 2, :3, :3] = normal[:, :3, :3]
+    systems[:, 2, 3, 3] = 1.0
+    full, replaced, minor = np.linalg.det(systems).T
+    full = np.where(full != 0.0, full, math.inf)
+    return replaced / full, np.sqrt(np.abs(minor / full))
 
 
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
@@ -171,12 +176,13 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     x = (rel @ direction[:, :, None])[:, :, 0]
     y = (rel @ (direction[:, ::-1] * (-1.0, 1.0))[:, :, None])[:, :, 0]
     x2 = x * x
-    sums = np.cumsum(np.stack((x, x2, x2 * x, x2 * x2, y, y * x, y * x2)), axis=2)
-    last = [c[-1] for c in counts]
-    cubic, cubic_sigma = _cubic_terms(x, y, last)
-    x_far = x[np.arange(n_ends), np.array(last) - 1].tolist()
+    x3 = x2 * x
+    sums = np.cumsum(np.stack((x, x2, x3, x2 * x2, y, y * x, y * x2, x3 * x2, x3 * x3, y * x3)), axis=2)
     idx = np.array(counts) - 1
-    cells = sums[:, np.arange(n_ends)[:, None], idx].transpose(1, 2, 0).tolist()
+    rows = np.arange(n_ends)
+    cubic, cubic_sigma = (v.tolist() for v in _cubic_terms(idx[:, -1] + 1.0, sums[:, rows, idx[:, -1]]))
+    x_far = x[rows, idx[:, -1]].tolist()
+    cells = sums[:7, rows[:, None], idx].transpose(1, 2, 0).tolist()
     fits = []
     for e in range(n_ends):
         cx, cy = chords[e]
