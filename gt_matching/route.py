@@ -26,8 +26,6 @@ MAX_COARSE_SAMPLES: Final = 256
 ANCHOR_STRIDE: Final = 10
 #: Arc length either side of an interpolated seed searched for the nearest sample, m.
 ANCHOR_REACH_M: Final = 0.1
-#: Times a window whose minimum lies on its edge is moved to centre on that minimum.
-RECENTRE_PASSES: Final = 3
 #: Points farther than this from the border are searched globally (KD-tree), m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
@@ -314,11 +312,11 @@ class RouteBorder:
 
     def _nearest_samples(
         self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
-    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool, NDArrayBool]:
+    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
-        length ``seed_arc``, that sample's index, whether it is inside the window (not on
-        an edge, where the minimum may continue outside), and whether no kink or lanelet
-        joint near it may start another minimum (``_clear_of_breaks``)."""
+        length ``seed_arc``, that sample's index, and whether the window settles it: the
+        minimum is not on its edge (it may continue outside), and no kink or lanelet joint
+        near it may start another minimum (``_clear_of_breaks``)."""
         last = len(self.samples) - 1
         width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
         first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
@@ -332,10 +330,10 @@ class RouteBorder:
         breaks = self._break_arc
         low, high = np.searchsorted(breaks, arc - reach), np.searchsorted(breaks, arc + reach, side="right")
         smooth = low == high
-        check = np.flatnonzero(~smooth)
+        check = np.flatnonzero(inside & ~smooth)
         if len(check):
             smooth[check] = self._clear_of_breaks(arc[check], distance[check], low[check], high[check])
-        return distance, sample, inside, smooth
+        return distance, sample, inside & smooth
 
     def _clear_of_breaks(
         self, arc: NDArrayFloat, distance: NDArrayFloat, low: NDArrayInt, high: NDArrayInt
@@ -369,9 +367,8 @@ class RouteBorder:
         Every ``ANCHOR_STRIDE``-th point finds its nearest sample (``_nearest``); the arc
         lengths of the points between are interpolated
         along the detection, and each point takes the nearest sample within
-        ``ANCHOR_REACH_M`` of that; a minimum on the window's edge moves the window there
-        (up to ``RECENTRE_PASSES`` times). Where that cannot settle it (minimum still on
-        the edge, a kink or lanelet joint near it, or the point farther than
+        ``ANCHOR_REACH_M`` of that. Where that window cannot settle it (minimum on its
+        edge, a kink or lanelet joint near it, or the point farther than
         ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is the
         smallest to the segments within two steps of the nearest sample (twice the
         distance for the points ``_nearest`` answered). Only points far enough off the
@@ -382,14 +379,8 @@ class RouteBorder:
         anchors[-1] = len(points) - 1
         along = arc_lengths(points)
         seed = np.interp(along, along[anchors], self.sample_arc[self._nearest(points[anchors])[1]])
-        resampled, sample, inside, smooth = self._nearest_samples(points, seed, ANCHOR_REACH_M)
-        for _ in range(RECENTRE_PASSES):
-            moved = np.flatnonzero(~inside & (resampled <= REFINE_DISTANCE_M))
-            if len(moved) == 0:
-                break
-            found = self._nearest_samples(points[moved], self.sample_arc[sample[moved]], ANCHOR_REACH_M)
-            resampled[moved], sample[moved], inside[moved], smooth[moved] = found
-        redo = np.flatnonzero(~(inside & smooth) | (resampled > REFINE_DISTANCE_M))
+        resampled, sample, settled = self._nearest_samples(points, seed, ANCHOR_REACH_M)
+        redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
         if len(redo):
             resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
         arc = self.sample_arc[sample]

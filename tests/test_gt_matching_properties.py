@@ -185,3 +185,48 @@ def test_evaluate_equals_global_closest_point_search(
         assert r.max_error_m == pytest.approx(float(global_resampled.max()), abs=1e-12)
         assert e.mean_error_m == pytest.approx(float(global_exact.mean()), abs=1e-12)
         assert e.max_error_m == pytest.approx(float(global_exact.max()), abs=1e-12)
+
+
+def kinked_path(turns: list[float], segment_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices of a polyline of equal segments turning by ``turns`` (rad) at its interior
+    vertices (every vertex a kink), and the bisecting heading at each vertex (rad)."""
+    headings = np.concatenate(([0.0], np.cumsum(turns)))
+    steps = segment_m * np.column_stack((np.cos(headings), np.sin(headings)))
+    vertices = np.vstack(([0.0, 0.0], np.cumsum(steps, axis=0)))
+    bisectors = np.concatenate(([0.0], headings[:-1] + 0.5 * np.asarray(turns), headings[-1:]))
+    return vertices, bisectors
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    turns=st.lists(st.floats(-0.8, 0.8), min_size=3, max_size=8),
+    segment_m=st.floats(2.0, 6.0),
+    noise_m=st.floats(0.0, 1.0),
+    seed=st.integers(0, 2**16),
+    step_m=st.sampled_from([0.02, 0.1]),
+)
+def test_route_border_distances_equal_a_kd_tree_over_its_samples_on_sharp_kinks(
+    turns: list[float], segment_m: float, noise_m: float, seed: int, step_m: float
+) -> None:
+    """Windows, recentring, the kink rule (distance * tan(turning)) and the coarse-sample
+    search together find every point's nearest sample: on a border of two lanelets whose
+    every vertex turns by up to 0.8 rad, points up to ~3 m off it."""
+    from gt_matching.route import RouteBorder
+
+    centre, headings = kinked_path(turns, segment_m)
+    builder = LaneletMapBuilder()
+    cut = len(centre) // 2
+    builder.add_lane(centre[: cut + 1], WIDTH_M, headings[: cut + 1])
+    builder.add_lane(centre[cut:], WIDTH_M, headings[cut:])
+    lanelet_map, graph = builder.build()
+    gt = GroundTruth(lanelet_map, graph, config=MatchingConfig(step_m=step_m, max_distance_m=3.0))
+    parts = sorted((g for g in gt._geometry.values() if not g.key[1]), key=lambda g: float(np.hypot(*g.centre[0])))
+    border = RouteBorder(gt.lines, [gt._part(g, "left") for g in parts], set())
+    rng = np.random.default_rng(seed)
+    along, _ = resample(border.vertices, 0.1)
+    points = along + rng.normal(0.0, noise_m, along.shape)
+    found = border.distances(points, exact=False)
+    expected = cKDTree(border.samples).query(points)[0]
+    np.testing.assert_allclose(found.distances, expected, rtol=0.0, atol=1e-12)
+    exact = border.distances(points, exact=True)
+    np.testing.assert_allclose(exact.distances, closest_distances(points, border.vertices)[0], rtol=0.0, atol=1e-9)
