@@ -59,16 +59,16 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     overlap_end = min(float(s_ego[-1]) - s0, float(s_coop[-1]))
     stop = int(np.searchsorted(s_ego, s0 + overlap_end, side="right"))
     u = s_ego[first:stop] - s0
-    paired = np.empty((u.shape[0], 2))
-    paired[:, 0] = np.interp(u, s_coop, coop[:, 0])
-    paired[:, 1] = np.interp(u, s_coop, coop[:, 1])
-    overlap = ego[first:stop]
+    paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])
+    overlap = np.ascontiguousarray(ego[first:stop]).view(np.complex128)[:, 0]
     if offset > blend_offset_m and overlap_end > 0.0:
-        w = (u / overlap_end)[:, None]
-        fused = overlap + (paired - overlap) * w
+        paired -= overlap
+        paired *= u / overlap_end
     else:
-        fused = overlap * (1.0 - coop_weight) + paired * coop_weight
-    parts = [(ego[:first], Source.EGO), (fused, Source.FUSED)]
+        paired -= overlap
+        paired *= coop_weight
+    paired += overlap
+    parts = [(ego[:first], Source.EGO), (paired.view(np.float64).reshape(-1, 2), Source.FUSED)]
     if stop < ego.shape[0]:
         parts.append((ego[stop:], Source.EGO))
     else:
