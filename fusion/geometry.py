@@ -159,7 +159,8 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     counts, chords, origins = [], [], []
     for points, end in zip(borders, at_end):
         n = points.shape[0]
-        step = math.hypot(float(points[-1, 0] - points[0, 0]), float(points[-1, 1] - points[0, 1])) / (n - 1)
+        (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
+        step = math.hypot(x1 - x0, y1 - y0) / (n - 1)
         counts.append([_points_in(w, step, n - 1) + 1 for w in windows_m])
         chords.append(end_direction(points, end, windows_m[0]))
         origins.append(points[-1] if end else points[0])
@@ -198,15 +199,15 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
                 break
             b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
-            c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
-            scale = 2.0 / math.hypot(1.0, b) ** 3
-            window_curvature = (scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det)))
             half = _CI_FACTOR * sigma * math.sqrt(abs((k * s4 - s2 * s2) / det))
             lo, hi = max(lo, b - half), min(hi, b + half)
-            if lo <= hi:
-                a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
-                chosen = (a, b)
-                curvature, curvature_sigma = window_curvature
+            if lo > hi:
+                break
+            a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+            c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
+            scale = 2.0 / math.hypot(1.0, b) ** 3
+            chosen = (a, b)
+            curvature, curvature_sigma = scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
         arc_cubic = curvature ** 3 * x_far[e] / 6.0
         if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * cubic_sigma[e]
                                         + _CUBIC_ARC_BIAS * abs(curvature) ** 3 * abs(x_far[e])):
