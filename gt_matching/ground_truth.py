@@ -142,9 +142,10 @@ def _sequence_arc(lanelets: Sequence[LaneletGeometry], points: NDArrayFloat) -> 
 class GroundTruth:
     """A Lanelet2 map prepared for matching detections: built once, reused per frame.
 
-    Construction extracts every lanelet's geometry and border samples and every line
-    string's samples and KD-tree; lanelet sequences matched by frames are assembled on
-    first use and kept (LRU, ``ROUTE_CACHE_SIZE``).
+    Construction extracts every lanelet's geometry, border samples and the borders'
+    clearances to other lines, and every line string's samples and KD-tree; lanelet
+    sequences matched by frames are assembled from them on first use (joining arrays) and
+    kept (LRU, ``ROUTE_CACHE_SIZE``).
 
     The map must not change after construction.
     """
@@ -173,8 +174,8 @@ class GroundTruth:
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
-            self._part(geometry, "left")
-            self._part(geometry, "right")
+            for side in ("left", "right"):
+                self._part(geometry, side).clearances
         for slot in range(len(self.lines.vertices)):
             self.lines.tree(slot, self.config.step_m)
 

@@ -4,7 +4,7 @@ summarised per border."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -12,6 +12,19 @@ from gt_matching.polyline import NDArrayBool, NDArrayFloat
 
 if TYPE_CHECKING:
     from gt_matching.ground_truth import LaneMatch
+
+
+#: The percentile reported as ``p95_error_m``.
+P95: Final = 95.0
+
+
+def _percentile(values: NDArrayFloat, percent: float) -> float:
+    """``np.percentile(values, percent)`` (linear interpolation) by partial sorting."""
+    position = percent / 100.0 * (len(values) - 1)
+    below = int(np.floor(position))
+    above = min(below + 1, len(values) - 1)
+    low, high = np.partition(values, (below, above))[[below, above]]
+    return float(low + (high - low) * (position - below))
 
 
 @dataclass(frozen=True)
@@ -48,7 +61,7 @@ class BorderMetrics:
             mean_error_m=float(np.mean(distances)),
             rmse_m=float(np.sqrt(np.mean(distances * distances))),
             max_error_m=float(np.max(distances)),
-            p95_error_m=float(np.percentile(distances, 95.0)),
+            p95_error_m=_percentile(distances, P95),
             points=int(distances.size),
             unmatched_points=int(np.count_nonzero(unmatched)),
             length_m=float(length_m),

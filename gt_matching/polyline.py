@@ -34,7 +34,7 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
     if not np.all(np.isfinite(array)):
         bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
         raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
-    if arc_lengths(array)[-1] <= ZERO_LENGTH_M:
+    if float(np.max(np.ptp(array, axis=0))) <= ZERO_LENGTH_M:
         raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
     return array
 
@@ -113,21 +113,26 @@ def angle_difference(a: float, b: float) -> float:
     return abs((a - b + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def at_fractions(polyline: NDArrayFloat, fractions: NDArrayFloat) -> NDArrayFloat:
-    """Points at the given fractions (0..1) of the polyline's length, m."""
-    cum = arc_lengths(polyline)
+def at_fractions(polyline: NDArrayFloat, fractions: NDArrayFloat, cum: NDArrayFloat | None = None) -> NDArrayFloat:
+    """Points at the given fractions (0..1) of the polyline's length, m (``cum``: its
+    ``arc_lengths`` if known)."""
+    cum = arc_lengths(polyline) if cum is None else cum
     s = fractions * cum[-1]
     return np.column_stack((np.interp(s, cum, polyline[:, 0]), np.interp(s, cum, polyline[:, 1])))
 
 
 def paired_fractions(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
     """Fractions that sample two borders about every ``step_m`` of the longer one (>= 2)."""
-    longer = max(arc_lengths(left)[-1], arc_lengths(right)[-1])
-    return np.linspace(0.0, 1.0, max(2, int(np.ceil(longer / step_m)) + 1))
+    return _fractions(max(arc_lengths(left)[-1], arc_lengths(right)[-1]), step_m)
+
+
+def _fractions(longer_m: float, step_m: float) -> NDArrayFloat:
+    return np.linspace(0.0, 1.0, max(2, int(np.ceil(longer_m / step_m)) + 1))
 
 
 def mid_line(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
     """Mid-line of two borders, sampled at equal fractions of their lengths, about every
     ``step_m`` of the longer border (at least 2 points), m."""
-    fractions = paired_fractions(left, right, step_m)
-    return 0.5 * (at_fractions(left, fractions) + at_fractions(right, fractions))
+    left_cum, right_cum = arc_lengths(left), arc_lengths(right)
+    fractions = _fractions(max(left_cum[-1], right_cum[-1]), step_m)
+    return 0.5 * (at_fractions(left, fractions, left_cum) + at_fractions(right, fractions, right_cum))

@@ -23,9 +23,9 @@ MIN_COARSE_STRIDE: Final = 25
 MAX_COARSE_SAMPLES: Final = 256
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its arc length along the detection.
-ANCHOR_STRIDE: Final = 10
+ANCHOR_STRIDE: Final = 20
 #: Arc length either side of an interpolated seed searched for the nearest sample, m.
-ANCHOR_REACH_M: Final = 0.1
+ANCHOR_REACH_M: Final = 0.2
 #: Points farther than this from the border are searched globally (KD-tree), m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
@@ -38,8 +38,9 @@ MAX_TAN_TURNING_RAD: Final = float(np.arctan(2.0))
 LOOKOUT_SPACING_M: Final = 5.0
 #: Spacing along the border of the checkpoints whose clearance to other lines is kept, m.
 CLEARANCE_SPACING_M: Final = 0.25
-#: Checkpoint-to-sample distances computed at once when clearances are built.
-CLEARANCE_BLOCK: Final = 1 << 20
+#: Nearest coarse samples of other lines looked up per checkpoint (lines farther away
+#: get the distance of the farthest of them as their clearance).
+CLEARANCE_NEIGHBOURS: Final = 16
 
 
 def _turning(vertices: NDArrayFloat) -> NDArrayFloat:
@@ -150,9 +151,11 @@ class BorderPart:
 
     @cached_property
     def clearances(self) -> tuple[NDArrayInt, NDArrayFloat]:
-        """Slots of the other lines near this border and, per slot (rows), each
-        checkpoint's distance to the line's coarse samples minus ``COARSE_STEP_M / 2``
-        (a lower bound to its samples every ``step_m``), m.
+        """Slots of the other lines near this border and, per slot (rows), a lower bound
+        of each checkpoint's distance to the line's samples every ``step_m``, m: the
+        distance to its nearest coarse sample among the checkpoint's
+        ``CLEARANCE_NEIGHBOURS`` nearest (else the farthest of those) minus
+        ``COARSE_STEP_M / 2``.
 
         Coarse samples farther than ``reach_m + COARSE_STEP_M`` from the border or within
         the coincidence distance of it are left out, as a route does: a route's clearance
@@ -165,16 +168,18 @@ class BorderPart:
             gap = self.guess_tree.query(lines.coarse[near], distance_upper_bound=self.reach_m + COARSE_STEP_M)[0]
             near = near[(gap > _coincidence_m(self.step_m, self.other_margin_m)) & np.isfinite(gap)]
         owners = lines.coarse_owner[near]
-        slots, starts = np.unique(owners, return_index=True)
+        slots = np.unique(owners)
         points = self.samples[self.checkpoints]
         rows = np.empty((len(slots), len(points)))
         if len(slots):
-            others = lines.coarse[near, 0] + 1j * lines.coarse[near, 1]
-            complex_points = points[:, 0] + 1j * points[:, 1]
-            chunk = max(1, CLEARANCE_BLOCK // len(others))
-            for at in range(0, len(points), chunk):
-                gaps = np.abs(complex_points[at : at + chunk, None] - others)
-                rows[:, at : at + chunk] = np.minimum.reduceat(gaps, starts, axis=1).T
+            from scipy.spatial import cKDTree
+
+            count = min(CLEARANCE_NEIGHBOURS, len(near))
+            distances, index = cKDTree(lines.coarse[near]).query(points, k=count)
+            distances, index = distances.reshape(len(points), count), index.reshape(len(points), count)
+            rows[:] = distances[:, -1]
+            columns = np.broadcast_to(np.arange(len(points))[:, None], index.shape)
+            np.minimum.at(rows, (np.searchsorted(slots, owners[index]), columns), distances)
             rows -= COARSE_STEP_M / 2.0
         return slots, rows
 

@@ -230,3 +230,14 @@ def test_route_border_distances_equal_a_kd_tree_over_its_samples_on_sharp_kinks(
     np.testing.assert_allclose(found.distances, expected, rtol=0.0, atol=1e-12)
     exact = border.distances(points, exact=True)
     np.testing.assert_allclose(exact.distances, closest_distances(points, border.vertices)[0], rtol=0.0, atol=1e-9)
+
+
+@given(
+    values=st.lists(st.floats(0.0, 100.0), min_size=1, max_size=200),
+    percent=st.one_of(st.sampled_from([0.0, 50.0, 95.0, 100.0]), st.floats(0.0, 100.0)),
+)
+def test_partial_sort_percentile_equals_numpy(values: list[float], percent: float) -> None:
+    from gt_matching.metrics import _percentile
+
+    expected = float(np.percentile(values, percent))
+    assert _percentile(np.array(values), percent) == pytest.approx(expected, rel=1e-12, abs=1e-12)
