@@ -83,6 +83,27 @@ def test_meter_measures_a_known_lateral_offset(straight_evaluator, offset):
     assert measured.matched
 
 
+def test_meter_reuses_the_match_of_a_reference_lane(straight_evaluator):
+    """A reference lane matched again (equal borders and pose) gives the kept match; lanes
+    measured against it get GroundTruth.errors' per-point distances and range."""
+    meter = straight_evaluator.meter
+    state = straight_evaluator.drives[0].states(3)["ego"]
+    pose = state.track.strip.pose(state.station)
+    truth = state.track.borders_between(state.station, state.station + 30.0)
+    first = meter.match(*truth, pose)
+    assert meter.match(truth[0].copy(), truth[1].copy(), tuple(pose)) is first
+    moved = meter.match(truth[0] + 0.01, truth[1] + 0.01, pose)
+    assert moved is not first and moved.lanelet_ids == first.lanelet_ids
+    sensed = sense(state, LaneSensor(), SensorErrorModel(lateral_offset_m=0.3), np.random.default_rng(0))
+    left, right = world_borders(sensed.detection)
+    measured = meter.measure(left, right, pose, reference=truth)
+    expected = meter.ground_truth.errors(left, right, first)
+    np.testing.assert_array_equal(measured.left_errors_m, expected.left.distances_m)
+    np.testing.assert_array_equal(measured.right_errors_m, expected.right.distances_m)
+    assert measured.left_range_m == pytest.approx(expected.left.metrics().length_m, abs=1e-12)
+    assert measured.left_errors_m.min() == pytest.approx(0.3, abs=1e-6)
+
+
 def test_reason_categories_of_real_rejections(straight_evaluator):
     states = straight_evaluator.drives[0].states(0)
     sensor, rng, errors = LaneSensor(), np.random.default_rng(0), SensorErrorModel()
