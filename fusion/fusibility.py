@@ -230,9 +230,11 @@ def arc_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
     both ends in one curve; the adjacent lane lies a lane width off either way, the same
     lane within a clothoid shift (L²/24R). Two curved ends whose radius intervals overlap lie
     on one arc (its radii: the intersection); otherwise (a compound curve) the smaller of the
-    two mismatches counts. 0 when no end applies, or when the ends curve opposite ways (an
-    S-bend in the gap).
+    two mismatches counts. 0 when no end applies, when the ends curve opposite ways (an
+    S-bend in the gap) or when there is no gap.
     """
+    if ends.gap_m <= 0.0:
+        return 0.0
     psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
     turn = wrap_angle(psi1 - psi0)
     (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
