@@ -238,32 +238,11 @@ def _time_msg(ns: int) -> dict[str, int]:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def simplify_polyline(points: NDArrayFloat, tolerance_m: float = DISPLAY_TOLERANCE_M) -> NDArrayFloat:
-    """Douglas-Peucker: a subset of an (N, 2) polyline's points (end points kept, order
-    kept) such that every dropped point lies within ``tolerance_m`` of the segment that
-    replaces it (segment, not line: a polyline that doubles back keeps its turning point)."""
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) < 3:
-        return points
-    keep = np.zeros(len(points), dtype=bool)
-    keep[[0, -1]] = True
-    spans = [(0, len(points) - 1)]
-    while spans:
-        first, last = spans.pop()
-        if last - first < 2:
-            continue
-        chord = points[last] - points[first]
-        offsets = points[first + 1: last] - points[first]
-        squared = float(chord @ chord)
-        along = np.clip(offsets @ chord / squared, 0.0, 1.0) if squared > 0.0 else np.zeros(len(offsets))
-        gap = offsets - along[:, None] * chord
-        distance = np.hypot(gap[:, 0], gap[:, 1])
-        worst = int(np.argmax(distance))
-        if distance[worst] > tolerance_m:
-            split = first + 1 + worst
-            keep[split] = True
-            spans += [(first, split), (split, last)]
-    return points[keep]
+def _simplified(points: NDArrayFloat) -> NDArrayFloat:
+    """The polyline's points within ``DISPLAY_TOLERANCE_M`` (Douglas-Peucker)."""
+    from converters.osm import simplify
+
+    return points[simplify(points, DISPLAY_TOLERANCE_M)] if len(points) > 2 else points
 
 
 def _line_entity(entity_id: str, ns: int, points: NDArrayFloat, color: RGBA) -> dict[str, Any]:
@@ -273,7 +252,7 @@ def _line_entity(entity_id: str, ns: int, points: NDArrayFloat, color: RGBA) -> 
         "thickness": LINE_THICKNESS_M,
         "scale_invariant": False,
         "points": [{"x": x, "y": y, "z": 0.0}
-                   for x, y in np.round(simplify_polyline(points), DISPLAY_DECIMALS).tolist()],
+                   for x, y in np.round(_simplified(points), DISPLAY_DECIMALS).tolist()],
         "color": dict(zip("rgba", color)),
         "colors": [],
         "indices": [],

@@ -15,7 +15,10 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from converters.osm import simplify
+
 from cold_maps.recording import (
+    DISPLAY_TOLERANCE_M,
     FRAME_METRICS_SCHEMA,
     LANE_DETECTION_SCHEMA,
     SCENE_UPDATE_SCHEMA,
@@ -23,7 +26,6 @@ from cold_maps.recording import (
     RecordingError,
     read_detections,
     read_metadata,
-    simplify_polyline,
 )
 
 FRAMES = 3
@@ -250,6 +252,10 @@ def _distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
     along = np.clip(along / np.maximum(np.einsum("sk,sk->s", direction, direction), 1e-300), 0.0, 1.0)
     foot = start[None] + along[..., None] * direction[None]
     return np.min(np.linalg.norm(points[:, None, :] - foot, axis=2), axis=1)
+
+
+def simplify_polyline(points: np.ndarray, tolerance: float = DISPLAY_TOLERANCE_M) -> np.ndarray:
+    return points[simplify(points, tolerance)]
 
 
 def test_simplify_collapses_a_straight_line_and_keeps_an_arc_within_tolerance() -> None:
