@@ -21,6 +21,8 @@ _MIN_ARC_TURN_RAD: Final[float] = 1e-3
 _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
+_STRAIGHT_SIGMAS: Final[float] = 2.5
+_GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
 _TAU_POWERS_T: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4)).T.copy()
@@ -194,18 +196,26 @@ def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
     return d / (math.hypot(d[0], d[1]) or 1.0)
 
 
+def _straight(fit: EndFit) -> bool:
+    """Whether a border end is straight within its noise: |κ| ≤ 2.5·σ_κ (σ_κ finite)."""
+    return abs(fit.curvature) <= _STRAIGHT_SIGMAS * fit.curvature_sigma < math.inf
+
+
 def hermite_lane(fits: Sequence[EndFit], spacing_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
-    """G1 gap interpolation of both borders of a lane; returns the (left, right) gap points.
+    """G1/G2 gap interpolation of both borders of a lane; returns the (left, right) gap points.
 
     ``fits`` are the least-squares end fits of (ego left, ego right, coop left, coop right)
     from :func:`lane_end_fits`; the end directions of the two borders are averaged (the
     borders of a lane are parallel), which halves the heading variance. Each border's gap
-    is :func:`hermite_gap` between the fitted ends.
+    is :func:`hermite_gap` between the fitted ends. When all four border ends are straight
+    (zero curvature within noise), the turn lies wholly inside the gap and the arc, whose
+    curvature would jump at the ends, is replaced by a clothoid pair (``clothoid=True``).
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m),
-            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m))
+    clothoid = all(_straight(fit) for fit in fits)
+    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, clothoid),
+            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m, clothoid))
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
@@ -220,8 +230,21 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
     return fits[0], fits[1], fits[2], fits[3]
 
 
+def clothoid_pair_tangent(turn_rad: float) -> float:
+    """Tangent length of the symmetric clothoid pair of half length 1 turning by ``turn_rad``.
+
+    Each half is a clothoid from curvature 0 to ``turn_rad`` (heading change turn/2); the
+    pair's end is F + e^{iθ}·conj(F) with F = ∫₀¹ e^{iθs²/2} ds (16-point Gauss–Legendre,
+    exact to 1e-12 for |θ| ≤ π). Returns the distance from its start to where the end
+    tangents meet.
+    """
+    half = complex(np.dot(_GL_WEIGHTS, np.exp(0.5j * turn_rad * _GL_NODES * _GL_NODES)))
+    end = half + complex(math.cos(turn_rad), math.sin(turn_rad)) * half.conjugate()
+    return end.real - end.imag / math.tan(turn_rad)
+
+
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
-                spacing_m: float) -> NDArrayFloat:
+                spacing_m: float, clothoid: bool = False) -> NDArrayFloat:
     """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``).
 
     The two tangent lines meet at P_i, at distance a from p0 and b from p3. The curve is the
@@ -230,8 +253,11 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     longer side. A circular arc between the ends is therefore reproduced exactly (a = b),
     and so is a curve that starts or ends inside the gap; it is sampled in closed form every
     ≤ ``spacing_m``, ends excluded. (A cubic Bézier with arms (4/3)·R·tan(θ/4) would
-    approximate the same arc to 3·10⁻⁴·R.) Parallel or S-shaped end tangents (no triangle
-    ahead of both ends) use a cubic Bézier with arms of a third of the chord.
+    approximate the same arc to 3·10⁻⁴·R.) With ``clothoid`` the arc is replaced by the
+    symmetric clothoid pair of the same tangent length m (curvature rising linearly from 0
+    and back, half length m / :func:`clothoid_pair_tangent`): a G2 turn between straight
+    ends. Parallel or S-shaped end tangents (no triangle ahead of both ends) use a cubic
+    Bézier with arms of a third of the chord.
     """
     chord = p3 - p0
     denom = _cross(d0[0], d0[1], d1[0], d1[1])
@@ -243,21 +269,31 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     if a <= 0.0 or b <= 0.0:
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     m = min(a, b)
-    radius = m / math.tan(abs(turn) / 2.0)
-    kappa = math.copysign(1.0 / radius, turn)
-    lead, arc, tail = a - m, radius * abs(turn), b - m
+    if clothoid:
+        half = m / clothoid_pair_tangent(turn)
+        arc = 2.0 * half
+    else:
+        radius = m / math.tan(abs(turn) / 2.0)
+        arc = radius * abs(turn)
+    lead, tail = a - m, b - m
     total = lead + arc + tail
     n_steps = math.ceil(total / spacing_m * (1.0 + 1e-9))
     if n_steps < 2:
         return np.empty((0, 2))
     u = np.linspace(0.0, total, n_steps + 1)[1:-1]
-    t0 = p0 + lead * d0
-    psi0 = math.atan2(d0[1], d0[0])
     ua = np.clip(u - lead, 0.0, arc)
-    heading = psi0 + kappa * ua
-    out = np.empty((u.shape[0], 2))
-    out[:, 0] = t0[0] + (np.sin(heading) - math.sin(psi0)) / kappa
-    out[:, 1] = t0[1] - (np.cos(heading) - math.cos(psi0)) / kappa
+    start = complex(*(p0 + lead * d0).tolist())
+    direction = complex(*d0.tolist())
+    if clothoid:
+        mid = 0.5 * (ua + np.concatenate(([0.0], ua[:-1])))
+        rise = np.minimum(mid, half) / half
+        fall = np.maximum(mid - half, 0.0) / half
+        heading = (0.5 * turn) * (rise * rise + fall * (2.0 - fall))
+        z = start + direction * np.cumsum(np.diff(ua, prepend=0.0) * np.exp(1j * heading))
+    else:
+        kappa = math.copysign(abs(turn) / arc, turn)
+        z = start + direction * (np.exp(1j * kappa * ua) - 1.0) / (1j * kappa)
+    out = z.view(np.float64).reshape(-1, 2).copy()
     before = u < lead
     out[before] = p0 + u[before, None] * d0
     after = u > lead + arc
