@@ -98,3 +98,76 @@ def detect(road: AnalyticRoad, s_from: float, length_m: float, left_m: float, ri
             pts = pts + (rng or np.random.default_rng(0)).normal(0.0, noise_m, pts.shape)
         borders.append((pts - (pose.x, pose.y)) @ rot)
     return LaneDetection(pose, borders[0], borders[1], sender=sender)
+
+
+FAMILIES: Final[tuple[str, ...]] = ("corner", "clothoid corner", "arc", "s-bend")
+
+
+def family_case(family: str, rng: np.random.Generator) -> tuple[AnalyticRoad, float, float]:
+    """A random road of a held-out ``family`` and a gap on it: ``(road, s_end, s_coop)`` [m].
+
+    ``corner``: straight, arc of radius 8–60 m turning 30–120°, straight; the gap holds the
+    whole turn plus 2–20 m of straight on each side. ``clothoid corner``: the same with
+    5–20 m clothoids into and out of the arc. ``arc``: a straight then an arc of radius
+    15–300 m; both gap ends lie 3–10 m or more inside the arc (curve90-like), gap 5–20 m.
+    ``s-bend``: two opposite arcs of radius 30–100 m, 10–25 m each; the gap holds the
+    inflection and ends inside the arcs. Turn directions are random.
+    """
+    sign = rng.choice((-1.0, 1.0))
+    if family in ("corner", "clothoid corner"):
+        radius, turn = rng.uniform(8.0, 60.0), math.radians(rng.uniform(30.0, 120.0))
+        entry = rng.uniform(5.0, 20.0) if family == "clothoid corner" else 0.0
+        arc = max(0.5, radius * turn - entry)
+        pre, post = rng.uniform(2.0, 20.0, 2)
+        body = [Segment(arc, sign / radius)]
+        if entry:
+            body = [Segment(entry, 0.0, sign / radius), *body, Segment(entry, sign / radius, 0.0)]
+        road = AnalyticRoad([Segment(80.0), *body, Segment(80.0)])
+        return road, 80.0 - pre, 80.0 + 2.0 * entry + arc + post
+    if family == "arc":
+        radius = rng.uniform(15.0, 300.0)
+        length = min(120.0, 1.5 * math.pi * radius)
+        road = AnalyticRoad([Segment(60.0), Segment(length, sign / radius)])
+        s_end = 60.0 + rng.uniform(3.0, 10.0)
+        return road, s_end, s_end + rng.uniform(5.0, min(20.0, length - 45.0 - (s_end - 60.0)))
+    if family == "s-bend":
+        k, first, second = sign / rng.uniform(30.0, 100.0), rng.uniform(10.0, 25.0), rng.uniform(10.0, 25.0)
+        road = AnalyticRoad([Segment(60.0), Segment(first, k), Segment(second, -k), Segment(60.0)])
+        return road, 60.0 + rng.uniform(2.0, first), 60.0 + first + rng.uniform(2.0, second)
+    raise InvalidParameterError(f"unknown road family {family!r}; expected one of {FAMILIES}")
+
+
+def gap_errors(road: AnalyticRoad, s_end: float, s_coop: float, noise_m: float = 0.0,
+               rng: np.random.Generator | None = None, offsets: tuple[float, float] = (0.0, -4.0),
+               ) -> dict[str, float] | None:
+    """Max distance [m] of the gap points of each interpolation from the true borders.
+
+    Keys: ``paper``, ``hermite``, and ``arc`` (hermite with the largest arc for every turn,
+    i.e. without the clothoid pair between straight ends). The ego detects 30 m up to
+    ``s_end``, the coop 30 m from ``s_coop``, on the lane between ``offsets``; ``None`` when
+    the pair is not fused as a spline.
+    """
+    from fusion.api import fuse
+    from fusion.geometry import to_world
+    from fusion.spline import hermite_lane, lane_end_fits
+    from fusion.types import FusionParams, Source
+
+    ego = detect(road, s_end - 30.0, 30.0, *offsets, noise_m=noise_m, rng=rng)
+    coop = detect(road, s_coop, 30.0, *offsets, noise_m=noise_m, rng=rng)
+    truth = [road.border(offset) for offset in offsets]
+    errors: dict[str, float] = {}
+    for interpolation in ("paper", "hermite"):
+        result = fuse(ego, coop, mode="spline", interpolation=interpolation)
+        if result.kind != "spline":
+            return None
+        gaps = (result.left[result.left_source == Source.INTERPOLATED],
+                result.right[result.right_source == Source.INTERPOLATED])
+        errors[interpolation] = max(float(distance_to_polyline(g, t).max()) if g.shape[0] else 0.0
+                                    for g, t in zip(gaps, truth))
+    fits = lane_end_fits((to_world(ego.left, ego.pose), to_world(ego.right, ego.pose)),
+                         (to_world(coop.left, coop.pose), to_world(coop.right, coop.pose)),
+                         FusionParams().heading_window_m)
+    arc_gaps = hermite_lane(fits, FusionParams().spacing_m, clothoid=False)
+    arc = max(float(distance_to_polyline(g, t).max()) if g.shape[0] else 0.0 for g, t in zip(arc_gaps, truth))
+    errors["arc"] = arc
+    return errors

@@ -201,7 +201,8 @@ def _straight(fit: EndFit) -> bool:
     return abs(fit.curvature) <= _STRAIGHT_SIGMAS * fit.curvature_sigma < math.inf
 
 
-def hermite_lane(fits: Sequence[EndFit], spacing_m: float) -> tuple[NDArrayFloat, NDArrayFloat]:
+def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
+                 clothoid: bool | None = None) -> tuple[NDArrayFloat, NDArrayFloat]:
     """G1/G2 gap interpolation of both borders of a lane; returns the (left, right) gap points.
 
     ``fits`` are the least-squares end fits of (ego left, ego right, coop left, coop right)
@@ -209,11 +210,13 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float) -> tuple[NDArrayFloat
     borders of a lane are parallel), which halves the heading variance. Each border's gap
     is :func:`hermite_gap` between the fitted ends. When all four border ends are straight
     (zero curvature within noise), the turn lies wholly inside the gap and the arc, whose
-    curvature would jump at the ends, is replaced by a clothoid pair (``clothoid=True``).
+    curvature would jump at the ends, is replaced by a clothoid pair; ``clothoid`` forces
+    (``True``) or forbids (``False``) it.
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    clothoid = all(_straight(fit) for fit in fits)
+    if clothoid is None:
+        clothoid = all(_straight(fit) for fit in fits)
     return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, clothoid),
             hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m, clothoid))
 

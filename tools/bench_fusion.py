@@ -7,7 +7,11 @@ Hermite rows it still runs the paper's spline, so its |Δ| column there is the d
 the two interpolations. Calls of the library and of the
 baseline alternate, so both see the same machine load. Also prints the Bézier exchange cost.
 
-Usage: .venv/bin/python tools/bench_fusion.py [--repeats 2000] [--json out.json]
+With ``--families N`` it prints instead the accuracy of the gap interpolations on N random
+roads of each held-out family of :func:`fusion.analytic.family_case`, without and with 5 cm
+noise: max and mean error of ``paper``, ``hermite`` and the largest-arc Hermite (``arc``).
+
+Usage: .venv/bin/python tools/bench_fusion.py [--repeats 2000] [--json out.json] [--families N]
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion  # noqa: E402
 from fusion import bezier  # noqa: E402
-from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
+from fusion.analytic import FAMILIES, AnalyticRoad, Segment, detect, family_case, gap_errors  # noqa: E402
 from fusion.geometry import cumulative_length, distance_to_polyline, to_world  # noqa: E402
 
 RADIUS_M = 20.0
@@ -113,11 +117,39 @@ def stats(samples_ns: list[int]) -> dict[str, float]:
     return {"mean": float(ms.mean()), "sigma": float(ms.std()), "median": float(np.median(ms)), "max": float(ms.max())}
 
 
+def accuracy(n_roads: int) -> dict[str, dict[str, float]]:
+    """Print and return the per-family max / mean gap errors [m] of paper, hermite and arc."""
+    print(f"# Gap accuracy on {n_roads} random roads per family (seed 11): max / mean error [m] of the fused "
+          "ones; 'rejected' = not fused (e.g. turns above 100°)\n")
+    print("| family | noise [m] | fused | rejected | arc (old hermite) | hermite | paper | hermite > paper + 1 cm |")
+    print("|---|---|---|---|---|---|---|---|")
+    report = {}
+    for family in FAMILIES:
+        for noise in (0.0, 0.05):
+            rng = np.random.default_rng(11)
+            cases = [gap_errors(*family_case(family, rng), noise_m=noise, rng=rng) for _ in range(n_roads)]
+            fused = [c for c in cases if c is not None]
+            if not fused:
+                continue
+            err = {k: np.array([c[k] for c in fused]) for k in ("arc", "hermite", "paper")}
+            worse = int((err["hermite"] > err["paper"] + 0.01).sum())
+            cells = " | ".join(f"{v.max():.2f} / {v.mean():.2f}" for v in err.values())
+            print(f"| {family} | {noise:.2f} | {len(fused)} | {n_roads - len(fused)} | {cells} | {worse} |")
+            report[f"{family}, noise {noise}"] = {k: float(v.max()) for k, v in err.items()}
+    return report
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=2000, help="timed calls per scenario and implementation")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
+    parser.add_argument("--families", type=int, metavar="N", help="gap accuracy on N roads per family instead")
     args = parser.parse_args()
+    if args.families:
+        report = accuracy(args.families)
+        if args.json:
+            args.json.write_text(json.dumps(report, indent=2))
+        return 0
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"# fusion.fuse latency: {args.repeats} calls per row, Python {platform.python_version()}, "
           f"numpy {np.__version__}, {os.cpu_count()} cores, load average {load:.2f}")
