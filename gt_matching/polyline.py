@@ -34,7 +34,7 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
     if not np.all(np.isfinite(array)):
         bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
         raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
-    if float(np.max(np.ptp(array, axis=0))) <= ZERO_LENGTH_M:
+    if float(np.max(np.abs(array - array[0]))) <= ZERO_LENGTH_M:
         raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
     return array
 

@@ -21,6 +21,9 @@ GUESS_STRIDE: Final = 3
 #: this many samples at least, and at most this many in all.
 MIN_COARSE_STRIDE: Final = 25
 MAX_COARSE_SAMPLES: Final = 256
+#: Borders with more samples than this find nearest samples with a KD-tree (its build
+#: time pays off over the frames of a long route; short routes change often).
+KD_TREE_SAMPLES: Final = 16384
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its arc length along the detection.
 ANCHOR_STRIDE: Final = 20
@@ -273,7 +276,11 @@ class RouteBorder:
         (every ``_coarse_stride``-th sample of each part and each part's ends), so the
         nearest one, at distance d, lies within that many samples of a coarse sample within
         d + half a stride of the point, and d is at most the distance to the nearest coarse
-        sample (or ``within``)."""
+        sample (or ``within``). Borders of more than ``KD_TREE_SAMPLES`` samples ask a
+        KD-tree of all samples instead (built on first use)."""
+        if len(self.samples) > KD_TREE_SAMPLES:
+            distance, sample = self._tree.query(points)
+            return distance, sample
         coarse = self._squared_distances(points, self._coarse_index[None, :])
         bound = np.sqrt(np.min(coarse, axis=1))
         if within is not None:
@@ -288,6 +295,13 @@ class RouteBorder:
         order = np.lexsort((sample, distance, point))
         first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
         return distance[first], sample[first]
+
+    @cached_property
+    def _tree(self) -> cKDTree:
+        """KD-tree of all samples (long borders: kept with the route, reused by its frames)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.samples)
 
     def _squared_distances(self, points: NDArrayFloat, samples: NDArrayInt) -> NDArrayFloat:
         """Squared distance (m²) of each point (row) to the samples of its row of indices

@@ -204,13 +204,18 @@ def kinked_path(turns: list[float], segment_m: float) -> tuple[np.ndarray, np.nd
     noise_m=st.floats(0.0, 1.0),
     seed=st.integers(0, 2**16),
     step_m=st.sampled_from([0.02, 0.1]),
+    long_border=st.booleans(),
 )
 def test_route_border_distances_equal_a_kd_tree_over_its_samples_on_sharp_kinks(
-    turns: list[float], segment_m: float, noise_m: float, seed: int, step_m: float
+    turns: list[float], segment_m: float, noise_m: float, seed: int, step_m: float, long_border: bool
 ) -> None:
-    """Windows, recentring, the kink rule (distance * tan(turning)) and the coarse-sample
-    search together find every point's nearest sample: on a border of two lanelets whose
-    every vertex turns by up to 0.8 rad, points up to ~3 m off it."""
+    """Windows, the kink rule (distance * tan(turning)) and the nearest-sample search
+    (coarse samples, or a KD-tree as on long borders) together find every point's nearest
+    sample: on a border of two lanelets whose every vertex turns by up to 0.8 rad, points
+    up to ~3 m off it."""
+    from unittest import mock
+
+    from gt_matching import route
     from gt_matching.route import RouteBorder
 
     centre, headings = kinked_path(turns, segment_m)
@@ -225,7 +230,8 @@ def test_route_border_distances_equal_a_kd_tree_over_its_samples_on_sharp_kinks(
     rng = np.random.default_rng(seed)
     along, _ = resample(border.vertices, 0.1)
     points = along + rng.normal(0.0, noise_m, along.shape)
-    found = border.distances(points, exact=False)
+    with mock.patch.object(route, "KD_TREE_SAMPLES", 0 if long_border else route.KD_TREE_SAMPLES):
+        found = border.distances(points, exact=False)
     expected = cKDTree(border.samples).query(points)[0]
     np.testing.assert_allclose(found.distances, expected, rtol=0.0, atol=1e-12)
     exact = border.distances(points, exact=True)
