@@ -167,7 +167,7 @@ def gap_errors(road: AnalyticRoad, s_end: float, s_coop: float, noise_m: float =
     fits = lane_end_fits((to_world(ego.left, ego.pose), to_world(ego.right, ego.pose)),
                          (to_world(coop.left, coop.pose), to_world(coop.right, coop.pose)),
                          FusionParams().heading_window_m)
-    arc_gaps = hermite_lane(fits, FusionParams().spacing_m, clothoid=False)
+    arc_gaps = hermite_lane(fits, FusionParams().spacing_m, share=0.0)
     arc = max(float(distance_to_polyline(g, t).max()) if g.shape[0] else 0.0 for g, t in zip(arc_gaps, truth))
     errors["arc"] = arc
     return errors

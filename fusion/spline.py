@@ -22,6 +22,7 @@ _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _STRAIGHT_SIGMAS: Final[float] = 2.5
+TRANSITION_SHARE: float = 0.5
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
@@ -202,7 +203,7 @@ def _straight(fit: EndFit) -> bool:
 
 
 def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
-                 clothoid: bool | None = None) -> tuple[NDArrayFloat, NDArrayFloat]:
+                 share: float | None = None) -> tuple[NDArrayFloat, NDArrayFloat]:
     """G1/G2 gap interpolation of both borders of a lane; returns the (left, right) gap points.
 
     ``fits`` are the least-squares end fits of (ego left, ego right, coop left, coop right)
@@ -210,15 +211,15 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
     borders of a lane are parallel), which halves the heading variance. Each border's gap
     is :func:`hermite_gap` between the fitted ends. When all four border ends are straight
     (zero curvature within noise), the turn lies wholly inside the gap and the arc, whose
-    curvature would jump at the ends, is replaced by a clothoid pair; ``clothoid`` forces
-    (``True``) or forbids (``False``) it.
+    curvature would jump at the ends, gets clothoids (``share`` of the turn, default
+    TRANSITION_SHARE; ``share`` given: used for every turn, 0 = the arc).
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    if clothoid is None:
-        clothoid = all(_straight(fit) for fit in fits)
-    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, clothoid),
-            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m, clothoid))
+    if share is None:
+        share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
+    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, share),
+            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m, share))
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
@@ -233,21 +234,25 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
     return fits[0], fits[1], fits[2], fits[3]
 
 
-def clothoid_pair_tangent(turn_rad: float) -> float:
-    """Tangent length of the symmetric clothoid pair of half length 1 turning by ``turn_rad``.
+def transition_tangent(turn_rad: float, share: float) -> float:
+    """Tangent length of the symmetric clothoid–arc–clothoid turn of arc radius 1 [m].
 
-    Each half is a clothoid from curvature 0 to ``turn_rad`` (heading change turn/2); the
-    pair's end is F + e^{iθ}·conj(F) with F = ∫₀¹ e^{iθs²/2} ds (16-point Gauss–Legendre,
-    exact to 1e-12 for |θ| ≤ π). Returns the distance from its start to where the end
-    tangents meet.
+    The turn ``turn_rad`` is split into two clothoids (curvature linear between 0 and 1, each
+    turning ``share``·|turn|/2, so each 2·that long) and an arc between them (the rest of
+    the turn). By symmetry the end is H + e^{iθ}·conj(H) for the first half H (clothoid by
+    16-point Gauss–Legendre, exact to 1e-12 for |θ| ≤ π, then half the arc in closed form);
+    returns the distance from the start to where the end tangents meet.
     """
-    half = complex(np.dot(_GL_WEIGHTS, np.exp(0.5j * turn_rad * _GL_NODES * _GL_NODES)))
-    end = half + complex(math.cos(turn_rad), math.sin(turn_rad)) * half.conjugate()
-    return end.real - end.imag / math.tan(turn_rad)
+    theta = abs(turn_rad)
+    spiral, arc = share * theta, (1.0 - share) * theta
+    half = complex(spiral * np.dot(_GL_WEIGHTS, np.exp(0.5j * spiral * _GL_NODES * _GL_NODES)))
+    half += complex(math.cos(0.5 * spiral), math.sin(0.5 * spiral)) * (complex(math.cos(0.5 * arc), math.sin(0.5 * arc)) - 1.0) / 1j
+    end = half + complex(math.cos(theta), math.sin(theta)) * half.conjugate()
+    return end.real - end.imag / math.tan(theta)
 
 
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
-                spacing_m: float, clothoid: bool = False) -> NDArrayFloat:
+                spacing_m: float, share: float = 0.0) -> NDArrayFloat:
     """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``).
 
     The two tangent lines meet at P_i, at distance a from p0 and b from p3. The curve is the
@@ -256,10 +261,10 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     longer side. A circular arc between the ends is therefore reproduced exactly (a = b),
     and so is a curve that starts or ends inside the gap; it is sampled in closed form every
     ≤ ``spacing_m``, ends excluded. (A cubic Bézier with arms (4/3)·R·tan(θ/4) would
-    approximate the same arc to 3·10⁻⁴·R.) With ``clothoid`` the arc is replaced by the
-    symmetric clothoid pair of the same tangent length m (curvature rising linearly from 0
-    and back, half length m / :func:`clothoid_pair_tangent`): a G2 turn between straight
-    ends. Parallel or S-shaped end tangents (no triangle ahead of both ends) use a cubic
+    approximate the same arc to 3·10⁻⁴·R.) With ``share`` > 0 the arc is replaced by the
+    symmetric clothoid–arc–clothoid turn of the same tangent length m whose clothoids take
+    that share of the turn (:func:`transition_tangent`; 1 = a clothoid pair): a G2 turn
+    between straight ends. Parallel or S-shaped end tangents (no triangle ahead of both ends) use a cubic
     Bézier with arms of a third of the chord.
     """
     chord = p3 - p0
@@ -272,9 +277,10 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     if a <= 0.0 or b <= 0.0:
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     m = min(a, b)
-    if clothoid:
-        half = m / clothoid_pair_tangent(turn)
-        arc = 2.0 * half
+    if share > 0.0:
+        radius = m / transition_tangent(turn, share)
+        spiral, arc_turn = share * abs(turn) * radius, (1.0 - share) * abs(turn)
+        arc = 2.0 * spiral + arc_turn * radius
     else:
         radius = m / math.tan(abs(turn) / 2.0)
         arc = radius * abs(turn)
@@ -287,11 +293,12 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     ua = np.clip(u - lead, 0.0, arc)
     start = complex(*(p0 + lead * d0).tolist())
     direction = complex(*d0.tolist())
-    if clothoid:
+    if share > 0.0:
         mid = 0.5 * (ua + np.concatenate(([0.0], ua[:-1])))
-        rise = np.minimum(mid, half) / half
-        fall = np.maximum(mid - half, 0.0) / half
-        heading = (0.5 * turn) * (rise * rise + fall * (2.0 - fall))
+        rise = np.minimum(mid, spiral)
+        fall = np.maximum(mid - spiral - arc_turn * radius, 0.0)
+        along = np.clip(mid - spiral, 0.0, arc_turn * radius)
+        heading = math.copysign(1.0 / radius, turn) * (0.5 * rise * rise / spiral + along + fall - 0.5 * fall * fall / spiral)
         z = start + direction * np.cumsum(np.diff(ua, prepend=0.0) * np.exp(1j * heading))
     else:
         kappa = math.copysign(abs(turn) / arc, turn)
