@@ -15,7 +15,8 @@ from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_leng
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
-#: Every this many GT samples seed the closest-point search (KD-tree).
+#: Every this many GT samples of a lanelet border are its guess samples (KD-tree): other
+#: lines' samples near them are "near the border", those very near "on the border".
 GUESS_STRIDE: Final = 3
 #: Coarse samples of a border (the exact nearest-sample search starts from them): every
 #: this many samples at least, and at most this many in all.
@@ -29,7 +30,7 @@ KD_TREE_SAMPLES: Final = 16384
 ANCHOR_STRIDE: Final = 20
 #: Arc length either side of an interpolated seed searched for the nearest sample, m.
 ANCHOR_REACH_M: Final = 0.2
-#: Points farther than this from the border are searched globally (KD-tree), m.
+#: Points farther than this from the border are searched over all samples, m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
 #: near one are searched globally (a second minimum may start there), rad.
@@ -91,8 +92,8 @@ class BorderDistances:
 @dataclass(frozen=True, eq=False)
 class BorderPart:
     """One lanelet's left or right border in driving order, prepared once per map; its
-    KD-trees and clearances to other lines are built on first use and shared by every
-    route through the lanelet.
+    guess samples' KD-tree and its clearances to other lines are built on first use
+    (``GroundTruth`` builds them with the map) and shared by every route through it.
 
     Fields:
         vertices: ``(N, 2)`` vertices, world frame, m.
@@ -199,7 +200,8 @@ class RouteBorder:
     driving order) and its samples every ``step_m``, with what is needed to find each
     detected point's closest GT point and whether another lane's border is closer.
 
-    Assembly only joins the parts' arrays: KD-trees and clearances live in the parts."""
+    Assembly only joins the parts' arrays: clearances live in the parts; a KD-tree of the
+    samples is built only for long borders, on first use."""
 
     def __init__(self, lines: MapLines, parts: list[BorderPart], ignored: set[int]) -> None:
         """``parts``: the lanelets' borders in driving order (same ``step_m``, reach and
