@@ -9,6 +9,7 @@ borders are sampled by arc length in one vectorised pass (:func:`sample_pieces`)
 
 from __future__ import annotations
 
+import cmath
 import math
 from typing import Final, Sequence
 
@@ -22,7 +23,7 @@ _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _STRAIGHT_SIGMAS: Final[float] = 2.5
-TRANSITION_SHARE: float = 0.5
+TRANSITION_SHARE: Final[float] = 0.5  # share of a turn between straight ends in its clothoids (equal thirds)
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
@@ -246,8 +247,8 @@ def transition_tangent(turn_rad: float, share: float) -> float:
     theta = abs(turn_rad)
     spiral, arc = share * theta, (1.0 - share) * theta
     half = complex(spiral * np.dot(_GL_WEIGHTS, np.exp(0.5j * spiral * _GL_NODES * _GL_NODES)))
-    half += complex(math.cos(0.5 * spiral), math.sin(0.5 * spiral)) * (complex(math.cos(0.5 * arc), math.sin(0.5 * arc)) - 1.0) / 1j
-    end = half + complex(math.cos(theta), math.sin(theta)) * half.conjugate()
+    half += cmath.exp(0.5j * spiral) * (cmath.exp(0.5j * arc) - 1.0) / 1j
+    end = half + cmath.exp(1j * theta) * half.conjugate()
     return end.real - end.imag / math.tan(theta)
 
 
@@ -298,7 +299,8 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
         rise = np.minimum(mid, spiral)
         fall = np.maximum(mid - spiral - arc_turn * radius, 0.0)
         along = np.clip(mid - spiral, 0.0, arc_turn * radius)
-        heading = math.copysign(1.0 / radius, turn) * (0.5 * rise * rise / spiral + along + fall - 0.5 * fall * fall / spiral)
+        heading = (0.5 * rise * rise / spiral + along + fall - 0.5 * fall * fall / spiral)
+        heading *= math.copysign(1.0 / radius, turn)
         z = start + direction * np.cumsum(np.diff(ua, prepend=0.0) * np.exp(1j * heading))
     else:
         kappa = math.copysign(abs(turn) / arc, turn)

@@ -11,15 +11,14 @@ from fusion.analytic import AnalyticRoad, Segment, family_case, gap_errors
 from fusion.errors import InvalidParameterError
 from fusion.spline import hermite_gap, transition_tangent
 
+NDArrayComplex = np.ndarray
+
 
 def dense_pair(turn: float, n: int = 200_000) -> NDArrayComplex:
     """Midpoint-rule points of the clothoid pair of half length 1 (start 0, heading 0)."""
     s = (np.arange(n) + 0.5) * (2.0 / n)
     heading = np.where(s < 1.0, 0.5 * turn * s * s, turn - 0.5 * turn * (2.0 - s) ** 2)
     return np.cumsum(np.exp(1j * heading)) * (2.0 / n)
-
-
-NDArrayComplex = np.ndarray
 
 
 @pytest.mark.parametrize("turn_deg", [-100.0, -45.0, 10.0, 90.0])
