@@ -196,8 +196,9 @@ class Measurement:
 class GroundTruthMeter:
     """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
     (``GroundTruth.errors``: per-point distances to the GT borders resampled every
-    ``step_m``, samples and KD-trees cached per lanelet). Matches of the last few
-    reference lanes are kept: the scenarios of a frame share their coops' true lanes."""
+    ``step_m``, samples cached per lanelet; without the other-lane check, which the
+    reports do not use). Matches of the last few reference lanes are kept: the scenarios
+    of a frame share their coops' true lanes."""
 
     def __init__(self, ground_truth: GroundTruth) -> None:
         self.ground_truth = ground_truth
@@ -220,7 +221,7 @@ class GroundTruthMeter:
 
     def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``."""
-        found = self.ground_truth.errors(left, right, match)
+        found = self.ground_truth.errors(left, right, match, others=False)
         return Measurement(found.left.distances_m, found.right.distances_m,
                            float(found.left.arc_m[-1] - found.left.arc_m[0]),
                            float(found.right.arc_m[-1] - found.right.arc_m[0]),

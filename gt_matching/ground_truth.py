@@ -197,13 +197,16 @@ class GroundTruth:
             mismatch=mismatch,
         )
 
-    def errors(self, left: npt.ArrayLike, right: npt.ArrayLike, match: LaneMatch, *, exact: bool = False) -> LaneErrors:
+    def errors(
+        self, left: npt.ArrayLike, right: npt.ArrayLike, match: LaneMatch, *, exact: bool = False, others: bool = True
+    ) -> LaneErrors:
         """Per-point closest-point errors of a detected lane against the GT of ``match``
         (from ``match()`` on this lane, or on a reference lane that it should follow).
 
         ``exact`` False: distances to the GT resampled every ``config.step_m`` (the paper's
         method, floor up to ``step_m / 2``); True: point-to-segment distances to the GT
-        polyline.
+        polyline. ``others`` False skips the check for other lanes' borders closer than
+        the GT: ``unmatched`` then marks only points beyond ``max_distance_m``.
         """
         left_xy, right_xy = as_polyline("left border", left), as_polyline("right border", right)
         unknown = [key for key in match.route_key if key not in self._geometry]
@@ -213,7 +216,7 @@ class GroundTruth:
         config = self.config
         borders = []
         for points, border in ((left_xy, route.left), (right_xy, route.right)):
-            found = border.distances(points, exact=exact)
+            found = border.distances(points, exact=exact, others=others)
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
             borders.append(BorderErrors(distances_m=found.distances, arc_m=found.arc_m, unmatched=unmatched))
         return LaneErrors(left=borders[0], right=borders[1], match=match, exact=exact, step_m=config.step_m)

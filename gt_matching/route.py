@@ -25,6 +25,9 @@ MAX_COARSE_SAMPLES: Final = 256
 #: Borders with more samples than this find nearest samples with a KD-tree (its build
 #: time pays off over the frames of a long route; short routes change often).
 KD_TREE_SAMPLES: Final = 16384
+#: Borders asked for distances more often than this also get one (a route measured many
+#: times: every lane of every frame while a drive stays on it).
+KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its arc length along the detection.
 ANCHOR_STRIDE: Final = 20
@@ -208,6 +211,7 @@ class RouteBorder:
         margin); ``ignored``: line string ids that are never another lane's border (this
         border's own lines and those of lanelets overlapping the route)."""
         first = parts[0]
+        self._calls = 0
         self.step_m = first.step_m
         self.reach_m = first.reach_m
         self.other_margin_m = first.other_margin_m
@@ -278,9 +282,8 @@ class RouteBorder:
         (every ``_coarse_stride``-th sample of each part and each part's ends), so the
         nearest one, at distance d, lies within that many samples of a coarse sample within
         d + half a stride of the point, and d is at most the distance to the nearest coarse
-        sample (or ``within``). Borders of more than ``KD_TREE_SAMPLES`` samples ask a
-        KD-tree of all samples instead (built on first use)."""
-        if len(self.samples) > KD_TREE_SAMPLES:
+        sample (or ``within``). A border with a KD-tree (``_uses_tree``) asks it instead."""
+        if self._uses_tree():
             distance, sample = self._tree.query(points)
             return distance, sample
         coarse = self._squared_distances(points, self._coarse_index[None, :])
@@ -300,7 +303,7 @@ class RouteBorder:
 
     @cached_property
     def _tree(self) -> cKDTree:
-        """KD-tree of all samples (long borders: kept with the route, reused by its frames)."""
+        """KD-tree of all samples (built on first use, kept with the route)."""
         from scipy.spatial import cKDTree
 
         return cKDTree(self.samples)
@@ -347,14 +350,27 @@ class RouteBorder:
         rows = np.arange(len(points))
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
         distance, sample = np.sqrt(squared[rows, closest]), around[rows, closest]
+        settled = np.zeros(len(points), dtype=bool)
+        settled[inside] = self._smooth(distance[inside], sample[inside])
+        return distance, sample, settled
+
+    def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:
+        """Whether no kink or lanelet joint near each point's nearest sample (index
+        ``sample``, ``distance`` m away) may start another minimum (``_clear_of_breaks``)."""
         arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         breaks = self._break_arc
         low, high = np.searchsorted(breaks, arc - reach), np.searchsorted(breaks, arc + reach, side="right")
         smooth = low == high
-        check = np.flatnonzero(inside & ~smooth)
+        check = np.flatnonzero(~smooth)
         if len(check):
             smooth[check] = self._clear_of_breaks(arc[check], distance[check], low[check], high[check])
-        return distance, sample, inside & smooth
+        return smooth
+
+    def _uses_tree(self) -> bool:
+        """Whether nearest samples come from a KD-tree of all samples: for a long border,
+        or one asked for distances more than ``KD_TREE_CALLS`` times (its build time then
+        pays off)."""
+        return self._calls > KD_TREE_CALLS or len(self.samples) > KD_TREE_SAMPLES
 
     def _clear_of_breaks(
         self, arc: NDArrayFloat, distance: NDArrayFloat, low: NDArrayInt, high: NDArrayInt
@@ -381,36 +397,42 @@ class RouteBorder:
             clear &= far | (low + offset >= high)
         return clear
 
-    def distances(self, points: NDArrayFloat, *, exact: bool) -> BorderDistances:
+    def distances(self, points: NDArrayFloat, *, exact: bool, others: bool = True) -> BorderDistances:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
-        border.
+        border, and (``others``; else all False) whether another lane's border is closer.
 
-        Every ``ANCHOR_STRIDE``-th point finds its nearest sample (``_nearest``); the arc
-        lengths of the points between are interpolated
-        along the detection, and each point takes the nearest sample within
-        ``ANCHOR_REACH_M`` of that. Where that window cannot settle it (minimum on its
-        edge, a kink or lanelet joint near it, or the point farther than
-        ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is the
-        smallest to the segments within two steps of the nearest sample (twice the
-        distance for the points ``_nearest`` answered). Only points far enough off the
-        border to possibly be closer to another line (by the clearance of the checkpoints
-        around the nearest sample) are checked against the other lines.
+        A border with a KD-tree (``_uses_tree``) asks it for every point. Otherwise every
+        ``ANCHOR_STRIDE``-th point finds its nearest sample (``_nearest``); the arc lengths
+        of the points between are interpolated along the detection, and each point takes
+        the nearest sample within ``ANCHOR_REACH_M`` of that. Where that window cannot
+        settle it (minimum on its edge, a kink or lanelet joint near it, or the point
+        farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is
+        the smallest to the segments within two steps of the nearest sample (twice the
+        distance for the points near a kink or joint, or far). Only points far enough off
+        the border to possibly be closer to another line (by the clearance of the
+        checkpoints around the nearest sample) are checked against the other lines.
         """
-        anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
-        anchors[-1] = len(points) - 1
-        along = arc_lengths(points)
-        seed = np.interp(along, along[anchors], self.sample_arc[self._nearest(points[anchors])[1]])
-        resampled, sample, settled = self._nearest_samples(points, seed, ANCHOR_REACH_M)
-        redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
-        if len(redo):
-            resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
+        self._calls += 1
+        if self._uses_tree():
+            resampled, sample = self._tree.query(points)
+            redo = np.flatnonzero(~self._smooth(resampled, sample) | (resampled > REFINE_DISTANCE_M))
+        else:
+            anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
+            anchors[-1] = len(points) - 1
+            along = arc_lengths(points)
+            seed = np.interp(along, along[anchors], self.sample_arc[self._nearest(points[anchors])[1]])
+            resampled, sample, settled = self._nearest_samples(points, seed, ANCHOR_REACH_M)
+            redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
+            if len(redo):
+                resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
         arc = self.sample_arc[sample]
-        after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
-        clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
-        suspect = 2.0 * resampled > clearance + self.other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
         other_closer = np.zeros(len(points), dtype=bool)
-        if np.any(suspect):
-            other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - self.other_margin_m)
+        if others:
+            after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
+            clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
+            suspect = 2.0 * resampled > clearance + self.other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
+            if np.any(suspect):
+                other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - self.other_margin_m)
         if exact:
             exact_distance, exact_arc = windowed_distances(points, self.vertices, arc, 2.0 * self.step_m)
             if len(redo):

@@ -259,6 +259,22 @@ def test_point_closer_to_another_lanes_border_is_unmatched(junction: JunctionMap
     assert metrics.left.unmatched_points == 0
 
 
+def test_errors_without_the_other_lane_check_keep_the_distances(junction: JunctionMap) -> None:
+    """others=False: the same distances; only points beyond max_distance_m are unmatched.
+    Right-border points moved 2.0 m left are 1.5 m from the left border (unmatched by the
+    other-border rule), those moved 2.5 m right are beyond max_distance_m = 2.2 m."""
+    gt = GroundTruth(junction.map, junction.graph, config=MatchingConfig(max_distance_m=2.2))
+    left, right = route(junction, "approach").borders(5.0, 35.0)
+    right = right.copy()
+    right[:50, 1] += 2.0
+    right[50:60, 1] -= 2.5
+    match = gt.match(left, right, (5.0, 0.0, 0.0))
+    checked, unchecked = gt.errors(left, right, match), gt.errors(left, right, match, others=False)
+    np.testing.assert_array_equal(checked.right.distances_m, unchecked.right.distances_m)
+    assert checked.right.metrics().unmatched_points == 60
+    assert unchecked.right.metrics().unmatched_points == 10
+
+
 def test_match_lane_function_agrees_with_ground_truth(junction: JunctionMap) -> None:
     left, right = route(junction, "approach", "right", "right_exit").borders(15.0, 75.0)
     found = match_lane(junction.map, junction.graph, left, right, (15.0, 0.0, 0.0))
