@@ -415,7 +415,9 @@ class RouteBorder:
         self._calls += 1
         if self._uses_tree():
             resampled, sample = self._tree.query(points)
-            redo = np.flatnonzero(~self._smooth(resampled, sample) | (resampled > REFINE_DISTANCE_M))
+            redo = np.empty(0, dtype=np.int64)
+            if exact:
+                redo = np.flatnonzero(~self._smooth(resampled, sample) | (resampled > REFINE_DISTANCE_M))
         else:
             anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
             anchors[-1] = len(points) - 1
