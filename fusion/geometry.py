@@ -14,7 +14,10 @@ _SIGMA_FLOOR_M: Final[float] = 0.002
 _CI_FACTOR: Final[float] = 2.5
 _CURVATURE_CHANGE_SIGMAS: Final[float] = 3.0
 _CUBIC_ARC_BIAS: Final[float] = 0.05
-_HANKEL: Final = np.add.outer(np.arange(4), np.arange(4))
+_EYE4: Final[NDArrayFloat] = np.eye(4)
+# Power sums of a window by slot: n, Σx … Σx⁶ (1–6), Σy, Σy·x, Σy·x², Σy·x³ (7–10).
+_CUBIC_NORMAL: Final = np.add.outer(np.arange(4), np.arange(4))
+_CUBIC_RHS: Final = np.arange(7, 11)
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
@@ -79,15 +82,10 @@ def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArra
     return best[1], best[0], best[2]
 
 
-def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
-    """Unit tangent ``(dx, dy)`` at the last (``at_end``) or first point, by a chord.
-
-    The chord spans about ``window_m`` of the polyline (at least one segment), assuming
-    roughly even spacing; it points in driving direction.
-    """
-    n = points.shape[0]
-    (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
-    k = max(1, _points_in(window_m, math.hypot(x1 - x0, y1 - y0) / (n - 1), n - 1))
+def _chord(points: NDArrayFloat, at_end: bool, k: int, first: list[float], last: list[float]) -> tuple[float, float]:
+    """Unit vector from the point ``k`` before the last one to the last (``at_end``), or from the
+    first point to the point ``k`` after it; the whole polyline's chord when that is zero."""
+    (x0, y0), (x1, y1) = first, last
     if at_end:
         px, py = points[-1 - k].tolist()
         vx, vy = x1 - px, y1 - py
@@ -99,6 +97,18 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
         vx, vy = x1 - x0, y1 - y0
         norm = math.hypot(vx, vy) or 1.0
     return vx / norm, vy / norm
+
+
+def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
+    """Unit tangent ``(dx, dy)`` at the last (``at_end``) or first point, by a chord.
+
+    The chord spans about ``window_m`` of the polyline (at least one segment), assuming
+    roughly even spacing; it points in driving direction.
+    """
+    n = points.shape[0]
+    first, last = points[0].tolist(), points[-1].tolist()
+    k = max(1, _points_in(window_m, math.hypot(last[0] - first[0], last[1] - first[1]) / (n - 1), n - 1))
+    return _chord(points, at_end, k, first, last)
 
 
 @dataclass(frozen=True)
@@ -114,23 +124,6 @@ class EndFit:
     direction: tuple[float, float]
     curvature: float
     curvature_sigma: float
-
-
-def _cubic_terms(count: NDArrayFloat, sums: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
-    """Cubic coefficient d of a least-squares ``y = a + b·x + c·x² + d·x³`` per end, and σ_d per
-    metre of noise, by Cramer's rule on the normal equations. ``count`` (E,) holds the number
-    of points, ``sums`` (10, E) the sums of x, x², x³, x⁴, y, y·x, y·x², x⁵, x⁶, y·x³ over them."""
-    powers = np.stack((count, sums[0], sums[1], sums[2], sums[3], sums[7], sums[8]))
-    normal = powers[_HANKEL].transpose(2, 0, 1)
-    systems = np.zeros((count.shape[0], 3, 4, 4))
-    systems[:, 0] = normal
-    systems[:, 1] = normal
-    systems[:, 1, :, 3] = sums[[4, 5, 6, 9]].T
-    systems[:, 2, :3, :3] = normal[:, :3, :3]
-    systems[:, 2, 3, 3] = 1.0
-    full, replaced, minor = np.linalg.det(systems).T
-    full = np.where(full != 0.0, full, math.inf)
-    return replaced / full, np.sqrt(np.abs(minor / full))
 
 
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
@@ -153,47 +146,59 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     8–100 m radius), by more than 3σ_d + 0.05·|κ|³·L. A clothoid (d ≈ κ'/6 for a curvature
     rate κ') or a junction of line and arc inside the window fails that test. A border whose
     shortest window holds fewer than four points gets its end point, the chord direction and
-    zero curvature of infinite uncertainty. All borders share one vectorised pass.
+    zero curvature of infinite uncertainty.
+
+    The power sums of every window of every border come from one masked matrix product, the
+    cubics of all borders from one batched solve; the windows' quadratics are solved by
+    Cramer's rule on floats, stopping at the first window the rule rejects.
     """
-    n_ends = len(borders)
-    counts, chords, origins = [], [], []
+    n_ends, n_windows = len(borders), len(windows_m)
+    counts, chords, origins, curves = [], [], [], []
     for points, end in zip(borders, at_end):
         n = points.shape[0]
-        (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
-        step = math.hypot(x1 - x0, y1 - y0) / (n - 1)
+        first, last = points[0].tolist(), points[-1].tolist()
+        step = math.hypot(last[0] - first[0], last[1] - first[1]) / (n - 1)
         counts.append([_points_in(w, step, n - 1) + 1 for w in windows_m])
-        chords.append(end_direction(points, end, windows_m[0]))
-        origins.append(points[-1] if end else points[0])
+        chords.append(complex(*_chord(points, end, max(1, _points_in(windows_m[0], step, n - 1)), first, last)))
+        origins.append(last if end else first)
+        curves.append(np.ascontiguousarray(points).view(np.complex128)[:, 0])
     k_max = max(c[-1] for c in counts)
-    windows = np.zeros((n_ends, k_max, 2))
-    for e, (points, end) in enumerate(zip(borders, at_end)):
-        m = min(k_max, points.shape[0])
-        windows[e, :m] = points[:-m - 1:-1] if end else points[:m]
+    windows = np.zeros((n_ends, k_max), dtype=np.complex128)
+    for e, (z, end) in enumerate(zip(curves, at_end)):
+        m = min(k_max, z.shape[0])
+        windows[e, :m] = z[:-m - 1:-1] if end else z[:m]
     n_noise = min(k_max, min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
-    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2)) / (12.0 * n_ends * max(1, n_noise - 2))))
-    direction = np.array(chords)
-    rel = windows - windows[:, :1]
-    x = (rel @ direction[:, :, None])[:, :, 0]
-    y = (rel @ (direction[:, ::-1] * (-1.0, 1.0))[:, :, None])[:, :, 0]
-    x2 = x * x
-    x3 = x2 * x
-    sums = np.cumsum(np.stack((x, x2, x3, x2 * x2, y, y * x, y * x2, x3 * x2, x3 * x3, y * x3)), axis=2)
-    idx = np.array(counts) - 1
-    rows = np.arange(n_ends)
-    cubic, cubic_sigma = (v.tolist() for v in _cubic_terms(idx[:, -1] + 1.0, sums[:, rows, idx[:, -1]]))
-    x_far = x[rows, idx[:, -1]].tolist()
-    cells = sums[:7, rows[:, None], idx].transpose(1, 2, 0).tolist()
+    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2).real) / (12.0 * n_ends * max(1, n_noise - 2))))
+    local = (windows - windows[:, :1]) * np.conj(chords)[:, None]
+    x, y = local.real, local.imag
+    powers = np.empty((n_ends, 11, k_max))
+    powers[:, 0] = 1.0
+    powers[:, 1] = x
+    for j in range(2, 7):
+        np.multiply(powers[:, j - 1], x, out=powers[:, j])
+    np.multiply(powers[:, :4], y[:, None], out=powers[:, 7:])
+    count = np.array(counts)
+    inside = (np.arange(k_max) < count[..., None]).astype(np.float64)
+    sums = inside @ powers.transpose(0, 2, 1)
+    cubic_normal = sums[:, -1, _CUBIC_NORMAL]
+    full = np.linalg.det(cubic_normal)
+    solvable = full != 0.0
+    rhs = np.zeros((n_ends, 4, 2))
+    rhs[:, :, 0] = sums[:, -1, _CUBIC_RHS]
+    rhs[:, 3, 1] = 1.0
+    solution = np.linalg.solve(np.where(solvable[:, None, None], cubic_normal, _EYE4), rhs)[:, 3]
+    cubic = np.where(solvable, solution[:, 0], 0.0).tolist()
+    cubic_var = np.where(solvable, solution[:, 1], 0.0).tolist()
+    x_far = x[np.arange(n_ends), count[:, -1] - 1].tolist()
+    cells = sums[..., :10].tolist()
     fits = []
     for e in range(n_ends):
-        cx, cy = chords[e]
-        fallback = EndFit(origins[e], (cx, cy), 0.0, math.inf)
+        direction = chords[e]
         chosen: tuple[float, float] | None = None
         curvature = curvature_sigma = 0.0
         lo, hi = -math.inf, math.inf
-        for w in range(len(windows_m)):
-            k = float(counts[e][w])
-            s1, s2, s3, s4, t0, t1, t2 = cells[e][w]
+        for k, s1, s2, s3, s4, _, _, t0, t1, t2 in cells[e]:
             m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
             det = k * m0 - s1 * m1 + s2 * m2
             if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
@@ -208,17 +213,18 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             scale = 2.0 / math.hypot(1.0, b) ** 3
             chosen = (a, b)
             curvature, curvature_sigma = scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
+        if chosen is None:
+            fits.append(EndFit(np.array(origins[e]), (direction.real, direction.imag), 0.0, math.inf))
+            continue
         arc_cubic = curvature ** 3 * x_far[e] / 6.0
-        if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * cubic_sigma[e]
+        if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * math.sqrt(abs(cubic_var[e]))
                                         + _CUBIC_ARC_BIAS * abs(curvature) ** 3 * abs(x_far[e])):
             curvature_sigma = math.inf
-        if chosen is None:
-            fits.append(fallback)
-            continue
         offset, slope = chosen
-        norm = math.hypot(1.0, slope)
-        point = origins[e] + offset * np.array((-cy, cx))
-        fits.append(EndFit(point, ((cx - slope * cy) / norm, (cy + slope * cx) / norm), curvature, curvature_sigma))
+        point = complex(*origins[e]) + offset * 1j * direction
+        tangent = direction * complex(1.0, slope) / math.hypot(1.0, slope)
+        fits.append(EndFit(np.array((point.real, point.imag)), (tangent.real, tangent.imag), curvature,
+                           curvature_sigma))
     return fits
 
 
