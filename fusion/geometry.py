@@ -175,32 +175,34 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     powers = np.empty((n_ends, 11, k_max))
     powers[:, 0] = 1.0
     powers[:, 1] = x
-    for j in range(2, 7):
-        np.multiply(powers[:, j - 1], x, out=powers[:, j])
+    np.multiply(x, x, out=powers[:, 2])
+    np.multiply(powers[:, 2], x, out=powers[:, 3])
+    np.multiply(powers[:, 1:4], powers[:, 3:4], out=powers[:, 4:7])
     np.multiply(powers[:, :4], y[:, None], out=powers[:, 7:])
     count = np.array(counts)
     inside = (np.arange(k_max) < count[..., None]).astype(np.float64)
     sums = inside @ powers.transpose(0, 2, 1)
     cubic_normal = sums[:, -1, _CUBIC_NORMAL]
-    full = np.linalg.det(cubic_normal)
-    solvable = full != 0.0
     rhs = np.zeros((n_ends, 4, 2))
     rhs[:, :, 0] = sums[:, -1, _CUBIC_RHS]
     rhs[:, 3, 1] = 1.0
-    solution = np.linalg.solve(np.where(solvable[:, None, None], cubic_normal, _EYE4), rhs)[:, 3]
-    cubic = np.where(solvable, solution[:, 0], 0.0).tolist()
-    cubic_var = np.where(solvable, solution[:, 1], 0.0).tolist()
+    try:
+        solution = np.linalg.solve(cubic_normal, rhs)[:, 3]
+    except np.linalg.LinAlgError:  # fewer than four distinct x in a window: d = σ_d = 0 there
+        solvable = np.linalg.det(cubic_normal) != 0.0
+        solution = np.linalg.solve(np.where(solvable[:, None, None], cubic_normal, _EYE4), rhs)[:, 3]
+        solution *= solvable[:, None]
+    cubic, cubic_var = solution.T.tolist()
     x_far = x[np.arange(n_ends), count[:, -1] - 1].tolist()
     cells = sums[..., :10].tolist()
     fits = []
     for e in range(n_ends):
         direction = chords[e]
-        chosen: tuple[float, float] | None = None
-        curvature = curvature_sigma = 0.0
+        chosen = None
         lo, hi = -math.inf, math.inf
         for k, s1, s2, s3, s4, _, _, t0, t1, t2 in cells[e]:
-            m0, m1, m2 = s2 * s4 - s3 * s3, s1 * s4 - s3 * s2, s1 * s3 - s2 * s2
-            det = k * m0 - s1 * m1 + s2 * m2
+            m1 = s1 * s4 - s3 * s2
+            det = k * (s2 * s4 - s3 * s3) - s1 * m1 + s2 * (s1 * s3 - s2 * s2)
             if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
                 break
             b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
@@ -208,21 +210,22 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             lo, hi = max(lo, b - half), min(hi, b + half)
             if lo > hi:
                 break
-            a = (t0 * m0 - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
-            c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * m2) / det
-            scale = 2.0 / math.hypot(1.0, b) ** 3
-            chosen = (a, b)
-            curvature, curvature_sigma = scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
+            chosen = (k, s1, s2, s3, s4, t0, t1, t2, det, b)
         if chosen is None:
             fits.append(EndFit(np.array(origins[e]), (direction.real, direction.imag), 0.0, math.inf))
             continue
+        k, s1, s2, s3, s4, t0, t1, t2, det, slope = chosen
+        a = (t0 * (s2 * s4 - s3 * s3) - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+        c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * (s1 * s3 - s2 * s2)) / det
+        norm = math.hypot(1.0, slope)
+        scale = 2.0 / norm ** 3
+        curvature, curvature_sigma = scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
         arc_cubic = curvature ** 3 * x_far[e] / 6.0
         if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * math.sqrt(abs(cubic_var[e]))
                                         + _CUBIC_ARC_BIAS * abs(curvature) ** 3 * abs(x_far[e])):
             curvature_sigma = math.inf
-        offset, slope = chosen
-        point = complex(*origins[e]) + offset * 1j * direction
-        tangent = direction * complex(1.0, slope) / math.hypot(1.0, slope)
+        point = complex(*origins[e]) + a * 1j * direction
+        tangent = direction * complex(1.0, slope) / norm
         fits.append(EndFit(np.array((point.real, point.imag)), (tangent.real, tangent.imag), curvature,
                            curvature_sigma))
     return fits
