@@ -217,6 +217,10 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
+    ends = ((fits[0].point, fits[2].point), (fits[1].point, fits[3].point))
+    if all(_tangent_triangle(p0, d0, p3, d1) is None for p0, p3 in ends):
+        left, right = sample_pieces([[_bezier_piece(p0, d0, p3, d1)] for p0, p3 in ends], spacing_m)
+        return left, right
     if share is None:
         share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
     return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, share),
@@ -252,6 +256,21 @@ def transition_tangent(turn_rad: float, share: float) -> float:
     return end.real - end.imag / math.tan(theta)
 
 
+def _tangent_triangle(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat,
+                      d1: NDArrayFloat) -> tuple[float, float, float] | None:
+    """``(turn, a, b)``: the signed turn [rad] from ``d0`` to ``d1`` and the distances [m] from ``p0``
+    and from ``p3`` to where the two tangent lines meet; ``None`` when they meet behind either
+    end or the turn is below 1 mrad (no circular arc: straight or S-shaped)."""
+    chord = p3 - p0
+    denom = _cross(d0[0], d0[1], d1[0], d1[1])
+    turn = math.atan2(denom, float(d0 @ d1))
+    if abs(turn) < _MIN_ARC_TURN_RAD:
+        return None
+    a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
+    b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
+    return None if a <= 0.0 or b <= 0.0 else (turn, a, b)
+
+
 def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat,
                 spacing_m: float, share: float = 0.0) -> NDArrayFloat:
     """G1 Hermite interpolation from ``p0`` (direction ``d0``) to ``p3`` (``d1``).
@@ -268,15 +287,10 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     between straight ends. Parallel or S-shaped end tangents (no triangle ahead of both ends) use a cubic
     Bézier with arms of a third of the chord.
     """
-    chord = p3 - p0
-    denom = _cross(d0[0], d0[1], d1[0], d1[1])
-    turn = math.atan2(denom, float(d0 @ d1))
-    if abs(turn) < _MIN_ARC_TURN_RAD:
+    triangle = _tangent_triangle(p0, d0, p3, d1)
+    if triangle is None:
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
-    a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
-    b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
-    if a <= 0.0 or b <= 0.0:
-        return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
+    turn, a, b = triangle
     m = min(a, b)
     if share > 0.0:
         radius = m / transition_tangent(turn, share)
