@@ -261,13 +261,13 @@ def _tangent_triangle(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat,
     """``(turn, a, b)``: the signed turn [rad] from ``d0`` to ``d1`` and the distances [m] from ``p0``
     and from ``p3`` to where the two tangent lines meet; ``None`` when they meet behind either
     end or the turn is below 1 mrad (no circular arc: straight or S-shaped)."""
-    chord = p3 - p0
-    denom = _cross(d0[0], d0[1], d1[0], d1[1])
-    turn = math.atan2(denom, float(d0 @ d1))
+    (x0, y0), (ux, uy), (x3, y3), (vx, vy) = p0.tolist(), d0.tolist(), p3.tolist(), d1.tolist()
+    denom = _cross(ux, uy, vx, vy)
+    turn = math.atan2(denom, ux * vx + uy * vy)
     if abs(turn) < _MIN_ARC_TURN_RAD:
         return None
-    a = _cross(chord[0], chord[1], d1[0], d1[1]) / denom
-    b = _cross(d0[0], d0[1], chord[0], chord[1]) / denom
+    a = _cross(x3 - x0, y3 - y0, vx, vy) / denom
+    b = _cross(ux, uy, x3 - x0, y3 - y0) / denom
     return None if a <= 0.0 or b <= 0.0 else (turn, a, b)
 
 
@@ -304,10 +304,10 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     n_steps = math.ceil(total / spacing_m * (1.0 + 1e-9))
     if n_steps < 2:
         return np.empty((0, 2))
-    u = np.linspace(0.0, total, n_steps + 1)[1:-1]
+    u = np.arange(1.0, n_steps) * (total / n_steps)
     ua = np.clip(u - lead, 0.0, arc)
-    start = complex(*(p0 + lead * d0).tolist())
     direction = complex(*d0.tolist())
+    start = complex(*p0.tolist()) + lead * direction
     if share > 0.0:
         mid = 0.5 * (ua + np.concatenate(([0.0], ua[:-1])))
         rise = np.minimum(mid, spiral)
@@ -319,9 +319,10 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     else:
         kappa = math.copysign(abs(turn) / arc, turn)
         z = start + direction * (np.exp(1j * kappa * ua) - 1.0) / (1j * kappa)
-    out = z.view(np.float64).reshape(-1, 2).copy()
-    before = u < lead
-    out[before] = p0 + u[before, None] * d0
-    after = u > lead + arc
-    out[after] = (p3 - b * d1 + m * d1) + (u[after] - lead - arc)[:, None] * d1
+    out = z.view(np.float64).reshape(-1, 2)
+    n_before, n_inside = int(np.searchsorted(u, lead)), int(np.searchsorted(u, lead + arc, side="right"))
+    if n_before > 0:
+        out[:n_before] = p0 + u[:n_before, None] * d0
+    if n_inside < u.shape[0]:
+        out[n_inside:] = (p3 - b * d1 + m * d1) + (u[n_inside:] - lead - arc)[:, None] * d1
     return out
