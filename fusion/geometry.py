@@ -153,20 +153,21 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     Cramer's rule on floats, stopping at the first window the rule rejects.
     """
     n_ends, n_windows = len(borders), len(windows_m)
-    counts, chords, origins, curves = [], [], [], []
+    counts, chords, origins = [], [], []
     for points, end in zip(borders, at_end):
         n = points.shape[0]
         first, last = points[0].tolist(), points[-1].tolist()
         step = math.hypot(last[0] - first[0], last[1] - first[1]) / (n - 1)
-        counts.append([_points_in(w, step, n - 1) + 1 for w in windows_m])
-        chords.append(complex(*_chord(points, end, max(1, _points_in(windows_m[0], step, n - 1)), first, last)))
+        count = [_points_in(w, step, n - 1) + 1 for w in windows_m]
+        counts.append(count)
+        chords.append(complex(*_chord(points, end, max(1, count[0] - 1), first, last)))
         origins.append(last if end else first)
-        curves.append(np.ascontiguousarray(points).view(np.complex128)[:, 0])
     k_max = max(c[-1] for c in counts)
-    windows = np.zeros((n_ends, k_max), dtype=np.complex128)
-    for e, (z, end) in enumerate(zip(curves, at_end)):
-        m = min(k_max, z.shape[0])
-        windows[e, :m] = z[:-m - 1:-1] if end else z[:m]
+    stacked = np.zeros((n_ends, k_max, 2))
+    for e, (points, end) in enumerate(zip(borders, at_end)):
+        m = min(k_max, points.shape[0])
+        stacked[e, :m] = points[:-m - 1:-1] if end else points[:m]
+    windows = stacked.view(np.complex128)[..., 0]
     n_noise = min(k_max, min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
     sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2).real) / (12.0 * n_ends * max(1, n_noise - 2))))
