@@ -245,11 +245,11 @@ class RouteBorder:
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
         )
-        ignored_slots = lines.slots(ignored)
+        ignored_slots = set(lines.slots(ignored).tolist())
         clearance = []
         for part in parts:
             slots, rows = part.clearances
-            kept = rows[~np.isin(slots, ignored_slots)]
+            kept = rows[[slot not in ignored_slots for slot in slots.tolist()]]
             cap = np.full(rows.shape[1], part.clearance_cap_m)
             clearance.append(np.minimum(cap, kept.min(axis=0)) if len(kept) else cap)
         self._clearance = np.concatenate(clearance)
