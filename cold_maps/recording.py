@@ -5,8 +5,10 @@ Channels (all JSON-encoded, schemas in ``jsonschema``):
 - ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the Foxglove
   JSON schema, with the item schemas of the primitive lists we always leave empty reduced to
   their title). One entity per polyline, a ``LINE_STRIP`` in frame ``map`` (= the world
-  frame, m, z = 0, rounded to 0.1 mm). Every update first deletes all older entities on its
-  topic, so the 3D panel shows exactly the current frame.
+  frame, m, z = 0), simplified to within 1 cm (Douglas-Peucker; the lines are drawn
+  0.15 m wide, straight stretches cost two points) and rounded to 0.1 mm. Every update
+  first deletes all older entities on its topic, so the 3D panel shows exactly the
+  current frame.
 - ``/cold/detections``: ``cold.LaneDetection`` (:data:`LANE_DETECTION_SCHEMA`), the raw
   detections for re-fusion.
 - ``/metrics``: ``cold.FrameMetrics`` (:data:`FRAME_METRICS_SCHEMA`), a flat object of
@@ -49,7 +51,7 @@ STATUS_COMPLETE: Final[str] = "complete"
 STATUS_PARTIAL: Final[str] = "partial"
 LINE_THICKNESS_M: Final[float] = 0.15
 DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
-DISPLAY_TOLERANCE_M: Final[float] = 1e-3  # SceneUpdate lines simplified to within this distance
+DISPLAY_TOLERANCE_M: Final[float] = 0.01  # SceneUpdate lines simplified to within this distance
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 
 RGBA = tuple[float, float, float, float]

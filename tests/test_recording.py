@@ -118,7 +118,7 @@ def test_scene_updates_are_line_strips_in_the_map_frame_at_the_world_pose(record
     assert entities["left"]["frame_id"] == "map" and line["type"] == 0
     assert entities["left"]["timestamp"] == {"sec": 0, "nsec": 200_000_000}
     # ego at (10, 5) heading north: vehicle (x, 1.75) -> world (10 - 1.75, 5 + x)
-    # a straight border is drawn as its two end points (1 mm simplification, 0.1 mm rounding)
+    # a straight border is drawn as its two end points (1 cm simplification, 0.1 mm rounding)
     left, _ = lane(2)
     points = np.array([[p["x"], p["y"], p["z"]] for p in line["points"]])
     np.testing.assert_allclose(points[:, 0], 10.0 - 1.75, atol=0.5e-4)
