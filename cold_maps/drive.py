@@ -50,7 +50,14 @@ Role = Literal["ego", "coop", "turn", "adjacent", "opposite", "behind"]
 
 
 class DriveError(ValueError):
-    """A drive that cannot be built (no drivable route, a route too short); names the map."""
+    """A drive that cannot be built (no drivable route, a route too short); names the map.
+
+    ``longest_m`` is the longest route there was (m), or None when unknown.
+    """
+
+    def __init__(self, message: str, *, longest_m: float | None = None) -> None:
+        super().__init__(message)
+        self.longest_m = longest_m
 
 
 @dataclass(frozen=True)
@@ -252,8 +259,8 @@ def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
     startable = [lane for lane in graph.lanes if longest[lane] >= length_m]
     if not startable:
         best = max(longest.values())
-        raise DriveError(f"{_map_name(graph)}: no drivable route of {length_m:.0f} m (longest {best:.0f} m); "
-                         "use fewer --frames")
+        raise DriveError(f"{_map_name(graph)}: no drivable route of {length_m:.0f} m (longest {best:.0f} m)",
+                         longest_m=best)
     covered: set[LaneKey] = set()
     routes: list[tuple[LaneKey, ...]] = []
     while len(routes) < (MAX_COVER_ROUTES if count is None else count):
@@ -276,7 +283,7 @@ def route_from_start(graph: LaneGraph, start: LaneKey, length_m: float,
     if lanes is None:
         longest = longest_route_lengths(graph)[start]
         raise DriveError(f"{_map_name(graph)}: no route of {length_m:.0f} m from lane {tuple(start)} "
-                         f"(longest {longest:.0f} m); use fewer --frames")
+                         f"(longest {longest:.0f} m)", longest_m=longest)
     return lanes
 
 

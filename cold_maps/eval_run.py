@@ -73,6 +73,15 @@ def prepare_out_dir(path: str | os.PathLike[str]) -> Path:
     return out
 
 
+def _missing_folders(path: Path) -> list[Path]:
+    """``path`` and its parents that do not exist yet, innermost first."""
+    missing = []
+    while not path.exists() and path != path.parent:
+        missing.append(path)
+        path = path.parent
+    return missing
+
+
 def _file_part(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
@@ -185,13 +194,22 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
                    ) -> RunResult:
     """Prepares every map (routes, ground truth), then evaluates them all into one MCAP and
     one report. ``extra_sections(collector, results)`` returns more (title, markdown)
-    summary sections. Bad input raises before any output file is opened; an exception
+    summary sections. Bad input raises before any output file is opened (and removes the
+    output folder again when it created it); an exception
     during the run (Ctrl-C included) ends it with partial outputs, returned in the result."""
+    created = _missing_folders(Path(options.out))
     out = prepare_out_dir(options.out)
-    evaluators = [MapEvaluator(plan) for plan in plans]
-    for evaluator in evaluators:
-        LOG.info("%s: preparing ground truth", evaluator.plan.path)
-        evaluator.prepare()
+    try:
+        evaluators = [MapEvaluator(plan) for plan in plans]
+        for evaluator in evaluators:
+            LOG.info("%s: preparing ground truth", evaluator.plan.path)
+            evaluator.prepare()
+    except BaseException:
+        for folder in created:
+            if any(folder.iterdir()):
+                break
+            folder.rmdir()
+        raise
     collector = Collector()
     error: BaseException | None = None
     total = sum(e.total_frames for e in evaluators)

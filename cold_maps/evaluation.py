@@ -31,6 +31,7 @@ from cold_maps.drive import (
     DEFAULT_SPEED_MPS,
     FRAME_RATE_HZ,
     Drive,
+    DriveError,
     VehicleState,
     build_drive,
     covering_routes,
@@ -352,15 +353,34 @@ class MapEvaluator:
         distractor_leads = leads if plan.distractors else ()
         length = required_route_length(plan.frames, leads, behind_m=max(distractor_leads, default=0.0),
                                        speed_mps=plan.speed_mps)
-        if plan.start_lane is None:
-            routes = covering_routes(self.graph, plan.routes, length, self.rng)
-        else:
-            routes = [route_from_start(self.graph, plan.start_lane, length, self.rng)
-                      for _ in range(plan.routes or 1)]
+        try:
+            if plan.start_lane is None:
+                routes = covering_routes(self.graph, plan.routes, length, self.rng)
+            else:
+                routes = [route_from_start(self.graph, plan.start_lane, length, self.rng)
+                          for _ in range(plan.routes or 1)]
+        except DriveError as exc:
+            if exc.longest_m is None:
+                raise
+            raise DriveError(f"{exc}; {self._length_hint(exc.longest_m)}", longest_m=exc.longest_m) from None
         covered = {lane for route in routes for lane in route}
         drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads, distractor_leads_m=distractor_leads,
                               rng=self.rng, speed_mps=plan.speed_mps) for lanes in routes]
         return drives, (len(covered), len(self.graph.lanes))
+
+    def _length_hint(self, longest_m: float) -> str:
+        """What to change when the longest route (m) is too short for the plan's drives."""
+        plan = self.plan
+        leads = plan.coop_leads_m
+        behind = max(leads, default=0.0) if plan.distractors else 0.0
+        one = required_route_length(1, leads, behind_m=behind, speed_mps=plan.speed_mps)
+        if longest_m >= one:
+            step_m = plan.speed_mps / FRAME_RATE_HZ
+            return f"at most {1 + int((longest_m - one) // step_m)} --frames fit"
+        what = "shorter --gaps" + (" or --no-distractors" if behind > 0 else "")
+        return (f"even one frame needs {one:.0f} m (coops up to {max(leads, default=0.0):g} m ahead, "
+                f"{SENSOR_RANGE_M:g} m sensor range" + (f", a vehicle {behind:g} m behind" if behind > 0 else "")
+                + f"): use {what}")
 
     def prepare(self) -> None:
         """Loads (or converts, cached) the Lanelet2 ground truth if not given."""

@@ -81,7 +81,8 @@ class BorderDistances:
 
     Fields:
         distances: per point, m (exact, or to the GT resampled every ``step_m``).
-        arc_m: per point, arc length of its closest GT point along the border, m.
+        arc_m: per point, arc length of its closest GT point along the border, m; on a closed
+            border continuous across its seam (may then leave [0, length]).
         other_closer: per point, True when a border of another lane (not this GT border,
             not a lanelet overlapping the route) is closer than this GT border by more than
             the margin (both resampled every ``step_m``).
@@ -221,6 +222,9 @@ class RouteBorder:
         self.vertices: NDArrayFloat = np.concatenate([part.vertices for part in parts])
         self.samples: NDArrayFloat = np.concatenate([part.samples for part in parts])
         cum = arc_lengths(self.vertices)
+        closed = len(self.vertices) > 2 and float(np.hypot(*(self.vertices[-1] - self.vertices[0]))) <= self.step_m
+        self.loop_m: float | None = float(cum[-1]) if closed else None
+        """Length (m) of a border that ends where it starts (a ring road), else None."""
         arc_offsets = cum[np.cumsum([0] + [len(part.vertices) for part in parts[:-1]])]
         self.sample_arc: NDArrayFloat = np.concatenate(
             [offset + part.sample_arc_m for offset, part in zip(arc_offsets, parts)]
@@ -442,5 +446,13 @@ class RouteBorder:
                 # within twice that of the sample (along a border, arc ~ chord).
                 reach = 2.0 * float(np.max(resampled[redo])) + 2.0 * self.step_m
                 exact_distance[redo], exact_arc[redo] = windowed_distances(points[redo], self.vertices, arc[redo], reach)
-            return BorderDistances(distances=exact_distance, arc_m=exact_arc, other_closer=other_closer)
-        return BorderDistances(distances=resampled, arc_m=arc, other_closer=other_closer)
+            return BorderDistances(distances=exact_distance, arc_m=self._unwrap(exact_arc), other_closer=other_closer)
+        return BorderDistances(distances=resampled, arc_m=self._unwrap(arc), other_closer=other_closer)
+
+    def _unwrap(self, arc: NDArrayFloat) -> NDArrayFloat:
+        """On a closed border, arc lengths made continuous across its seam (a jump by more
+        than half the loop counts as crossing it), so the last minus the first is the
+        distance driven; unchanged otherwise."""
+        if self.loop_m is None or len(arc) < 2:
+            return arc
+        return np.unwrap(arc, period=self.loop_m)
