@@ -7,6 +7,11 @@ We also skip its lane join/split "mirroring", which moves the borders of a lane 
 opens or closes from zero width (bundled highway.xodr: lane -4 off by up to 4 m), so the
 lanelets keep the OpenDRIVE borders. And we record, before crdesigner renumbers its
 lanelets and forgets where they came from, the OpenDRIVE lanes each lanelet covers.
+crdesigner 0.8.5 crashes (AttributeError ``has_unique_pred_succ_relation``) on every
+lanelet with an opposite-direction right neighbour and a unique successor, i.e. on any
+left-hand-traffic road with two lane sections or a road link: its right-side neighbour
+check calls the network's method on the lanelet. We replace that check by the same check
+called on the network (``_adjacent_consistent``, identical to its left-side twin).
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -177,6 +182,7 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
     with (
         _ONE_AT_A_TIME,
         mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders),
+        mock.patch.object(ConversionLaneletNetwork, "adj_right_consistent_nb", _right_consistent),
         mock.patch.object(network_module, "convert_to_base_lanelet_network", recording_to_base),
     ):
         return network.export_commonroad_scenario(GeneralConfig(), config), sources
@@ -186,6 +192,26 @@ def _opendrive_lane(parametric_lane_id: str) -> tuple[str, int, int]:
     """(road id, section index, lane id) of crdesigner's "road.section.lane.width.mark" id."""
     road, section, lane = parametric_lane_id.split(".")[:3]
     return road, int(section), int(lane)
+
+
+def _adjacent_consistent(network: Any, lanelet: Any, side: str) -> bool:
+    """crdesigner's ``adj_<side>_consistent_nb``: the ``side`` neighbour of the lanelet's
+    successor is the successor (same direction) or predecessor (opposite direction) of
+    the lanelet's ``side`` neighbour, and that relation is one-to-one."""
+    successor = network.find_lanelet_by_id(lanelet.successor[0])
+    neighbour = network.find_lanelet_by_id(getattr(lanelet, f"adj_{side}"))
+    if not neighbour:
+        return getattr(successor, f"adj_{side}") is None
+    same = getattr(lanelet, f"adj_{side}_same_direction")
+    if not network.has_unique_pred_succ_relation(1 if same else -1, neighbour):
+        return False
+    follower = neighbour.successor[0] if same else neighbour.predecessor[0]
+    return follower == getattr(successor, f"adj_{side}")
+
+
+def _right_consistent(network: Any, lanelet: Any) -> bool:
+    """``adj_right_consistent_nb`` without crdesigner 0.8.5's AttributeError."""
+    return _adjacent_consistent(network, lanelet, "right")
 
 
 def _keep_borders(network: object) -> None:

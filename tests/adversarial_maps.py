@@ -120,13 +120,6 @@ def document(roads: list[RoadSpec], *, geo_reference: str = "", junctions: str =
     )
 
 
-def _two_lanes(successor: int | None = None, predecessor: int | None = None) -> tuple[LaneSpec, ...]:
-    return (
-        LaneSpec(1, predecessor=predecessor, successor=successor),
-        LaneSpec(-1, predecessor=predecessor, successor=successor),
-    )
-
-
 def param_poly3_map() -> str:
     """paramPoly3 (normalized, then arcLength), both with non-uniform parameter speed;
     three sections with cubic widths; lane -2 closes to zero width in the last section.
@@ -264,42 +257,58 @@ ARM_LENGTH_M: Final[float] = 50.0
 JUNCTION_HALF_M: Final[float] = 10.0
 
 
+ARM_SPLIT_M: Final[float] = 20.0
+"""s (m) where each junction arm's second lane section starts."""
+
+
 def lht_junction_map() -> str:
-    """A left-hand-traffic four-way junction: four arms leaving the junction along +s (lane
-    1 drives outwards, lane -1 towards the junction) and, for every arm, connecting roads
-    turning left (short arc, radius 10 m), straight and right (long arc), each with one
-    lane 1 driving along +s."""
+    """A left-hand-traffic four-way junction. Four arms leave the junction along +s (lane 1
+    drives outwards, lane -1 towards the junction), each in two lane sections. Every arm
+    has connecting roads turning left (short arc, reference radius 10 m) and right (long
+    arc), drawn from the incoming arm with lane 1 (along +s, contactPoint start), and
+    going straight, drawn backwards from the target arm with lane -1 (against +s,
+    contactPoint end)."""
     arms = []
     for k in range(4):
         theta = k * math.pi / 2
         x, y = JUNCTION_HALF_M * math.cos(theta), JUNCTION_HALF_M * math.sin(theta)
+        sections = (
+            SectionSpec(0.0, (LaneSpec(1, successor=1), LaneSpec(-1, successor=-1))),
+            SectionSpec(ARM_SPLIT_M, (LaneSpec(1, predecessor=1), LaneSpec(-1, predecessor=-1))),
+        )
         arms.append(RoadSpec(str(k + 1), (geometry(0.0, x, y, theta, ARM_LENGTH_M, "<line/>"),), ARM_LENGTH_M,
-                             (SectionSpec(0.0, (LaneSpec(1), LaneSpec(-1))),), rule="LHT",
-                             predecessor=road_link("predecessor", "junction", "100")))  # fmt: skip
+                             sections, rule="LHT", predecessor=road_link("predecessor", "junction", "100")))  # fmt: skip
     connecting = []
     connections = []
     for k in range(4):
         theta = k * math.pi / 2
         start = (JUNCTION_HALF_M * math.cos(theta), JUNCTION_HALF_M * math.sin(theta))
-        for turn, target, shape, length in (
-            ("straight", (k + 2) % 4, "<line/>", 2 * JUNCTION_HALF_M),
-            ("right", (k + 1) % 4, f'<arc curvature="{-1 / JUNCTION_HALF_M!r}"/>', math.pi / 2 * JUNCTION_HALF_M),
-            ("left", (k + 3) % 4, f'<arc curvature="{1 / JUNCTION_HALF_M!r}"/>', math.pi / 2 * JUNCTION_HALF_M),
-        ):
-            road_id = str(200 + 10 * k + len(connecting) % 3)
+        for turn, (target, curvature) in enumerate((((k + 1) % 4, -1 / JUNCTION_HALF_M), ((k + 3) % 4, 1 / JUNCTION_HALF_M))):
+            road_id = f"2{k}{turn}"
             connecting.append(RoadSpec(
-                road_id, (geometry(0.0, start[0], start[1], theta + math.pi, length, shape),), length,
+                road_id, (geometry(0.0, start[0], start[1], theta + math.pi, math.pi / 2 * JUNCTION_HALF_M,
+                                   f'<arc curvature="{curvature!r}"/>'),), math.pi / 2 * JUNCTION_HALF_M,
                 (SectionSpec(0.0, (LaneSpec(1, predecessor=-1, successor=1),)),), rule="LHT", junction="100",
                 predecessor=road_link("predecessor", "road", str(k + 1), "start"),
                 successor=road_link("successor", "road", str(target + 1), "start"),
             ))  # fmt: skip
-            connections.append(
-                f'<connection id="{len(connections)}" incomingRoad="{k + 1}" connectingRoad="{road_id}" '
-                f'contactPoint="start"><laneLink from="-1" to="1"/></connection>'
-            )
-            del turn
-    junction = f'<junction id="100" name="lht">{"".join(connections)}</junction>'
-    return document(arms + connecting, junctions=junction, name="lht-junction")
+            connections.append((k, road_id, "start", 1))
+        target = (k + 2) % 4
+        road_id = f"2{k}2"
+        end = (-start[0], -start[1])
+        connecting.append(RoadSpec(
+            road_id, (geometry(0.0, end[0], end[1], theta, 2 * JUNCTION_HALF_M, "<line/>"),), 2 * JUNCTION_HALF_M,
+            (SectionSpec(0.0, (LaneSpec(-1, predecessor=1, successor=-1),)),), rule="LHT", junction="100",
+            predecessor=road_link("predecessor", "road", str(target + 1), "start"),
+            successor=road_link("successor", "road", str(k + 1), "start"),
+        ))  # fmt: skip
+        connections.append((k, road_id, "end", -1))
+    junction = "".join(
+        f'<connection id="{i}" incomingRoad="{k + 1}" connectingRoad="{road_id}" contactPoint="{contact}">'
+        f'<laneLink from="-1" to="{lane}"/></connection>'
+        for i, (k, road_id, contact, lane) in enumerate(connections)
+    )
+    return document(arms + connecting, junctions=f'<junction id="100" name="lht">{junction}</junction>', name="lht-junction")
 
 
 def georeferenced_map(proj: str, x0: float, y0: float) -> str:

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adversarial_maps import ARM_LENGTH_M, JUNCTION_HALF_M, LANE_WIDTH_M, MAPS, write_maps
+from adversarial_maps import ARM_LENGTH_M, ARM_SPLIT_M, JUNCTION_HALF_M, LANE_WIDTH_M, MAPS, write_maps
 from conftest import PROJECT_ROOT
 
 from cold_maps.cli import main as cold_maps_main
 from cold_maps.cli import map_info
-from cold_maps.lane_graph import LENGTH_STEP_M, build_lane_graph
+from cold_maps.lane_graph import LENGTH_STEP_M, LaneKey, build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import sample_lane_borders
 from cold_maps.route import route_from_lanes
@@ -108,31 +108,34 @@ def test_lht_junction_drives_on_the_left(maps) -> None:
     three other arms, the left turn (radius 10 m - 1.75 m) being the shortest."""
     odr_map = load_opendrive(maps["lht_junction"])
     graph = build_lane_graph(odr_map)
-    for arm in "1234":
-        entering = next(lane for lane in graph.lanes if lane.road_id == arm and lane.lane_id == -1)
+    half = LANE_WIDTH_M / 2
+    # samples every step of s on the reference arc (radius R0 = 10 m) are chords of the
+    # same angle on every lane: lengths fall short by step²/(24·R0²) (relative)
+    chord = 1 - LENGTH_STEP_M**2 / (24 * JUNCTION_HALF_M**2)
+    for k in range(4):
+        entering = LaneKey(str(k + 1), 0, -1)
+        assert graph.predecessors[entering] == (LaneKey(str(k + 1), 1, -1),)
         targets = {}
         for connector in graph.successors[entering]:
             (leaving,) = graph.successors[connector]
-            assert leaving.lane_id == 1
+            assert (leaving.section, leaving.lane_id) == (0, 1)
             targets[leaving.road_id] = graph.lengths[connector]
-        k = int(arm) - 1
         left, straight, right = (str((k + d) % 4 + 1) for d in (3, 2, 1))
         assert set(targets) == {left, straight, right}
-        half = LANE_WIDTH_M / 2
-        # samples every step of s on the reference arc (radius R0 = 10 m) are chords of the
-        # same angle on every lane: lengths fall short by step²/(24·R0²) (relative)
-        chord = 1 - LENGTH_STEP_M**2 / (24 * JUNCTION_HALF_M**2)
         assert targets[straight] == pytest.approx(2 * JUNCTION_HALF_M, abs=1e-6)
         assert targets[left] == pytest.approx(math.pi / 2 * (JUNCTION_HALF_M - half) * chord, rel=1e-5)
         assert targets[right] == pytest.approx(math.pi / 2 * (JUNCTION_HALF_M + half) * chord, rel=1e-5)
-    road = odr_map.roads["1"]
-    # arm 1 runs east from (10, 0): lane 1 (outwards) is north of the reference line in LHT
-    out = route_from_lanes(graph, [next(lane for lane in graph.lanes if lane.road_id == "1" and lane.lane_id == 1)])
-    assert out.centre[0] == pytest.approx((JUNCTION_HALF_M, LANE_WIDTH_M / 2), abs=1e-9)
-    assert out.centre[-1] == pytest.approx((JUNCTION_HALF_M + road.length, LANE_WIDTH_M / 2), abs=1e-9)
-    # the driver's left border is the outer one (t = 3.5 m) in LHT
+    # arm 1 runs east from (10, 0): lane 1 (outwards) is north of the reference line in
+    # LHT, and the driver's left border is its outer one (t = 3.5 m)
+    out = route_from_lanes(graph, [LaneKey("1", 0, 1), LaneKey("1", 1, 1)])
+    assert out.centre[0] == pytest.approx((JUNCTION_HALF_M, half), abs=1e-9)
+    assert out.centre[-1] == pytest.approx((JUNCTION_HALF_M + ARM_LENGTH_M, half), abs=1e-9)
     assert out.left[0] == pytest.approx((JUNCTION_HALF_M, LANE_WIDTH_M), abs=1e-9)
-    assert road.length == ARM_LENGTH_M
+    # straight through, entering on arm 1 (lane -1, south of it) and leaving on arm 3 (x < 0)
+    (straight_in,) = [c for c in graph.successors[LaneKey("1", 0, -1)] if graph.successors[c][0].road_id == "3"]
+    through = route_from_lanes(graph, [LaneKey("1", 0, -1), straight_in, LaneKey("3", 0, 1)])
+    assert through.centre[0] == pytest.approx((JUNCTION_HALF_M + ARM_SPLIT_M, -half), abs=1e-9)
+    assert through.centre[-1] == pytest.approx((-JUNCTION_HALF_M - ARM_SPLIT_M, -half), abs=1e-9)
 
 
 def test_border_records_closed_form(maps) -> None:
