@@ -12,6 +12,9 @@ lanelet with an opposite-direction right neighbour and a unique successor, i.e. 
 left-hand-traffic road with two lane sections or a road link: its right-side neighbour
 check calls the network's method on the lanelet. We replace that check by the same check
 called on the network (``_adjacent_consistent``, identical to its left-side twin).
+crdesigner also reads road and junction ids as integers, while OpenDRIVE ids are strings:
+a map with other ids is converted from a copy with integer ids (``integer_ids``), and the
+lanelets' OpenDRIVE lanes name the original roads.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -21,6 +24,7 @@ import contextlib
 import io
 import logging
 import os
+import tempfile
 import threading
 import warnings
 from collections.abc import Iterator
@@ -132,11 +136,22 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     or finds no lanelet.
     """
     geo_reference = read_geo_reference(path)
-    with _quiet(verbose):
+    renumbered = integer_ids(path.read_bytes())
+    with _quiet(verbose), tempfile.TemporaryDirectory(prefix="cold-maps-ids-") as folder:
+        source = path
+        if renumbered is not None:
+            source = Path(folder) / path.name
+            source.write_bytes(renumbered[0])
         try:
-            scenario, sources = _run_crdesigner(path)
+            scenario, sources = _run_crdesigner(source)
         except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
             raise ConversionError(str(path), f"converter crashed: {type(exc).__name__}: {exc}") from exc
+    if renumbered is not None:
+        original = renumbered[1]
+        sources = {
+            lanelet: tuple((original.get(road, road), section, lane) for road, section, lane in lanes)
+            for lanelet, lanes in sources.items()
+        }
     lanelets = [
         SourceLanelet(
             id=int(lanelet.lanelet_id),
@@ -155,6 +170,58 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
         if not (np.isfinite(lanelet.left).all() and np.isfinite(lanelet.right).all()):
             raise ConversionError(str(path), f"the converter produced non-finite vertices in lanelet {lanelet.id}")
     return lanelets, geo_reference
+
+
+_ROAD_REFERENCES: Final[tuple[tuple[str, str], ...]] = (
+    ("connection", "incomingRoad"),
+    ("connection", "connectingRoad"),
+    ("connection", "linkedRoad"),
+)
+
+
+def _is_integer(text: str) -> bool:
+    try:
+        int(text)
+    except ValueError:
+        return False
+    return True
+
+
+def integer_ids(data: bytes) -> tuple[bytes, dict[str, str]] | None:
+    """``data`` with every non-integer road and junction id replaced by a fresh integer,
+    and the map from new road id to original road id; None when every id is an integer.
+
+    References are rewritten with them: road ``junction``, link ``elementId`` (by its
+    ``elementType``) and junction connection roads. ``data`` has been checked by
+    ``read_geo_reference``.
+    """
+    root = etree.fromstring(data, _hardened_parser())
+    roads = [e for e in root if etree.QName(e).localname == "road"]
+    junctions = [e for e in root if etree.QName(e).localname == "junction"]
+    renames: dict[str, dict[str, str]] = {}
+    for kind, elements in (("road", roads), ("junction", junctions)):
+        ids = [e.get("id", "") for e in elements]
+        taken = [int(i) for i in ids if _is_integer(i)]
+        fresh = iter(range(max(taken, default=0) + 1, 1 << 62))
+        renames[kind] = {i: str(next(fresh)) for i in dict.fromkeys(ids) if not _is_integer(i)}
+    if not renames["road"] and not renames["junction"]:
+        return None
+    road_ids, junction_ids = renames["road"], renames["junction"]
+    for element in root.iter():
+        if not isinstance(element.tag, str):
+            continue
+        name = etree.QName(element).localname
+        if name in ("road", "junction") and element.getparent() is root:
+            element.set("id", renames[name].get(element.get("id", ""), element.get("id", "")))
+        if name == "road" and element.get("junction") in junction_ids:
+            element.set("junction", junction_ids[element.get("junction")])
+        if name in ("predecessor", "successor") and element.get("elementId") is not None:
+            table = junction_ids if element.get("elementType") == "junction" else road_ids
+            element.set("elementId", table.get(element.get("elementId"), element.get("elementId")))
+        for tag, attribute in _ROAD_REFERENCES:
+            if name == tag and element.get(attribute) in road_ids:
+                element.set(attribute, road_ids[element.get(attribute)])
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), {new: old for old, new in road_ids.items()}
 
 
 def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]]]:

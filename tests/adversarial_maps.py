@@ -261,13 +261,14 @@ ARM_SPLIT_M: Final[float] = 20.0
 """s (m) where each junction arm's second lane section starts."""
 
 
-def lht_junction_map() -> str:
+def lht_junction_map(prefix: str = "") -> str:
     """A left-hand-traffic four-way junction. Four arms leave the junction along +s (lane 1
     drives outwards, lane -1 towards the junction), each in two lane sections. Every arm
     has connecting roads turning left (short arc, reference radius 10 m) and right (long
     arc), drawn from the incoming arm with lane 1 (along +s, contactPoint start), and
     going straight, drawn backwards from the target arm with lane -1 (against +s,
-    contactPoint end)."""
+    contactPoint end). Road and junction ids start with ``prefix``
+    (non-integer ids when it is not empty)."""
     arms = []
     for k in range(4):
         theta = k * math.pi / 2
@@ -276,39 +277,39 @@ def lht_junction_map() -> str:
             SectionSpec(0.0, (LaneSpec(1, successor=1), LaneSpec(-1, successor=-1))),
             SectionSpec(ARM_SPLIT_M, (LaneSpec(1, predecessor=1), LaneSpec(-1, predecessor=-1))),
         )
-        arms.append(RoadSpec(str(k + 1), (geometry(0.0, x, y, theta, ARM_LENGTH_M, "<line/>"),), ARM_LENGTH_M,
-                             sections, rule="LHT", predecessor=road_link("predecessor", "junction", "100")))  # fmt: skip
+        arms.append(RoadSpec(f"{prefix}{k + 1}", (geometry(0.0, x, y, theta, ARM_LENGTH_M, "<line/>"),), ARM_LENGTH_M,
+                             sections, rule="LHT", predecessor=road_link("predecessor", "junction", f"{prefix}100")))  # fmt: skip
     connecting = []
     connections = []
     for k in range(4):
         theta = k * math.pi / 2
         start = (JUNCTION_HALF_M * math.cos(theta), JUNCTION_HALF_M * math.sin(theta))
         for turn, (target, curvature) in enumerate((((k + 1) % 4, -1 / JUNCTION_HALF_M), ((k + 3) % 4, 1 / JUNCTION_HALF_M))):
-            road_id = f"2{k}{turn}"
+            road_id = f"{prefix}2{k}{turn}"
             connecting.append(RoadSpec(
                 road_id, (geometry(0.0, start[0], start[1], theta + math.pi, math.pi / 2 * JUNCTION_HALF_M,
                                    f'<arc curvature="{curvature!r}"/>'),), math.pi / 2 * JUNCTION_HALF_M,
-                (SectionSpec(0.0, (LaneSpec(1, predecessor=-1, successor=1),)),), rule="LHT", junction="100",
-                predecessor=road_link("predecessor", "road", str(k + 1), "start"),
-                successor=road_link("successor", "road", str(target + 1), "start"),
+                (SectionSpec(0.0, (LaneSpec(1, predecessor=-1, successor=1),)),), rule="LHT", junction=f"{prefix}100",
+                predecessor=road_link("predecessor", "road", f"{prefix}{k + 1}", "start"),
+                successor=road_link("successor", "road", f"{prefix}{target + 1}", "start"),
             ))  # fmt: skip
             connections.append((k, road_id, "start", 1))
         target = (k + 2) % 4
-        road_id = f"2{k}2"
+        road_id = f"{prefix}2{k}2"
         end = (-start[0], -start[1])
         connecting.append(RoadSpec(
             road_id, (geometry(0.0, end[0], end[1], theta, 2 * JUNCTION_HALF_M, "<line/>"),), 2 * JUNCTION_HALF_M,
-            (SectionSpec(0.0, (LaneSpec(-1, predecessor=1, successor=-1),)),), rule="LHT", junction="100",
-            predecessor=road_link("predecessor", "road", str(target + 1), "start"),
-            successor=road_link("successor", "road", str(k + 1), "start"),
+            (SectionSpec(0.0, (LaneSpec(-1, predecessor=1, successor=-1),)),), rule="LHT", junction=f"{prefix}100",
+            predecessor=road_link("predecessor", "road", f"{prefix}{target + 1}", "start"),
+            successor=road_link("successor", "road", f"{prefix}{k + 1}", "start"),
         ))  # fmt: skip
         connections.append((k, road_id, "end", -1))
     junction = "".join(
-        f'<connection id="{i}" incomingRoad="{k + 1}" connectingRoad="{road_id}" contactPoint="{contact}">'
+        f'<connection id="{i}" incomingRoad="{prefix}{k + 1}" connectingRoad="{road_id}" contactPoint="{contact}">'
         f'<laneLink from="-1" to="{lane}"/></connection>'
         for i, (k, road_id, contact, lane) in enumerate(connections)
     )
-    return document(arms + connecting, junctions=f'<junction id="100" name="lht">{junction}</junction>', name="lht-junction")
+    return document(arms + connecting, junctions=f'<junction id="{prefix}100" name="lht">{junction}</junction>', name="lht-junction")
 
 
 def georeferenced_map(proj: str, x0: float, y0: float) -> str:
@@ -360,6 +361,7 @@ MAPS: Final[dict[str, object]] = {
     "param_poly3": param_poly3_map,
     "spirals": spiral_map,
     "lht_junction": lht_junction_map,
+    "named_ids": lambda: lht_junction_map("arm-"),
     "tmerc": lambda: georeferenced_map(TMERC, 512345.678, 412345.6),
     "utm": lambda: georeferenced_map(UTM, 691234.5, 5334567.8),
     "no_geo": lambda: georeferenced_map("", 0.0, 0.0),

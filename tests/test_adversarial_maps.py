@@ -27,7 +27,7 @@ from cold_maps.route import route_from_lanes
 from cold_maps.routing import random_route
 
 MM = 1e-3
-AGREEING = ("spirals", "lht_junction", "tmerc", "utm", "no_geo", "lane_offset")
+AGREEING = ("spirals", "lht_junction", "named_ids", "tmerc", "utm", "no_geo", "lane_offset")
 """Maps on which both implementations follow the spec the same way."""
 CONTINUITY_M = 0.01
 
@@ -210,3 +210,37 @@ def test_param_poly3_is_sampled_by_arc_length(maps) -> None:
     x, y, _ = reference_pose(road, s)
     steps = np.hypot(np.diff(x), np.diff(y))
     np.testing.assert_allclose(steps, s[1] - s[0], rtol=1e-5)
+
+
+def test_integer_ids_renumbers_only_non_integer_ids(maps) -> None:
+    """crdesigner reads ids as integers: "arm-…" roads and junction get fresh integers
+    above the largest integer id, every reference follows, integer maps are untouched."""
+    from lxml import etree
+
+    from converters.crdesigner_bridge import integer_ids
+
+    assert integer_ids(maps["lht_junction"].read_bytes()) is None
+    data, original = integer_ids(maps["named_ids"].read_bytes())
+    renamed = etree.fromstring(data)
+    road_ids = [road.get("id") for road in renamed.iter("road")]
+    assert sorted(map(int, road_ids)) == list(range(1, 17))
+    assert sorted(original.values()) == sorted(road.id for road in load_opendrive(maps["named_ids"]).roads.values())
+    (junction,) = renamed.iter("junction")
+    assert junction.get("id") == "1"
+    assert {road.get("junction") for road in renamed.iter("road")} == {"-1", "1"}
+    references = [e.get("elementId") for e in renamed.iter("predecessor", "successor") if e.get("elementId")]
+    references += [c.get(a) for c in renamed.iter("connection") for a in ("incomingRoad", "connectingRoad")]
+    assert references and all(r in road_ids or r == "1" for r in references)
+
+
+def test_crosscheck_names_a_map_crdesigner_cannot_read(maps, tool, capsys, monkeypatch) -> None:
+    """A crdesigner parser failure is one line on stderr naming the map, exit status 1."""
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser import parser
+
+    def failing(*args, **kwargs):
+        raise KeyError("lane")
+
+    monkeypatch.setattr(parser, "parse_opendrive", failing)
+    assert tool.main([str(maps["no_geo"])]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(maps["no_geo"]) in err and "KeyError" in err

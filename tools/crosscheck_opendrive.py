@@ -5,7 +5,9 @@ every --step m) are compared with crdesigner's own parser and lane-border evalua
 (``OpenDriveConverter.lane_section_to_parametric_lanes`` → ``ParametricLane`` borders),
 sampled on the same s grid into a polyline. Printed per map: p50 / p99 / max of the
 distance from each of our points to the other implementation's polyline of the same
-lane border, the worst point, and lanes present on one side only. crdesigner is evaluated
+lane border, the worst point, and lanes present on one side only. Maps with non-integer
+road or junction ids (crdesigner reads them as integers) are renumbered first
+(``converters.crdesigner_bridge.integer_ids``). crdesigner is evaluated
 at our s values (plus the ends of its width pieces), so where both agree the distances
 are round-off, and a purely along-track disagreement is absorbed by the polyline.
 
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,9 +35,14 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat  # noqa: E402
 from cold_maps.opendrive.errors import OpenDriveError  # noqa: E402
 from cold_maps.opendrive.parser import load_opendrive  # noqa: E402
 from cold_maps.opendrive.sampling import sample_road, sample_s  # noqa: E402
+from converters.crdesigner_bridge import integer_ids  # noqa: E402
 
 LaneKey = tuple[str, int, int]
 """(road id, lane-section index, lane id)."""
+
+
+class CrdesignerError(RuntimeError):
+    """crdesigner cannot read a map that our parser accepts (message names the file)."""
 
 
 @dataclass(frozen=True)
@@ -83,9 +91,18 @@ def _their_borders(
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
     logging.getLogger("crdesigner").setLevel(logging.ERROR)
-    with warnings.catch_warnings():
+    renumbered = integer_ids(path.read_bytes())
+    original = {} if renumbered is None else renumbered[1]
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory(prefix="crosscheck-") as folder:
         warnings.simplefilter("ignore")
-        opendrive = parse_opendrive(path)
+        source = path
+        if renumbered is not None:  # crdesigner reads road and junction ids as integers
+            source = Path(folder) / path.name
+            source.write_bytes(renumbered[0])
+        try:
+            opendrive = parse_opendrive(source)
+        except Exception as exc:  # crdesigner raises anything
+            raise CrdesignerError(f"{path}: crdesigner cannot parse the map: {type(exc).__name__}: {exc}") from exc
     borders: dict[LaneKey, tuple[NDArrayFloat, NDArrayFloat]] = {}
     for road in opendrive.roads:
         reference = OpenDriveConverter.create_reference_border(road.plan_view, road.lanes.lane_offsets)
@@ -97,7 +114,7 @@ def _their_borders(
                 if lane_types is not None and group.type not in lane_types:
                     continue
                 road_id, section_index, lane_id, _ = group.id_.split(".")
-                key = (road_id, int(section_index), int(lane_id))
+                key = (original.get(road_id, road_id), int(section_index), int(lane_id))
                 grid = grids.get(key)
                 if grid is None:
                     grid = sample_s(section.sPos, section.sPos + section.length, step)
@@ -185,7 +202,7 @@ def main(argv: Iterable[str] | None = None) -> int:
     for path in args.maps:
         try:
             result = crosscheck(path, args.step, None if args.all_lanes else ("driving",))
-        except (OSError, OpenDriveError) as error:
+        except (OSError, OpenDriveError, CrdesignerError) as error:
             print(f"crosscheck_opendrive: {error}", file=sys.stderr)
             return 1
         print(result.summary())
