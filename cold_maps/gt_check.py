@@ -7,7 +7,9 @@ lanelets near it (maps converted by other tools), the one whose borders lie clos
 The disagreement of a lane is the distance from each of our
 border points to the matched lanelet's corresponding border polyline: the inner border
 is the lanelet's left one in RHT, its right one in LHT. A lane over the threshold, or
-with no lanelet near it, makes the ground truth untrustworthy.
+with no lanelet near it, makes the ground truth untrustworthy. A lane narrower than
+``ZERO_WIDTH_M`` over its whole section has no area to drive: converters drop it
+(crdesigner does), so it is listed apart and not checked.
 """
 
 from __future__ import annotations
@@ -41,6 +43,9 @@ SEARCH_RADIUS_M: Final[float] = 2.0
 RESAMPLE_STEP_M: Final[float] = 0.25
 """Lanelet borders are resampled this finely (m) to find where along them to search the
 closest segment (gt_matching's windowed search, reach = this step)."""
+
+ZERO_WIDTH_M: Final[float] = 1e-3
+"""A lane whose borders are never farther apart than this (m) in its section is zero-width."""
 
 EXIT_TRUSTWORTHY: Final[int] = 0
 EXIT_UNTRUSTWORTHY: Final[int] = 3
@@ -85,6 +90,8 @@ class CheckReport:
         step_m: our sampling step along s (m).
         lanes: one entry per checked lane and section, in map order.
         lanelets: number of lanelets in the converted map.
+        zero_width: (road id, section index, lane id) of the lanes of the checked types
+            that are zero-width over their whole section (not checked).
     """
 
     path: str
@@ -92,6 +99,7 @@ class CheckReport:
     step_m: float
     lanes: tuple[LaneCheck, ...]
     lanelets: int
+    zero_width: tuple[tuple[str, int, int], ...] = ()
 
     @property
     def failing(self) -> tuple[LaneCheck, ...]:
@@ -207,13 +215,21 @@ def check_lanelet_map(
     if not (np.isfinite(threshold_m) and threshold_m > 0.0):
         raise ValueError(f"check: threshold must be a positive length in m, got {threshold_m}")
     index = _LaneletIndex(lanelet_map)
-    lanes = tuple(
-        _check_lane(samples, road.rule, index)
+    sampled = [
+        (road.rule, samples)
         for road in odr_map.roads.values()
         for samples in sample_road(road, step_m, lane_types)
         if len(samples.s) > 1
-    )
-    return CheckReport(path, threshold_m, step_m, lanes, len(index.ids))
+    ]
+    zero = [_is_zero_width(samples) for _, samples in sampled]
+    lanes = tuple(_check_lane(samples, rule, index) for (rule, samples), empty in zip(sampled, zero) if not empty)
+    skipped = tuple((s.road_id, s.section, s.lane_id) for (_, s), empty in zip(sampled, zero) if empty)
+    return CheckReport(path, threshold_m, step_m, lanes, len(index.ids), skipped)
+
+
+def _is_zero_width(samples: LaneBorderSamples) -> bool:
+    """True when the lane's borders are within ``ZERO_WIDTH_M`` of each other everywhere."""
+    return bool(np.hypot(*(samples.outer[:, :2] - samples.inner[:, :2]).T).max() <= ZERO_WIDTH_M)
 
 
 def check_map(
@@ -258,6 +274,10 @@ def format_report(report: CheckReport) -> str:
         )
     by = Counter(lane.matched_by for lane in report.lanes)
     lines.append(f"lanes matched by OpenDRIVE id: {by['id']}, by geometry: {by['geometry']}, unmatched: {by['']}")
+    if report.zero_width:
+        named = ", ".join(f"road {road} section {section} lane {lane}" for road, section, lane in report.zero_width[:5])
+        more = f" and {len(report.zero_width) - 5} more" if len(report.zero_width) > 5 else ""
+        lines.append(f"zero-width lanes not checked: {len(report.zero_width)} ({named}{more})")
     failing = report.failing
     verdict = "TRUSTWORTHY" if report.trustworthy else "NOT TRUSTWORTHY"
     reason = f"{len(failing)} of {len(report.lanes)} lanes over {_mm(report.threshold_m)} mm or unmatched"

@@ -120,9 +120,14 @@ def document(roads: list[RoadSpec], *, geo_reference: str = "", junctions: str =
     )
 
 
+ZERO_WIDTH_SECTION_S: Final[float] = 85.0
+"""s (m) of the paramPoly3 road's last section, where lane -2 has zero width throughout."""
+
+
 def param_poly3_map() -> str:
     """paramPoly3 (normalized, then arcLength), both with non-uniform parameter speed;
-    three sections with cubic widths; lane -2 closes to zero width in the last section.
+    four sections with cubic widths; lane -2 closes to zero width in the third section
+    and stays at zero width over the fourth.
 
     Each record's length is the curve's own arc length, so no tool needs to rescale.
     """
@@ -156,11 +161,17 @@ def param_poly3_map() -> str:
             LaneSpec(-2, widths=((0.0, w, 0.0, 0.0, 0.0),), predecessor=-2, successor=-2),
         )),
         SectionSpec(60.0, (
-            LaneSpec(1, widths=((0.0, left_end, 0.0, 0.0, 0.0),), predecessor=1),
-            LaneSpec(-1, widths=((0.0, right_end, 0.0, 0.0, 0.0),), predecessor=-1),
+            LaneSpec(1, widths=((0.0, left_end, 0.0, 0.0, 0.0),), predecessor=1, successor=1),
+            LaneSpec(-1, widths=((0.0, right_end, 0.0, 0.0, 0.0),), predecessor=-1, successor=-1),
             # w → 0 over ``close`` m (cubic ease, zero slope at both ends), then 0 m
             LaneSpec(-2, widths=((0.0, w, 0.0, -3 * w / close**2, 2 * w / close**3), (close, 0.0, 0.0, 0.0, 0.0)),
-                     predecessor=-2),
+                     predecessor=-2, successor=-2),
+        )),
+        # lane -2 stays at zero width over the whole last section
+        SectionSpec(ZERO_WIDTH_SECTION_S, (
+            LaneSpec(1, widths=((0.0, left_end, 0.0, 0.0, 0.0),), predecessor=1),
+            LaneSpec(-1, widths=((0.0, right_end, 0.0, 0.0, 0.0),), predecessor=-1),
+            LaneSpec(-2, widths=((0.0, 0.0, 0.0, 0.0, 0.0),), predecessor=-2),
         )),
     )  # fmt: skip
     road = RoadSpec(

@@ -192,12 +192,21 @@ def test_param_poly3_differs_only_by_crdesigners_linear_parameter(maps, tool, re
     monkeypatch.setattr(ParamPoly3, "calc_position", _arc_length_param_poly3(ParamPoly3.calc_position))
     corrected = tool.crosscheck(maps["param_poly3"], step=0.5)
     assert corrected.missing_in_theirs == () and corrected.missing_in_ours == ()
-    assert corrected.lanes_compared == 9
+    assert corrected.lanes_compared == 12
     assert np.percentile(corrected.distances, 99) <= 1 * MM
     assert corrected.distances.max() <= 5 * MM
-    # the lateral error dw/ds·Δs only exceeds 5 cm where the width changes fastest:
-    # the lane that closes to zero width
-    assert {(lane.section, lane.lane_id) for lane in reports["param_poly3"].failing} == {(2, -2)}
+    # check names the lanes of section 2 only: there the lanelets end (crdesigner drops the
+    # zero-width lane -2 of section 3 and starts new lanelets), and crdesigner's linear p
+    # puts that end 0.77 m along track from s = 85 m; the lateral error dw/ds·Δs inside
+    # the lanelets stays under 5 cm. The zero-width lane is listed apart, not checked.
+    report = reports["param_poly3"]
+    assert {(lane.section, lane.lane_id) for lane in report.failing} == {(2, 1), (2, -1), (2, -2)}
+    assert max(lane.median_m for lane in report.lanes) <= 10 * MM
+    assert report.zero_width == (("1", 3, -2),)
+    from cold_maps.gt_check import format_report
+
+    assert "zero-width lanes not checked: 1 (road 1 section 3 lane -2)" in format_report(report)
+    assert len(report.lanes) == 11
 
 
 def test_param_poly3_is_sampled_by_arc_length(maps) -> None:
