@@ -12,9 +12,9 @@ lanelet with an opposite-direction right neighbour and a unique successor, i.e. 
 left-hand-traffic road with two lane sections or a road link: its right-side neighbour
 check calls the network's method on the lanelet. We replace that check by the same check
 called on the network (``_adjacent_consistent``, identical to its left-side twin).
-crdesigner also reads road and junction ids as integers, while OpenDRIVE ids are strings:
-a map with other ids is converted from a copy with integer ids (``integer_ids``), and the
-lanelets' OpenDRIVE lanes name the original roads.
+crdesigner also reads road and junction ids as integers (OpenDRIVE ids are strings) and
+rejects spirals of constant curvature: such maps are converted from a rewritten copy
+(``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -136,7 +136,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     or finds no lanelet.
     """
     geo_reference = read_geo_reference(path)
-    renumbered = integer_ids(path.read_bytes())
+    renumbered = crdesigner_copy(path.read_bytes())
     with _quiet(verbose), tempfile.TemporaryDirectory(prefix="cold-maps-ids-") as folder:
         source = path
         if renumbered is not None:
@@ -187,32 +187,44 @@ def _is_integer(text: str) -> bool:
     return True
 
 
-def integer_ids(data: bytes) -> tuple[bytes, dict[str, str]] | None:
-    """``data`` with every non-integer road and junction id replaced by a fresh integer,
-    and the map from new road id to original road id; None when every id is an integer.
+def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
+    """The map ``data`` rewritten where crdesigner 0.8.5 rejects valid OpenDRIVE, and the
+    map from new road id to original road id; None when nothing needs rewriting.
 
-    References are rewritten with them: road ``junction``, link ``elementId`` (by its
-    ``elementType``) and junction connection roads. ``data`` has been checked by
-    ``read_geo_reference``.
+    Non-integer road and junction ids become fresh integers (crdesigner parses ids with
+    ``int``), with every reference; spirals of constant curvature (crdesigner raises
+    "Curvature at the start and at the end of a spiral must be different") become the
+    arcs or lines they are. ``data`` has been checked by ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
-    roads = [e for e in root if etree.QName(e).localname == "road"]
-    junctions = [e for e in root if etree.QName(e).localname == "junction"]
+    original = _renumber(root)
+    spirals = _constant_spirals_to_arcs(root)
+    if original is None and not spirals:
+        return None
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
+
+
+def _renumber(root: etree._Element) -> dict[str, str] | None:
+    """Give non-integer road and junction ids fresh integers above the largest integer id,
+    rewrite road ``junction``, link ``elementId`` (by ``elementType``) and junction
+    connection roads; new road id → original, or None when every id is an integer."""
     renames: dict[str, dict[str, str]] = {}
-    for kind, elements in (("road", roads), ("junction", junctions)):
-        ids = [e.get("id", "") for e in elements]
+    for kind in ("road", "junction"):
+        ids = [e.get("id", "") for e in root if etree.QName(e).localname == kind]
         taken = [int(i) for i in ids if _is_integer(i)]
         fresh = iter(range(max(taken, default=0) + 1, 1 << 62))
         renames[kind] = {i: str(next(fresh)) for i in dict.fromkeys(ids) if not _is_integer(i)}
-    if not renames["road"] and not renames["junction"]:
-        return None
     road_ids, junction_ids = renames["road"], renames["junction"]
+    if not road_ids and not junction_ids:
+        return None
+    for element in root:
+        name = etree.QName(element).localname
+        if name in renames:
+            element.set("id", renames[name].get(element.get("id", ""), element.get("id", "")))
     for element in root.iter():
         if not isinstance(element.tag, str):
             continue
         name = etree.QName(element).localname
-        if name in ("road", "junction") and element.getparent() is root:
-            element.set("id", renames[name].get(element.get("id", ""), element.get("id", "")))
         if name == "road" and element.get("junction") in junction_ids:
             element.set("junction", junction_ids[element.get("junction")])
         if name in ("predecessor", "successor") and element.get("elementId") is not None:
@@ -221,7 +233,26 @@ def integer_ids(data: bytes) -> tuple[bytes, dict[str, str]] | None:
         for tag, attribute in _ROAD_REFERENCES:
             if name == tag and element.get(attribute) in road_ids:
                 element.set(attribute, road_ids[element.get(attribute)])
-    return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), {new: old for old, new in road_ids.items()}
+    return {new: old for old, new in road_ids.items()}
+
+
+def _constant_spirals_to_arcs(root: etree._Element) -> int:
+    """Replace each ``<spiral>`` whose curvStart equals curvEnd by that ``<arc>`` (or a
+    ``<line>`` at zero curvature); the number replaced."""
+    replaced = 0
+    for spiral in list(root.iter("{*}spiral")):
+        start, end = spiral.get("curvStart"), spiral.get("curvEnd")
+        try:
+            constant = float(start) == float(end)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            continue  # crdesigner names the bad attribute itself
+        if not constant:
+            continue
+        curvature = float(start)  # type: ignore[arg-type]
+        shape = etree.Element("arc", curvature=repr(curvature)) if curvature else etree.Element("line")
+        spiral.getparent().replace(spiral, shape)
+        replaced += 1
+    return replaced
 
 
 def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]]]:

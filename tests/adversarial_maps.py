@@ -23,6 +23,7 @@ TMERC: Final[str] = (
     "+proj=tmerc +lat_0=0 +lon_0=9 +k=0.9996 +x_0=500000 +y_0=-5000000 +ellps=WGS84 +units=m +no_defs"
 )
 UTM: Final[str] = "+proj=utm +zone=32 +ellps=WGS84 +datum=WGS84 +units=m +no_defs"
+UTM_SOUTH: Final[str] = "+proj=utm +zone=33 +south +ellps=WGS84 +datum=WGS84 +units=m +no_defs"
 
 
 @dataclass(frozen=True)
@@ -251,6 +252,28 @@ def spiral_map() -> str:
     return document([spiral_road, poly_road], name="spirals")
 
 
+def odd_geometry_map() -> str:
+    """Records real exporters write: spirals of constant curvature (an arc, a line), a
+    0.1 mm line, and an arcLength paramPoly3 whose parameter speed is about 2 (its record
+    length is half its arc length)."""
+    records = [
+        (10.0, '<spiral curvStart="0.02" curvEnd="0.02"/>'),
+        (1e-4, "<line/>"),
+        (10.0, '<spiral curvStart="0.0" curvEnd="0.0"/>'),
+    ]
+    geometries = []
+    s, x, y, hdg = 0.0, 0.0, 0.0, 0.0
+    for length, shape in records:
+        geometries.append(geometry(s, x, y, hdg, length, shape))
+        curvature = 0.02 if "0.02" in shape else 0.0
+        x, y, hdg = _spiral_end(x, y, hdg, length, curvature, curvature)
+        s += length
+    u, v, p_end = (0.0, 2.0, 0.0, 0.0), (0.0, 0.0, 0.01, 0.0), 20.0
+    geometries.append(geometry(s, x, y, hdg, p_end, _param_poly3(u, v, "arcLength")))
+    lanes = (LaneSpec(1, widths=((0.0, 3.0, 0.01, 0.0, 0.0),)), LaneSpec(-1, widths=((0.0, 3.5, -0.01, 0.0, 0.0),)))
+    return document([RoadSpec("9", tuple(geometries), s + p_end, (SectionSpec(0.0, lanes),))], name="odd geometry")
+
+
 def _spiral_end(x: float, y: float, hdg: float, length: float, k0: float, k1: float) -> tuple[float, float, float]:
     """End pose of a clothoid by the midpoint rule on its heading (fine enough: 1e-9 m)."""
     steps = 20000
@@ -371,10 +394,12 @@ def lane_offset_map() -> str:
 MAPS: Final[dict[str, object]] = {
     "param_poly3": param_poly3_map,
     "spirals": spiral_map,
+    "odd_geometry": odd_geometry_map,
     "lht_junction": lht_junction_map,
     "named_ids": lambda: lht_junction_map("arm-"),
     "tmerc": lambda: georeferenced_map(TMERC, 512345.678, 412345.6),
     "utm": lambda: georeferenced_map(UTM, 691234.5, 5334567.8),
+    "utm_south": lambda: georeferenced_map(UTM_SOUTH, 851234.5, 9912345.6),
     "no_geo": lambda: georeferenced_map("", 0.0, 0.0),
     "borders": border_map,
     "lane_offset": lane_offset_map,

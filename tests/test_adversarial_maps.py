@@ -27,7 +27,7 @@ from cold_maps.route import route_from_lanes
 from cold_maps.routing import random_route
 
 MM = 1e-3
-AGREEING = ("spirals", "lht_junction", "named_ids", "tmerc", "utm", "no_geo", "lane_offset")
+AGREEING = ("spirals", "odd_geometry", "lht_junction", "named_ids", "tmerc", "utm", "utm_south", "no_geo", "lane_offset")
 """Maps on which both implementations follow the spec the same way."""
 CONTINUITY_M = 0.01
 
@@ -61,7 +61,7 @@ def reports(maps: dict[str, Path], tmp_path_factory: pytest.TempPathFactory):
 def test_export_agrees_with_crdesigner(name: str, maps, tool) -> None:
     result = tool.crosscheck(maps[name], step=0.5)
     assert result.missing_in_theirs == () and result.missing_in_ours == ()
-    assert result.lanes_compared >= 5
+    assert result.lanes_compared >= 2
     assert np.percentile(result.distances, 99) <= 1 * MM
     assert result.distances.max() <= 5 * MM
 
@@ -99,8 +99,9 @@ def test_info_export_graph_and_routes(name: str, maps, tmp_path: Path) -> None:
         route = route_from_lanes(graph, lanes, step=0.5)
         assert route.length >= 30.0 - 1e-6
         jumps = np.hypot(*np.diff(route.centre, axis=0).T)
-        # a lane centre at t from the reference line steps ds·(1 - κ·t): |κ·t| < 0.4 here
-        assert jumps.max() <= 0.5 * 1.4
+        # a lane centre at t from the reference line steps ds·(1 - κ·t) (|κ·t| < 0.4 here),
+        # times 2 on odd_geometry's paramPoly3, whose curve is twice its record length
+        assert jumps.max() <= 0.5 * 1.4 * (2.0 if name == "odd_geometry" else 1.0)
 
 
 def test_lht_junction_drives_on_the_left(maps) -> None:
@@ -221,15 +222,15 @@ def test_param_poly3_is_sampled_by_arc_length(maps) -> None:
     np.testing.assert_allclose(steps, s[1] - s[0], rtol=1e-5)
 
 
-def test_integer_ids_renumbers_only_non_integer_ids(maps) -> None:
+def test_crdesigner_copy_renumbers_only_non_integer_ids(maps) -> None:
     """crdesigner reads ids as integers: "arm-…" roads and junction get fresh integers
     above the largest integer id, every reference follows, integer maps are untouched."""
     from lxml import etree
 
-    from converters.crdesigner_bridge import integer_ids
+    from converters.crdesigner_bridge import crdesigner_copy
 
-    assert integer_ids(maps["lht_junction"].read_bytes()) is None
-    data, original = integer_ids(maps["named_ids"].read_bytes())
+    assert crdesigner_copy(maps["lht_junction"].read_bytes()) is None
+    data, original = crdesigner_copy(maps["named_ids"].read_bytes())
     renamed = etree.fromstring(data)
     road_ids = [road.get("id") for road in renamed.iter("road")]
     assert sorted(map(int, road_ids)) == list(range(1, 17))
@@ -253,3 +254,15 @@ def test_crosscheck_names_a_map_crdesigner_cannot_read(maps, tool, capsys, monke
     assert tool.main([str(maps["no_geo"])]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(maps["no_geo"]) in err and "KeyError" in err
+
+
+def test_crdesigner_copy_turns_constant_spirals_into_arcs_and_lines(maps) -> None:
+    from lxml import etree
+
+    from converters.crdesigner_bridge import crdesigner_copy
+
+    data, original = crdesigner_copy(maps["odd_geometry"].read_bytes())
+    assert original == {}
+    shapes = [g[0] for g in etree.fromstring(data).iter("geometry")]
+    assert [s.tag for s in shapes] == ["arc", "line", "line", "paramPoly3"]
+    assert float(shapes[0].get("curvature")) == 0.02

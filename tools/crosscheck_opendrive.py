@@ -5,9 +5,9 @@ every --step m) are compared with crdesigner's own parser and lane-border evalua
 (``OpenDriveConverter.lane_section_to_parametric_lanes`` → ``ParametricLane`` borders),
 sampled on the same s grid into a polyline. Printed per map: p50 / p99 / max of the
 distance from each of our points to the other implementation's polyline of the same
-lane border, the worst point, and lanes present on one side only. Maps with non-integer
-road or junction ids (crdesigner reads them as integers) are renumbered first
-(``converters.crdesigner_bridge.integer_ids``). crdesigner is evaluated
+lane border, the worst point, and lanes present on one side only. Maps with what
+crdesigner rejects although valid (non-integer ids, constant-curvature spirals) are
+rewritten first (``converters.crdesigner_bridge.crdesigner_copy``). crdesigner is evaluated
 at our s values (plus the ends of its width pieces), so where both agree the distances
 are round-off, and a purely along-track disagreement is absorbed by the polyline.
 
@@ -35,7 +35,7 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat  # noqa: E402
 from cold_maps.opendrive.errors import OpenDriveError  # noqa: E402
 from cold_maps.opendrive.parser import load_opendrive  # noqa: E402
 from cold_maps.opendrive.sampling import sample_road, sample_s  # noqa: E402
-from converters.crdesigner_bridge import integer_ids  # noqa: E402
+from converters.crdesigner_bridge import crdesigner_copy  # noqa: E402
 
 LaneKey = tuple[str, int, int]
 """(road id, lane-section index, lane id)."""
@@ -91,12 +91,12 @@ def _their_borders(
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
     logging.getLogger("crdesigner").setLevel(logging.ERROR)
-    renumbered = integer_ids(path.read_bytes())
+    renumbered = crdesigner_copy(path.read_bytes())
     original = {} if renumbered is None else renumbered[1]
     with warnings.catch_warnings(), tempfile.TemporaryDirectory(prefix="crosscheck-") as folder:
         warnings.simplefilter("ignore")
         source = path
-        if renumbered is not None:  # crdesigner reads road and junction ids as integers
+        if renumbered is not None:  # ids crdesigner cannot read as integers, constant spirals
             source = Path(folder) / path.name
             source.write_bytes(renumbered[0])
         try:
