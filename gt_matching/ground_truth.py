@@ -139,6 +139,18 @@ def _sequence_arc(lanelets: Sequence[LaneletGeometry], points: NDArrayFloat) -> 
     return arc
 
 
+def _advance_m(lanelets: Sequence[LaneletGeometry], centre: NDArrayFloat, join_m: float) -> float:
+    """How far (m) the detection's mid-line ``centre`` advances along the joined mid-lines of
+    ``lanelets`` (negative when it runs against them). When they close into a loop (the
+    last ends within ``join_m`` of where the first starts: a ring road) each step between
+    samples is taken the short way round, so crossing the loop's seam is no reversal."""
+    steps = np.diff(_sequence_arc(lanelets, centre))
+    loop_m = float(sum(g.length_m for g in lanelets))
+    if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
+        steps = (steps + loop_m / 2) % loop_m - loop_m / 2
+    return float(np.sum(steps))
+
+
 class GroundTruth:
     """A Lanelet2 map prepared for matching detections: built once, reused per frame.
 
@@ -328,8 +340,7 @@ class GroundTruth:
                 f"{_ids(own.lanelets)}"
             )
         else:
-            ends = _sequence_arc(own.lanelets, centre[[0, -1]])
-            if ends[1] < ends[0]:
+            if _advance_m(own.lanelets, centre, self.config.step_m) < 0:
                 mismatch = f"detection runs against the driving direction of lanelets {_ids(own.lanelets)}"
         return own, pose_ids, mismatch
 

@@ -9,6 +9,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cold_maps import eval_cli
@@ -239,3 +240,34 @@ def test_too_many_frames_names_the_most_that_fit(tmp_path_factory, capsys):
     # one frame needs 60 m (spline coop) + 30 m range + 5 m margin; 10 frames per second at 10 m/s
     assert "at most 206 --frames fit" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def ring_ground_truth(tmp_path_factory):
+    from converters import load_lanelet2
+    from gt_matching import GroundTruth
+
+    path = tmp_path_factory.mktemp("ring_gt") / "ring.xodr"
+    path.write_text(ring())
+    return GroundTruth(*load_lanelet2(path))
+
+
+@pytest.mark.parametrize("start_rad", [-0.3, -0.01, 0.5, 2.0])
+def test_ring_lanelet_matched_across_its_seam(ring_ground_truth, start_rad):
+    """Inner lane of the ring (borders at radius 50 and 53.5 m, counter-clockwise): a 30 m
+    detection matches its lanelet wherever it starts, also across the closed lanelet's
+    seam at angle 0, with range 30 r / r_c along the border of radius r; the same points
+    in reverse order run against the lane."""
+    centre_m = RING_RADIUS_M + LANE_WIDTH_M / 2
+    angles = start_rad + SENSOR_RANGE_M / centre_m * np.linspace(0.0, 1.0, 301)
+    left = RING_RADIUS_M * np.c_[np.cos(angles), np.sin(angles)]
+    right = (RING_RADIUS_M + LANE_WIDTH_M) * np.c_[np.cos(angles), np.sin(angles)]
+    pose = (centre_m * math.cos(start_rad), centre_m * math.sin(start_rad), start_rad + math.pi / 2)
+    match = ring_ground_truth.match(left, right, pose)
+    assert match.matched, match.mismatch
+    errors = ring_ground_truth.errors(left, right, match, exact=True)
+    assert errors.left.distances_m.max() < 1e-3 and errors.right.distances_m.max() < 1e-3
+    for border, radius in ((errors.left, RING_RADIUS_M), (errors.right, RING_RADIUS_M + LANE_WIDTH_M)):
+        assert border.arc_m[-1] - border.arc_m[0] == pytest.approx(SENSOR_RANGE_M * radius / centre_m, abs=0.05)
+    backwards = ring_ground_truth.match(left[::-1], right[::-1], pose)
+    assert not backwards.matched and "against the driving direction" in backwards.mismatch
