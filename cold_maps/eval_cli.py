@@ -101,6 +101,12 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
         return [replace(plan, errors=errors) for plan in plans]
+    seen: dict[str, Path] = {}
+    for path in args.map:
+        if path.stem in seen:
+            raise ValueError(f"--map {seen[path.stem]} and --map {path} share the name {path.stem!r}; the report "
+                             "keys results by map name: give every map its own file name")
+        seen[path.stem] = path
     params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)
     return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, routes=args.routes, seed=args.seed,

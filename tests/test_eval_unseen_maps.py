@@ -271,3 +271,16 @@ def test_ring_lanelet_matched_across_its_seam(ring_ground_truth, start_rad):
         assert border.arc_m[-1] - border.arc_m[0] == pytest.approx(SENSOR_RANGE_M * radius / centre_m, abs=0.05)
     backwards = ring_ground_truth.match(left[::-1], right[::-1], pose)
     assert not backwards.matched and "against the driving direction" in backwards.mismatch
+
+
+def test_two_maps_with_one_name_are_refused(tmp_path, capsys):
+    """Results are keyed by map name: two files named ring.xodr would pool into one row."""
+    paths = [tmp_path / folder / "ring.xodr" for folder in ("a", "b")]
+    for path in paths:
+        path.parent.mkdir()
+        path.write_text(ring())
+    out = tmp_path / "out"
+    assert eval_cli.main(["--map", str(paths[0]), "--map", str(paths[1]), "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "share the name 'ring'" in err[0]
+    assert not out.exists()
