@@ -12,6 +12,12 @@ lanelet with an opposite-direction right neighbour and a unique successor, i.e. 
 left-hand-traffic road with two lane sections or a road link: its right-side neighbour
 check calls the network's method on the lanelet. We replace that check by the same check
 called on the network (``_adjacent_consistent``, identical to its left-side twin).
+crdesigner evaluates ``<paramPoly3>`` at p = s/length·pRange and ``<poly3>`` at u = s,
+which is the arc length the spec's s stands for only at uniform parameter speed (lanes
+off by dw/ds·Δs laterally, lanelet ends by Δs along track: 0.77 m on a 50 m curve with
+speed 1 ± 30 %); we evaluate them at the parameter whose arc length is s
+(``_arc_length_parameter``; for paramPoly3 scaled so the record still ends at p_end, as
+``cold_maps.opendrive.geometry.param_poly3`` does).
 crdesigner also reads road and junction ids as integers (OpenDRIVE ids are strings) and
 rejects spirals of constant curvature: such maps are converted from a rewritten copy
 (``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
@@ -172,6 +178,48 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     return lanelets, geo_reference
 
 
+ARC_TABLE_POINTS: Final[int] = 4097
+"""Samples of |r'(p)| per paramPoly3/poly3 record for its arc-length table (trapezoid
+rule; error ~ length·h²·max|speed''|/12, below 1e-8 m on road curves)."""
+
+
+def _arc_length_parameter(
+    record: Any, derivatives: tuple[Any, Any], p_end: float, arc: float, scale_to_end: bool
+) -> float:
+    """The parameter in [0, p_end] at arc length ``arc`` (m) along a crdesigner geometry
+    record whose derivative coefficients (u', v') are given; with ``scale_to_end``,
+    ``arc`` is a fraction of the record length, times the curve's own length. The table
+    is kept on the record (crdesigner evaluates each record hundreds of times)."""
+    table = record.__dict__.get("_cold_maps_arc_table")
+    if table is None:
+        p = np.linspace(0.0, p_end, ARC_TABLE_POINTS)
+        speed = np.hypot(*(np.polynomial.polynomial.polyval(p, d) for d in derivatives))
+        table = p, np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(p))))
+        record.__dict__["_cold_maps_arc_table"] = table
+    p, length = table
+    return float(np.interp(arc * length[-1] if scale_to_end else arc, length, p))
+
+
+def _param_poly3_by_arc_length(original: Any) -> Any:
+    """crdesigner's ``ParamPoly3.calc_position`` with s read as arc length."""
+
+    def calc_position(self: Any, s_pos: float, compute_curvature: bool = True) -> Any:
+        p = _arc_length_parameter(self, (self.d_coeffs_u, self.d_coeffs_v), self._pRange, s_pos / self.length, True)
+        return original(self, p / self._pRange * self.length, compute_curvature)
+
+    return calc_position
+
+
+def _poly3_by_arc_length(original: Any) -> Any:
+    """crdesigner's ``Poly3.calc_position`` (u = its argument) with s read as arc length."""
+
+    def calc_position(self: Any, s_pos: float, compute_curvature: bool = True) -> Any:
+        u = _arc_length_parameter(self, ([1.0], self.d_coeffs), self.length, s_pos, False)
+        return original(self, u, compute_curvature)
+
+    return calc_position
+
+
 _ROAD_REFERENCES: Final[tuple[tuple[str, str], ...]] = (
     ("connection", "incomingRoad"),
     ("connection", "connectingRoad"),
@@ -261,12 +309,12 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
     from crdesigner.common.config.opendrive_config import OpenDriveConfig
     from crdesigner.map_conversion.common.conversion_lanelet_network import ConversionLaneletNetwork
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion import network as network_module
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.elements.geometry import ParamPoly3, Poly3
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
     config = OpenDriveConfig()
     config.proj_string_odr = None
     network = network_module.Network(config)
-    network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
     sources: dict[int, tuple[tuple[str, int, int], ...]] = {}
     to_base = network_module.convert_to_base_lanelet_network
 
@@ -282,7 +330,10 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
         mock.patch.object(ConversionLaneletNetwork, "join_and_split_possible_lanes", _keep_borders),
         mock.patch.object(ConversionLaneletNetwork, "adj_right_consistent_nb", _right_consistent),
         mock.patch.object(network_module, "convert_to_base_lanelet_network", recording_to_base),
+        mock.patch.object(ParamPoly3, "calc_position", _param_poly3_by_arc_length(ParamPoly3.calc_position)),
+        mock.patch.object(Poly3, "calc_position", _poly3_by_arc_length(Poly3.calc_position)),
     ):
+        network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
         return network.export_commonroad_scenario(GeneralConfig(), config), sources
 
 

@@ -28,7 +28,10 @@ from cold_maps.routing import random_route
 
 MM = 1e-3
 AGREEING = ("spirals", "odd_geometry", "lht_junction", "named_ids", "tmerc", "utm", "utm_south", "no_geo", "lane_offset")
-"""Maps on which both implementations follow the spec the same way."""
+"""Maps on which crdesigner's own OpenDRIVE code follows the spec as we do."""
+CONVERTED_AGREEING = (*AGREEING, "param_poly3")
+"""Maps whose Lanelet2 conversion agrees with our borders (our converter evaluates
+paramPoly3 and poly3 by arc length, unlike crdesigner's own code)."""
 CONTINUITY_M = 0.01
 
 
@@ -66,7 +69,7 @@ def test_export_agrees_with_crdesigner(name: str, maps, tool) -> None:
     assert result.distances.max() <= 5 * MM
 
 
-@pytest.mark.parametrize("name", AGREEING)
+@pytest.mark.parametrize("name", CONVERTED_AGREEING)
 def test_lanelet2_ground_truth_agrees(name: str, reports) -> None:
     report = reports[name]
     assert report.trustworthy, report.failing
@@ -196,18 +199,28 @@ def test_param_poly3_differs_only_by_crdesigners_linear_parameter(maps, tool, re
     assert corrected.lanes_compared == 12
     assert np.percentile(corrected.distances, 99) <= 1 * MM
     assert corrected.distances.max() <= 5 * MM
-    # check names the lanes of section 2 only: there the lanelets end (crdesigner drops the
-    # zero-width lane -2 of section 3 and starts new lanelets), and crdesigner's linear p
-    # puts that end 0.77 m along track from s = 85 m; the lateral error dw/ds·Δs inside
-    # the lanelets stays under 5 cm. The zero-width lane is listed apart, not checked.
+    # our converter reads s as arc length too: its lanelets agree (see
+    # test_lanelet2_ground_truth_agrees); the zero-width lane is listed apart, not checked
     report = reports["param_poly3"]
-    assert {(lane.section, lane.lane_id) for lane in report.failing} == {(2, 1), (2, -1), (2, -2)}
-    assert max(lane.median_m for lane in report.lanes) <= 10 * MM
     assert report.zero_width == (("1", 3, -2),)
     from cold_maps.gt_check import format_report
 
     assert "zero-width lanes not checked: 1 (road 1 section 3 lane -2)" in format_report(report)
     assert len(report.lanes) == 11
+
+
+def test_check_names_the_lanes_of_crdesigners_linear_parameter(maps, tmp_path: Path, monkeypatch) -> None:
+    """Without our arc-length evaluation the lanelets of the paramPoly3 road end 0.77 m
+    along track from s = 85 m (crdesigner drops the zero-width lane -2 of section 3 and
+    starts new lanelets there): check names exactly the three lanes of section 2."""
+    from converters import crdesigner_bridge
+
+    from cold_maps.gt_check import check_map
+
+    monkeypatch.setattr(crdesigner_bridge, "_param_poly3_by_arc_length", lambda original: original)
+    report = check_map(maps["param_poly3"], cache=False)
+    assert {(lane.section, lane.lane_id) for lane in report.failing} == {(2, 1), (2, -1), (2, -2)}
+    assert 0.5 < max(lane.max_m for lane in report.failing) < 1.0
 
 
 def test_param_poly3_is_sampled_by_arc_length(maps) -> None:
