@@ -252,13 +252,18 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
 
 
+def _local_name(element: etree._Element) -> str:
+    """The tag without namespace; "" for comments and processing instructions."""
+    return etree.QName(element).localname if isinstance(element.tag, str) else ""
+
+
 def _renumber(root: etree._Element) -> dict[str, str] | None:
     """Give non-integer road and junction ids fresh integers above the largest integer id,
     rewrite road ``junction``, link ``elementId`` (by ``elementType``) and junction
     connection roads; new road id → original, or None when every id is an integer."""
     renames: dict[str, dict[str, str]] = {}
     for kind in ("road", "junction"):
-        ids = [e.get("id", "") for e in root if etree.QName(e).localname == kind]
+        ids = [e.get("id", "") for e in root if _local_name(e) == kind]
         taken = [int(i) for i in ids if _is_integer(i)]
         fresh = iter(range(max(taken, default=0) + 1, 1 << 62))
         renames[kind] = {i: str(next(fresh)) for i in dict.fromkeys(ids) if not _is_integer(i)}
@@ -266,13 +271,11 @@ def _renumber(root: etree._Element) -> dict[str, str] | None:
     if not road_ids and not junction_ids:
         return None
     for element in root:
-        name = etree.QName(element).localname
+        name = _local_name(element)
         if name in renames:
             element.set("id", renames[name].get(element.get("id", ""), element.get("id", "")))
     for element in root.iter():
-        if not isinstance(element.tag, str):
-            continue
-        name = etree.QName(element).localname
+        name = _local_name(element)
         if name == "road" and element.get("junction") in junction_ids:
             element.set("junction", junction_ids[element.get("junction")])
         if name in ("predecessor", "successor") and element.get("elementId") is not None:

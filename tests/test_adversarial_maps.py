@@ -242,8 +242,12 @@ def test_crdesigner_copy_renumbers_only_non_integer_ids(maps) -> None:
 
     from converters.crdesigner_bridge import crdesigner_copy
 
-    assert crdesigner_copy(maps["lht_junction"].read_bytes()) is None
-    data, original = crdesigner_copy(maps["named_ids"].read_bytes())
+    def commented(name: str) -> bytes:  # comments at the top level and inside roads
+        text = maps[name].read_bytes()
+        return text.replace(b"<header", b"<!-- top --><header", 1).replace(b"<planView>", b"<planView><!-- g -->")
+
+    assert crdesigner_copy(commented("lht_junction")) is None
+    data, original = crdesigner_copy(commented("named_ids"))
     renamed = etree.fromstring(data)
     road_ids = [road.get("id") for road in renamed.iter("road")]
     assert sorted(map(int, road_ids)) == list(range(1, 17))
