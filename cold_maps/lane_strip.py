@@ -11,9 +11,8 @@ from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
-import numpy.typing as npt
 
-NDArrayFloat = npt.NDArray[np.float64]
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
 
 MIN_STATION_STEP_M: Final[float] = 1e-9
 
