@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import dataclass
 from typing import Final, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from fusion.types import NDArrayFloat, Pose2D
 
@@ -14,10 +16,8 @@ _SIGMA_FLOOR_M: Final[float] = 0.002
 _CI_FACTOR: Final[float] = 2.5
 _CURVATURE_CHANGE_SIGMAS: Final[float] = 3.0
 _CUBIC_ARC_BIAS: Final[float] = 0.05
-_EYE4: Final[NDArrayFloat] = np.eye(4)
-# Power sums of a window by slot: n, Σx … Σx⁶ (1–6), Σy, Σy·x, Σy·x², Σy·x³ (7–10).
-_CUBIC_NORMAL: Final = np.add.outer(np.arange(4), np.arange(4))
-_CUBIC_RHS: Final = np.arange(7, 11)
+_STEP_SPAN: Final[int] = 20  # segments at a border end whose chord gives the point spacing
+_TINY_SPEED_M: Final[float] = 1e-300
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
@@ -117,7 +117,7 @@ class EndFit:
 
     Fields: ``point`` fitted end point [m]; ``direction`` unit tangent (driving direction);
     ``curvature`` [1/m] (positive turning left); ``curvature_sigma`` its standard deviation
-    from the detection noise [1/m].
+    from the detection noise [1/m], infinite when the end is no single arc.
     """
 
     point: NDArrayFloat
@@ -126,110 +126,158 @@ class EndFit:
     curvature_sigma: float
 
 
+@dataclass(frozen=True)
+class _EndDesign:
+    """Constant least-squares filters of :func:`fit_ends` for one set of window sizes.
+
+    Fields: ``rows`` ``(K, 3·W + 1 + D)`` complex, one filter per column: for each of the W
+    windows (``counts`` points, t = 0, 1, … the point index) the columns giving the quadratic
+    coefficients p0, p1, p2; then the column giving the cubic coefficient p3 of a cubic fit
+    over the longest window; then D second differences over the first ``n_noise`` points.
+    ``enough_points`` ``(W,)`` whether a window holds four points;
+    ``p1_gains`` ``(W,)`` and ``p2_gains`` the noise gains (row norms) of p1 and p2 per
+    window, ``p3_gain`` that of p3. ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴
+    projected onto the window's quadratic basis (how an arc's cubic and quartic terms bias
+    p0…p2); ``p3_quartic_leak``: t⁴ projected onto the longest window's p3.
+    """
+
+    rows: npt.NDArray[np.complex128]
+    enough_points: npt.NDArray[np.bool_]
+    p1_gains: NDArrayFloat
+    p2_gains: tuple[float, ...]
+    p3_gain: float
+    cubic_leaks: tuple[tuple[float, float, float], ...]
+    quartic_leaks: tuple[tuple[float, float, float], ...]
+    p3_quartic_leak: float
+
+
+_DESIGNS: dict[tuple[tuple[int, ...], int], _EndDesign] = {}
+_MAX_DESIGNS: Final[int] = 256
+
+
+def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
+    """The filters of windows of ``counts`` points and of the noise over ``n_noise`` points
+    (memoised: they depend on the sizes only)."""
+    design = _DESIGNS.get((counts, n_noise))
+    if design is not None:
+        return design
+    n_windows = len(counts)
+    rows = np.zeros((3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
+    gains, cubic_leaks, quartic_leaks = [], [], []
+    for w, count in enumerate(counts):
+        t = np.arange(count, dtype=np.float64)
+        pinv = np.linalg.pinv(np.vander(t, 3, increasing=True))
+        rows[3 * w: 3 * w + 3, :count] = pinv
+        gains.append(np.linalg.norm(pinv, axis=1))
+        cubic_leaks.append(tuple((pinv @ t ** 3).tolist()))
+        quartic_leaks.append(tuple((pinv @ t ** 4).tolist()))
+    t = np.arange(counts[-1], dtype=np.float64)
+    p3 = np.linalg.pinv(np.vander(t, 4, increasing=True))[3] if counts[-1] >= 4 else np.zeros(counts[-1])
+    rows[3 * n_windows, : counts[-1]] = p3
+    for i in range(n_noise - 2):
+        rows[3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
+    gain = np.array(gains)
+    if len(_DESIGNS) >= _MAX_DESIGNS:
+        _DESIGNS.clear()
+    design = _DESIGNS[counts, n_noise] = _EndDesign(
+        rows.T.astype(np.complex128), np.array(counts) >= 4, gain[:, 1].copy(), tuple(gain[:, 2].tolist()),
+        float(np.linalg.norm(p3)), tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
+    return design
+
+
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
              noise_window_m: float) -> list[EndFit]:
     """Least-squares end point, tangent and curvature of several borders at once.
 
-    For each border, fits ``y = a + b·x + c·x²`` to the points within each of ``windows_m``
-    (increasing) of its last (``at_end``) or first point, in a frame whose x axis is the
-    chord of the shortest window (driving direction) and whose origin is that point. The
-    quadratic term removes most of the bias a line fit has on a curve; longer windows
-    average the noise but are biased where the curvature changes. The window is chosen by
-    the intersection-of-confidence-intervals rule: the longest window whose slope interval
-    b ± 2.5·σ_b still intersects those of all shorter windows, with σ_b from the detection
-    noise σ (estimated from second differences over ``noise_window_m`` of all borders,
-    assuming ~0.1 m spacing; a smooth curve contributes < 1 mm). The curvature comes from the
-    chosen window too (σ_κ falls with the window length to the power 2.5, so a long window
-    tells a 1/500 m⁻¹ curve from a straight); ``curvature_sigma`` is its σ, or infinite when
-    the longest window is no single arc: the cubic coefficient d of a cubic fit over it
-    differs from an arc's, κ³·x_L/6 (x_L the far end of the window; measured on arcs of
-    8–100 m radius), by more than 3σ_d + 0.05·|κ|³·L. A clothoid (d ≈ κ'/6 for a curvature
-    rate κ') or a junction of line and arc inside the window fails that test. A border whose
-    shortest window holds fewer than four points gets its end point, the chord direction and
-    zero curvature of infinite uncertainty.
+    Each border is read from its last (``at_end``) or first point inward and fitted, in each
+    of ``windows_m`` (increasing; point counts from the spacing over the end's first 20
+    segments), by a parametric quadratic z(t) = p0 + p1·t + p2·t² with t the point index: a
+    sensor samples a border at even steps along it, so the index is its arc length up to
+    scale, noise enters both coordinates alike, and the fit of every window of every border
+    is one constant linear filter (one matrix product for all). Tangent p1/|p1|, curvature
+    Im(conj(p1)·2p2)/|p1|³. An arc's cubic (tangential, −κ²v³/6 at speed v per index) and
+    quartic (normal, −κ³v⁴/24) terms bias p0…p2 by known multiples (their projections onto
+    the window's basis); that bias is removed with the fitted κ and v (arcs of 8 m radius
+    and more then come out within 1.2 % in κ and 0.06° in heading over 6 m windows).
 
-    The power sums of every window of every border come from one masked matrix product, the
-    cubics of all borders from one batched solve; the windows' quadratics are solved by
-    Cramer's rule on floats, stopping at the first window the rule rejects.
+    The window is chosen by the intersection-of-confidence-intervals rule: the longest
+    window whose heading interval ψ ± 2.5·σ_ψ still intersects those of all shorter windows,
+    with σ_ψ from the detection noise σ (estimated from second differences over
+    ``noise_window_m`` of all borders, assuming ~0.1 m spacing; a smooth curve contributes
+    < 1 mm; floor 2 mm). ``curvature_sigma`` is the chosen window's σ_κ, or infinite when the
+    longest window is no single arc: the normal part of the p3 of a cubic fit over it
+    (v³·κ'/6 for a curvature rate κ') differs from an arc's (its quartic leak, from the
+    chosen κ) by more than 3σ plus 5 % of that leak; a clothoid or a junction of line and
+    arc inside the window fails that test. A border whose shortest window holds fewer than
+    four points gets its end point, the chord direction and zero curvature of infinite
+    uncertainty.
     """
-    n_ends, n_windows = len(borders), len(windows_m)
-    counts, chords, origins = [], [], []
-    for points, end in zip(borders, at_end):
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for e, points in enumerate(borders):
         n = points.shape[0]
-        first, last = points[0].tolist(), points[-1].tolist()
-        step = math.hypot(last[0] - first[0], last[1] - first[1]) / (n - 1)
-        count = [_points_in(w, step, n - 1) + 1 for w in windows_m]
-        counts.append(count)
-        chords.append(complex(*_chord(points, end, max(1, count[0] - 1), first, last)))
-        origins.append(last if end else first)
-    k_max = max(c[-1] for c in counts)
-    stacked = np.zeros((n_ends, k_max, 2))
-    for e, (points, end) in enumerate(zip(borders, at_end)):
-        m = min(k_max, points.shape[0])
-        stacked[e, :m] = points[:-m - 1:-1] if end else points[:m]
-    windows = stacked.view(np.complex128)[..., 0]
-    n_noise = min(k_max, min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
-    d2 = windows[:, : n_noise - 2] - 2.0 * windows[:, 1: n_noise - 1] + windows[:, 2:n_noise]
-    sigma = max(_SIGMA_FLOOR_M, math.sqrt(float(np.vdot(d2, d2).real) / (12.0 * n_ends * max(1, n_noise - 2))))
-    local = (windows - windows[:, :1]) * np.conj(chords)[:, None]
-    x, y = local.real, local.imag
-    powers = np.empty((n_ends, 11, k_max))
-    powers[:, 0] = 1.0
-    powers[:, 1] = x
-    np.multiply(x, x, out=powers[:, 2])
-    np.multiply(powers[:, 2], x, out=powers[:, 3])
-    np.multiply(powers[:, 1:4], powers[:, 3:4], out=powers[:, 4:7])
-    np.multiply(powers[:, :4], y[:, None], out=powers[:, 7:])
-    count = np.array(counts)
-    inside = (np.arange(k_max) < count[..., None]).astype(np.float64)
-    sums = inside @ powers.transpose(0, 2, 1)
-    cubic_normal = sums[:, -1, _CUBIC_NORMAL]
-    rhs = np.zeros((n_ends, 4, 2))
-    rhs[:, :, 0] = sums[:, -1, _CUBIC_RHS]
-    rhs[:, 3, 1] = 1.0
-    try:
-        solution = np.linalg.solve(cubic_normal, rhs)[:, 3]
-    except np.linalg.LinAlgError:  # fewer than four distinct x in a window: d = σ_d = 0 there
-        solvable = np.linalg.det(cubic_normal) != 0.0
-        solution = np.linalg.solve(np.where(solvable[:, None, None], cubic_normal, _EYE4), rhs)[:, 3]
-        solution *= solvable[:, None]
-    cubic, cubic_var = solution.T.tolist()
-    x_far = x[np.arange(n_ends), count[:, -1] - 1].tolist()
-    cells = sums[..., :10].tolist()
-    fits = []
-    for e in range(n_ends):
-        direction = chords[e]
-        chosen = None
-        lo, hi = -math.inf, math.inf
-        for k, s1, s2, s3, s4, _, _, t0, t1, t2 in cells[e]:
-            m1 = s1 * s4 - s3 * s2
-            det = k * (s2 * s4 - s3 * s3) - s1 * m1 + s2 * (s1 * s3 - s2 * s2)
-            if k < 4.0 or abs(det) <= 1e-12 * max(1.0, s4 * s4):
-                break
-            b = (k * (t1 * s4 - s3 * t2) - t0 * m1 + s2 * (s1 * t2 - s2 * t1)) / det
-            half = _CI_FACTOR * sigma * math.sqrt(abs((k * s4 - s2 * s2) / det))
-            lo, hi = max(lo, b - half), min(hi, b + half)
-            if lo > hi:
-                break
-            chosen = (k, s1, s2, s3, s4, t0, t1, t2, det, b)
-        if chosen is None:
-            fits.append(EndFit(np.array(origins[e]), (direction.real, direction.imag), 0.0, math.inf))
-            continue
-        k, s1, s2, s3, s4, t0, t1, t2, det, slope = chosen
-        a = (t0 * (s2 * s4 - s3 * s3) - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
-        c = (k * (s2 * t2 - t1 * s3) - s1 * (s1 * t2 - t1 * s2) + t0 * (s1 * s3 - s2 * s2)) / det
-        norm = math.hypot(1.0, slope)
-        scale = 2.0 / norm ** 3
-        curvature, curvature_sigma = scale * c, scale * sigma * math.sqrt(abs((k * s2 - s1 * s1) / det))
-        arc_cubic = curvature ** 3 * x_far[e] / 6.0
-        if abs(cubic[e] - arc_cubic) > (_CURVATURE_CHANGE_SIGMAS * sigma * math.sqrt(abs(cubic_var[e]))
-                                        + _CUBIC_ARC_BIAS * abs(curvature) ** 3 * abs(x_far[e])):
-            curvature_sigma = math.inf
-        point = complex(*origins[e]) + a * 1j * direction
-        tangent = direction * complex(1.0, slope) / norm
-        fits.append(EndFit(np.array((point.real, point.imag)), (tangent.real, tangent.imag), curvature,
-                           curvature_sigma))
+        span = min(n - 1, _STEP_SPAN)
+        (x0, y0), (x1, y1) = (points[-1].tolist(), points[-1 - span].tolist()) if at_end[e] else (
+            points[0].tolist(), points[span].tolist())
+        per_point = span / (math.hypot(x1 - x0, y1 - y0) or math.inf)
+        groups.setdefault(tuple([min(n - 1, round(w * per_point)) + 1 for w in windows_m]), []).append(e)
+    n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
+    filtered, squares, n_squares = [], 0.0, 0
+    for counts, members in groups.items():
+        design = _end_design(counts, min(n_noise, counts[-1]))
+        k = design.rows.shape[0]
+        window = np.concatenate([borders[e][:-k - 1:-1] if at_end[e] else borders[e][:k] for e in members])
+        values = window.view(np.complex128).reshape(len(members), k) @ design.rows
+        n_fit = 3 * len(counts) + 1
+        noise = values[:, n_fit:]
+        squares += float(np.vdot(noise, noise).real)
+        n_squares += noise.size
+        filtered.append((counts, members, design, values))
+    sigma = max(_SIGMA_FLOOR_M, math.sqrt(squares / (12.0 * n_squares))) if n_squares else _SIGMA_FLOOR_M
+    fits: list[EndFit] = []
+    for counts, members, design, values in filtered:
+        p1 = values[:, 1:3 * len(counts):3]
+        turn = p1 * p1[:, :1].conj()
+        heading = np.arctan2(turn.imag, turn.real)
+        half = ((_CI_FACTOR * sigma) * design.p1_gains) / np.maximum(np.abs(p1), _TINY_SPEED_M)
+        lo, hi = np.maximum.accumulate(heading - half, axis=1), np.minimum.accumulate(heading + half, axis=1)
+        consistent = ((lo <= hi) & design.enough_points).tolist()
+        for e, row, ok in zip(members, values[:, :3 * len(counts) + 1].tolist(), consistent):
+            chosen = ok.index(False) - 1 if False in ok else len(ok) - 1
+            fits.append(_end_fit(row, design, chosen, at_end[e], sigma) if chosen >= 0
+                        else _chord_fit(borders[e], at_end[e]))
+    if len(filtered) > 1:
+        order = [e for _, members, _, _ in filtered for e in members]
+        fits = [fit for _, fit in sorted(zip(order, fits), key=lambda pair: pair[0])]
     return fits
+
+
+def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
+    """The end point, the whole border's chord direction and zero curvature of infinite σ."""
+    (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
+    norm = math.hypot(x1 - x0, y1 - y0) or 1.0
+    return EndFit(np.array((x1, y1) if at_end else (x0, y0)), ((x1 - x0) / norm, (y1 - y0) / norm), 0.0, math.inf)
+
+
+def _end_fit(row: list[complex], design: _EndDesign, w: int, at_end: bool, sigma: float) -> EndFit:
+    """One border's fit from its filtered coefficients ``row`` and chosen window ``w``."""
+    p0, p1, p2 = row[3 * w: 3 * w + 3]
+    speed = abs(p1)
+    tangent = p1 / speed
+    curvature = (p1.conjugate() * p2).imag * 2.0 / speed ** 3
+    along = curvature * curvature * speed ** 3 / 6.0 * tangent
+    across = curvature ** 3 * speed ** 4 / 24.0 * 1j * tangent
+    (c0, c1, c2), (q0, q1, q2) = design.cubic_leaks[w], design.quartic_leaks[w]
+    p0, p1, p2 = p0 + c0 * along + q0 * across, p1 + c1 * along + q1 * across, p2 + c2 * along + q2 * across
+    speed = abs(p1)
+    curvature = (p1.conjugate() * p2).imag * 2.0 / speed ** 3
+    curvature_sigma = 2.0 * sigma * design.p2_gains[w] / (speed * speed)
+    normal_p3 = (row[-1] * (1j * p1).conjugate()).real / speed
+    arc_p3 = -design.p3_quartic_leak * curvature ** 3 * speed ** 4 / 24.0
+    if abs(normal_p3 - arc_p3) > _CURVATURE_CHANGE_SIGMAS * sigma * design.p3_gain + _CUBIC_ARC_BIAS * abs(arc_p3):
+        curvature_sigma = math.inf
+    direction = (-p1 if at_end else p1) / speed
+    return EndFit(np.array((p0.real, p0.imag)), (direction.real, direction.imag),
+                  -curvature if at_end else curvature, curvature_sigma)
 
 
 def distance_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
