@@ -17,7 +17,6 @@ _CI_FACTOR: Final[float] = 2.5
 _CURVATURE_CHANGE_SIGMAS: Final[float] = 3.0
 _CUBIC_ARC_BIAS: Final[float] = 0.05
 _STEP_SPAN: Final[int] = 20  # segments at a border end whose chord gives the point spacing
-_TINY_SPEED_M: Final[float] = 1e-300
 
 
 def transform(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
@@ -134,16 +133,14 @@ class _EndDesign:
     windows (``counts`` points, t = 0, 1, … the point index) the columns giving the quadratic
     coefficients p0, p1, p2; then the column giving the cubic coefficient p3 of a cubic fit
     over the longest window; then D second differences over the first ``n_noise`` points.
-    ``enough_points`` ``(W,)`` whether a window holds four points;
-    ``p1_gains`` ``(W,)`` and ``p2_gains`` the noise gains (row norms) of p1 and p2 per
-    window, ``p3_gain`` that of p3. ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴
+    ``windows`` per window: whether it holds four points, and the noise gain (row norm) of
+    p1; ``p2_gains`` those of p2, ``p3_gain`` that of p3. ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴
     projected onto the window's quadratic basis (how an arc's cubic and quartic terms bias
     p0…p2); ``p3_quartic_leak``: t⁴ projected onto the longest window's p3.
     """
 
     rows: npt.NDArray[np.complex128]
-    enough_points: npt.NDArray[np.bool_]
-    p1_gains: NDArrayFloat
+    windows: tuple[tuple[bool, float], ...]
     p2_gains: tuple[float, ...]
     p3_gain: float
     cubic_leaks: tuple[tuple[float, float, float], ...]
@@ -180,7 +177,8 @@ def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
     if len(_DESIGNS) >= _MAX_DESIGNS:
         _DESIGNS.clear()
     design = _DESIGNS[counts, n_noise] = _EndDesign(
-        rows.T.astype(np.complex128), np.array(counts) >= 4, gain[:, 1].copy(), tuple(gain[:, 2].tolist()),
+        rows.T.astype(np.complex128), tuple(zip([c >= 4 for c in counts], gain[:, 1].tolist())),
+        tuple(gain[:, 2].tolist()),
         float(np.linalg.norm(p3)), tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
     return design
 
@@ -235,20 +233,32 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     sigma = max(_SIGMA_FLOOR_M, math.sqrt(squares / (12.0 * n_squares))) if n_squares else _SIGMA_FLOOR_M
     fits: list[EndFit] = []
     for counts, members, design, values in filtered:
-        p1 = values[:, 1:3 * len(counts):3]
-        turn = p1 * p1[:, :1].conj()
-        heading = np.arctan2(turn.imag, turn.real)
-        half = ((_CI_FACTOR * sigma) * design.p1_gains) / np.maximum(np.abs(p1), _TINY_SPEED_M)
-        lo, hi = np.maximum.accumulate(heading - half, axis=1), np.minimum.accumulate(heading + half, axis=1)
-        consistent = ((lo <= hi) & design.enough_points).tolist()
-        for e, row, ok in zip(members, values[:, :3 * len(counts) + 1].tolist(), consistent):
-            chosen = ok.index(False) - 1 if False in ok else len(ok) - 1
-            fits.append(_end_fit(row, design, chosen, at_end[e], sigma) if chosen >= 0
-                        else _chord_fit(borders[e], at_end[e]))
+        for e, row in zip(members, values[:, :3 * len(counts) + 1].tolist()):
+            fits.append(_end_fit(row, design, _chosen_window(row, design, sigma), borders[e], at_end[e], sigma))
     if len(filtered) > 1:
         order = [e for _, members, _, _ in filtered for e in members]
         fits = [fit for _, fit in sorted(zip(order, fits), key=lambda pair: pair[0])]
     return fits
+
+
+def _chosen_window(row: list[complex], design: _EndDesign, sigma: float) -> int:
+    """Index of the longest window whose heading interval meets those of all shorter ones
+    (−1 when the shortest has fewer than four points or no tangent)."""
+    chosen, reference = -1, 0j
+    lo, hi = -math.inf, math.inf
+    for w, (enough, gain) in enumerate(design.windows):
+        p1 = row[3 * w + 1]
+        speed = abs(p1)
+        if not enough or speed == 0.0:
+            break
+        if w == 0:
+            reference = p1.conjugate() / speed
+        heading, half = cmath.phase(p1 * reference), _CI_FACTOR * sigma * gain / speed
+        lo, hi = max(lo, heading - half), min(hi, heading + half)
+        if lo > hi:
+            break
+        chosen = w
+    return chosen
 
 
 def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
@@ -258,8 +268,11 @@ def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
     return EndFit(np.array((x1, y1) if at_end else (x0, y0)), ((x1 - x0) / norm, (y1 - y0) / norm), 0.0, math.inf)
 
 
-def _end_fit(row: list[complex], design: _EndDesign, w: int, at_end: bool, sigma: float) -> EndFit:
+def _end_fit(row: list[complex], design: _EndDesign, w: int, points: NDArrayFloat, at_end: bool,
+             sigma: float) -> EndFit:
     """One border's fit from its filtered coefficients ``row`` and chosen window ``w``."""
+    if w < 0:
+        return _chord_fit(points, at_end)
     p0, p1, p2 = row[3 * w: 3 * w + 3]
     speed = abs(p1)
     tangent = p1 / speed
