@@ -27,9 +27,9 @@ TRANSITION_SHARE: Final[float] = 0.5  # share of a turn between straight ends in
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
-_TAU_POWERS_T: Final[NDArrayFloat] = np.power.outer(_TAU, np.arange(4)).T.copy()
-_NO_TARGETS: Final[NDArrayFloat] = np.empty(0)
+_TAU_POWERS_T: Final = np.power.outer(_TAU, np.arange(4)).T.astype(np.complex128)  # complex: no cast per call
 _PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
+_COUNTING: list[NDArrayFloat] = [np.empty(0)]  # 1.0, 2.0, …: the one table of _counting
 
 Piece = list[complex]  # power-basis coefficients [a, b, c, d] as x + iy: a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1]
 
@@ -46,6 +46,15 @@ def _parameter_grid(n_pieces: int) -> NDArrayFloat:
     return grid
 
 
+def _counting(n: int) -> NDArrayFloat:
+    """1.0, 2.0, …, n: a read-only slice of a table that grows on demand (no allocation per call)."""
+    table = _COUNTING[0]
+    if n > table.shape[0]:
+        table = _COUNTING[0] = np.arange(1.0, 2.0 * n + 1.0)
+        table.flags.writeable = False
+    return table[:n]
+
+
 def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[NDArrayFloat]:
     """Sample chains of cubic pieces by arc length; one ``(K, 2)`` array per chain.
 
@@ -60,40 +69,40 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     if not flat:
         return [np.empty((0, 2)) for _ in pieces]
     coeffs = np.array(flat, dtype=np.complex128)
-    n_pieces = coeffs.shape[0]
     grid = (coeffs @ _TAU_POWERS_T).ravel()
     s = np.empty(grid.shape[0])
     s[0] = 0.0
-    np.cumsum(np.abs(grid[1:] - grid[:-1]), out=s[1:])
-    piece_start, piece_end = s[:: _GRID + 1].tolist(), s[_GRID:: _GRID + 1].tolist()
-    targets, first = [], 0
+    np.add.accumulate(np.abs(grid[1:] - grid[:-1]), out=s[1:])
+    spans, first, offset = [], 0, 0  # per chain: (first target, target count, arc length at its start, step)
     for chain in pieces:
-        start = piece_start[first] if chain else 0.0
-        length = piece_end[first + len(chain) - 1] - start if chain else 0.0
-        n_steps = math.ceil(length / spacing_m * (1.0 + 1e-3)) if length > 0.0 else 0
-        targets.append(start + (length / n_steps) * np.arange(1.0, n_steps) if n_steps > 1 else _NO_TARGETS)
-        first += len(chain)
-    k = np.concatenate(targets)
-    if k.shape[0] == 0:
+        count, start, step = 0, 0.0, 0.0
+        if chain:
+            start, end = s.item(first * (_GRID + 1)), s.item((first + len(chain)) * (_GRID + 1) - 1)
+            if end > start:
+                n_steps = math.ceil((end - start) / spacing_m * (1.0 + 1e-3))
+                count, step = n_steps - 1, (end - start) / n_steps
+        spans.append((offset, count, start, step))
+        first, offset = first + len(chain), offset + count
+    if offset == 0:
         return [np.empty((0, 2)) for _ in pieces]
-    q = np.interp(k, s, _parameter_grid(n_pieces))
+    k = np.empty(offset)
+    for offset, count, start, step in spans:
+        target = k[offset:offset + count]
+        np.multiply(_counting(count), step, out=target)
+        target += start
+    q = np.interp(k, s, _parameter_grid(len(flat)))
     index = q.astype(np.intp)
-    np.minimum(index, n_pieces - 1, out=index)
-    tau = q - index
-    a, b, c, d = np.ascontiguousarray(coeffs.T)
-    z = d.take(index)
+    np.minimum(index, len(flat) - 1, out=index)
+    tau = (q - index).astype(np.complex128)  # complex × complex: no cast inside each product
+    a, b, c, d = coeffs.T.take(index, axis=1)
+    z = d * tau
+    z += c
     z *= tau
-    z += c.take(index)
+    z += b
     z *= tau
-    z += b.take(index)
-    z *= tau
-    z += a.take(index)
+    z += a
     points = z.view(np.float64).reshape(-1, 2)
-    out, offset = [], 0
-    for target in targets:
-        out.append(points[offset:offset + target.shape[0]])
-        offset += target.shape[0]
-    return out
+    return [points[offset:offset + count] for offset, count, _, _ in spans]
 
 
 def estimate_apex(p_end: tuple[float, float], d_end: tuple[float, float], p_start: tuple[float, float],
@@ -157,25 +166,26 @@ def paper_pieces(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float
     than ``apex_min_turn_rad``. Returns the power-basis pieces from ego[-1] to coop[0]; knots
     are complex numbers x + iy, so one tridiagonal solve serves both coordinates.
     """
-    e0, e1 = complex(*ego[max(0, ego.shape[0] - 3)].tolist()), complex(*ego[-1].tolist())
-    c0, c1 = complex(*coop[0].tolist()), complex(*coop[min(2, coop.shape[0] - 1)].tolist())
+    (ex0, ey0), *_, (ex1, ey1) = ego[-3:].tolist()
+    (cx0, cy0), *_, (cx1, cy1) = coop[:3].tolist()
+    e0, e1, c0, c1 = complex(ex0, ey0), complex(ex1, ey1), complex(cx0, cy0), complex(cx1, cy1)
     de = (e1 - e0) / (abs(e1 - e0) or 1.0)
     dc = (c1 - c0) / (abs(c1 - c0) or 1.0)
     knots = [e0, e1]
     turn = dc * de.conjugate()
     if abs(math.atan2(turn.imag, turn.real)) > apex_min_turn_rad:
-        apex = estimate_apex((e1.real, e1.imag), (de.real, de.imag), (c0.real, c0.imag), (dc.real, dc.imag),
-                             apex_ratio)
+        apex = estimate_apex((ex1, ey1), (de.real, de.imag), (cx0, cy0), (dc.real, dc.imag), apex_ratio)
         if apex is not None:
             knots.append(complex(*apex))
     knots += [c0, c1]
-    kept = [knots[0]]
+    kept, h = [e0], []
     for knot in knots[1:]:
-        if abs(knot - kept[-1]) > _MIN_KNOT_STEP_M:
+        step = abs(knot - kept[-1])
+        if step > _MIN_KNOT_STEP_M:
             kept.append(knot)
+            h.append(1.0 if uniform else step)
     if e1 not in kept or c0 not in kept:
         return []
-    h = [1.0 if uniform else abs(b - a) for a, b in zip(kept[:-1], kept[1:])]
     m = natural_spline_moments(h, kept)
     pieces = []
     for i in range(kept.index(e1), kept.index(c0)):
@@ -185,17 +195,17 @@ def paper_pieces(ego: NDArrayFloat, coop: NDArrayFloat, apex_min_turn_rad: float
     return pieces
 
 
-def _bezier_piece(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArrayFloat) -> Piece:
+def _bezier_piece(p0: complex, d0: complex, p3: complex, d1: complex) -> Piece:
     """Power basis of the cubic Bézier with arms of a third of the chord (straight or S-shaped)."""
-    a, b = complex(*p0.tolist()), complex(*p3.tolist())
-    arm = abs(b - a) / 3.0
-    c1, c2 = a + arm * complex(*d0.tolist()), b - arm * complex(*d1.tolist())
-    return [a, 3.0 * (c1 - a), 3.0 * (c2 - 2.0 * c1 + a), b - 3.0 * c2 + 3.0 * c1 - a]
+    arm = abs(p3 - p0) / 3.0
+    c1, c2 = p0 + arm * d0, p3 - arm * d1
+    return [p0, 3.0 * (c1 - p0), 3.0 * (c2 - 2.0 * c1 + p0), p3 - 3.0 * c2 + 3.0 * c1 - p0]
 
 
-def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> NDArrayFloat:
-    d = np.array((a[0] + b[0], a[1] + b[1]))
-    return d / (math.hypot(d[0], d[1]) or 1.0)
+def _mean_dir(a: tuple[float, float], b: tuple[float, float]) -> complex:
+    """Unit vector (x + iy) along the sum of two directions."""
+    d = complex(a[0] + b[0], a[1] + b[1])
+    return d / (abs(d) or 1.0)
 
 
 def _straight(fit: EndFit) -> bool:
@@ -217,14 +227,16 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    ends = ((fits[0].point, fits[2].point), (fits[1].point, fits[3].point))
-    if all(_tangent_triangle(p0, d0, p3, d1) is None for p0, p3 in ends):
+    ends = [(complex(*fits[i].point.tolist()), complex(*fits[i + 2].point.tolist())) for i in (0, 1)]
+    triangles = [_tangent_triangle(p0, d0, p3, d1) for p0, p3 in ends]
+    if triangles[0] is None and triangles[1] is None:
         left, right = sample_pieces([[_bezier_piece(p0, d0, p3, d1)] for p0, p3 in ends], spacing_m)
         return left, right
     if share is None:
         share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
-    return (hermite_gap(fits[0].point, d0, fits[2].point, d1, spacing_m, share),
-            hermite_gap(fits[1].point, d0, fits[3].point, d1, spacing_m, share))
+    left, right = (_hermite_points(p0, d0, p3, d1, triangle, spacing_m, share)
+                   for (p0, p3), triangle in zip(ends, triangles))
+    return left, right
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
@@ -256,18 +268,19 @@ def transition_tangent(turn_rad: float, share: float) -> float:
     return end.real - end.imag / math.tan(theta)
 
 
-def _tangent_triangle(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat,
-                      d1: NDArrayFloat) -> tuple[float, float, float] | None:
+def _tangent_triangle(p0: complex, d0: complex, p3: complex, d1: complex) -> tuple[float, float, float] | None:
     """``(turn, a, b)``: the signed turn [rad] from ``d0`` to ``d1`` and the distances [m] from ``p0``
     and from ``p3`` to where the two tangent lines meet; ``None`` when they meet behind either
-    end or the turn is below 1 mrad (no circular arc: straight or S-shaped)."""
-    (x0, y0), (ux, uy), (x3, y3), (vx, vy) = p0.tolist(), d0.tolist(), p3.tolist(), d1.tolist()
+    end or the turn is below 1 mrad (no circular arc: straight or S-shaped). Points and unit
+    directions are x + iy."""
+    ux, uy, vx, vy = d0.real, d0.imag, d1.real, d1.imag
     denom = _cross(ux, uy, vx, vy)
     turn = math.atan2(denom, ux * vx + uy * vy)
     if abs(turn) < _MIN_ARC_TURN_RAD:
         return None
-    a = _cross(x3 - x0, y3 - y0, vx, vy) / denom
-    b = _cross(ux, uy, x3 - x0, y3 - y0) / denom
+    cx, cy = p3.real - p0.real, p3.imag - p0.imag
+    a = _cross(cx, cy, vx, vy) / denom
+    b = _cross(ux, uy, cx, cy) / denom
     return None if a <= 0.0 or b <= 0.0 else (turn, a, b)
 
 
@@ -287,7 +300,18 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     between straight ends. Parallel or S-shaped end tangents (no triangle ahead of both ends) use a cubic
     Bézier with arms of a third of the chord.
     """
-    triangle = _tangent_triangle(p0, d0, p3, d1)
+    p0c, d0c, p3c, d1c = (complex(*v.tolist()) for v in (p0, d0, p3, d1))
+    return _hermite_points(p0c, d0c, p3c, d1c, _tangent_triangle(p0c, d0c, p3c, d1c), spacing_m, share)
+
+
+def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle: tuple[float, float, float] | None,
+                    spacing_m: float, share: float) -> NDArrayFloat:
+    """:func:`hermite_gap` on points and unit directions as x + iy, given their ``triangle``.
+
+    The curve, by arc length u from ``p0``: the straight p0 + u·d0 up to the lead a − m, the
+    turn (arc or clothoid–arc–clothoid), then the straight into ``p3`` along ``d1``; each
+    stretch of the samples u = j·total/n is evaluated in closed form on its own slice.
+    """
     if triangle is None:
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     turn, a, b = triangle
@@ -304,25 +328,40 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     n_steps = math.ceil(total / spacing_m * (1.0 + 1e-9))
     if n_steps < 2:
         return np.empty((0, 2))
-    u = np.arange(1.0, n_steps) * (total / n_steps)
-    ua = np.clip(u - lead, 0.0, arc)
-    direction = complex(*d0.tolist())
-    start = complex(*p0.tolist()) + lead * direction
+    step = total / n_steps
+    u = _counting(n_steps - 1) * step
+    n_lead = min(n_steps - 1, max(0, math.ceil(lead / step) - 1))  # samples before the turn
+    n_turn = min(n_steps - 1, math.floor((lead + arc) / step))  # ... and up to its end
+    z = np.empty(n_steps - 1, dtype=np.complex128)
+    if n_lead > 0:
+        np.multiply(u[:n_lead], d0, out=z[:n_lead])
+        z[:n_lead] += p0
+    start = p0 + lead * d0
+    ua = u[n_lead:n_turn] - lead
     if share > 0.0:
-        mid = 0.5 * (ua + np.concatenate(([0.0], ua[:-1])))
+        du = np.empty_like(ua)
+        du[:1] = ua[:1]
+        np.subtract(ua[1:], ua[:-1], out=du[1:])
+        mid = ua - 0.5 * du
         rise = np.minimum(mid, spiral)
         fall = np.maximum(mid - spiral - arc_turn * radius, 0.0)
-        along = np.clip(mid - spiral, 0.0, arc_turn * radius)
+        along = np.minimum(np.maximum(mid - spiral, 0.0), arc_turn * radius)
         heading = (0.5 * rise * rise / spiral + along + fall - 0.5 * fall * fall / spiral)
         heading *= math.copysign(1.0 / radius, turn)
-        z = start + direction * np.cumsum(np.diff(ua, prepend=0.0) * np.exp(1j * heading))
+        w = np.exp(1j * heading)
+        w *= du
+        np.add.accumulate(w, out=z[n_lead:n_turn])
+        z[n_lead:n_turn] *= d0
+        z[n_lead:n_turn] += start
     else:
         kappa = math.copysign(abs(turn) / arc, turn)
-        z = start + direction * (np.exp(1j * kappa * ua) - 1.0) / (1j * kappa)
-    out = z.view(np.float64).reshape(-1, 2)
-    n_before, n_inside = int(np.searchsorted(u, lead)), int(np.searchsorted(u, lead + arc, side="right"))
-    if n_before > 0:
-        out[:n_before] = p0 + u[:n_before, None] * d0
-    if n_inside < u.shape[0]:
-        out[n_inside:] = (p3 - b * d1 + m * d1) + (u[n_inside:] - lead - arc)[:, None] * d1
-    return out
+        scale = d0 / (1j * kappa)  # z = start + scale·(e^{iκ·ua} − 1)
+        w = z[n_lead:n_turn]
+        np.multiply(ua, 1j * kappa, out=w)
+        np.exp(w, out=w)
+        w *= scale
+        w += start - scale
+    if n_turn < n_steps - 1:
+        np.multiply(u[n_turn:] - (lead + arc), d1, out=z[n_turn:])
+        z[n_turn:] += p3 - tail * d1
+    return z.view(np.float64).reshape(-1, 2)
