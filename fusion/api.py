@@ -99,10 +99,10 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
 def _result(ego: LaneDetection, left: Parts, right: Parts, kind: FusionKind, gap_m: float,
             reason: str = "") -> FusionResult:
     """Result from ego-frame parts: one concatenation and one transform to the world frame."""
-    parts = left + right
-    counts = [points.shape[0] for points, _ in parts]
-    world = to_world(np.concatenate([points for points, _ in parts]), ego.pose)
-    labels = np.repeat(np.array([int(source) for _, source in parts], dtype=np.int8), counts)
+    arrays, sources = zip(*left, *right)
+    counts = [points.shape[0] for points in arrays]
+    world = to_world(np.concatenate(arrays), ego.pose)
+    labels = np.repeat(np.array(sources, dtype=np.int8), counts)
     n_left = sum(counts[: len(left)])
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason)
 

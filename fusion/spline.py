@@ -25,6 +25,7 @@ _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _STRAIGHT_SIGMAS: Final[float] = 2.5
 TRANSITION_SHARE: Final[float] = 0.5  # share of a turn between straight ends in its clothoids (equal thirds)
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
+_GL_NODES_SQUARED: Final[NDArrayFloat] = _GL_NODES * _GL_NODES
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
 _TAU_POWERS_T: Final = np.power.outer(_TAU, np.arange(4)).T.astype(np.complex128)  # complex: no cast per call
@@ -234,7 +235,9 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
         return left, right
     if share is None:
         share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
-    left, right = (_hermite_points(p0, d0, p3, d1, triangle, spacing_m, share)
+    turn = (triangles[0] or triangles[1])[0]  # the same for both borders (same end directions)
+    unit_tangent = _unit_tangent(turn, share)
+    left, right = (_hermite_points(p0, d0, p3, d1, triangle, unit_tangent, spacing_m, share)
                    for (p0, p3), triangle in zip(ends, triangles))
     return left, right
 
@@ -262,7 +265,7 @@ def transition_tangent(turn_rad: float, share: float) -> float:
     """
     theta = abs(turn_rad)
     spiral, arc = share * theta, (1.0 - share) * theta
-    half = complex(spiral * np.dot(_GL_WEIGHTS, np.exp(0.5j * spiral * _GL_NODES * _GL_NODES)))
+    half = complex(spiral * np.dot(_GL_WEIGHTS, np.exp((0.5j * spiral) * _GL_NODES_SQUARED)))
     half += cmath.exp(0.5j * spiral) * (cmath.exp(0.5j * arc) - 1.0) / 1j
     end = half + cmath.exp(1j * theta) * half.conjugate()
     return end.real - end.imag / math.tan(theta)
@@ -301,12 +304,21 @@ def hermite_gap(p0: NDArrayFloat, d0: NDArrayFloat, p3: NDArrayFloat, d1: NDArra
     Bézier with arms of a third of the chord.
     """
     p0c, d0c, p3c, d1c = (complex(*v.tolist()) for v in (p0, d0, p3, d1))
-    return _hermite_points(p0c, d0c, p3c, d1c, _tangent_triangle(p0c, d0c, p3c, d1c), spacing_m, share)
+    triangle = _tangent_triangle(p0c, d0c, p3c, d1c)
+    unit_tangent = _unit_tangent(triangle[0], share) if triangle is not None else math.nan
+    return _hermite_points(p0c, d0c, p3c, d1c, triangle, unit_tangent, spacing_m, share)
+
+
+def _unit_tangent(turn: float, share: float) -> float:
+    """Tangent length [m] of the turn ``turn`` [rad] of arc radius 1: the arc, or with ``share`` > 0
+    the clothoid–arc–clothoid turn (:func:`transition_tangent`)."""
+    return transition_tangent(turn, share) if share > 0.0 else math.tan(abs(turn) / 2.0)
 
 
 def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle: tuple[float, float, float] | None,
-                    spacing_m: float, share: float) -> NDArrayFloat:
-    """:func:`hermite_gap` on points and unit directions as x + iy, given their ``triangle``.
+                    unit_tangent: float, spacing_m: float, share: float) -> NDArrayFloat:
+    """:func:`hermite_gap` on points and unit directions as x + iy, given their ``triangle`` and
+    the :func:`_unit_tangent` of its turn (the same for both borders of a lane).
 
     The curve, by arc length u from ``p0``: the straight p0 + u·d0 up to the lead a − m, the
     turn (arc or clothoid–arc–clothoid), then the straight into ``p3`` along ``d1``; each
@@ -316,12 +328,11 @@ def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
     turn, a, b = triangle
     m = min(a, b)
+    radius = m / unit_tangent
     if share > 0.0:
-        radius = m / transition_tangent(turn, share)
         spiral, arc_turn = share * abs(turn) * radius, (1.0 - share) * abs(turn)
         arc = 2.0 * spiral + arc_turn * radius
     else:
-        radius = m / math.tan(abs(turn) / 2.0)
         arc = radius * abs(turn)
     lead, tail = a - m, b - m
     total = lead + arc + tail
@@ -329,39 +340,45 @@ def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle
     if n_steps < 2:
         return np.empty((0, 2))
     step = total / n_steps
-    u = _counting(n_steps - 1) * step
+    j = _counting(n_steps - 1)  # sample j lies at arc length u = j·step
     n_lead = min(n_steps - 1, max(0, math.ceil(lead / step) - 1))  # samples before the turn
     n_turn = min(n_steps - 1, math.floor((lead + arc) / step))  # ... and up to its end
     z = np.empty(n_steps - 1, dtype=np.complex128)
+    line, bend, straight = z[:n_lead], z[n_lead:n_turn], z[n_turn:]
     if n_lead > 0:
-        np.multiply(u[:n_lead], d0, out=z[:n_lead])
-        z[:n_lead] += p0
+        np.multiply(j[:n_lead], step * d0, out=line)
+        line += p0
     start = p0 + lead * d0
-    ua = u[n_lead:n_turn] - lead
-    if share > 0.0:
-        du = np.empty_like(ua)
-        du[:1] = ua[:1]
-        np.subtract(ua[1:], ua[:-1], out=du[1:])
-        mid = ua - 0.5 * du
-        rise = np.minimum(mid, spiral)
-        fall = np.maximum(mid - spiral - arc_turn * radius, 0.0)
-        along = np.minimum(np.maximum(mid - spiral, 0.0), arc_turn * radius)
-        heading = (0.5 * rise * rise / spiral + along + fall - 0.5 * fall * fall / spiral)
-        heading *= math.copysign(1.0 / radius, turn)
-        w = np.exp(1j * heading)
-        w *= du
-        np.add.accumulate(w, out=z[n_lead:n_turn])
-        z[n_lead:n_turn] *= d0
-        z[n_lead:n_turn] += start
+    if share > 0.0:  # midpoint rule on the steps of u (the first one from the start of the turn)
+        first = j[n_lead] * step - lead if n_turn > n_lead else 0.0  # end of the first step [m into the turn]
+        mid = j[n_lead:n_turn] * step
+        mid -= lead + 0.5 * step
+        mid[:1] = 0.5 * first
+        along = arc_turn * radius
+        i_arc, i_out = np.searchsorted(mid, (spiral, spiral + along)).tolist()
+        turned = np.empty_like(mid)  # turned angle × radius [m]: clothoid in, arc, clothoid out
+        rise, flat, fall = turned[:i_arc], turned[i_arc:i_out], turned[i_out:]
+        np.multiply(mid[:i_arc], mid[:i_arc], out=rise)
+        rise *= 0.5 / spiral
+        np.subtract(mid[i_arc:i_out], 0.5 * spiral, out=flat)
+        np.subtract(mid[i_out:], spiral + along, out=fall)
+        fall *= 1.0 - (0.5 / spiral) * fall
+        fall += 0.5 * spiral + along
+        w = np.multiply(turned, 1j * math.copysign(1.0 / radius, turn))
+        np.exp(w, out=w)
+        w[:1] *= first
+        w[1:] *= step
+        np.add.accumulate(w, out=bend)
+        bend *= d0
+        bend += start
     else:
         kappa = math.copysign(abs(turn) / arc, turn)
-        scale = d0 / (1j * kappa)  # z = start + scale·(e^{iκ·ua} − 1)
-        w = z[n_lead:n_turn]
-        np.multiply(ua, 1j * kappa, out=w)
-        np.exp(w, out=w)
-        w *= scale
-        w += start - scale
+        scale = d0 / (1j * kappa)  # bend = start + scale·(e^{iκ(u − lead)} − 1)
+        np.multiply(j[n_lead:n_turn], 1j * kappa * step, out=bend)
+        np.exp(bend, out=bend)
+        bend *= scale * cmath.exp(-1j * kappa * lead)
+        bend += start - scale
     if n_turn < n_steps - 1:
-        np.multiply(u[n_turn:] - (lead + arc), d1, out=z[n_turn:])
-        z[n_turn:] += p3 - tail * d1
+        np.multiply(j[n_turn:], step * d1, out=straight)  # p3 + (u − total)·d1
+        straight += p3 - total * d1
     return z.view(np.float64).reshape(-1, 2)

@@ -244,5 +244,5 @@ class FusionResult:
     reason: str = ""
 
     def __post_init__(self) -> None:
-        for name in ("left", "right", "left_source", "right_source"):
-            getattr(self, name).flags.writeable = False
+        for array in (self.left, self.right, self.left_source, self.right_source):
+            array.setflags(write=False)
