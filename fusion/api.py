@@ -7,6 +7,7 @@ one transform, the result to the world frame in another); all checks are frame-i
 from __future__ import annotations
 
 import math
+from typing import Final, Sequence
 
 import numpy as np
 
@@ -15,14 +16,16 @@ from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_check, lane_ends, paper_check, relative_pose
 from fusion.geometry import EndFit, to_world, transform
 from fusion.spline import hermite_lane, lane_end_fits, paper_pieces, sample_pieces
-from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, Source
+from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
 _INTERPOLATIONS = ("paper", "hermite")
 
+_EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
+_SPLINE_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.INTERPOLATED, Source.COOP] * 2, dtype=np.int8)
+
 Borders = tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]
-Parts = list[tuple[NDArrayFloat, Source]]
 
 
 def _ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, float]:
@@ -96,14 +99,14 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
     return not reason, reason
 
 
-def _result(ego: LaneDetection, left: Parts, right: Parts, kind: FusionKind, gap_m: float,
+def _result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind, gap_m: float,
             reason: str = "") -> FusionResult:
-    """Result from ego-frame parts: one concatenation and one transform to the world frame."""
-    arrays, sources = zip(*left, *right)
-    counts = [points.shape[0] for points in arrays]
-    world = to_world(np.concatenate(arrays), ego.pose)
-    labels = np.repeat(np.array(sources, dtype=np.int8), counts)
-    n_left = sum(counts[: len(left)])
+    """Result from ego-frame ``parts``, the left border's then as many of the right border's, with
+    one :class:`Source` per part: one concatenation and one transform to the world frame."""
+    counts = [points.shape[0] for points in parts]
+    world = to_world(np.concatenate(parts), ego.pose)
+    labels = sources.repeat(counts)
+    n_left = sum(counts[: len(parts) // 2])
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason)
 
 
@@ -125,13 +128,14 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, cl, cr = borders
     if reason:
-        return _result(ego, [(el, Source.EGO)], [(er, Source.EGO)], "none", ends.gap_m, reason)
+        return _result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
     if kind == "convoy":
         assert starts is not None
         w, blend = params.coop_weight, params.convoy_blend_offset_m
         n_left = cl.shape[0]
-        return _result(ego, convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
-                       convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend), "convoy", ends.gap_m)
+        parts, sources = zip(*convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
+                             *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend))
+        return _result(ego, parts, np.array(sources, dtype=np.int8), "convoy", ends.gap_m)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(
@@ -139,5 +143,4 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
             params.spacing_m)
     else:
         gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
-    return _result(ego, [(el, Source.EGO), (gap_left, Source.INTERPOLATED), (cl, Source.COOP)],
-                   [(er, Source.EGO), (gap_right, Source.INTERPOLATED), (cr, Source.COOP)], "spline", ends.gap_m)
+    return _result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", ends.gap_m)

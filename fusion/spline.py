@@ -28,7 +28,7 @@ _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0],
 _GL_NODES_SQUARED: Final[NDArrayFloat] = _GL_NODES * _GL_NODES
 _GRID: Final[int] = 128
 _TAU: Final[NDArrayFloat] = np.linspace(0.0, 1.0, _GRID + 1)
-_TAU_POWERS_T: Final = np.power.outer(_TAU, np.arange(4)).T.astype(np.complex128)  # complex: no cast per call
+_TAU_STEPS_T: Final = np.diff(np.power.outer(_TAU, np.arange(4)), axis=0).T.astype(np.complex128)  # (4, _GRID)
 _PARAMETER_GRIDS: dict[int, NDArrayFloat] = {}
 _COUNTING: list[NDArrayFloat] = [np.empty(0)]  # 1.0, 2.0, …: the one table of _counting
 
@@ -40,10 +40,10 @@ def _cross(ax: float, ay: float, bx: float, by: float) -> float:
 
 
 def _parameter_grid(n_pieces: int) -> NDArrayFloat:
-    """Global parameter (piece index + τ) of the sampling grid of ``n_pieces`` pieces."""
+    """Global parameter (piece index + τ) of the ``n_pieces·_GRID + 1`` grid nodes of joined pieces."""
     grid = _PARAMETER_GRIDS.get(n_pieces)
     if grid is None:
-        grid = _PARAMETER_GRIDS[n_pieces] = (np.arange(n_pieces)[:, None] + _TAU).ravel()
+        grid = _PARAMETER_GRIDS[n_pieces] = np.arange(n_pieces * _GRID + 1) / _GRID
     return grid
 
 
@@ -60,25 +60,26 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     """Sample chains of cubic pieces by arc length; one ``(K, 2)`` array per chain.
 
     ``pieces[b]`` is the chain of border b: cubic pieces a + b·τ + c·τ² + d·τ³, τ ∈ [0, 1],
-    joined end to start. All pieces are measured on one 128-step-per-piece grid (one running
-    arc length over every piece; the steps between chains are never sampled), then each chain
-    is sampled at equal arc-length steps ≤ ``spacing_m`` strictly between its two ends (ends
-    excluded), by evaluating the pieces exactly (Horner) at the interpolated parameters. All
-    chains are processed in one vectorised pass, with points as complex numbers (x + iy).
+    joined end to start. All pieces are measured on one 128-step-per-piece grid (chord lengths
+    from the differenced powers of τ, one running arc length over all pieces put end to end),
+    then each chain is sampled at equal arc-length steps ≤ ``spacing_m`` strictly between its
+    two ends (ends excluded), by evaluating the pieces exactly (Horner) at the interpolated
+    parameters. All chains are processed in one vectorised pass, with points as complex
+    numbers (x + iy).
     """
     flat = [piece for chain in pieces for piece in chain]
     if not flat:
         return [np.empty((0, 2)) for _ in pieces]
     coeffs = np.array(flat, dtype=np.complex128)
-    grid = (coeffs @ _TAU_POWERS_T).ravel()
-    s = np.empty(grid.shape[0])
+    n_pieces = coeffs.shape[0]
+    s = np.empty(n_pieces * _GRID + 1)  # arc length at the grid nodes of the pieces joined end to end [m]
     s[0] = 0.0
-    np.add.accumulate(np.abs(grid[1:] - grid[:-1]), out=s[1:])
+    np.add.accumulate(np.abs(coeffs @ _TAU_STEPS_T).ravel(), out=s[1:])
     spans, first, offset = [], 0, 0  # per chain: (first target, target count, arc length at its start, step)
     for chain in pieces:
         count, start, step = 0, 0.0, 0.0
         if chain:
-            start, end = s.item(first * (_GRID + 1)), s.item((first + len(chain)) * (_GRID + 1) - 1)
+            start, end = s.item(first * _GRID), s.item((first + len(chain)) * _GRID)
             if end > start:
                 n_steps = math.ceil((end - start) / spacing_m * (1.0 + 1e-3))
                 count, step = n_steps - 1, (end - start) / n_steps
@@ -91,9 +92,9 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         target = k[offset:offset + count]
         np.multiply(_counting(count), step, out=target)
         target += start
-    q = np.interp(k, s, _parameter_grid(len(flat)))
+    q = np.interp(k, s, _parameter_grid(n_pieces))
     index = q.astype(np.intp)
-    np.minimum(index, len(flat) - 1, out=index)
+    np.minimum(index, n_pieces - 1, out=index)
     tau = (q - index).astype(np.complex128)  # complex × complex: no cast inside each product
     a, b, c, d = coeffs.T.take(index, axis=1)
     z = d * tau
