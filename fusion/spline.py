@@ -87,11 +87,8 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
         first, offset = first + len(chain), offset + count
     if offset == 0:
         return [np.empty((0, 2)) for _ in pieces]
-    k = np.empty(offset)
-    for offset, count, start, step in spans:
-        target = k[offset:offset + count]
-        np.multiply(_counting(count), step, out=target)
-        target += start
+    k = np.concatenate([np.arange(start + step, start + (count + 0.5) * step, step)
+                        for _, count, start, step in spans if count])
     q = np.interp(k, s, _parameter_grid(n_pieces))
     index = q.astype(np.intp)
     np.minimum(index, n_pieces - 1, out=index)
