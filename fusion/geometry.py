@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from typing import Final, Sequence
 
 import numpy as np
-import numpy.typing as npt
 
 from fusion.types import NDArrayFloat, Pose2D
 
@@ -129,17 +128,17 @@ class EndFit:
 class _EndDesign:
     """Constant least-squares filters of :func:`fit_ends` for one set of window sizes.
 
-    Fields: ``rows`` ``(K, 3·W + 1 + D)`` complex, one filter per column: for each of the W
-    windows (``counts`` points, t = 0, 1, … the point index) the columns giving the quadratic
-    coefficients p0, p1, p2; then the column giving the cubic coefficient p3 of a cubic fit
-    over the longest window; then D second differences over the first ``n_noise`` points.
+    Fields: ``rows`` ``(3·W + 1 + D, K)``, one filter per row: for each of the W windows
+    (``counts`` points, t = 0, 1, … the point index) the rows giving the quadratic
+    coefficients p0, p1, p2; then the row giving the cubic coefficient p3 of a cubic fit over
+    the longest window; then D second differences over the first ``n_noise`` points.
     ``windows`` per window: whether it holds four points, and the noise gain (row norm) of
     p1; ``p2_gains`` those of p2, ``p3_gain`` that of p3. ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴
     projected onto the window's quadratic basis (how an arc's cubic and quartic terms bias
     p0…p2); ``p3_quartic_leak``: t⁴ projected onto the longest window's p3.
     """
 
-    rows: npt.NDArray[np.complex128]
+    rows: NDArrayFloat
     windows: tuple[tuple[bool, float], ...]
     p2_gains: tuple[float, ...]
     p3_gain: float
@@ -177,7 +176,7 @@ def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
     if len(_DESIGNS) >= _MAX_DESIGNS:
         _DESIGNS.clear()
     design = _DESIGNS[counts, n_noise] = _EndDesign(
-        rows.T.astype(np.complex128), tuple(zip([c >= 4 for c in counts], gain[:, 1].tolist())),
+        rows, tuple(zip([c >= 4 for c in counts], gain[:, 1].tolist())),
         tuple(gain[:, 2].tolist()),
         float(np.linalg.norm(p3)), tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
     return design
@@ -214,17 +213,16 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     for e, points in enumerate(borders):
         n = points.shape[0]
         span = min(n - 1, _STEP_SPAN)
-        (x0, y0), (x1, y1) = (points[-1].tolist(), points[-1 - span].tolist()) if at_end[e] else (
-            points[0].tolist(), points[span].tolist())
+        (x0, y0), (x1, y1) = (points[-1 - span::span] if at_end[e] else points[: span + 1: span]).tolist()
         per_point = span / (math.hypot(x1 - x0, y1 - y0) or math.inf)
         groups.setdefault(tuple([min(n - 1, round(w * per_point)) + 1 for w in windows_m]), []).append(e)
     n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     filtered, squares, n_squares = [], 0.0, 0
     for counts, members in groups.items():
         design = _end_design(counts, min(n_noise, counts[-1]))
-        k = design.rows.shape[0]
+        k = design.rows.shape[1]
         window = np.concatenate([borders[e][:-k - 1:-1] if at_end[e] else borders[e][:k] for e in members])
-        values = window.view(np.complex128).reshape(len(members), k) @ design.rows
+        values = (design.rows @ window.reshape(len(members), k, 2)).view(np.complex128)[..., 0]
         n_fit = 3 * len(counts) + 1
         noise = values[:, n_fit:]
         squares += float(np.vdot(noise, noise).real)
