@@ -215,7 +215,10 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         span = min(n - 1, _STEP_SPAN)
         (x0, y0), (x1, y1) = (points[-1 - span::span] if at_end[e] else points[: span + 1: span]).tolist()
         per_point = span / (math.hypot(x1 - x0, y1 - y0) or math.inf)
-        groups.setdefault(tuple([min(n - 1, round(w * per_point)) + 1 for w in windows_m]), []).append(e)
+        counts = [int(w * per_point + 0.5) + 1 for w in windows_m]  # round(w / spacing) + 1 points
+        if counts[-1] > n:
+            counts = [min(n, count) for count in counts]
+        groups.setdefault(tuple(counts), []).append(e)
     n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
     filtered, squares, n_squares = [], 0.0, 0
     for counts, members in groups.items():
@@ -242,21 +245,26 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
 def _chosen_window(row: list[complex], design: _EndDesign, sigma: float) -> int:
     """Index of the longest window whose heading interval meets those of all shorter ones
     (−1 when the shortest has fewer than four points or no tangent)."""
-    chosen, reference = -1, 0j
-    lo, hi = -math.inf, math.inf
-    for w, (enough, gain) in enumerate(design.windows):
+    p1 = row[1]
+    speed = abs(p1)
+    if not design.windows[0][0] or speed == 0.0:
+        return -1
+    reference, scale = p1.conjugate() / speed, _CI_FACTOR * sigma
+    half = scale * design.windows[0][1] / speed
+    lo, hi = -half, half
+    for w in range(1, len(design.windows)):
         p1 = row[3 * w + 1]
         speed = abs(p1)
-        if not enough or speed == 0.0:
-            break
-        if w == 0:
-            reference = p1.conjugate() / speed
-        heading, half = cmath.phase(p1 * reference), _CI_FACTOR * sigma * gain / speed
-        lo, hi = max(lo, heading - half), min(hi, heading + half)
+        if speed == 0.0:
+            return w - 1
+        heading, half = cmath.phase(p1 * reference), scale * design.windows[w][1] / speed
+        if heading - half > lo:
+            lo = heading - half
+        if heading + half < hi:
+            hi = heading + half
         if lo > hi:
-            break
-        chosen = w
-    return chosen
+            return w - 1
+    return len(design.windows) - 1
 
 
 def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
@@ -274,16 +282,16 @@ def _end_fit(row: list[complex], design: _EndDesign, w: int, points: NDArrayFloa
     p0, p1, p2 = row[3 * w: 3 * w + 3]
     speed = abs(p1)
     tangent = p1 / speed
-    curvature = (p1.conjugate() * p2).imag * 2.0 / speed ** 3
-    along = curvature * curvature * speed ** 3 / 6.0 * tangent
-    across = curvature ** 3 * speed ** 4 / 24.0 * 1j * tangent
+    turn = (p1.conjugate() * p2).imag * 2.0 / (speed * speed)  # κ·v: curvature per point index
+    along = turn * turn * speed / 6.0 * tangent  # minus the arc's cubic term, −κ²v³/6 along the tangent
+    across = turn * turn * turn * speed / 24.0 * 1j * tangent  # minus its quartic term, −κ³v⁴/24 across
     (c0, c1, c2), (q0, q1, q2) = design.cubic_leaks[w], design.quartic_leaks[w]
     p0, p1, p2 = p0 + c0 * along + q0 * across, p1 + c1 * along + q1 * across, p2 + c2 * along + q2 * across
     speed = abs(p1)
-    curvature = (p1.conjugate() * p2).imag * 2.0 / speed ** 3
-    curvature_sigma = 2.0 * sigma * design.p2_gains[w] / (speed * speed)
-    normal_p3 = (row[-1] * (1j * p1).conjugate()).real / speed
-    arc_p3 = -design.p3_quartic_leak * curvature ** 3 * speed ** 4 / 24.0
+    turn = (p1.conjugate() * p2).imag * 2.0 / (speed * speed)
+    curvature, curvature_sigma = turn / speed, 2.0 * sigma * design.p2_gains[w] / (speed * speed)
+    normal_p3 = (row[-1] * p1.conjugate()).imag / speed
+    arc_p3 = -design.p3_quartic_leak * turn * turn * turn * speed / 24.0
     if abs(normal_p3 - arc_p3) > _CURVATURE_CHANGE_SIGMAS * sigma * design.p3_gain + _CUBIC_ARC_BIAS * abs(arc_p3):
         curvature_sigma = math.inf
     direction = (-p1 if at_end else p1) / speed

@@ -18,7 +18,7 @@ SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[Healt
 
 roads = st.builds(
     lambda k, turn, entry: AnalyticRoad([Segment(80.0), Segment(entry, 0.0, k), Segment(max(1.0, turn / abs(k)), k),
-                                         Segment(entry, k, 0.0), Segment(80.0)]),
+                                         Segment(entry, k, 0.0), Segment(120.0)]),  # ≥ s_end + gap + 30 m
     k=st.floats(1 / 60.0, 1 / 18.0).flatmap(lambda k: st.sampled_from([k, -k])),
     turn=st.floats(0.05, math.pi / 2),
     entry=st.floats(0.5, 15.0),

@@ -4,8 +4,12 @@ The baseline implements the same steps straightforwardly (world-frame borders, n
 overlap search, arc-length pairing, scipy.interpolate.CubicSpline with natural boundary
 conditions, dense evaluation and arc-length resampling) without fusibility checks; for the
 Hermite rows it still runs the paper's spline, so its |Δ| column there is the difference of
-the two interpolations. Calls of the library and of the
-baseline alternate, so both see the same machine load. Also prints the Bézier exchange cost.
+the two interpolations. Two timings per row, both in one run so that the library and the
+baseline see the same machine load: *steady* — blocks of 50 consecutive calls of one, then
+50 of the other (each call timed; the usual warm-loop latency, as timeit measures it); and
+*cold* — single calls strictly alternating, so every call of one runs right after the other
+has evicted its code and data from the CPU caches (the worst case for short calls). Also
+prints the Bézier exchange cost.
 
 With ``--families N`` it prints instead the accuracy of the gap interpolations on N random
 roads of each held-out family of :func:`fusion.analytic.family_case`, without and with 5 cm
@@ -36,6 +40,7 @@ from fusion.analytic import FAMILIES, AnalyticRoad, Segment, detect, family_case
 from fusion.geometry import cumulative_length, distance_to_polyline, to_world  # noqa: E402
 
 RADIUS_M = 20.0
+BLOCK = 50  # consecutive calls per block in the steady timing
 LENGTH_M = 29.9  # 300 points at 0.1 m
 
 
@@ -151,41 +156,51 @@ def main() -> int:
             args.json.write_text(json.dumps(report, indent=2))
         return 0
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"# fusion.fuse latency: {args.repeats} calls per row, Python {platform.python_version()}, "
+    print(f"# fusion.fuse latency: {args.repeats} calls per row and timing, Python {platform.python_version()}, "
           f"numpy {np.__version__}, {os.cpu_count()} cores, load average {load:.2f}")
-    print("Wall-clock per call, and CPU time of the calling thread (excludes time the scheduler gives to other "
-          "processes on a shared machine); garbage collection off while timing, as in timeit.\n")
-    print("| scenario | points out | fuse mean [ms] | σ | median | max | fuse CPU mean [ms] | scipy baseline mean [ms] "
-          "| σ | max | baseline CPU mean [ms] | max |Δ| to baseline [m] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print(f"Steady: blocks of {BLOCK} consecutive calls, library and baseline in turn; cold: single calls "
+          "alternating. Wall-clock per call [ms]; CPU = CPU time of the calling thread (excludes time the "
+          "scheduler gives to other processes); garbage collection off while timing, as in timeit.\n")
+    print("| scenario | points out | steady mean | σ | median | max | steady CPU mean | cold mean | cold max "
+          "| baseline steady mean | σ | max | baseline cold mean | max |Δ| to baseline [m] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     report = {}
     for name, (ego, coop, kwargs, baseline) in scenarios().items():
         result = fusion.fuse(ego, coop, **kwargs)
         assert result.kind != "none", result.reason
         reference = baseline(ego, coop)
         delta = max(float(distance_to_polyline(mine, ref).max()) for mine, ref in zip((result.left, result.right), reference))
+        timings = {key: [] for key in ("steady", "steady_cpu", "cold", "baseline", "baseline_cold")}
         for _ in range(50):
             fusion.fuse(ego, coop, **kwargs)
             baseline(ego, coop)
-        mine_ns, base_ns, mine_cpu, base_cpu = [], [], [], []
         gc.disable()  # as timeit does: no collector pauses inside the timed calls
+        for _ in range(max(1, args.repeats // BLOCK)):
+            for _ in range(BLOCK):
+                c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
+                fusion.fuse(ego, coop, **kwargs)
+                c1, t1 = time.thread_time_ns(), time.perf_counter_ns()
+                timings["steady"].append(t1 - t0)
+                timings["steady_cpu"].append(c1 - c0)
+            for _ in range(BLOCK):
+                t0 = time.perf_counter_ns()
+                baseline(ego, coop)
+                timings["baseline"].append(time.perf_counter_ns() - t0)
         for _ in range(args.repeats):
-            c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
+            t0 = time.perf_counter_ns()
             fusion.fuse(ego, coop, **kwargs)
-            c1, t1 = time.thread_time_ns(), time.perf_counter_ns()
+            t1 = time.perf_counter_ns()
             baseline(ego, coop)
-            c2, t2 = time.thread_time_ns(), time.perf_counter_ns()
-            mine_ns.append(t1 - t0)
-            base_ns.append(t2 - t1)
-            mine_cpu.append(c1 - c0)
-            base_cpu.append(c2 - c1)
+            t2 = time.perf_counter_ns()
+            timings["cold"].append(t1 - t0)
+            timings["baseline_cold"].append(t2 - t1)
         gc.enable()
-        m, b, mc, bc = stats(mine_ns), stats(base_ns), stats(mine_cpu), stats(base_cpu)
-        report[name] = {"fuse": m, "baseline": b, "fuse_cpu": mc, "baseline_cpu": bc,
-                        "points": int(result.left.shape[0] + result.right.shape[0]), "max_delta_m": delta}
+        st = {key: stats(values) for key, values in timings.items()}
+        report[name] = {**st, "points": int(result.left.shape[0] + result.right.shape[0]), "max_delta_m": delta}
+        m, b = st["steady"], st["baseline"]
         print(f"| {name} | {report[name]['points']} | {m['mean']:.3f} | {m['sigma']:.3f} | {m['median']:.3f} | "
-              f"{m['max']:.3f} | {mc['mean']:.3f} | {b['mean']:.3f} | {b['sigma']:.3f} | {b['max']:.3f} | "
-              f"{bc['mean']:.3f} | {delta:.4f} |")
+              f"{m['max']:.3f} | {st['steady_cpu']['mean']:.3f} | {st['cold']['mean']:.3f} | {st['cold']['max']:.3f} | "
+              f"{b['mean']:.3f} | {b['sigma']:.3f} | {b['max']:.3f} | {st['baseline_cold']['mean']:.3f} | {delta:.4f} |")
     print("\n# Bézier exchange (tolerance 0.05 m)\n| lane (30 m) | Bézier bytes | payload | sampled bytes | "
           "segments | max decode error [m] |\n|---|---|---|---|---|---|")
     for name, (ego, _, _, _) in list(scenarios().items())[:2]:
