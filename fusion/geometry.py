@@ -80,33 +80,23 @@ def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArra
     return best[1], best[0], best[2]
 
 
-def _chord(points: NDArrayFloat, at_end: bool, k: int, first: list[float], last: list[float]) -> tuple[float, float]:
-    """Unit vector from the point ``k`` before the last one to the last (``at_end``), or from the
-    first point to the point ``k`` after it; the whole polyline's chord when that is zero."""
-    (x0, y0), (x1, y1) = first, last
-    if at_end:
-        px, py = points[-1 - k].tolist()
-        vx, vy = x1 - px, y1 - py
-    else:
-        px, py = points[k].tolist()
-        vx, vy = px - x0, py - y0
+def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
+    """Unit tangent ``(dx, dy)`` at the last (``at_end``) or first point, by a chord.
+
+    The chord spans about ``window_m`` of the polyline (at least one segment), assuming
+    roughly even spacing; it points in driving direction. The whole polyline's chord when
+    that one has zero length.
+    """
+    n = points.shape[0]
+    (x0, y0), (x1, y1) = points[:: n - 1].tolist()
+    k = max(1, _points_in(window_m, math.hypot(x1 - x0, y1 - y0) / (n - 1), n - 1))
+    (ax, ay), (bx, by) = (points[-1 - k::k] if at_end else points[: k + 1: k]).tolist()
+    vx, vy = bx - ax, by - ay
     norm = math.hypot(vx, vy)
     if norm == 0.0:
         vx, vy = x1 - x0, y1 - y0
         norm = math.hypot(vx, vy) or 1.0
     return vx / norm, vy / norm
-
-
-def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:
-    """Unit tangent ``(dx, dy)`` at the last (``at_end``) or first point, by a chord.
-
-    The chord spans about ``window_m`` of the polyline (at least one segment), assuming
-    roughly even spacing; it points in driving direction.
-    """
-    n = points.shape[0]
-    first, last = points[0].tolist(), points[-1].tolist()
-    k = max(1, _points_in(window_m, math.hypot(last[0] - first[0], last[1] - first[1]) / (n - 1), n - 1))
-    return _chord(points, at_end, k, first, last)
 
 
 @dataclass(frozen=True)
