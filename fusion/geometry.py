@@ -5,7 +5,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass
-from typing import Final, Sequence
+from typing import Final, NamedTuple, Sequence
 
 import numpy as np
 
@@ -99,9 +99,9 @@ def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[
     return vx / norm, vy / norm
 
 
-@dataclass(frozen=True)
-class EndFit:
-    """Least-squares estimate at a border end (world frame).
+class EndFit(NamedTuple):
+    """Least-squares estimate at a border end (world frame); a named tuple, immutable and
+    cheap to build (four per spline fusion).
 
     Fields: ``point`` fitted end point [m]; ``direction`` unit tangent (driving direction);
     ``curvature`` [1/m] (positive turning left); ``curvature_sigma`` its standard deviation
@@ -225,7 +225,8 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     fits: list[EndFit] = []
     for counts, members, design, values in filtered:
         for e, row in zip(members, values[:, :3 * len(counts) + 1].tolist()):
-            fits.append(_end_fit(row, design, _chosen_window(row, design, sigma), borders[e], at_end[e], sigma))
+            w = _chosen_window(row, design, sigma)
+            fits.append(_end_fit(row, design, w, at_end[e], sigma) if w >= 0 else _chord_fit(borders[e], at_end[e]))
     if len(filtered) > 1:
         order = [e for _, members, _, _ in filtered for e in members]
         fits = [fit for _, fit in sorted(zip(order, fits), key=lambda pair: pair[0])]
@@ -264,11 +265,8 @@ def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
     return EndFit(np.array((x1, y1) if at_end else (x0, y0)), ((x1 - x0) / norm, (y1 - y0) / norm), 0.0, math.inf)
 
 
-def _end_fit(row: list[complex], design: _EndDesign, w: int, points: NDArrayFloat, at_end: bool,
-             sigma: float) -> EndFit:
+def _end_fit(row: list[complex], design: _EndDesign, w: int, at_end: bool, sigma: float) -> EndFit:
     """One border's fit from its filtered coefficients ``row`` and chosen window ``w``."""
-    if w < 0:
-        return _chord_fit(points, at_end)
     p0, p1, p2 = row[3 * w: 3 * w + 3]
     speed = abs(p1)
     tangent = p1 / speed
