@@ -150,3 +150,12 @@ def test_zero_gap_is_not_a_spline_fusion() -> None:
     result = fusion.fuse(ego, coop, mode="spline")
     assert result.kind == "none"
     assert "d_s must be > 0" in result.reason
+
+
+def test_hermite_gap_with_opposite_end_tangents_is_finite() -> None:
+    """Exactly opposite end directions (a turn of π: the tangent lines never meet, sin(turn) = 0)
+    take the Bézier fallback: finite points from end to end, no division by zero."""
+    gap = hermite_gap(np.array((0.0, 0.0)), np.array((1.0, 0.0)), np.array((5.0, 3.0)), np.array((-1.0, 0.0)), 0.1)
+    assert gap.shape[0] > 40 and np.isfinite(gap).all()
+    assert np.hypot(*np.diff(gap, axis=0).T).max() <= 0.1 + 1e-9
+
