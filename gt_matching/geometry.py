@@ -82,11 +82,12 @@ class LaneletGeometry:
             centre_tree=cKDTree(centre),
         )
 
-    def centre_distances(self, points: NDArrayFloat) -> NDArrayFloat:
-        """Distance of each point to the closest ``centre`` vertex, m: at most
-        ``sqrt(d**2 + (CENTRE_STEP_M / 2)**2)`` for a distance d to the mid-line."""
-        distances: NDArrayFloat = self.centre_tree.query(points)[0]
-        return distances
+    def centre_nearest(self, points: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayInt]:
+        """Distance of each point to the closest ``centre`` vertex, m (at most
+        ``sqrt(d**2 + (CENTRE_STEP_M / 2)**2)`` for a distance d to the mid-line), and
+        that vertex's index."""
+        distances, index = self.centre_tree.query(points)
+        return distances, index
 
     def locate(self, xy: tuple[float, float]) -> tuple[float, float]:
         """Arc length (m) of the mid-line vertex closest to ``xy`` and the mid-line heading

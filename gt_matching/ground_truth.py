@@ -21,6 +21,7 @@ from gt_matching.geometry import LaneletGeometry, LaneletKey, MapLines
 from gt_matching.metrics import BorderErrors, LaneErrors, LaneMetrics
 from gt_matching.polyline import (
     NDArrayFloat,
+    NDArrayInt,
     angle_difference,
     arc_lengths,
     as_polyline,
@@ -126,25 +127,27 @@ def _ids(lanelets: Sequence[LaneletGeometry]) -> tuple[int, ...]:
     return tuple(g.key[0] for g in lanelets)
 
 
-def _sequence_arc(lanelets: Sequence[LaneletGeometry], points: NDArrayFloat) -> NDArrayFloat:
-    """Arc length (m) along the joined mid-lines of ``lanelets`` of each point's closest
-    mid-line vertex (KD-trees of the lanelets; the first lanelet wins a tie)."""
-    found = [g.centre_tree.query(points) for g in lanelets]
-    distances = np.array([d for d, _ in found])
-    nearest = np.argmin(distances, axis=0)
+CentreNearest = Callable[[LaneletGeometry], tuple[NDArrayFloat, NDArrayInt]]
+"""A lanelet's ``centre_nearest`` of the detection's mid-line samples (memoised per frame)."""
+
+
+def _sequence_arc(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNearest) -> NDArrayFloat:
+    """Arc length (m) along the joined mid-lines of ``lanelets`` of each detection mid-line
+    sample's closest mid-line vertex (the first lanelet wins a tie)."""
+    found = [centre_nearest(g) for g in lanelets]
+    nearest = np.argmin([distance for distance, _ in found], axis=0)
     offsets = np.cumsum([0.0] + [g.length_m for g in lanelets[:-1]])
-    arc: NDArrayFloat = np.array(
-        [offsets[k] + lanelets[k].centre_arc_m[found[k][1][i]] for i, k in enumerate(nearest)], dtype=np.float64
-    )
+    along = np.array([offset + g.centre_arc_m[index] for offset, g, (_, index) in zip(offsets, lanelets, found)])
+    arc: NDArrayFloat = along[nearest, np.arange(len(nearest))]
     return arc
 
 
-def _advance_m(lanelets: Sequence[LaneletGeometry], centre: NDArrayFloat, join_m: float) -> float:
-    """How far (m) the detection's mid-line ``centre`` advances along the joined mid-lines of
+def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNearest, join_m: float) -> float:
+    """How far (m) the detection's mid-line advances along the joined mid-lines of
     ``lanelets`` (negative when it runs against them). When they close into a loop (the
     last ends within ``join_m`` of where the first starts: a ring road) each step between
     samples is taken the short way round, so crossing the loop's seam is no reversal."""
-    steps = np.diff(_sequence_arc(lanelets, centre))
+    steps = np.diff(_sequence_arc(lanelets, centre_nearest))
     loop_m = float(sum(g.length_m for g in lanelets))
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
@@ -310,13 +313,16 @@ class GroundTruth:
         pose_gap, pose_arc = closest_distances(np.array([pose[:2]]), centre)
         ahead_m = arc_lengths(centre)[-1] - pose_arc[0] + pose_gap[0] + config.margin_m
         behind_m = pose_arc[0] + config.margin_m
-        memo: dict[LaneletKey, NDArrayFloat] = {}
+        memo: dict[LaneletKey, tuple[NDArrayFloat, NDArrayInt]] = {}
 
-        def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:
+        def centre_nearest(geometry: LaneletGeometry) -> tuple[NDArrayFloat, NDArrayInt]:
             found = memo.get(geometry.key)
             if found is None:
-                found = memo[geometry.key] = geometry.centre_distances(centre)
+                found = memo[geometry.key] = geometry.centre_nearest(centre)
             return found
+
+        def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:
+            return centre_nearest(geometry)[0]
 
         sequences = [
             sequence
@@ -340,7 +346,7 @@ class GroundTruth:
                 f"{_ids(own.lanelets)}"
             )
         else:
-            if _advance_m(own.lanelets, centre, self.config.step_m) < 0:
+            if _advance_m(own.lanelets, centre_nearest, self.config.step_m) < 0:
                 mismatch = f"detection runs against the driving direction of lanelets {_ids(own.lanelets)}"
         return own, pose_ids, mismatch
 

@@ -8,6 +8,7 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from gt_matching.geometry import COARSE_STEP_M, MapLines
 from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, resample, windowed_distances
@@ -158,6 +159,21 @@ class BorderPart:
         return _spaced(self.sample_arc_m, CLEARANCE_SPACING_M)
 
     @cached_property
+    def near_coarse(self) -> tuple[NDArrayInt, NDArrayInt]:
+        """Indices (ascending) into ``lines.coarse`` of the samples of other lines within
+        ``reach_m + COARSE_STEP_M`` of a ``guess`` sample: those farther from every guess
+        sample than the coincidence distance (``_coincidence_m``), and the others."""
+        lines = self.lines
+        lookouts = self.samples[_spaced(self.sample_arc_m, LOOKOUT_SPACING_M)]
+        near = lines.coarse_near(lookouts, self.reach_m + COARSE_STEP_M + LOOKOUT_SPACING_M / 2.0)
+        near = near[lines.coarse_owner[near] != lines.slot_of_line[self.line]]
+        if len(near) == 0:
+            return near, near
+        gap = self.guess_tree.query(lines.coarse[near], distance_upper_bound=self.reach_m + COARSE_STEP_M)[0]
+        coincident = gap <= _coincidence_m(self.step_m, self.other_margin_m)
+        return near[~coincident & np.isfinite(gap)], near[coincident]
+
+    @cached_property
     def clearances(self) -> tuple[NDArrayInt, NDArrayFloat]:
         """Slots of the other lines near this border and, per slot (rows), a lower bound
         of each checkpoint's distance to the line's samples every ``step_m``, m: the
@@ -169,12 +185,7 @@ class BorderPart:
         the coincidence distance of it are left out, as a route does: a route's clearance
         is the smallest row of the lines it does not ignore, capped (``clearance_cap_m``)."""
         lines = self.lines
-        lookouts = self.samples[_spaced(self.sample_arc_m, LOOKOUT_SPACING_M)]
-        near = lines.coarse_near(lookouts, self.reach_m + COARSE_STEP_M + LOOKOUT_SPACING_M / 2.0)
-        near = near[lines.coarse_owner[near] != lines.slot_of_line[self.line]]
-        if len(near):
-            gap = self.guess_tree.query(lines.coarse[near], distance_upper_bound=self.reach_m + COARSE_STEP_M)[0]
-            near = near[(gap > _coincidence_m(self.step_m, self.other_margin_m)) & np.isfinite(gap)]
+        near = self.near_coarse[0]
         owners = lines.coarse_owner[near]
         slots = np.unique(owners)
         points = self.samples[self.checkpoints]
@@ -245,7 +256,11 @@ class RouteBorder:
         )
         self._coarse_half_m = (self._coarse_stride // 2 + 1) * self.step_m
         # A window may hold a repeated sample where two lanelets join.
-        self._joints = min(len(parts), 2)
+        width = int(2.0 * ANCHOR_REACH_M / self.step_m) + 1 + min(len(parts), 2)
+        beyond = np.full(width - 1, np.inf)
+        self._window_x = sliding_window_view(np.concatenate((self._sample_x, beyond)), width)
+        self._window_y = sliding_window_view(np.concatenate((self._sample_y, beyond)), width)
+        """Row k: x (y) of the samples k to k + width - 1, m (infinite past the last)."""
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
         )
@@ -266,17 +281,21 @@ class RouteBorder:
         from scipy.spatial import cKDTree
 
         lines = self._lines
-        lookouts = self.samples[_spaced(self.sample_arc, LOOKOUT_SPACING_M)]
-        near = lines.coarse_near(lookouts, self.reach_m + COARSE_STEP_M + LOOKOUT_SPACING_M / 2.0)
-        near = near[~np.isin(lines.coarse_owner[near], lines.slots(self._ignored))]
-        if len(near):
-            bound = self.reach_m + COARSE_STEP_M
-            others = lines.coarse[near]
-            gap = np.min([part.guess_tree.query(others, distance_upper_bound=bound)[0] for part in self._parts], axis=0)
-            near = near[(gap > _coincidence_m(self.step_m, self.other_margin_m)) & np.isfinite(gap)]
+        near = np.unique(np.concatenate([part.near_coarse[0] for part in self._parts]))
+        coincident = np.concatenate([part.near_coarse[1] for part in self._parts])
+        near = near[~np.isin(near, coincident) & ~np.isin(lines.coarse_owner[near], lines.slots(self._ignored))]
         if len(near) == 0:
             return np.empty(0, dtype=np.int64), None
         return lines.coarse_owner[near], cKDTree(lines.coarse[near])
+
+    def _seed_sample(self, points: NDArrayFloat) -> NDArrayInt:
+        """Index of a sample near each point's nearest one: the nearest within half a
+        stride of the point's nearest coarse sample (exact where the border is smooth)."""
+        coarse = self._coarse_index[np.argmin(self._squared_distances(points, self._coarse_index[None, :]), axis=1)]
+        half = self._coarse_stride // 2 + 1
+        around = np.clip(coarse[:, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
+        sample: NDArrayInt = around[np.arange(len(points)), np.argmin(self._squared_distances(points, around), axis=1)]
+        return sample
 
     def _nearest(self, points: NDArrayFloat, within: NDArrayFloat | None = None) -> tuple[NDArrayFloat, NDArrayInt]:
         """Distance (m) and index of each point's nearest sample over the whole border,
@@ -339,21 +358,22 @@ class RouteBorder:
         return closer
 
     def _nearest_samples(
-        self, points: NDArrayFloat, seed_arc: NDArrayFloat, reach_m: float
+        self, points: NDArrayFloat, seed_arc: NDArrayFloat
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
-        """Per point, the smallest distance (m) to the samples within ``reach_m`` of arc
-        length ``seed_arc``, that sample's index, and whether the window settles it: the
+        """Per point, the smallest distance (m) to the samples within ``ANCHOR_REACH_M`` of
+        arc length ``seed_arc``, that sample's index, and whether the window settles it: the
         minimum is not on its edge (it may continue outside), and no kink or lanelet joint
         near it may start another minimum (``_clear_of_breaks``)."""
         last = len(self.samples) - 1
-        width = int(2.0 * reach_m / self.step_m) + 1 + self._joints
-        first = np.searchsorted(self.sample_arc, seed_arc - reach_m)
-        around = np.minimum(first[:, None] + np.arange(width), last)
-        squared = self._squared_distances(points, around)
+        width = self._window_x.shape[1]
+        first = np.minimum(np.searchsorted(self.sample_arc, seed_arc - ANCHOR_REACH_M), last)
+        squared = self._window_x[first] - points[:, :1]
+        squared *= squared
+        dy = self._window_y[first] - points[:, 1:]
+        squared += dy * dy
         closest = np.argmin(squared, axis=1)
-        rows = np.arange(len(points))
-        inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (around[:, -1] == last))
-        distance, sample = np.sqrt(squared[rows, closest]), around[rows, closest]
+        inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (first + width - 1 >= last))
+        distance, sample = np.sqrt(squared[np.arange(len(points)), closest]), first + closest
         settled = np.zeros(len(points), dtype=bool)
         settled[inside] = self._smooth(distance[inside], sample[inside])
         return distance, sample, settled
@@ -406,7 +426,7 @@ class RouteBorder:
         border, and (``others``; else all False) whether another lane's border is closer.
 
         A border with a KD-tree (``_uses_tree``) asks it for every point. Otherwise every
-        ``ANCHOR_STRIDE``-th point finds its nearest sample (``_nearest``); the arc lengths
+        ``ANCHOR_STRIDE``-th point finds a sample near its nearest one (``_seed_sample``); the arc lengths
         of the points between are interpolated along the detection, and each point takes
         the nearest sample within ``ANCHOR_REACH_M`` of that. Where that window cannot
         settle it (minimum on its edge, a kink or lanelet joint near it, or the point
@@ -426,8 +446,8 @@ class RouteBorder:
             anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
             anchors[-1] = len(points) - 1
             along = arc_lengths(points)
-            seed = np.interp(along, along[anchors], self.sample_arc[self._nearest(points[anchors])[1]])
-            resampled, sample, settled = self._nearest_samples(points, seed, ANCHOR_REACH_M)
+            seed = np.interp(along, along[anchors], self.sample_arc[self._seed_sample(points[anchors])])
+            resampled, sample, settled = self._nearest_samples(points, seed)
             redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
             if len(redo):
                 resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
