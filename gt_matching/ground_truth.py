@@ -197,10 +197,13 @@ class GroundTruth:
     def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:
         """Ground truth of a detected lane given its borders (``(N, 2)``, world frame,
         driving order) and the sender's pose (x, y, yaw)."""
-        left_xy, right_xy, pose_ = self._inputs(left, right, pose)
-        sequence, pose_ids, mismatch = self._select(left_xy, right_xy, pose_)
+        return self._match(*self._inputs(left, right, pose))[0]
+
+    def _match(self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose) -> tuple[LaneMatch, _Route]:
+        """``match`` of validated inputs, and the assembled route."""
+        sequence, pose_ids, mismatch = self._select(left, right, pose)
         route = self._route(sequence.lanelets)
-        return LaneMatch(
+        match = LaneMatch(
             lanelet_ids=_ids(sequence.lanelets),
             route_key=route.keys,
             left_gt=route.left.vertices,
@@ -211,6 +214,7 @@ class GroundTruth:
             matched=mismatch is None,
             mismatch=mismatch,
         )
+        return match, route
 
     def errors(
         self, left: npt.ArrayLike, right: npt.ArrayLike, match: LaneMatch, *, exact: bool = False, others: bool = True
@@ -228,9 +232,15 @@ class GroundTruth:
         if unknown:
             raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
         route = self._route([self._geometry[key] for key in match.route_key])
+        return self._errors(left_xy, right_xy, match, route, exact, others)
+
+    def _errors(
+        self, left: NDArrayFloat, right: NDArrayFloat, match: LaneMatch, route: _Route, exact: bool, others: bool
+    ) -> LaneErrors:
+        """``errors`` of validated borders against the assembled route of ``match``."""
         config = self.config
         borders = []
-        for points, border in ((left_xy, route.left), (right_xy, route.right)):
+        for points, border in ((left, route.left), (right, route.right)):
             found = border.distances(points, exact=exact, others=others)
             unmatched = (found.distances > config.max_distance_m) | found.other_closer
             borders.append(BorderErrors(distances_m=found.distances, arc_m=found.arc_m, unmatched=unmatched))
@@ -242,7 +252,9 @@ class GroundTruth:
         """Closest-point error metrics of a detected lane (borders ``(N, 2)``, world frame,
         driving order; sender at ``pose`` (x, y, yaw)) against its ground truth: ``match``,
         then ``errors``, summarised."""
-        return self.errors(left, right, self.match(left, right, pose), exact=exact).metrics()
+        left_xy, right_xy, pose_ = self._inputs(left, right, pose)
+        match, route = self._match(left_xy, right_xy, pose_)
+        return self._errors(left_xy, right_xy, match, route, exact, others=True).metrics()
 
     def _inputs(
         self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]

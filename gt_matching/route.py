@@ -26,8 +26,10 @@ MAX_COARSE_SAMPLES: Final = 256
 #: Borders with more samples than this find nearest samples with a KD-tree (its build
 #: time pays off over the frames of a long route; short routes change often).
 KD_TREE_SAMPLES: Final = 16384
-#: Borders asked for distances more often than this also get one (a route measured many
-#: times: every lane of every frame while a drive stays on it).
+#: Borders asked for distances to the resampled GT more often than this also get one (a
+#: route measured many times: every lane of every frame while a drive stays on it). Its
+#: build costs about as much as it saves over this many such calls; exact distances,
+#: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its arc length along the detection.
@@ -392,8 +394,8 @@ class RouteBorder:
 
     def _uses_tree(self) -> bool:
         """Whether nearest samples come from a KD-tree of all samples: for a long border,
-        or one asked for distances more than ``KD_TREE_CALLS`` times (its build time then
-        pays off)."""
+        or one asked for resampled distances more than ``KD_TREE_CALLS`` times (its build
+        time then pays off)."""
         return self._calls > KD_TREE_CALLS or len(self.samples) > KD_TREE_SAMPLES
 
     def _clear_of_breaks(
@@ -436,7 +438,8 @@ class RouteBorder:
         the border to possibly be closer to another line (by the clearance of the
         checkpoints around the nearest sample) are checked against the other lines.
         """
-        self._calls += 1
+        if not exact:
+            self._calls += 1
         if self._uses_tree():
             resampled, sample = self._tree.query(points)
             redo = np.empty(0, dtype=np.int64)
