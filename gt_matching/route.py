@@ -250,7 +250,6 @@ class RouteBorder:
         # Joints count as turning by pi: the borders of two lanelets may not meet.
         break_turning = np.concatenate((np.full(len(parts) - 1, np.pi), turning[kinks]))[order]
         self._break_turning_sum = np.concatenate(([0.0], np.cumsum(break_turning)))
-        self._sample_x, self._sample_y = self.samples[:, 0].copy(), self.samples[:, 1].copy()
         stride = self._coarse_stride = max(MIN_COARSE_STRIDE, -(-len(self.samples) // MAX_COARSE_SAMPLES))
         starts = np.cumsum([0] + [len(part.samples) for part in parts])
         self._coarse_index = np.unique(
@@ -260,8 +259,10 @@ class RouteBorder:
         # A window may hold a repeated sample where two lanelets join.
         width = int(2.0 * ANCHOR_REACH_M / self.step_m) + 1 + min(len(parts), 2)
         beyond = np.full(width - 1, np.inf)
-        self._window_x = sliding_window_view(np.concatenate((self._sample_x, beyond)), width)
-        self._window_y = sliding_window_view(np.concatenate((self._sample_y, beyond)), width)
+        padded_x, padded_y = (np.concatenate((self.samples[:, axis], beyond)) for axis in (0, 1))
+        self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
+        self._window_x = sliding_window_view(padded_x, width)
+        self._window_y = sliding_window_view(padded_y, width)
         """Row k: x (y) of the samples k to k + width - 1, m (infinite past the last)."""
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
@@ -290,12 +291,18 @@ class RouteBorder:
             return np.empty(0, dtype=np.int64), None
         return lines.coarse_owner[near], cKDTree(lines.coarse[near])
 
+    def _around_coarse(self, coarse: NDArrayInt) -> NDArrayInt:
+        """Per coarse sample (index into the samples), the indices of the samples within
+        half a stride (+ 1) of it, clipped to the border: ``(len(coarse), K)``."""
+        half = self._coarse_stride // 2 + 1
+        around: NDArrayInt = np.clip(coarse[:, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
+        return around
+
     def _seed_sample(self, points: NDArrayFloat) -> NDArrayInt:
         """Index of a sample near each point's nearest one: the nearest within half a
         stride of the point's nearest coarse sample (exact where the border is smooth)."""
         coarse = self._coarse_index[np.argmin(self._squared_distances(points, self._coarse_index[None, :]), axis=1)]
-        half = self._coarse_stride // 2 + 1
-        around = np.clip(coarse[:, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
+        around = self._around_coarse(coarse)
         sample: NDArrayInt = around[np.arange(len(points)), np.argmin(self._squared_distances(points, around), axis=1)]
         return sample
 
@@ -316,8 +323,7 @@ class RouteBorder:
         if within is not None:
             bound = np.minimum(bound, within)
         point, candidate = np.nonzero(coarse <= ((bound + self._coarse_half_m) ** 2)[:, None])
-        half = self._coarse_stride // 2 + 1
-        around = np.clip(self._coarse_index[candidate, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
+        around = self._around_coarse(self._coarse_index[candidate])
         squared = self._squared_distances(points[point], around)
         best = np.argmin(squared, axis=1)
         rows = np.arange(len(point))
@@ -428,9 +434,10 @@ class RouteBorder:
         border, and (``others``; else all False) whether another lane's border is closer.
 
         A border with a KD-tree (``_uses_tree``) asks it for every point. Otherwise every
-        ``ANCHOR_STRIDE``-th point finds a sample near its nearest one (``_seed_sample``); the arc lengths
-        of the points between are interpolated along the detection, and each point takes
-        the nearest sample within ``ANCHOR_REACH_M`` of that. Where that window cannot
+        ``ANCHOR_STRIDE``-th point finds a sample near its nearest one (``_seed_sample``);
+        the arc lengths of the points between are interpolated along the detection, and
+        each point takes the nearest sample within ``ANCHOR_REACH_M`` of that (the seed
+        need not be exact: the window check below decides). Where that window cannot
         settle it (minimum on its edge, a kink or lanelet joint near it, or the point
         farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is
         the smallest to the segments within two steps of the nearest sample (twice the

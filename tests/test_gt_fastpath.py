@@ -88,7 +88,8 @@ def reference_errors(
     other = np.full(len(points), np.inf)
     for line, slot in gt.lines.slot_of_line.items():
         line_vertices = gt.lines.vertices[slot]
-        if line not in ignored and np.all(line_vertices.max(axis=0) >= low) and np.all(line_vertices.min(axis=0) <= high):
+        near = np.all(line_vertices.max(axis=0) >= low) and np.all(line_vertices.min(axis=0) <= high)
+        if line not in ignored and near:
             other = np.minimum(other, cKDTree(gt.lines.samples(slot, config.step_m)).query(points)[0])
     unmatched = (distances > config.max_distance_m) | (other < resampled - config.other_border_margin_m)
     return BorderErrors(distances_m=distances, arc_m=arc, unmatched=unmatched)
@@ -101,7 +102,10 @@ def test_errors_and_metrics_equal_brute_force(grid: tuple[Any, Any, GroundTruth]
         match = gt.match(left, right, pose)
         # The first calls search windows; past KD_TREE_CALLS resampled ones the KD-tree answers.
         for repeats, exact in ((1, True), (KD_TREE_CALLS + 2, False), (1, True)):
-            expected = {side: reference_errors(gt, points, side, match, exact) for side, points in (("left", left), ("right", right))}
+            expected = {
+                side: reference_errors(gt, points, side, match, exact)
+                for side, points in (("left", left), ("right", right))
+            }
             for _ in range(repeats):
                 errors = gt.errors(left, right, match, exact=exact)
                 for found, reference in ((errors.left, expected["left"]), (errors.right, expected["right"])):
