@@ -119,17 +119,19 @@ class _EndDesign:
     """Constant least-squares filters of :func:`fit_ends` for one set of window sizes.
 
     Fields: ``rows`` ``(3·W + 1 + D, K)``, one filter per row: for each of the W windows
-    (``counts`` points, t = 0, 1, … the point index) the rows giving the quadratic
-    coefficients p0, p1, p2; then the row giving the cubic coefficient p3 of a cubic fit over
-    the longest window; then D second differences over the first ``n_noise`` points.
-    ``windows`` per window: whether it holds four points, and the noise gain (row norm) of
-    p1; ``p2_gains`` those of p2, ``p3_gain`` that of p3. ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴
-    projected onto the window's quadratic basis (how an arc's cubic and quartic terms bias
-    p0…p2); ``p3_quartic_leak``: t⁴ projected onto the longest window's p3.
+    (t = 0, 1, … the point index) the rows giving the quadratic coefficients p0, p1, p2; then
+    the row giving the cubic coefficient p3 of a cubic fit over the longest window; then D
+    second differences over the first noise points. ``enough_points``: whether the shortest
+    window holds four points (the longer ones hold more). ``p1_gains``/``p2_gains`` per
+    window the noise gains (row norms) of p1 and p2, ``p3_gain`` that of p3.
+    ``cubic_leaks``/``quartic_leaks`` per window: t³/t⁴ projected onto the window's quadratic
+    basis (how an arc's cubic and quartic terms bias p0…p2); ``p3_quartic_leak``: t⁴
+    projected onto the longest window's p3.
     """
 
     rows: NDArrayFloat
-    windows: tuple[tuple[bool, float], ...]
+    enough_points: bool
+    p1_gains: tuple[float, ...]
     p2_gains: tuple[float, ...]
     p3_gain: float
     cubic_leaks: tuple[tuple[float, float, float], ...]
@@ -166,9 +168,8 @@ def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
     if len(_DESIGNS) >= _MAX_DESIGNS:
         _DESIGNS.clear()
     design = _DESIGNS[counts, n_noise] = _EndDesign(
-        rows, tuple(zip([c >= 4 for c in counts], gain[:, 1].tolist())),
-        tuple(gain[:, 2].tolist()),
-        float(np.linalg.norm(p3)), tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
+        rows, counts[0] >= 4, tuple(gain[:, 1].tolist()), tuple(gain[:, 2].tolist()), float(np.linalg.norm(p3)),
+        tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
     return design
 
 
@@ -220,16 +221,13 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         noise = values[:, n_fit:]
         squares += float(np.vdot(noise, noise).real)
         n_squares += noise.size
-        filtered.append((counts, members, design, values))
+        filtered.append((members, design, values[:, :n_fit]))
     sigma = max(_SIGMA_FLOOR_M, math.sqrt(squares / (12.0 * n_squares))) if n_squares else _SIGMA_FLOOR_M
-    fits: list[EndFit] = []
-    for counts, members, design, values in filtered:
-        for e, row in zip(members, values[:, :3 * len(counts) + 1].tolist()):
+    fits: list[EndFit] = [None] * len(borders)  # type: ignore[list-item]  # every slot is filled below
+    for members, design, values in filtered:
+        for e, row in zip(members, values.tolist()):
             w = _chosen_window(row, design, sigma)
-            fits.append(_end_fit(row, design, w, at_end[e], sigma) if w >= 0 else _chord_fit(borders[e], at_end[e]))
-    if len(filtered) > 1:
-        order = [e for _, members, _, _ in filtered for e in members]
-        fits = [fit for _, fit in sorted(zip(order, fits), key=lambda pair: pair[0])]
+            fits[e] = _end_fit(row, design, w, at_end[e], sigma) if w >= 0 else _chord_fit(borders[e], at_end[e])
     return fits
 
 
@@ -238,24 +236,24 @@ def _chosen_window(row: list[complex], design: _EndDesign, sigma: float) -> int:
     (−1 when the shortest has fewer than four points or no tangent)."""
     p1 = row[1]
     speed = abs(p1)
-    if not design.windows[0][0] or speed == 0.0:
+    if not design.enough_points or speed == 0.0:
         return -1
     reference, scale = p1.conjugate() / speed, _CI_FACTOR * sigma
-    half = scale * design.windows[0][1] / speed
+    half = scale * design.p1_gains[0] / speed
     lo, hi = -half, half
-    for w in range(1, len(design.windows)):
+    for w in range(1, len(design.p1_gains)):
         p1 = row[3 * w + 1]
         speed = abs(p1)
         if speed == 0.0:
             return w - 1
-        heading, half = cmath.phase(p1 * reference), scale * design.windows[w][1] / speed
+        heading, half = cmath.phase(p1 * reference), scale * design.p1_gains[w] / speed
         if heading - half > lo:
             lo = heading - half
         if heading + half < hi:
             hi = heading + half
         if lo > hi:
             return w - 1
-    return len(design.windows) - 1
+    return len(design.p1_gains) - 1
 
 
 def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:

@@ -273,8 +273,7 @@ def _tangent_triangle(p0: complex, d0: complex, p3: complex, d1: complex) -> tup
     """``(turn, a, b)``: the signed turn [rad] from ``d0`` to ``d1`` and the distances [m] from ``p0``
     and from ``p3`` to where the two tangent lines meet; ``None`` when they meet behind either
     end, never meet (a turn of exactly π) or the turn is below 1 mrad (no circular arc:
-    straight or S-shaped). Points and unit
-    directions are x + iy."""
+    straight or S-shaped). Points and unit directions are x + iy."""
     ux, uy, vx, vy = d0.real, d0.imag, d1.real, d1.imag
     denom = _cross(ux, uy, vx, vy)
     turn = math.atan2(denom, ux * vx + uy * vy)
