@@ -103,6 +103,15 @@ def detect(road: AnalyticRoad, s_from: float, length_m: float, left_m: float, ri
 FAMILIES: Final[tuple[str, ...]] = ("corner", "clothoid corner", "arc", "s-bend")
 
 
+def bend_segments(curvature: float, turn_rad: float, entry_m: float = 0.0) -> list[Segment]:
+    """A bend turning by ``turn_rad`` [rad] on an arc of ``curvature`` [1/m] (its sign the turn
+    direction), with clothoids of ``entry_m`` [m] into and out of it when > 0 (the arc keeps at
+    least 0.5 m); the whole bend turns by ``turn_rad`` either way."""
+    arc = max(0.5, turn_rad / abs(curvature) - entry_m)
+    body = [Segment(arc, curvature)]
+    return [Segment(entry_m, 0.0, curvature), *body, Segment(entry_m, curvature, 0.0)] if entry_m else body
+
+
 def family_case(family: str, rng: np.random.Generator) -> tuple[AnalyticRoad, float, float]:
     """A random road of a held-out ``family`` and a gap on it: ``(road, s_end, s_coop)`` [m].
 
@@ -117,13 +126,10 @@ def family_case(family: str, rng: np.random.Generator) -> tuple[AnalyticRoad, fl
     if family in ("corner", "clothoid corner"):
         radius, turn = rng.uniform(8.0, 60.0), math.radians(rng.uniform(30.0, 120.0))
         entry = rng.uniform(5.0, 20.0) if family == "clothoid corner" else 0.0
-        arc = max(0.5, radius * turn - entry)
         pre, post = rng.uniform(2.0, 20.0, 2)
-        body = [Segment(arc, sign / radius)]
-        if entry:
-            body = [Segment(entry, 0.0, sign / radius), *body, Segment(entry, sign / radius, 0.0)]
+        body = bend_segments(sign / radius, turn, entry)
         road = AnalyticRoad([Segment(80.0), *body, Segment(80.0)])
-        return road, 80.0 - pre, 80.0 + 2.0 * entry + arc + post
+        return road, 80.0 - pre, 80.0 + sum(piece.length_m for piece in body) + post
     if family == "arc":
         radius = rng.uniform(15.0, 300.0)
         length = min(120.0, 1.5 * math.pi * radius)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fusion
-from fusion.analytic import AnalyticRoad, Segment, detect
+from fusion.analytic import AnalyticRoad, Segment, bend_segments, detect
 from fusion.geometry import fit_ends, to_world
 from fusion.spline import lane_end_fits
 
@@ -29,12 +29,8 @@ def lane(road: AnalyticRoad, s_from: float, index: int, noise_m: float = 0.0, se
 @lru_cache(maxsize=None)
 def bend(radius: float, turn_deg: float, sign: int, entry_m: float = 0.0) -> AnalyticRoad:
     """Straight of 100 m, a bend of ``turn_deg`` (clothoids of ``entry_m`` each side), straight."""
-    k = sign / radius
-    turn = math.radians(turn_deg)
-    if entry_m == 0.0:
-        return AnalyticRoad([Segment(CURVE_START), Segment(turn * radius, k), Segment(100.0)])
-    return AnalyticRoad([Segment(CURVE_START), Segment(entry_m, 0.0, k), Segment(turn * radius - entry_m, k),
-                         Segment(entry_m, k, 0.0), Segment(100.0)])
+    return AnalyticRoad([Segment(CURVE_START), *bend_segments(sign / radius, math.radians(turn_deg), entry_m),
+                         Segment(100.0)])
 
 
 def verdicts(road: AnalyticRoad, s_end: float, gap: float) -> tuple[tuple[bool, str], ...]:

@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion  # noqa: E402
-from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
+from fusion.analytic import AnalyticRoad, Segment, bend_segments, detect  # noqa: E402
 
 WIDTH_M = 3.5
 STRAIGHT_M = 100.0
@@ -34,11 +34,7 @@ PARAMS = fusion.FusionParams(d_i_m=51.0)
 
 def bend(radius: float, sign: int, entry_m: float) -> tuple[AnalyticRoad, float]:
     """The road and the length of its bend [m]."""
-    k, turn = sign / radius, math.pi / 2
-    if entry_m == 0.0:
-        pieces = [Segment(turn * radius, k)]
-    else:
-        pieces = [Segment(entry_m, 0.0, k), Segment(turn * radius - entry_m, k), Segment(entry_m, k, 0.0)]
+    pieces = bend_segments(sign / radius, math.pi / 2, entry_m)
     return AnalyticRoad([Segment(STRAIGHT_M), *pieces, Segment(STRAIGHT_M)]), sum(p.length_m for p in pieces)
 
 
