@@ -23,6 +23,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
+from gt_matching.polyline import simplify
 
 NDArrayInt = npt.NDArray[np.int64]
 
@@ -139,31 +140,6 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
         left_marking=lanelet.right_marking,
         right_marking=lanelet.left_marking,
     )
-
-
-def simplify(points: NDArrayFloat, tolerance: float) -> npt.NDArray[np.bool_]:
-    """Douglas-Peucker: which vertices of the polyline ``points`` (N, 2) to keep so that no
-    dropped vertex is farther than ``tolerance`` (m) from the kept polyline. The ends are
-    always kept."""
-    keep = np.zeros(len(points), dtype=bool)
-    keep[[0, -1]] = True
-    pending = [(0, len(points) - 1)]
-    while pending:
-        first, last = pending.pop()
-        if last - first < 2:
-            continue
-        chord = points[last] - points[first]
-        rel = points[first + 1 : last] - points[first]
-        length_sq = float(chord @ chord)
-        along = np.clip(rel @ chord / length_sq, 0.0, 1.0) if length_sq > 0.0 else np.zeros(len(rel))
-        gap = rel - along[:, None] * chord
-        offsets = np.hypot(gap[:, 0], gap[:, 1])
-        worst = int(np.argmax(offsets))
-        if offsets[worst] > tolerance:
-            split = first + 1 + worst
-            keep[split] = True
-            pending.extend(((first, split), (split, last)))
-    return keep
 
 
 def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:

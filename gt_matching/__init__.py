@@ -4,7 +4,8 @@ metrics (paper sec. IV). Never imports ``cold_maps``; lanelet2 and scipy load la
 
 from gt_matching.config import PAPER_STEP_M, MatchingConfig
 from gt_matching.errors import MatchingError
-from gt_matching.ground_truth import GroundTruth, LaneMatch, evaluate_lane, ground_truth_for, match_lane
+from gt_matching.ground_truth import GroundTruth, evaluate_lane, ground_truth_for, match_lane
+from gt_matching.lane_match import LaneMatch
 from gt_matching.metrics import BorderErrors, BorderMetrics, LaneErrors, LaneMetrics
 
 __all__ = [

@@ -4,15 +4,12 @@ summarised per border."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 
+from gt_matching.lane_match import LaneMatch
 from gt_matching.polyline import NDArrayBool, NDArrayFloat
-
-if TYPE_CHECKING:
-    from gt_matching.ground_truth import LaneMatch
-
 
 #: The percentile reported as ``p95_error_m``.
 P95: Final = 95.0

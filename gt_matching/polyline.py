@@ -1,5 +1,7 @@
-"""Polyline primitives in the world frame: validation, arc length, resampling and
-vectorised closest-point distances to polyline segments."""
+"""Polyline primitives in the world frame: validation, arc length, resampling,
+simplification (Douglas-Peucker) and vectorised closest-point distances to polyline
+segments. The one home of these helpers: the converter, the recording and the lane strips
+use them too."""
 
 from __future__ import annotations
 
@@ -136,3 +138,28 @@ def mid_line(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayF
     left_cum, right_cum = arc_lengths(left), arc_lengths(right)
     fractions = _fractions(max(left_cum[-1], right_cum[-1]), step_m)
     return 0.5 * (at_fractions(left, fractions, left_cum) + at_fractions(right, fractions, right_cum))
+
+
+def simplify(points: NDArrayFloat, tolerance: float) -> NDArrayBool:
+    """Douglas-Peucker: which vertices of the polyline ``points`` (N, 2) to keep so that no
+    dropped vertex is farther than ``tolerance`` (m) from the kept polyline. The ends are
+    always kept."""
+    keep = np.zeros(len(points), dtype=bool)
+    keep[[0, -1]] = True
+    pending = [(0, len(points) - 1)]
+    while pending:
+        first, last = pending.pop()
+        if last - first < 2:
+            continue
+        chord = points[last] - points[first]
+        rel = points[first + 1 : last] - points[first]
+        length_sq = float(chord @ chord)
+        along = np.clip(rel @ chord / length_sq, 0.0, 1.0) if length_sq > 0.0 else np.zeros(len(rel))
+        gap = rel - along[:, None] * chord
+        offsets = np.hypot(gap[:, 0], gap[:, 1])
+        worst = int(np.argmax(offsets))
+        if offsets[worst] > tolerance:
+            split = first + 1 + worst
+            keep[split] = True
+            pending.extend(((first, split), (split, last)))
+    return keep

@@ -18,13 +18,13 @@ import pytest
 from adversarial_maps import ARM_LENGTH_M, ARM_SPLIT_M, JUNCTION_HALF_M, LANE_WIDTH_M, MAPS, write_maps
 from conftest import PROJECT_ROOT
 
-from cold_maps.cli import main as cold_maps_main
-from cold_maps.cli import map_info
-from cold_maps.lane_graph import LENGTH_STEP_M, LaneKey, build_lane_graph
+from cold_maps.cli.maps import main as cold_maps_main
+from cold_maps.cli.maps import map_info
+from cold_maps.network.lane_graph import LENGTH_STEP_M, LaneKey, build_lane_graph
+from cold_maps.network.route import route_from_lanes
+from cold_maps.network.routing import random_route
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import sample_lane_borders
-from cold_maps.route import route_from_lanes
-from cold_maps.routing import random_route
 
 MM = 1e-3
 AGREEING = ("spirals", "odd_geometry", "lht_junction", "named_ids", "tmerc", "utm", "utm_south", "no_geo", "lane_offset")
@@ -54,7 +54,7 @@ def tool():
 @pytest.fixture(scope="session")
 def reports(maps: dict[str, Path], tmp_path_factory: pytest.TempPathFactory):
     """``check_map`` of every map (one crdesigner conversion each, private cache)."""
-    from cold_maps.gt_check import check_map
+    from cold_maps.groundtruth.check import check_map
 
     cache = tmp_path_factory.mktemp("cache")
     return {name: check_map(path, cache_dir=cache) for name, path in maps.items()}
@@ -203,7 +203,7 @@ def test_param_poly3_differs_only_by_crdesigners_linear_parameter(maps, tool, re
     # test_lanelet2_ground_truth_agrees); the zero-width lane is listed apart, not checked
     report = reports["param_poly3"]
     assert report.zero_width == (("1", 3, -2),)
-    from cold_maps.gt_check import format_report
+    from cold_maps.groundtruth.check import format_report
 
     assert "zero-width lanes not checked: 1 (road 1 section 3 lane -2)" in format_report(report)
     assert len(report.lanes) == 11
@@ -213,9 +213,8 @@ def test_check_names_the_lanes_of_crdesigners_linear_parameter(maps, tmp_path: P
     """Without our arc-length evaluation the lanelets of the paramPoly3 road end 0.77 m
     along track from s = 85 m (crdesigner drops the zero-width lane -2 of section 3 and
     starts new lanelets there): check names exactly the three lanes of section 2."""
+    from cold_maps.groundtruth.check import check_map
     from converters import crdesigner_bridge
-
-    from cold_maps.gt_check import check_map
 
     monkeypatch.setattr(crdesigner_bridge, "_param_poly3_by_arc_length", lambda original: original)
     report = check_map(maps["param_poly3"], cache=False)

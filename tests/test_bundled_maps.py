@@ -17,12 +17,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROJECT_ROOT, bundled_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from lxml import etree
 from scipy.special import fresnel
-
-from conftest import BUNDLED_MAPS_DIR, PROJECT_ROOT, bundled_map
 
 MAP_NAMES = ("straight", "curve90", "rural", "junction", "highway")
 POSITION_TOL_M = 1e-3

@@ -14,8 +14,8 @@ import pytest
 from conftest import PROJECT_ROOT, bundled_map
 from graph_maps import JUNCTION_RADIUS_M, LANE_WIDTH_M, junction_map
 
-from cold_maps import cli
-from cold_maps.cli import CSV_HEADER, main, map_info
+from cold_maps.cli import maps
+from cold_maps.cli.maps import CSV_HEADER, main, map_info
 from cold_maps.opendrive.parser import load_opendrive
 
 ROAD_X0, ROAD_Y0, ROAD_LENGTH = 10.0, 20.0, 50.0
@@ -50,7 +50,7 @@ def straight_map(tmp_path: Path) -> Path:
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "cold_maps.cli", *args], capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=60
+        [sys.executable, "-m", "cold_maps.cli.maps", *args], capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=60
     )
 
 
@@ -163,8 +163,8 @@ def test_map_info_counts_of_a_hand_built_map() -> None:
 
 def test_info_is_fast_to_import_and_reports_the_georeference(town04_path: Path) -> None:
     code = (
-        "import sys; from cold_maps.cli import main; rc = main(['info', sys.argv[1]]); "
-        "heavy = [m for m in ('crdesigner', 'lanelet2', 'matplotlib', 'mcap', 'converters', 'cold_maps.gt_check') "
+        "import sys; from cold_maps.cli.maps import main; rc = main(['info', sys.argv[1]]); "
+        "heavy = [m for m in ('crdesigner', 'lanelet2', 'matplotlib', 'mcap', 'converters', 'cold_maps.groundtruth.check') "
         "if m in sys.modules]; "
         "print('heavy:', heavy); sys.exit(rc)"
     )
@@ -194,13 +194,13 @@ def test_failure_while_writing_leaves_the_old_file(
 ) -> None:
     out = tmp_path / "borders.csv"
     out.write_text("old\n")
-    real = cli.lane_border_polylines
+    real = maps.lane_border_polylines
 
     def failing(odr_map, step):
         yield next(real(odr_map, step))
         raise ValueError("road 7: sampling failed")
 
-    monkeypatch.setattr(cli, "lane_border_polylines", failing)
+    monkeypatch.setattr(maps, "lane_border_polylines", failing)
     assert main(["export", str(straight_map), "-o", str(out)]) == 1
     assert capsys.readouterr().err == "cold-maps: error: road 7: sampling failed\n"
     assert out.read_text() == "old\n"

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import bundled_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import converters
-from conftest import bundled_map
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
@@ -33,8 +33,8 @@ from converters.osm import (
     merge_points,
     opendrive_lanes_tag,
     parse_opendrive_lanes_tag,
-    simplify,
 )
+from gt_matching.polyline import simplify
 
 HEADING = 0.3
 LENGTH = 60.0
@@ -381,13 +381,13 @@ def test_importing_converters_does_not_import_crdesigner_or_lanelet2() -> None:
     assert result.stdout.strip() == "False", result.stderr
 
 
-# --- cross-check against our own sampling (cold_maps.gt_check) ---------------------------
+# --- cross-check against our own sampling (cold_maps.groundtruth.check) ---------------------------
 
 @pytest.fixture(scope="session")
 def town01_checked(town01_path: Path, tmp_path_factory: pytest.TempPathFactory):
     """Town01 converted once (its CommonRoad lanelets kept, the OSM stored in a session
     cache), the cross-check report and the loaded map from that cache."""
-    from cold_maps.gt_check import check_map
+    from cold_maps.groundtruth.check import check_map
     from converters.crdesigner_bridge import odr_to_lanelets
     from converters.osm import build_osm
 
@@ -419,7 +419,7 @@ def test_town01_lanelet2_borders_are_the_commonroad_vertices(town01_checked) -> 
 
 
 def test_town01_ground_truth_agrees_with_our_sampling(town01_checked) -> None:
-    from cold_maps.gt_check import format_report
+    from cold_maps.groundtruth.check import format_report
 
     report, lanelet_map, _, _ = town01_checked
     assert report.lanes and report.trustworthy and report.exit_code == 0
@@ -447,7 +447,7 @@ def _parsed(text: str):
 
 @pytest.mark.parametrize("name", ["no-georef", "lht"])
 def test_check_passes_on_a_faithful_conversion(synthetic_maps, name: str) -> None:
-    from cold_maps.gt_check import check_lanelet_map
+    from cold_maps.groundtruth.check import check_lanelet_map
 
     variant, lanelet_map = synthetic_maps[name]
     odr = _parsed(synthetic_xodr(variant.geo_reference, variant.rule, variant.x0, variant.y0))
@@ -459,7 +459,7 @@ def test_check_passes_on_a_faithful_conversion(synthetic_maps, name: str) -> Non
 
 
 def test_check_measures_a_known_lateral_shift_and_lists_every_lane(synthetic_maps) -> None:
-    from cold_maps.gt_check import check_lanelet_map, format_report
+    from cold_maps.groundtruth.check import check_lanelet_map, format_report
 
     variant, lanelet_map = synthetic_maps["no-georef"]
     shift = 0.08
@@ -483,7 +483,7 @@ def _renumbered(text: str) -> str:
 
 
 def test_check_matches_by_opendrive_id_else_by_geometry(synthetic_maps) -> None:
-    from cold_maps.gt_check import check_lanelet_map, format_report
+    from cold_maps.groundtruth.check import check_lanelet_map, format_report
 
     _, lanelet_map = synthetic_maps["no-georef"]
     variant = synthetic_maps["no-georef"][0]
@@ -498,7 +498,7 @@ def test_check_matches_by_opendrive_id_else_by_geometry(synthetic_maps) -> None:
 
 
 def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
-    from cold_maps.gt_check import check_lanelet_map, format_report
+    from cold_maps.groundtruth.check import check_lanelet_map, format_report
 
     _, lanelet_map = synthetic_maps["no-georef"]
     far = _renumbered(synthetic_xodr("", "RHT", 5000.0, 5000.0))
@@ -512,7 +512,7 @@ def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
 def test_check_subcommand_exit_codes(straight_map, tmp_path, monkeypatch, capsys) -> None:
     import argparse
 
-    from cold_maps.gt_check import configure_check, run_check
+    from cold_maps.groundtruth.check import configure_check, run_check
 
     monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
     parser = argparse.ArgumentParser()
@@ -584,7 +584,7 @@ def test_opening_lane_keeps_its_opendrive_borders(tmp_path) -> None:
 
 
 def test_bundled_highway_ground_truth_is_trustworthy() -> None:
-    from cold_maps.gt_check import check_map
+    from cold_maps.groundtruth.check import check_map
 
     report = check_map(bundled_map("highway"), cache=False)
     assert report.trustworthy and len(report.lanes) >= 20

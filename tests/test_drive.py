@@ -7,10 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from conftest import bundled_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.drive import (
+from cold_maps.network.lane_graph import LaneKey, build_lane_graph
+from cold_maps.opendrive.parser import load_opendrive
+from cold_maps.simulation.drive import (
     ROUTE_MARGIN_M,
     DriveError,
     Track,
@@ -19,9 +22,6 @@ from cold_maps.drive import (
     lane_relation,
     required_route_length,
 )
-from cold_maps.lane_graph import LaneKey, build_lane_graph
-from cold_maps.opendrive.parser import load_opendrive
-from conftest import bundled_map
 
 LANE = LaneKey("1", 0, -1)
 
@@ -154,7 +154,7 @@ def test_coop_station_lead_and_chord_on_the_curve(curve90, lead, frame):
 
 
 def test_covering_routes_until_every_startable_lane_is_covered(junction):
-    from cold_maps.routing import longest_route_lengths
+    from cold_maps.network.routing import longest_route_lengths
 
     routes = covering_routes(junction, None, 120.0, np.random.default_rng(5))
     longest = longest_route_lengths(junction)

@@ -8,11 +8,11 @@ import json
 from pathlib import Path
 
 import pytest
-
-from cold_maps import eval_cli
-from cold_maps.evaluation import MapEvaluator
-from cold_maps.recording import METADATA_STATUS, read_detections, read_metadata
 from conftest import bundled_map
+
+from cold_maps.cli import evaluate
+from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.recording.recorder import METADATA_STATUS, read_detections, read_metadata
 
 RECORD_KEYS = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_m", "rmse_m", "max_error_m",
                "p95_error_m", "perception_range_m", "frames", "fused_frames", "runtime_ms", "rejected", "fusibility"}
@@ -21,7 +21,7 @@ RECORD_KEYS = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_
 @pytest.fixture(scope="module")
 def straight_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("straight") / "out"
-    status = eval_cli.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "2", "--gaps", "30",
+    status = evaluate.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "2", "--gaps", "30",
                             "--out", str(out)])
     return status, out
 
@@ -67,7 +67,7 @@ def test_mcap_channels_and_detections(straight_run):
 def test_paper_figures(tmp_path):
     out = tmp_path / "paper"
     # 25 m per frame over each whole route (the default is 1 m per frame at 10 m/s)
-    assert eval_cli.main(["--paper", "--speed", "250", "--no-mcap", "--no-plots", "--out", str(out)]) == 0
+    assert evaluate.main(["--paper", "--speed", "250", "--no-mcap", "--no-plots", "--out", str(out)]) == 0
     _, records = _records(out)
 
     def worst(map_name, fusion, interpolation, d_s, key="max_error_m"):
@@ -98,13 +98,13 @@ def _one_line_error(capsys, status):
 
 
 def test_missing_map(tmp_path, capsys):
-    status = eval_cli.main(["--map", str(tmp_path / "nope.xodr"), "--out", str(tmp_path / "out")])
+    status = evaluate.main(["--map", str(tmp_path / "nope.xodr"), "--out", str(tmp_path / "out")])
     assert "nope.xodr" in _one_line_error(capsys, status)
     assert not (tmp_path / "out" / "metrics.json").exists()
 
 
 def test_route_too_short(tmp_path, capsys):
-    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--frames", "5000", "--out", str(tmp_path / "o")])
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "5000", "--out", str(tmp_path / "o")])
     assert "no drivable route" in _one_line_error(capsys, status)
     assert not (tmp_path / "o" / "metrics.json").exists()
 
@@ -112,7 +112,7 @@ def test_route_too_short(tmp_path, capsys):
 def test_unwritable_output_folder(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--out", str(blocker / "out")])
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--out", str(blocker / "out")])
     assert "output folder" in _one_line_error(capsys, status)
 
 
@@ -129,7 +129,7 @@ def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys
 
     monkeypatch.setattr(MapEvaluator, "_frame", failing)
     out = tmp_path / "out"
-    status = eval_cli.main(["--map", str(bundled_map("curve90")), "--frames", "10", "--routes", "1", "--out", str(out)])
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "10", "--routes", "1", "--out", str(out)])
     assert status == code
     assert "partial" in capsys.readouterr().err
     document, records = _records(out)
@@ -151,7 +151,7 @@ def test_sigint_finalises_the_recording(tmp_path):
 
     out = tmp_path / "out"
     process = subprocess.Popen(
-        [sys.executable, "-m", "cold_maps.eval_cli", "--map", str(bundled_map("rural")), "--frames", "1500",
+        [sys.executable, "-m", "cold_maps.cli.evaluate", "--map", str(bundled_map("rural")), "--frames", "1500",
          "--routes", "1", "--no-plots", "--out", str(out)],
         stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1])
     deadline = time.monotonic() + 60
@@ -170,9 +170,9 @@ def test_sigint_finalises_the_recording(tmp_path):
 def test_false_fusions_are_counted_and_kept_apart():
     import numpy as np
 
-    from cold_maps.eval_run import false_fusion_markdown
-    from cold_maps.evaluation import Collector
-    from cold_maps.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.collector import Collector
+    from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.run import false_fusion_markdown
 
     collector = Collector()
     key = ScenarioKey("m", "spline", "paper", 20.0, "left")

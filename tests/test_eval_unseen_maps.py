@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cold_maps import eval_cli
-from cold_maps.recording import METADATA_STATUS, read_detections, read_metadata
+from cold_maps.cli import evaluate
+from cold_maps.recording.recorder import METADATA_STATUS, read_detections, read_metadata
 
 LANE_WIDTH_M = 3.5
 RING_RADIUS_M = 50.0
@@ -133,7 +133,7 @@ def _run(tmp_path_factory: pytest.TempPathFactory, name: str, text: str, *extra:
     path = folder / f"{name}.xodr"
     path.write_text(text)
     out = folder / "out"
-    status = eval_cli.main(["--map", str(path), "--routes", "all", "--frames", str(FRAMES), "--gaps", "30",
+    status = evaluate.main(["--map", str(path), "--routes", "all", "--frames", str(FRAMES), "--gaps", "30",
                             "--interpolation", "hermite", "--no-plots", "--out", str(out), *extra])
     return status, out
 
@@ -281,7 +281,7 @@ def test_two_maps_with_one_name_are_refused(tmp_path, capsys):
         path.parent.mkdir()
         path.write_text(ring())
     out = tmp_path / "out"
-    assert eval_cli.main(["--map", str(paths[0]), "--map", str(paths[1]), "--out", str(out)]) == 1
+    assert evaluate.main(["--map", str(paths[0]), "--map", str(paths[1]), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "share the name 'ring'" in err[0]
     assert not out.exists()

@@ -7,23 +7,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import bundled_map
 
 import fusion
-from cold_maps.drive import build_drive
-from cold_maps.evaluation import (
-    Collector,
-    MapEvaluator,
-    MapPlan,
-    Scenario,
-    reason_category,
-    scenarios_for,
-    sense,
-    world_borders,
-)
-from cold_maps.lane_graph import LaneKey
-from cold_maps.sensor import LaneSensor
-from cold_maps.sensor_errors import SensorErrorModel
-from conftest import bundled_map
+from cold_maps.evaluation.collector import Collector
+from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category, scenarios_for
+from cold_maps.network.lane_graph import LaneKey
+from cold_maps.simulation.detection import sense, world_borders
+from cold_maps.simulation.drive import build_drive
+from cold_maps.simulation.sensor import LaneSensor
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 LANE = LaneKey("1", 0, -1)
 

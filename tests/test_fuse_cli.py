@@ -7,16 +7,17 @@ import json
 
 import numpy as np
 import pytest
-
-from cold_maps import eval_cli, fuse_cli
-from cold_maps.recording import METADATA_STATUS, Recorder, read_detections, read_metadata
 from conftest import bundled_map
+
+from cold_maps.cli import evaluate
+from cold_maps.cli import fuse
+from cold_maps.recording.recorder import METADATA_STATUS, Recorder, read_detections, read_metadata
 
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     out = tmp_path_factory.mktemp("rec")
-    assert eval_cli.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "1", "--gaps", "30",
+    assert evaluate.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "1", "--gaps", "30",
                           "--interpolation", "paper", "--no-distractors", "--no-plots", "--out", str(out)]) == 0
     return out
 
@@ -28,7 +29,7 @@ def _scenarios(folder):
 
 def test_refusion_reproduces_cold_eval(recording, tmp_path):
     report = tmp_path / "report"
-    status = fuse_cli.main(["--input", str(recording / "run.mcap"), "-o", str(tmp_path / "re.mcap"),
+    status = fuse.main(["--input", str(recording / "run.mcap"), "-o", str(tmp_path / "re.mcap"),
                             "--report", str(report)])
     assert status == 0
     before, after = _scenarios(recording), _scenarios(report)
@@ -52,7 +53,7 @@ def test_fuses_detections_from_another_source(tmp_path):
             recorder.write_detection(frame * 0.1, frame, "car0", (0.0, 0.0, 0.0), left, right, ego=True)
             recorder.write_detection(frame * 0.1, frame, "car1", (20.0, 0.0, 0.0), left, right)
     out = tmp_path / "fused.mcap"
-    assert fuse_cli.main(["--input", str(path), "-o", str(out), "--ego", "car0"]) == 0
+    assert fuse.main(["--input", str(path), "-o", str(out), "--ego", "car0"]) == 0
     from mcap.reader import make_reader
 
     with open(out, "rb") as stream:
@@ -64,7 +65,7 @@ def test_fuses_detections_from_another_source(tmp_path):
 
 
 def _fails(capsys, argv):
-    status = fuse_cli.main(argv)
+    status = fuse.main(argv)
     err = capsys.readouterr().err.strip()
     assert status == 1 and "\n" not in err and "Traceback" not in err
     return err

@@ -8,24 +8,24 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from conftest import bundled_map
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from graph_maps import (
     JUNCTION_RADIUS_M,
     LANE_WIDTH_M,
     contact_points_map,
     junction_map,
+    lane,
     multi_section_map,
     odr_map,
     road,
     section,
-    lane,
     to_junction,
     to_road,
     with_rule,
 )
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from cold_maps.lane_graph import LaneGraph, LaneKey, build_lane_graph
+from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.model import Connection, Junction, LaneLink, RoadLink
 
 CONTINUITY_TOLERANCE_M = 0.01

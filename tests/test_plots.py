@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cold_maps.plots import DPI, FIGURE_SIZE_IN, plot_frame_errors, plot_frame_overlay
-from cold_maps.recording import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
-from cold_maps.report import FrameRecord, ScenarioAccumulator, ScenarioKey
+from cold_maps.evaluation.plots import DPI, FIGURE_SIZE_IN, plot_frame_errors, plot_frame_overlay
+from cold_maps.evaluation.report import FrameRecord, ScenarioAccumulator, ScenarioKey
+from cold_maps.recording.recorder import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -89,7 +89,7 @@ def test_overlay_rejects_bad_polylines_by_name(tmp_path):
 
 
 def test_heavy_dependencies_are_imported_lazily():
-    code = ("import sys, cold_maps.plots, cold_maps.recording, cold_maps.report, cold_maps.sensor_errors, "
-            "cold_maps.progress; print(sorted(m for m in ('matplotlib', 'mcap') if m in sys.modules))")
+    code = ("import sys, cold_maps.evaluation.plots, cold_maps.recording.recorder, cold_maps.evaluation.report, cold_maps.simulation.sensor_errors, "
+            "cold_maps.common.progress; print(sorted(m for m in ('matplotlib', 'mcap') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"

@@ -15,9 +15,7 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from converters.osm import simplify
-
-from cold_maps.recording import (
+from cold_maps.recording.recorder import (
     DISPLAY_TOLERANCE_M,
     FRAME_METRICS_SCHEMA,
     LANE_DETECTION_SCHEMA,
@@ -27,6 +25,7 @@ from cold_maps.recording import (
     read_detections,
     read_metadata,
 )
+from gt_matching.polyline import simplify
 
 FRAMES = 3
 DT_S = 0.1

@@ -15,9 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps import report
-from cold_maps.progress import ProgressBar
-from cold_maps.report import (
+from cold_maps.evaluation import report
+from cold_maps.common.progress import ProgressBar
+from cold_maps.evaluation.report import (
     FRAMES_CSV_COLUMNS,
     PAPER_TABLE_I_MS,
     PAPER_TABLE_II,

@@ -11,9 +11,9 @@ from graph_maps import JUNCTION_RADIUS_M, LANE_WIDTH_M, junction_map, odr_map, w
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.lane_graph import LaneGraph, LaneKey, build_lane_graph
-from cold_maps.route import Route, RoutePiece, route_from_lanes
-from cold_maps.routing import (
+from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
+from cold_maps.network.route import Route, RoutePiece, route_from_lanes
+from cold_maps.network.routing import (
     NoRouteError,
     longest_route_lengths,
     random_route,

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.lane_strip import LaneStrip
-from cold_maps.sensor import LaneSensor, vehicle_to_world, world_to_vehicle
+from cold_maps.network.lane_strip import LaneStrip
+from cold_maps.simulation.sensor import LaneSensor, vehicle_to_world, world_to_vehicle
 
 LANE_WIDTH_M = 4.0
 

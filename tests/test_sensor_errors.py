@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.lane_strip import polyline_distance as arc_length
-from cold_maps.sensor_errors import SensorErrorModel, check_polyline
+from cold_maps.simulation.sensor_errors import SensorErrorModel, check_polyline
+from gt_matching.polyline import arc_lengths as arc_length
 
 STEP_M = 0.10
 

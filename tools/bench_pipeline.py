@@ -25,8 +25,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import fusion  # noqa: E402
-from cold_maps.evaluation import Collector, MapEvaluator, MapPlan, scenarios_for, sense, world_borders  # noqa: E402
-from cold_maps.report import FrameRecord  # noqa: E402
+from cold_maps.evaluation.collector import Collector  # noqa: E402
+from cold_maps.evaluation.evaluator import MapEvaluator  # noqa: E402
+from cold_maps.evaluation.report import FrameRecord  # noqa: E402
+from cold_maps.evaluation.scenarios import MapPlan, scenarios_for  # noqa: E402
+from cold_maps.simulation.detection import sense, world_borders  # noqa: E402
 
 DEFAULT_MAP = ROOT.parent / "shared" / "maps" / "carla" / "Town01.xodr"
 STAGES = ("sense", "fuse", "match", "metrics", "baseline evaluate")

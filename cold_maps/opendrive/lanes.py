@@ -24,8 +24,6 @@ signed t the spec and ``Lane.borders`` describe.
 
 from __future__ import annotations
 
-import numpy as np
-
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import Lane, LaneSection, Road

@@ -25,11 +25,11 @@ from typing import Final, Literal, Mapping, Sequence
 
 import numpy as np
 
-from cold_maps.lane_graph import LaneGraph, LaneKey
-from cold_maps.lane_strip import LaneStrip, NDArrayFloat
-from cold_maps.route import route_from_lanes
-from cold_maps.routing import longest_route_lengths, random_route
-from cold_maps.sensor import SENSOR_RANGE_M
+from cold_maps.network.lane_graph import LaneGraph, LaneKey
+from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat
+from cold_maps.network.route import route_from_lanes
+from cold_maps.network.routing import longest_route_lengths, random_route
+from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
 FRAME_RATE_HZ: Final[float] = 10.0
 DEFAULT_SPEED_MPS: Final[float] = 10.0

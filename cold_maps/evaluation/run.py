@@ -12,7 +12,6 @@ from __future__ import annotations
 import logging
 import os
 import re
-import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,9 +19,10 @@ from typing import Any, Callable, Final, Mapping, Sequence, TextIO
 
 import numpy as np
 
-from cold_maps.evaluation import Collector, MapEvaluator, MapPlan
-from cold_maps.progress import ProgressBar
-from cold_maps.report import (
+from cold_maps.common.progress import ProgressBar
+from cold_maps.evaluation.collector import Collector
+from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.evaluation.report import (
     ScenarioAccumulator,
     ScenarioResult,
     atomic_write_text,
@@ -30,31 +30,12 @@ from cold_maps.report import (
     write_frames_csv,
     write_metrics_json,
 )
+from cold_maps.evaluation.scenarios import MapPlan
 
-LOG = logging.getLogger("cold_maps.eval_run")
+LOG = logging.getLogger("cold_maps.evaluation.run")
 
 MCAP_NAME: Final[str] = "run.mcap"
 PLOTS_DIR: Final[str] = "plots"
-
-
-EXIT_FAILURE: Final[int] = 1
-EXIT_INTERRUPTED: Final[int] = 130
-
-
-def configure_logging(verbose: int) -> None:
-    """Logging to stderr: warnings, ``-v`` info, ``-vv`` debug."""
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)],
-                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-
-
-def startup_failure(prog: str, exc: BaseException) -> int:
-    """One line on stderr for a failure before any output was written; the exit status."""
-    if isinstance(exc, KeyboardInterrupt):
-        print(f"{prog}: interrupted before the run started; nothing written", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    logging.getLogger(prog).debug("failed", exc_info=exc)
-    print(f"{prog}: {exc}", file=sys.stderr)
-    return EXIT_FAILURE
 
 
 class OutputError(Exception):
@@ -89,7 +70,7 @@ def _file_part(text: str) -> str:
 def write_plots(out: Path, collector: Collector) -> list[Path]:
     """Per map and scenario: the error per frame of its own coop (Fig. 7) and the overlay
     of its worst frame (Fig. 8), into ``out/plots``; returns the files."""
-    from cold_maps.plots import plot_frame_errors, plot_frame_overlay
+    from cold_maps.evaluation.plots import plot_frame_errors, plot_frame_overlay
 
     folder = out / PLOTS_DIR
     folder.mkdir(exist_ok=True)
@@ -216,7 +197,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     try:
         with ProgressBar(total, "cold-eval", stream=options.progress) as bar:
             if options.mcap:
-                from cold_maps.recording import Recorder
+                from cold_maps.recording.recorder import Recorder
 
                 with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
                               params=options.run_params) as recorder:

@@ -6,7 +6,7 @@ OpenDRIVE map, optional seeded error models), the ego's detection is measured al
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
 ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
-against the true lane relation of the pair (:func:`cold_maps.drive.lane_relation`).
+against the true lane relation of the pair (:func:`cold_maps.simulation.drive.lane_relation`).
 
 Results go into a :class:`Collector` (``report.ScenarioAccumulator`` per scenario key,
 runtimes, one overlay per scenario), optionally also frame by frame into an MCAP
@@ -18,17 +18,19 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections import OrderedDict
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Final, Literal, Sequence
+from typing import TYPE_CHECKING, Callable, Final
 
 import numpy as np
 
 import fusion
-from cold_maps.drive import (
-    CONVOY_HEADWAY_M,
-    DEFAULT_SPEED_MPS,
+from cold_maps.evaluation.collector import Collector, Overlay
+from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
+from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
+from cold_maps.network.lane_graph import LaneGraph, load_graph
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.detection import Sensed, detection_pose, sense, world_borders
+from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
     Drive,
     DriveError,
@@ -39,288 +41,18 @@ from cold_maps.drive import (
     required_route_length,
     route_from_start,
 )
-from cold_maps.lane_graph import LaneGraph, LaneKey, build_lane_graph
-from cold_maps.lane_strip import NDArrayFloat
-from cold_maps.report import ScenarioAccumulator, ScenarioKey, FrameRecord
-from cold_maps.sensor import SENSOR_RANGE_M, LaneSensor, vehicle_to_world
-from cold_maps.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
 
 if TYPE_CHECKING:
-    from cold_maps.recording import Recorder
-    from gt_matching import GroundTruth, LaneMatch
+    from cold_maps.recording.recorder import Recorder
+    from gt_matching import GroundTruth
 
 LOG = logging.getLogger("cold_maps.evaluation")
 
-INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
-MATCH_CACHE_SIZE: Final[int] = 16
-"""Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
 OVERLAY_MARGIN_M: Final[float] = 10.0
 """The overlay plot shows the GT this far (m) around the detections and the fused lane."""
-DETECTION_DECIMALS: Final[int] = 6
-"""Detected border points are rounded to 1 µm (the sensor's resolution): the recorded
-``cold.LaneDetection`` JSON is then short and exactly what was fused."""
 RELATION_MARGIN_M: Final[float] = 5.0
 """Slack (m) on the longest lane distance at which a coop counts as ahead of the ego."""
-
-FusionName = Literal["local", "convoy", "spline"]
-
-_REASONS: Final[tuple[tuple[str, str], ...]] = (
-    ("not ahead", "coop_not_ahead"),
-    ("no overlap on the same lane", "other_lane"),
-    ("no overlap", "no_overlap"),
-    ("no gap", "no_gap"),
-    ("exceeds d_i", "gap_too_long"),
-    ("not the same direction", "opposite_direction"),
-    ("heads", "heading_mismatch"),
-    ("matches none", "pose_case"),
-    ("another lane", "other_lane"),
-)
-
-
-def reason_category(reason: str) -> str:
-    """A short key for a fusion rejection reason (``other`` when unknown)."""
-    for needle, category in _REASONS:
-        if needle in reason:
-            return category
-    return "other"
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """One fusion set-up evaluated on every frame.
-
-    Fields:
-        fusion: ``local`` (ego only), ``convoy`` or ``spline``.
-        interpolation: ``paper`` or ``hermite`` for ``spline``, "" otherwise.
-        d_s: spline gap between the ego's detection end and the coop's start (m), 0 otherwise.
-        lead_m: station distance of the scenario's coop ahead of the ego (m); 0 for local.
-    """
-
-    fusion: FusionName
-    interpolation: str = ""
-    d_s: float = 0.0
-    lead_m: float = 0.0
-
-    @property
-    def label(self) -> str:
-        """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``."""
-        return self.fusion if self.fusion != "spline" else f"spline-{self.interpolation}-d{self.d_s:g}"
-
-    def key(self, map_name: str, boundary: str) -> ScenarioKey:
-        """The report key of one boundary."""
-        return ScenarioKey(map_name, self.fusion, self.interpolation, float(self.d_s), boundary)
-
-
-def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
-                  sensor_range_m: float = SENSOR_RANGE_M) -> tuple[Scenario, ...]:
-    """local, convoy (headway d_v = 25 m) and spline for each distinct interpolation and gap."""
-    for gap in gaps_m:
-        if not (math.isfinite(gap) and gap > 0):
-            raise ValueError(f"spline gap d_s: expected a finite distance > 0 m, got {gap!r}")
-    for name in interpolations:
-        if name not in INTERPOLATIONS:
-            raise ValueError(f"interpolation: expected one of {INTERPOLATIONS}, got {name!r}")
-    splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
-               for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
-    return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
-
-
-def params_for_gaps(gaps_m: Sequence[float]) -> fusion.FusionParams:
-    """Fusion parameters whose longest bridged gap d_i (default 50 m) admits every gap
-    asked for, with 1 m to spare (a gap set along the lane is measured as a chord)."""
-    return fusion.FusionParams(d_i_m=max(fusion.DEFAULT_PARAMS.d_i_m, max(gaps_m, default=0.0) + 1.0))
-
-
-@dataclass(frozen=True)
-class MapPlan:
-    """What to evaluate on one map.
-
-    Fields:
-        path: the OpenDRIVE file.
-        scenarios: the fusion set-ups.
-        frames: frames per drive.
-        routes: drives (routes) on the map; None for as many as cover its lanes.
-        seed: seed of the route choice and of the error models.
-        speed_mps: ego speed (m/s); frames at ``FRAME_RATE_HZ``.
-        start_lane: the lane every route starts on, or None for routes spread over the map.
-        distractors: add turning coops, adjacent/opposite-lane and behind vehicles.
-        errors: sensor error models (all off by default).
-        params: fusion parameters.
-        road_type: the paper's road type of this map (for the side-by-side), or None.
-    """
-
-    path: Path
-    scenarios: tuple[Scenario, ...]
-    frames: int = 100
-    routes: int | None = 3
-    seed: int = 0
-    speed_mps: float = DEFAULT_SPEED_MPS
-    start_lane: LaneKey | None = None
-    distractors: bool = True
-    errors: SensorErrorModel = SensorErrorModel()
-    params: fusion.FusionParams = fusion.DEFAULT_PARAMS
-    road_type: str | None = None
-
-    @property
-    def name(self) -> str:
-        """Map name (file stem)."""
-        return self.path.stem
-
-    @property
-    def coop_leads_m(self) -> tuple[float, ...]:
-        """Distinct coop leads of the scenarios (m)."""
-        return tuple(sorted({s.lead_m for s in self.scenarios if s.fusion != "local"}))
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """A lane measured against its ground truth (world frame, m).
-
-    Fields:
-        left_errors_m, right_errors_m: per detected point, the distance to the GT border
-            resampled every ``step_m``.
-        left_range_m, right_range_m: length of the lane along its GT border, from the
-            projection of its first point to that of its last.
-        left_gt, right_gt: the GT borders (``(M, 2)``) the lane was matched to.
-        matched: False when the lane does not follow the sender's lane (see gt_matching).
-    """
-
-    left_errors_m: NDArrayFloat
-    right_errors_m: NDArrayFloat
-    left_range_m: float
-    right_range_m: float
-    left_gt: NDArrayFloat
-    right_gt: NDArrayFloat
-    matched: bool
-
-
-class GroundTruthMeter:
-    """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
-    (``GroundTruth.errors``: per-point distances to the GT borders resampled every
-    ``step_m``, samples cached per lanelet; without the other-lane check, which the
-    reports do not use). Matches of the last few reference lanes are kept: the scenarios
-    of a frame share their coops' true lanes."""
-
-    def __init__(self, ground_truth: GroundTruth) -> None:
-        self.ground_truth = ground_truth
-        self.step_m = ground_truth.config.step_m
-        self._matches: OrderedDict[tuple[bytes, bytes, tuple[float, float, float]], LaneMatch] = OrderedDict()
-
-    def match(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float]) -> LaneMatch:
-        """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``), from
-        the cache when the same borders and pose were matched lately."""
-        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
-        key = (left.tobytes(), right.tobytes(), tuple(pose))
-        found = self._matches.get(key)
-        if found is None:
-            found = self._matches[key] = self.ground_truth.match(left, right, pose)
-            if len(self._matches) > MATCH_CACHE_SIZE:
-                self._matches.popitem(last=False)
-        else:
-            self._matches.move_to_end(key)
-        return found
-
-    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
-        """Closest-point errors and range of a lane against the GT borders of ``match``."""
-        found = self.ground_truth.errors(left, right, match, others=False)
-        return Measurement(found.left.distances_m, found.right.distances_m,
-                           float(found.left.arc_m[-1] - found.left.arc_m[0]),
-                           float(found.right.arc_m[-1] - found.right.arc_m[0]),
-                           match.left_gt, match.right_gt, match.matched)
-
-    def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
-                reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
-        """Errors of a lane (borders ``(N, 2)`` world frame, driving order) whose sender
-        stands at ``pose`` (x m, y m, yaw rad). The GT lanelets are those matched to
-        ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
-        or to the lane itself; the errors are always against Lanelet2's borders. Raises
-        ``gt_matching.MatchingError``."""
-        return self.errors(self.match(*(reference or (left, right)), pose), left, right)
-
-
-@dataclass(frozen=True)
-class Overlay:
-    """What one frame of a scenario looked like, for the overlay plot (world frame, m).
-
-    Fields:
-        frame: frame index; max_error_m: its largest error; gt: GT borders by name;
-        detections: sender → (left, right); fused: fused borders by name.
-    """
-
-    frame: int
-    max_error_m: float
-    gt: dict[str, NDArrayFloat]
-    detections: dict[str, tuple[NDArrayFloat, NDArrayFloat]]
-    fused: dict[str, NDArrayFloat]
-
-
-@dataclass
-class Collector:
-    """Everything a run measured so far (filled frame by frame, readable after an interrupt).
-
-    Fields:
-        accumulators: one per scenario key, in insertion order.
-        fuse_ms: (map, scenario label) → fusion runtimes of the scenario's own coop (ms).
-        check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
-            overlap check for convoy (ms).
-        overlays: (map, scenario label) → the frame with the largest error.
-        notes: lines for the summary (routes, lane coverage).
-        frames_done: frames evaluated.
-    """
-
-    accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
-    fuse_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
-    check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
-    overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
-    frames_done: int = 0
-
-    def add(self, key: ScenarioKey, record: FrameRecord) -> None:
-        """Adds one evaluation to the scenario ``key``."""
-        accumulator = self.accumulators.get(key)
-        if accumulator is None:
-            accumulator = self.accumulators[key] = ScenarioAccumulator(key)
-        accumulator.add(record)
-
-
-@dataclass(frozen=True)
-class Sensed:
-    """One vehicle's detection in one frame.
-
-    Fields:
-        state: where the vehicle is.
-        detection: what it sends (reported pose with localisation error, borders in its
-            vehicle frame with the sensor errors), or None when the frame was dropped.
-    """
-
-    state: VehicleState
-    detection: fusion.LaneDetection | None
-
-
-def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
-          stamp_s: float = 0.0) -> Sensed:
-    """The detection of a vehicle: the sensor on its track, then the error models, points
-    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference)."""
-    raw = sensor.detect(state.track.strip, state.station)
-    if raw is None:
-        return Sensed(state, None)
-    borders = errors.apply(raw.left, raw.right, rng)
-    if borders is None:
-        return Sensed(state, None)
-    borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
-    x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
-    pose = fusion.Pose2D(x, y, yaw)
-    return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name))
-
-
-def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:
-    """The detection's borders in the world frame (m), from its reported pose."""
-    p = detection.pose
-    return vehicle_to_world(detection.left, p.x, p.y, p.yaw), vehicle_to_world(detection.right, p.x, p.y, p.yaw)
-
-
-def _pose(detection: fusion.LaneDetection) -> tuple[float, float, float]:
-    return detection.pose.x, detection.pose.y, detection.pose.yaw
 
 
 class MapEvaluator:
@@ -447,7 +179,7 @@ class MapEvaluator:
         if recorder is not None:
             for name, item in sensed.items():
                 if item.detection is not None:
-                    recorder.write_detection(stamp, index, name, _pose(item.detection), item.detection.left,
+                    recorder.write_detection(stamp, index, name, detection_pose(item.detection), item.detection.left,
                                              item.detection.right, ego=name == "ego")
             if gt_lines:
                 recorder.write_gt(stamp, gt_lines)
@@ -464,7 +196,7 @@ class MapEvaluator:
         left, right = world_borders(ego.detection)
         state = ego.state
         truth = state.track.borders_between(state.station, state.station + self.sensor.range_m)
-        measured = self._measure(left, right, _pose(ego.detection), truth)
+        measured = self._measure(left, right, detection_pose(ego.detection), truth)
         if isinstance(measured, str):
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=measured))
@@ -516,7 +248,7 @@ class MapEvaluator:
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime)
             return None
-        measured = self._measure(result.left, result.right, _pose(ego.detection),
+        measured = self._measure(result.left, result.right, detection_pose(ego.detection),
                                  self.true_lane(ego.state, other.state))
         if isinstance(measured, str):
             reject(measured, True, runtime)
@@ -568,10 +300,3 @@ def _crop(line: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat) -> NDArrayF
     plus one point on either side."""
     inside = np.flatnonzero(np.all((line >= low) & (line <= high), axis=1))
     return line if inside.size < 2 else line[max(inside[0] - 1, 0): inside[-1] + 2]
-
-
-def load_graph(path: Path) -> LaneGraph:
-    """The driving-lane graph of an OpenDRIVE file (OpenDriveError when unreadable)."""
-    from cold_maps.opendrive.parser import load_opendrive
-
-    return build_lane_graph(load_opendrive(path))

@@ -4,7 +4,7 @@
 - :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
   frame in the world frame, equal aspect (the paper's Fig. 8).
 
-Colours match the Foxglove channels of :mod:`cold_maps.recording`.
+Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from typing import Any, Final, Mapping, Sequence
 
 import numpy as np
 
-from cold_maps.lane_strip import NDArrayFloat
-from cold_maps.recording import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
-from cold_maps.report import ScenarioAccumulator, atomic_write_bytes
-from cold_maps.sensor_errors import check_polyline
+from cold_maps.evaluation.report import ScenarioAccumulator, atomic_write_bytes
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.recording.recorder import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
+from cold_maps.simulation.sensor_errors import check_polyline
 
 FIGURE_SIZE_IN: Final[tuple[float, float]] = (8.0, 4.5)
 DPI: Final[int] = 100

@@ -1,7 +1,7 @@
 """Routing on the lane graph: shortest routes (Dijkstra) and seeded random routes.
 
 A route here is a sequence of lanes (``LaneKey``) in driving direction, each followed
-whole; ``cold_maps.route.Route`` turns it into world-frame polylines. Lane lengths are the
+whole; ``cold_maps.network.route.Route`` turns it into world-frame polylines. Lane lengths are the
 graph's centreline lengths (m). Routes may pass a lane more than once (a loop round a
 block), so on a map with a reachable cycle any length can be driven.
 """
@@ -14,7 +14,7 @@ from typing import Final, Mapping, Sequence
 
 import numpy as np
 
-from cold_maps.lane_graph import LaneGraph, LaneKey
+from cold_maps.network.lane_graph import LaneGraph, LaneKey
 
 LENGTH_TOLERANCE_M: Final[float] = 1e-9
 

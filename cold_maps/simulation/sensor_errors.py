@@ -12,8 +12,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from cold_maps.lane_strip import NDArrayFloat, polyline_distance
-from cold_maps.sensor import vehicle_to_world
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.sensor import vehicle_to_world
+from gt_matching.polyline import arc_lengths
 
 
 def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFloat:
@@ -47,7 +48,7 @@ def left_normals(points: NDArrayFloat, name: str = "polyline") -> NDArrayFloat:
 
 def truncate(points: NDArrayFloat, fraction: float) -> NDArrayFloat:
     """The first ``fraction`` (0..1] of a polyline's arc length; the end point is interpolated."""
-    s = polyline_distance(points)
+    s = arc_lengths(points)
     end = fraction * s[-1]
     keep = int(np.searchsorted(s, end, side="right"))
     head = points[:keep]
@@ -107,7 +108,7 @@ class SensorErrorModel:
             return None
         if self.range_jitter_sigma_m > 0:
             cut = abs(rng.normal(0.0, self.range_jitter_sigma_m))
-            mean_length = 0.5 * (polyline_distance(borders[0])[-1] + polyline_distance(borders[1])[-1])
+            mean_length = 0.5 * (arc_lengths(borders[0])[-1] + arc_lengths(borders[1])[-1])
             if mean_length <= 0:
                 raise ValueError("left, right: detection has zero length")
             fraction = 1.0 - cut / mean_length

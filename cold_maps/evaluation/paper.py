@@ -15,14 +15,15 @@ import math
 from pathlib import Path
 from typing import Final, Mapping, Sequence
 
-from cold_maps.drive import DEFAULT_SPEED_MPS, FRAME_RATE_HZ, ROUTE_MARGIN_M
-from cold_maps.evaluation import Collector, MapPlan, load_graph, params_for_gaps, scenarios_for
-from cold_maps.lane_graph import LaneKey
-from cold_maps.report import PAPER_TABLE_I_MS, ScenarioResult, paper_comparison_markdown
-from cold_maps.routing import longest_route_lengths
-from cold_maps.sensor import SENSOR_RANGE_M
+from cold_maps.evaluation.collector import Collector
+from cold_maps.evaluation.report import PAPER_TABLE_I_MS, ScenarioResult, paper_comparison_markdown
+from cold_maps.evaluation.scenarios import MapPlan, params_for_gaps, scenarios_for
+from cold_maps.network.lane_graph import LaneKey, load_graph
+from cold_maps.network.routing import longest_route_lengths
+from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, FRAME_RATE_HZ, ROUTE_MARGIN_M
+from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
-BUNDLED_MAPS_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "maps"
+BUNDLED_MAPS_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "maps"
 PAPER_START_LANE: Final[LaneKey] = LaneKey("1", 0, -1)
 PAPER_GAPS_M: Final[Mapping[str, tuple[float, ...]]] = {
     "straight": (30.0, 50.0),

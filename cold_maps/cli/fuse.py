@@ -1,7 +1,7 @@
 """``cold-fuse``: fusion re-run on recorded lane detections.
 
 Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
-:mod:`cold_maps.recording`) of an MCAP file written by ``cold-eval`` or by any other source
+:mod:`cold_maps.recording.recorder`) of an MCAP file written by ``cold-eval`` or by any other source
 in that format, fuses the ego's detection (sender ``--ego``) with every other sender's of
 the same frame, and writes a new MCAP: the detections again, the fused lanes on
 ``/fused`` and per-frame metrics on ``/metrics``. With ``--map`` (or the map named in the
@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _map_path(args: argparse.Namespace) -> Path | None:
-    from cold_maps.recording import METADATA_RUN, read_metadata
+    from cold_maps.recording.recorder import METADATA_RUN, read_metadata
 
     if args.no_gt:
         return None
@@ -59,10 +59,9 @@ def _map_path(args: argparse.Namespace) -> Path | None:
 def _meter(map_path: Path | None) -> Any:
     if map_path is None:
         return None
+    from cold_maps.groundtruth.meter import GroundTruthMeter
     from converters import load_lanelet2
     from gt_matching import GroundTruth
-
-    from cold_maps.evaluation import GroundTruthMeter
 
     return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path)))
 
@@ -75,7 +74,7 @@ class Refuser:
     """
 
     def __init__(self, ego: str, mode: str, interpolation: str, meter: Any, map_name: str, params: Any) -> None:
-        from cold_maps.evaluation import Collector
+        from cold_maps.evaluation.collector import Collector
 
         self.ego, self.mode, self.interpolation, self.params = ego, mode, interpolation, params
         self.meter, self.map_name = meter, map_name
@@ -85,8 +84,7 @@ class Refuser:
     def frame(self, frame: int, detections: list[dict[str, Any]], recorder: Any) -> None:
         """Fuses one recorded frame and writes it to ``recorder``."""
         import fusion
-
-        from cold_maps.evaluation import reason_category
+        from cold_maps.evaluation.scenarios import reason_category
 
         stamp = detections[0]["stamp_s"]
         lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
@@ -148,8 +146,8 @@ class Refuser:
 
     def _add(self, fusion_name: str, frame: int, stamp: float, coop: str, measured: Any, runtime: float,
              rejected: str, predicted: bool | None) -> None:
-        from cold_maps.evaluation import Measurement
-        from cold_maps.report import FrameRecord, ScenarioKey
+        from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+        from cold_maps.groundtruth.meter import Measurement
 
         interpolation = self.interpolation if fusion_name == "spline" else ""
         if isinstance(measured, str):
@@ -168,7 +166,7 @@ class Refuser:
 
 
 def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
-    from cold_maps.evaluation import world_borders
+    from cold_maps.simulation.detection import world_borders
 
     return world_borders(detection)
 
@@ -176,8 +174,8 @@ def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.eval_run import EXIT_INTERRUPTED, configure_logging, startup_failure
-    from cold_maps.recording import Recorder, read_detections
+    from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
+    from cold_maps.recording.recorder import Recorder, read_detections
 
     configure_logging(args.verbose)
     error: BaseException | None = None
@@ -193,7 +191,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                           map_path.stem if map_path else args.input.stem, params)
         report_dir = None
         if args.report is not None:
-            from cold_maps.eval_run import prepare_out_dir
+            from cold_maps.evaluation.run import prepare_out_dir
 
             report_dir = prepare_out_dir(args.report)
         run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
@@ -211,7 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         logging.getLogger(PROG).debug("run ended early", exc_info=True)
     recorder.__exit__(type(error) if error is not None else None, error, None)
     if report_dir is not None:
-        from cold_maps.eval_run import write_outputs
+        from cold_maps.evaluation.run import write_outputs
 
         write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False)
     if isinstance(error, KeyboardInterrupt):

@@ -13,13 +13,9 @@ from typing import Final
 import numpy as np
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from gt_matching.polyline import arc_lengths
 
 MIN_STATION_STEP_M: Final[float] = 1e-9
-
-
-def polyline_distance(points: NDArrayFloat) -> NDArrayFloat:
-    """(N,) cumulative arc length along an (N, 2) polyline (m), starting at 0."""
-    return np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
 
 
 def resample_polyline(points: NDArrayFloat, distance: NDArrayFloat, start: float, end: float, step: float) -> NDArrayFloat:
@@ -75,12 +71,12 @@ class LaneStrip:
         if len(centre) < 2:
             raise ValueError("lane strip needs at least two distinct cross-sections")
         return cls(
-            station=polyline_distance(centre),
+            station=arc_lengths(centre),
             centerline=centre,
             left=left,
             right=right,
-            left_distance=polyline_distance(left),
-            right_distance=polyline_distance(right),
+            left_distance=arc_lengths(left),
+            right_distance=arc_lengths(right),
             heading=np.unwrap(np.arctan2(*np.gradient(centre, axis=0).T[::-1])),
         )
 

@@ -24,7 +24,7 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
-from cold_maps.atomic_io import atomic_output
+from cold_maps.common.atomic_io import atomic_output
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.model import OpenDriveMap
@@ -81,7 +81,7 @@ def _run_info(args: argparse.Namespace) -> int:
 
 def map_info(odr_map: OpenDriveMap) -> list[str]:
     """Summary lines of a map: header, roads, sections, lanes, junctions, geometry."""
-    from cold_maps.lane_graph import build_lane_graph
+    from cold_maps.network.lane_graph import build_lane_graph
 
     header = odr_map.header
     roads = odr_map.roads.values()
@@ -155,8 +155,8 @@ class BorderPolyline:
 
 def lane_border_polylines(odr_map: OpenDriveMap, step: float) -> Iterator[BorderPolyline]:
     """Left then right border of every driving lane, road by road, section by section."""
+    from cold_maps.network.route import borders_in_driving_direction
     from cold_maps.opendrive.sampling import sample_road
-    from cold_maps.route import borders_in_driving_direction
 
     for road in odr_map.roads.values():
         for samples in sample_road(road, step=step, lane_types=EXPORT_LANE_TYPES):
@@ -209,7 +209,7 @@ def _run_export(args: argparse.Namespace) -> int:
 
 
 def write_atomically(path: Path, write: Callable[[TextIO], None]) -> None:
-    """Write a text file atomically (:func:`cold_maps.atomic_io.atomic_output`), creating
+    """Write a text file atomically (:func:`cold_maps.common.atomic_io.atomic_output`), creating
     its folder when missing; on any failure ``path`` is left as it was."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(path, "w") as out:
@@ -229,13 +229,13 @@ def _run_convert(args: argparse.Namespace) -> int:
 
 
 def _configure_check(parser: argparse.ArgumentParser) -> None:
-    from cold_maps.gt_check import configure_check
+    from cold_maps.groundtruth.check import configure_check
 
     configure_check(parser)
 
 
 def _run_check(args: argparse.Namespace) -> int:
-    from cold_maps.gt_check import run_check
+    from cold_maps.groundtruth.check import run_check
 
     return run_check(args)
 

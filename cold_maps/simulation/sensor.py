@@ -14,7 +14,7 @@ from typing import Final
 
 import numpy as np
 
-from cold_maps.lane_strip import LaneStrip, NDArrayFloat, resample_polyline
+from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat, resample_polyline
 
 SENSOR_RANGE_M: Final[float] = 30.0
 SENSOR_STEP_M: Final[float] = 0.10

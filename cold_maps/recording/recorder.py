@@ -35,9 +35,10 @@ from typing import Any, Final, Iterator, Mapping
 
 import numpy as np
 
-from cold_maps.lane_strip import NDArrayFloat
-from cold_maps.sensor import vehicle_to_world
-from cold_maps.sensor_errors import check_polyline
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.sensor import vehicle_to_world
+from cold_maps.simulation.sensor_errors import check_polyline
+from gt_matching.polyline import simplify
 
 TOPIC_GT: Final[str] = "/gt"
 TOPIC_FUSED: Final[str] = "/fused"
@@ -242,8 +243,6 @@ def _time_msg(ns: int) -> dict[str, int]:
 
 def _simplified(points: NDArrayFloat) -> NDArrayFloat:
     """The polyline's points within ``DISPLAY_TOLERANCE_M`` (Douglas-Peucker)."""
-    from converters.osm import simplify
-
     return points[simplify(points, DISPLAY_TOLERANCE_M)] if len(points) > 2 else points
 
 

@@ -16,9 +16,10 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
-from cold_maps.evaluation import INTERPOLATIONS, Collector, MapPlan, params_for_gaps, scenarios_for
-from cold_maps.report import ScenarioResult
+from cold_maps.evaluation.collector import Collector
+from cold_maps.evaluation.report import ScenarioResult
+from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
+from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
@@ -88,7 +89,7 @@ def _interpolations(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def _plans(args: argparse.Namespace) -> list[MapPlan]:
-    from cold_maps.sensor_errors import SensorErrorModel
+    from cold_maps.simulation.sensor_errors import SensorErrorModel
 
     errors = SensorErrorModel(**{name: getattr(args, name) for name in (
         "lateral_offset_m", "noise_sigma_m", "heading_bias_rad", "range_jitter_sigma_m", "drop_probability",
@@ -97,7 +98,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     if args.paper:
         from dataclasses import replace
 
-        from cold_maps.paper import paper_plans
+        from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
         return [replace(plan, errors=errors) for plan in plans]
@@ -117,7 +118,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
     """The extra summary sections: Table II per interpolation and the longest gap for
     ``--paper``, the runtime table (Table I) always."""
-    from cold_maps.paper import gap_limit_markdown, runtime_markdown, table_ii_markdown
+    from cold_maps.evaluation.paper import gap_limit_markdown, runtime_markdown, table_ii_markdown
 
     def sections(collector: Collector, results: list[ScenarioResult]) -> list[tuple[str, str]]:
         found = []
@@ -134,7 +135,8 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.eval_run import EXIT_INTERRUPTED, RunOptions, configure_logging, run_evaluation, startup_failure
+    from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
+    from cold_maps.evaluation.run import RunOptions, run_evaluation
 
     configure_logging(args.verbose)
     try:

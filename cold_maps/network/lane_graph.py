@@ -22,6 +22,7 @@ that name missing roads, junctions or lanes, are reported in ``LaneGraph.issues`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from types import MappingProxyType
 from typing import Final, Iterator, Literal, Mapping, NamedTuple, Sequence
 
@@ -351,3 +352,10 @@ def _lane_lengths(
                 centre = 0.5 * (samples.inner[:, :2] + samples.outer[:, :2])
                 lengths[key] = float(np.linalg.norm(np.diff(centre, axis=0), axis=1).sum())
     return {key: lengths[key] for key in nodes}
+
+
+def load_graph(path: Path) -> LaneGraph:
+    """The driving-lane graph of an OpenDRIVE file (OpenDriveError when unreadable)."""
+    from cold_maps.opendrive.parser import load_opendrive
+
+    return build_lane_graph(load_opendrive(path))

@@ -15,7 +15,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
-from cold_maps.lane_graph import LaneGraph, LaneKey
+from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import Road
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_lane_borders

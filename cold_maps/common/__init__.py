@@ -1,0 +1,2 @@
+"""Helpers every stage's outputs use: atomic file output (``atomic_io``) and the progress
+bar (``progress``)."""

@@ -1,0 +1,57 @@
+"""What a run measured: one accumulator per scenario key, runtimes and overlays.
+
+The :class:`Collector` is filled frame by frame by the evaluator and read by the reports,
+the plots and the paper tables, also after an interrupt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cold_maps.evaluation.report import FrameRecord, ScenarioAccumulator, ScenarioKey
+from cold_maps.network.lane_strip import NDArrayFloat
+
+
+@dataclass(frozen=True)
+class Overlay:
+    """What one frame of a scenario looked like, for the overlay plot (world frame, m).
+
+    Fields:
+        frame: frame index; max_error_m: its largest error; gt: GT borders by name;
+        detections: sender → (left, right); fused: fused borders by name.
+    """
+
+    frame: int
+    max_error_m: float
+    gt: dict[str, NDArrayFloat]
+    detections: dict[str, tuple[NDArrayFloat, NDArrayFloat]]
+    fused: dict[str, NDArrayFloat]
+
+
+@dataclass
+class Collector:
+    """Everything a run measured so far (filled frame by frame, readable after an interrupt).
+
+    Fields:
+        accumulators: one per scenario key, in insertion order.
+        fuse_ms: (map, scenario label) → fusion runtimes of the scenario's own coop (ms).
+        check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
+            overlap check for convoy (ms).
+        overlays: (map, scenario label) → the frame with the largest error.
+        notes: lines for the summary (routes, lane coverage).
+        frames_done: frames evaluated.
+    """
+
+    accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
+    fuse_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    frames_done: int = 0
+
+    def add(self, key: ScenarioKey, record: FrameRecord) -> None:
+        """Adds one evaluation to the scenario ``key``."""
+        accumulator = self.accumulators.get(key)
+        if accumulator is None:
+            accumulator = self.accumulators[key] = ScenarioAccumulator(key)
+        accumulator.add(record)

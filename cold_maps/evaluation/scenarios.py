@@ -1,0 +1,131 @@
+"""What a run evaluates: the fusion set-ups (scenarios) and the plan per map.
+
+A :class:`Scenario` is one fusion set-up evaluated on every frame (``local``, ``convoy``,
+``spline`` per interpolation and gap d_s); a :class:`MapPlan` says which scenarios, drives,
+error models and fusion parameters one map is evaluated with.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final, Literal, Sequence
+
+import fusion
+from cold_maps.evaluation.report import ScenarioKey
+from cold_maps.network.lane_graph import LaneKey
+from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
+from cold_maps.simulation.sensor import SENSOR_RANGE_M
+from cold_maps.simulation.sensor_errors import SensorErrorModel
+
+INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
+
+FusionName = Literal["local", "convoy", "spline"]
+
+_REASONS: Final[tuple[tuple[str, str], ...]] = (
+    ("not ahead", "coop_not_ahead"),
+    ("no overlap on the same lane", "other_lane"),
+    ("no overlap", "no_overlap"),
+    ("no gap", "no_gap"),
+    ("exceeds d_i", "gap_too_long"),
+    ("not the same direction", "opposite_direction"),
+    ("heads", "heading_mismatch"),
+    ("matches none", "pose_case"),
+    ("another lane", "other_lane"),
+)
+
+
+def reason_category(reason: str) -> str:
+    """A short key for a fusion rejection reason (``other`` when unknown)."""
+    for needle, category in _REASONS:
+        if needle in reason:
+            return category
+    return "other"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One fusion set-up evaluated on every frame.
+
+    Fields:
+        fusion: ``local`` (ego only), ``convoy`` or ``spline``.
+        interpolation: ``paper`` or ``hermite`` for ``spline``, "" otherwise.
+        d_s: spline gap between the ego's detection end and the coop's start (m), 0 otherwise.
+        lead_m: station distance of the scenario's coop ahead of the ego (m); 0 for local.
+    """
+
+    fusion: FusionName
+    interpolation: str = ""
+    d_s: float = 0.0
+    lead_m: float = 0.0
+
+    @property
+    def label(self) -> str:
+        """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``."""
+        return self.fusion if self.fusion != "spline" else f"spline-{self.interpolation}-d{self.d_s:g}"
+
+    def key(self, map_name: str, boundary: str) -> ScenarioKey:
+        """The report key of one boundary."""
+        return ScenarioKey(map_name, self.fusion, self.interpolation, float(self.d_s), boundary)
+
+
+def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
+                  sensor_range_m: float = SENSOR_RANGE_M) -> tuple[Scenario, ...]:
+    """local, convoy (headway d_v = 25 m) and spline for each distinct interpolation and gap."""
+    for gap in gaps_m:
+        if not (math.isfinite(gap) and gap > 0):
+            raise ValueError(f"spline gap d_s: expected a finite distance > 0 m, got {gap!r}")
+    for name in interpolations:
+        if name not in INTERPOLATIONS:
+            raise ValueError(f"interpolation: expected one of {INTERPOLATIONS}, got {name!r}")
+    splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
+               for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
+    return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
+
+
+def params_for_gaps(gaps_m: Sequence[float]) -> fusion.FusionParams:
+    """Fusion parameters whose longest bridged gap d_i (default 50 m) admits every gap
+    asked for, with 1 m to spare (a gap set along the lane is measured as a chord)."""
+    return fusion.FusionParams(d_i_m=max(fusion.DEFAULT_PARAMS.d_i_m, max(gaps_m, default=0.0) + 1.0))
+
+
+@dataclass(frozen=True)
+class MapPlan:
+    """What to evaluate on one map.
+
+    Fields:
+        path: the OpenDRIVE file.
+        scenarios: the fusion set-ups.
+        frames: frames per drive.
+        routes: drives (routes) on the map; None for as many as cover its lanes.
+        seed: seed of the route choice and of the error models.
+        speed_mps: ego speed (m/s); frames at ``FRAME_RATE_HZ``.
+        start_lane: the lane every route starts on, or None for routes spread over the map.
+        distractors: add turning coops, adjacent/opposite-lane and behind vehicles.
+        errors: sensor error models (all off by default).
+        params: fusion parameters.
+        road_type: the paper's road type of this map (for the side-by-side), or None.
+    """
+
+    path: Path
+    scenarios: tuple[Scenario, ...]
+    frames: int = 100
+    routes: int | None = 3
+    seed: int = 0
+    speed_mps: float = DEFAULT_SPEED_MPS
+    start_lane: LaneKey | None = None
+    distractors: bool = True
+    errors: SensorErrorModel = SensorErrorModel()
+    params: fusion.FusionParams = fusion.DEFAULT_PARAMS
+    road_type: str | None = None
+
+    @property
+    def name(self) -> str:
+        """Map name (file stem)."""
+        return self.path.stem
+
+    @property
+    def coop_leads_m(self) -> tuple[float, ...]:
+        """Distinct coop leads of the scenarios (m)."""
+        return tuple(sorted({s.lead_m for s in self.scenarios if s.fusion != "local"}))

@@ -1,0 +1,88 @@
+"""Closest-point errors of lanes against the Lanelet2 ground truth (``gt_matching``).
+
+:class:`GroundTruthMeter` is the evaluation's one door to ``gt_matching.GroundTruth``:
+it matches a lane (or the lane the vehicles truly drive) to its lanelets and measures
+every detected point against the GT borders resampled every ``step_m``.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+import numpy as np
+
+from cold_maps.network.lane_strip import NDArrayFloat
+
+if TYPE_CHECKING:
+    from gt_matching import GroundTruth, LaneMatch
+
+MATCH_CACHE_SIZE: Final[int] = 16
+"""Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A lane measured against its ground truth (world frame, m).
+
+    Fields:
+        left_errors_m, right_errors_m: per detected point, the distance to the GT border
+            resampled every ``step_m``.
+        left_range_m, right_range_m: length of the lane along its GT border, from the
+            projection of its first point to that of its last.
+        left_gt, right_gt: the GT borders (``(M, 2)``) the lane was matched to.
+        matched: False when the lane does not follow the sender's lane (see gt_matching).
+    """
+
+    left_errors_m: NDArrayFloat
+    right_errors_m: NDArrayFloat
+    left_range_m: float
+    right_range_m: float
+    left_gt: NDArrayFloat
+    right_gt: NDArrayFloat
+    matched: bool
+
+
+class GroundTruthMeter:
+    """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
+    (``GroundTruth.errors``: per-point distances to the GT borders resampled every
+    ``step_m``, samples cached per lanelet; without the other-lane check, which the
+    reports do not use). Matches of the last few reference lanes are kept: the scenarios
+    of a frame share their coops' true lanes."""
+
+    def __init__(self, ground_truth: GroundTruth) -> None:
+        self.ground_truth = ground_truth
+        self.step_m = ground_truth.config.step_m
+        self._matches: OrderedDict[tuple[bytes, bytes, tuple[float, float, float]], LaneMatch] = OrderedDict()
+
+    def match(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float]) -> LaneMatch:
+        """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``), from
+        the cache when the same borders and pose were matched lately."""
+        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
+        key = (left.tobytes(), right.tobytes(), tuple(pose))
+        found = self._matches.get(key)
+        if found is None:
+            found = self._matches[key] = self.ground_truth.match(left, right, pose)
+            if len(self._matches) > MATCH_CACHE_SIZE:
+                self._matches.popitem(last=False)
+        else:
+            self._matches.move_to_end(key)
+        return found
+
+    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
+        """Closest-point errors and range of a lane against the GT borders of ``match``."""
+        found = self.ground_truth.errors(left, right, match, others=False)
+        return Measurement(found.left.distances_m, found.right.distances_m,
+                           float(found.left.arc_m[-1] - found.left.arc_m[0]),
+                           float(found.right.arc_m[-1] - found.right.arc_m[0]),
+                           match.left_gt, match.right_gt, match.matched)
+
+    def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
+                reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
+        """Errors of a lane (borders ``(N, 2)`` world frame, driving order) whose sender
+        stands at ``pose`` (x m, y m, yaw rad). The GT lanelets are those matched to
+        ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
+        or to the lane itself; the errors are always against Lanelet2's borders. Raises
+        ``gt_matching.MatchingError``."""
+        return self.errors(self.match(*(reference or (left, right)), pose), left, right)

@@ -1,0 +1,64 @@
+"""A vehicle's detection message: the lane sensor on its track, then the error models.
+
+``sense`` turns a vehicle's state into the ``fusion.LaneDetection`` it sends (borders in
+its vehicle frame, ISO 8855, m; reported pose in the world frame); ``world_borders``
+maps a detection back into the world frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+import fusion
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.drive import VehicleState
+from cold_maps.simulation.sensor import LaneSensor, vehicle_to_world
+from cold_maps.simulation.sensor_errors import SensorErrorModel
+
+DETECTION_DECIMALS: Final[int] = 6
+"""Detected border points are rounded to 1 µm (the sensor's resolution): the recorded
+``cold.LaneDetection`` JSON is then short and exactly what was fused."""
+
+
+@dataclass(frozen=True)
+class Sensed:
+    """One vehicle's detection in one frame.
+
+    Fields:
+        state: where the vehicle is.
+        detection: what it sends (reported pose with localisation error, borders in its
+            vehicle frame with the sensor errors), or None when the frame was dropped.
+    """
+
+    state: VehicleState
+    detection: fusion.LaneDetection | None
+
+
+def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
+          stamp_s: float = 0.0) -> Sensed:
+    """The detection of a vehicle: the sensor on its track, then the error models, points
+    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference)."""
+    raw = sensor.detect(state.track.strip, state.station)
+    if raw is None:
+        return Sensed(state, None)
+    borders = errors.apply(raw.left, raw.right, rng)
+    if borders is None:
+        return Sensed(state, None)
+    borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
+    x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
+    pose = fusion.Pose2D(x, y, yaw)
+    return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name))
+
+
+def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """The detection's borders in the world frame (m), from its reported pose."""
+    p = detection.pose
+    return vehicle_to_world(detection.left, p.x, p.y, p.yaw), vehicle_to_world(detection.right, p.x, p.y, p.yaw)
+
+
+def detection_pose(detection: fusion.LaneDetection) -> tuple[float, float, float]:
+    """The detection's reported pose as (x m, y m, yaw rad), world frame."""
+    return detection.pose.x, detection.pose.y, detection.pose.yaw
