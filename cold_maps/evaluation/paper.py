@@ -12,6 +12,7 @@ longest gap that keeps the maximum error bounded.
 from __future__ import annotations
 
 import math
+from importlib.resources import files
 from pathlib import Path
 from typing import Final, Mapping, Sequence
 
@@ -23,7 +24,8 @@ from cold_maps.network.routing import longest_route_lengths
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, FRAME_RATE_HZ, ROUTE_MARGIN_M
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
-BUNDLED_MAPS_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "maps"
+BUNDLED_MAPS_DIR: Final[Path] = Path(str(files("cold_maps.maps")))
+"""The bundled maps, package data ``cold_maps.maps`` (``maps/`` in a source checkout)."""
 PAPER_START_LANE: Final[LaneKey] = LaneKey("1", 0, -1)
 PAPER_GAPS_M: Final[Mapping[str, tuple[float, ...]]] = {
     "straight": (30.0, 50.0),
