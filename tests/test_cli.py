@@ -73,7 +73,7 @@ def read_csv(path: Path) -> tuple[list[str], dict[tuple[str, int, int, str], np.
 def test_export_csv_columns_on_a_straight_road(tmp_path: Path, rule: str) -> None:
     source = tmp_path / "straight.xodr"
     source.write_text(straight_xodr(rule))
-    out = tmp_path / "out" / "borders.csv"
+    out = tmp_path / "borders.csv"
     assert main(["export", str(source), "--step", "0.5", "--format", "csv", "-o", str(out)]) == 0
     header, borders = read_csv(out)
     assert tuple(header) == CSV_HEADER
@@ -292,3 +292,59 @@ def test_cache_lists_and_clears_conversions(tmp_path: Path, monkeypatch: pytest.
     assert main(["cache", "--clear"]) == 0
     assert "removed 1 file(s)" in capsys.readouterr().out
     assert not list((tmp_path / "cache").glob("*.osm"))
+
+
+@pytest.mark.parametrize("command", [["cold_maps", "info"], ["cold_maps", "export"]])
+def test_a_closed_pipe_ends_the_command_quietly(command: list[str], straight_map: Path, tmp_path: Path) -> None:
+    """A reader that goes away before the command writes (``cold-maps info MAP | true``):
+    no error, no traceback, the shell's SIGPIPE status 141."""
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    args = [sys.executable, "-m", *command, str(straight_map)]
+    if command[-1] == "export":
+        args += ["-o", "-"]
+    try:
+        run = subprocess.run(args, stdout=write_end, stderr=subprocess.PIPE, text=True, cwd=PROJECT_ROOT, timeout=60)
+    finally:
+        os.close(write_end)
+    assert run.stderr == ""
+    assert run.returncode == 141
+
+
+def test_export_to_standard_output_writes_the_same_rows(straight_map: Path, tmp_path: Path) -> None:
+    to_file = tmp_path / "borders.csv"
+    assert main(["export", str(straight_map), "-o", str(to_file)]) == 0
+    piped = subprocess.run([sys.executable, "-m", "cold_maps", "export", str(straight_map), "-o", "-"],
+                           capture_output=True, text=True, cwd=PROJECT_ROOT, timeout=60)
+    assert piped.returncode == 0 and piped.stderr == ""
+    assert piped.stdout == to_file.read_text()
+    assert not (PROJECT_ROOT / "-").exists()
+
+
+def test_export_into_a_missing_folder_is_one_line_and_creates_nothing(straight_map: Path, tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "missing" / "deeper" / "borders.csv"
+    assert main(["export", str(straight_map), "-o", str(target)]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "missing" in err
+    assert not (tmp_path / "missing").exists()
+
+
+def test_export_writes_into_a_fifo_in_place(straight_map: Path, tmp_path: Path) -> None:
+    """A target that is not a regular file (a FIFO here, /dev/stdout in a shell) is written
+    through, never replaced by a renamed file."""
+    import os
+    import stat
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    received: list[str] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_text()))
+    reader.start()
+    assert main(["export", str(straight_map), "-o", str(fifo)]) == 0
+    reader.join(timeout=60)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert received and received[0].startswith(CSV_HEADER)

@@ -140,8 +140,11 @@ def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys
     assert not (out / "run.mcap.partial").exists()
 
 
-def test_sigint_finalises_the_recording(tmp_path):
-    """A real Ctrl-C (SIGINT) on the command line: exit 130, MCAP finalised as partial,
+@pytest.mark.parametrize("signal_name, status, word", [("SIGINT", 130, "interrupted"),
+                                                       ("SIGTERM", 143, "terminated")])
+def test_signal_finalises_the_recording(tmp_path, signal_name, status, word):
+    """A real Ctrl-C (SIGINT) or SIGTERM (a scheduler, ``timeout``, a container stop) on
+    the command line: exit 130 / 143 with one line on stderr, MCAP finalised as partial,
     report marked partial."""
     import os
     import signal
@@ -158,10 +161,10 @@ def test_sigint_finalises_the_recording(tmp_path):
     while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.05)
     time.sleep(0.5)
-    os.kill(process.pid, signal.SIGINT)
+    os.kill(process.pid, getattr(signal, signal_name))
     _, err = process.communicate(timeout=60)
-    assert process.returncode == 130, err
-    assert "interrupted" in err and "Traceback" not in err
+    assert process.returncode == status, err
+    assert err.strip().startswith(f"cold-eval: {word}") and len(err.strip().splitlines()) == 1, err
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
     document, _ = _records(out)
     assert document["partial"] is True

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
+from cold_maps.cli.common import cli_entry
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -132,10 +133,11 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
     return sections
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
+    from cold_maps.cli.common import configure_logging, interruption, startup_failure
     from cold_maps.evaluation.run import RunOptions, run_evaluation
 
     configure_logging(args.verbose)
@@ -147,8 +149,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     if isinstance(run.error, KeyboardInterrupt):
-        print(f"{PROG}: interrupted; partial report in {args.out}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        what, status = interruption(run.error)
+        print(f"{PROG}: {what}; partial report in {args.out}", file=sys.stderr)
+        return status
     if run.error is not None:
         print(f"{PROG}: run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}",
               file=sys.stderr)

@@ -23,6 +23,8 @@ from typing import Any, Final, Sequence
 
 import numpy as np
 
+from cold_maps.cli.common import cli_entry
+
 PROG: Final[str] = "cold-fuse"
 
 
@@ -171,10 +173,11 @@ def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
     return world_borders(detection)
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
+    from cold_maps.cli.common import configure_logging, interruption, startup_failure
     from cold_maps.recording.recorder import Recorder, read_detections
 
     configure_logging(args.verbose)
@@ -213,8 +216,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False)
     if isinstance(error, KeyboardInterrupt):
-        print(f"{PROG}: interrupted after {count} frames; {args.output} finalised as partial", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        what, status = interruption(error)
+        print(f"{PROG}: {what} after {count} frames; {args.output} finalised as partial", file=sys.stderr)
+        return status
     if error is not None:
         print(f"{PROG}: {error}; {args.output} finalised as partial", file=sys.stderr)
         return 1

@@ -24,6 +24,7 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
+from cold_maps.cli.common import cli_entry
 from cold_maps.common.atomic_io import atomic_output
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.errors import OpenDriveError
@@ -131,7 +132,8 @@ def _configure_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
     parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
     parser.add_argument("--format", choices=("csv", "geojson"), default="csv")
-    parser.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
+    parser.add_argument("-o", "--output", required=True, metavar="FILE",
+                        help="file to write (its folder must exist); - for standard output")
 
 
 @dataclass(frozen=True)
@@ -204,16 +206,12 @@ def _run_export(args: argparse.Namespace) -> int:
     odr_map = _load(args.map)
     borders = lane_border_polylines(odr_map, args.step)
     write = _write_csv if args.format == "csv" else _write_geojson
-    write_atomically(Path(args.output), lambda out: write(borders, out))
+    if args.output == "-":
+        write(borders, sys.stdout)
+    else:
+        with atomic_output(Path(args.output), "w") as out:
+            write(borders, out)
     return 0
-
-
-def write_atomically(path: Path, write: Callable[[TextIO], None]) -> None:
-    """Write a text file atomically (:func:`cold_maps.common.atomic_io.atomic_output`), creating
-    its folder when missing; on any failure ``path`` is left as it was."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(path, "w") as out:
-        write(out)
 
 
 def _configure_convert(parser: argparse.ArgumentParser) -> None:
@@ -299,6 +297,7 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
+@cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-maps``; returns the exit status."""
     try:
@@ -309,6 +308,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UsageError as exc:
         print(_one_line(exc), file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        raise
     except (OpenDriveError, OSError, ValueError) as exc:
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
