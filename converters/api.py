@@ -40,7 +40,7 @@ def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool) -> tuple[
     target = cache_path(_read(xodr), crdesigner_version(), cache_dir)
     if target.is_file():
         return target, True
-    atomic_write(target, _convert_bytes(xodr, verbose))
+    atomic_write(target, _convert_bytes(xodr, verbose), create_folder=True)
     return target, False
 
 

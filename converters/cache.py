@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 from pathlib import Path
 from typing import Final
 
 from converters import frame
+from converters.atomic_io import atomic_output
 from converters.errors import ConversionError
 
 CACHE_DIR_ENV: Final[str] = "COLD_MAPS_CACHE_DIR"
@@ -40,27 +40,17 @@ def cache_path(content: bytes, converter_version: str, cache_dir: str | os.PathL
     return cache_root(cache_dir) / name
 
 
-def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder + os.replace.
-
-    Raises ConversionError naming ``path`` when the folder cannot be created or written.
-    """
+def atomic_write(path: Path, data: bytes, *, create_folder: bool = False) -> None:
+    """Write ``data`` to ``path`` atomically (:func:`converters.atomic_io.atomic_output`:
+    mode 0666 less the umask); ``create_folder`` creates missing folders (the cache's own),
+    else a missing folder is an error. Raises ConversionError naming ``path``."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        if create_folder:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_output(path, "wb") as stream:
+            stream.write(data)
     except OSError as exc:
         raise ConversionError(str(path), f"cannot write: {exc.strerror or exc}") from exc
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException as exc:
-        Path(temporary).unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise ConversionError(str(path), f"cannot write: {exc.strerror or exc}") from exc
-        raise
 
 
 def clear_cache(cache_dir: str | os.PathLike[str] | None = None) -> int:

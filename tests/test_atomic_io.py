@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from cold_maps.common.atomic_io import atomic_output
+from converters.atomic_io import atomic_output
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o077])

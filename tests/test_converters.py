@@ -313,7 +313,7 @@ def test_failed_write_leaves_neither_target_nor_temporary(tmp_path, monkeypatch)
 
     monkeypatch.setattr(os, "replace", broken_replace)
     with pytest.raises(converters.ConversionError, match="map.osm: cannot write: No space left"):
-        atomic_write(target, b"data")
+        atomic_write(target, b"data", create_folder=True)
     assert list(target.parent.iterdir()) == []
 
 
@@ -589,3 +589,18 @@ def test_bundled_highway_ground_truth_is_trustworthy() -> None:
     report = check_map(bundled_map("highway"), cache=False)
     assert report.trustworthy and len(report.lanes) >= 20
     assert max(lane.max_m for lane in report.lanes) <= 2 * MERGE_TOLERANCE_M
+
+
+def test_convert_output_gets_the_ordinary_file_mode_and_needs_its_folder(straight_map, tmp_path) -> None:
+    """``convert -o`` writes 0666 less the umask (not a temporary file's 0600) and refuses a
+    missing folder instead of creating it."""
+    import os
+
+    out = tmp_path / "map.osm"
+    converters.convert(straight_map, out, cache_dir=tmp_path / "cache")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~mask
+    with pytest.raises(converters.ConversionError, match="missing"):
+        converters.convert(straight_map, tmp_path / "missing" / "map.osm", cache_dir=tmp_path / "cache")
+    assert not (tmp_path / "missing").exists()

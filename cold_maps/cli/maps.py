@@ -25,7 +25,6 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 import numpy as np
 
 from cold_maps.cli.common import cli_entry
-from cold_maps.common.atomic_io import atomic_output
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.model import OpenDriveMap
@@ -209,6 +208,8 @@ def _run_export(args: argparse.Namespace) -> int:
     if args.output == "-":
         write(borders, sys.stdout)
     else:
+        from converters.atomic_io import atomic_output
+
         with atomic_output(Path(args.output), "w") as out:
             write(borders, out)
     return 0

@@ -1,2 +1,2 @@
-"""Helpers every stage's outputs use: atomic file output (``atomic_io``) and the progress
-bar (``progress``)."""
+"""Helpers every stage uses: the progress bar (``progress``). Atomic file output is
+``converters.atomic_io``, shared with the converter."""

@@ -47,8 +47,8 @@ from typing import Any, Final, Iterable, Literal, Mapping, Sequence
 
 import numpy as np
 
-from cold_maps.common.atomic_io import atomic_output
 from cold_maps.network.lane_strip import NDArrayFloat
+from converters.atomic_io import atomic_output
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -335,7 +335,7 @@ class ScenarioAccumulator:
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Writes ``data`` to ``path`` atomically (:func:`cold_maps.common.atomic_io.atomic_output`)."""
+    """Writes ``data`` to ``path`` atomically (:func:`converters.atomic_io.atomic_output`)."""
     path = Path(path)
     if not path.parent.is_dir():
         raise ReportError(f"{path}: cannot write: no folder {path.parent}")

@@ -1,5 +1,8 @@
 """Atomic output files: written to a temporary file in the target folder, renamed into place.
 
+The one atomic-write helper of the project: the converter's cache and ``-o`` files, the
+exports and the evaluation reports all go through :func:`atomic_output`.
+
 A reader never sees a half-written file, and a failure leaves the target as it was. The
 finished file gets the ordinary mode of a new file (0666 less the umask), not the private
 mode of a temporary file. A target that exists and is not a regular file (a device such as
