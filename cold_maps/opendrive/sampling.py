@@ -99,7 +99,7 @@ def _reference_with_record_ends(
     """s with each interior record start doubled, and the reference pose there: the first
     of a pair on the record that ends at it, the second on the record that starts."""
     boundaries = record_starts(road, section.s, section.s_end)
-    s = np.sort(np.concatenate((s, boundaries)))
+    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries)))
     x, y, hdg = reference_pose(road, s, before=section.s_end)
     for boundary in boundaries:
         first = int(np.searchsorted(s, boundary, side="left"))
