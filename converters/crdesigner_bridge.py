@@ -45,7 +45,7 @@ from lxml import etree
 
 from converters.elevation import RoadHeights
 from converters.errors import ConversionError
-from converters.regulatory import LaneletRegulations, regulations_of
+from converters.regulatory import LaneletRegulations, regulations_of, road_speed_limits
 
 NDArrayFloat = npt.NDArray[np.float64]
 
@@ -165,8 +165,14 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
     heights = RoadHeights(opendrive)
     junction_of = {str(road.id): str(road.junction.id) for road in opendrive.roads if road.junction is not None}
     network = scenario.lanelet_network
-    regulations = regulations_of(network)
     roads_of = {lanelet: [road for road, _, _ in lanes] for lanelet, lanes in sources.items()}  # crdesigner's ids
+    speeds = road_speed_limits(opendrive)
+    road_limits = {
+        lanelet: min(speeds[road] for road in roads if road in speeds)
+        for lanelet, roads in roads_of.items()
+        if any(road in speeds for road in roads)
+    }
+    regulations = regulations_of(network, road_limits)
     junctions = {lanelet: tuple(sorted({junction_of[r] for r in roads if r in junction_of})) for lanelet, roads in roads_of.items()}
 
     def height(vertices: Any, lanelet_id: int) -> NDArrayFloat:

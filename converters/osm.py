@@ -218,7 +218,7 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
             if way is None:
                 way = ways[points] = len(way_points)
                 chain = np.asarray(points)
-                way_points.append(chain[simplify(coordinates[chain], SIMPLIFY_TOLERANCE_M)])
+                way_points.append(chain[_kept_vertices(coordinates[chain])])
                 way_tags.append({})
             if not way_tags[way]:
                 way_tags[way] = _MARKINGS.get(marking, {})
@@ -271,6 +271,17 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     regulations = {lanelet.id: lanelet.regulations for lanelet in lanelets}
     append_regulatory_elements(root, regulations, exits, new_node, fresh)
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+
+
+def _kept_vertices(points: NDArrayFloat) -> npt.NDArray[np.bool_]:
+    """Douglas-Peucker (``SIMPLIFY_TOLERANCE_M``) of an (N, 3) way, in plan and in its
+    height profile over plan length (a crest on a straight road keeps its vertices)."""
+    keep = simplify(points[:, :2], SIMPLIFY_TOLERANCE_M)
+    heights = points[:, 2]
+    if np.all(np.isfinite(heights)):
+        along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points[:, :2], axis=0).T))))
+        keep |= simplify(np.column_stack((along, heights)), SIMPLIFY_TOLERANCE_M)
+    return keep
 
 
 def _heights(lanelet: SourceLanelet, side: str) -> NDArrayFloat:

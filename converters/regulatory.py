@@ -1,15 +1,18 @@
 """Regulatory elements of a converted map, per the Lanelet2 tagging specification
 (lanelet2_core/doc/RegulatoryElementTagging.md, LinestringTagging.md).
 
-crdesigner turns OpenDRIVE ``<signal>``s and road ``<type><speed>`` into CommonRoad
-traffic signs (speed limits as virtual ``MAX_SPEED`` signs on every lanelet of the road,
-in m/s), traffic lights and intersections, and assigns them to lanelets;
-``regulations_of`` reads that assignment into one ``LaneletRegulations`` per lanelet and
-``append_regulatory_elements`` writes them:
+crdesigner turns OpenDRIVE ``<signal>``s into CommonRoad traffic signs, traffic lights
+and intersections and assigns them to lanelets; ``regulations_of`` reads that assignment
+into one ``LaneletRegulations`` per lanelet and ``append_regulatory_elements`` writes them:
 
-- speed limit: ``subtype=speed_limit`` referring to a ``type=traffic_sign`` line whose
-  subtype is the German sign (``de274-50``) when the limit is one, else the speed in
-  km/h (``40.2336km/h``), which lanelet2's traffic rules read as a velocity;
+- speed limit: a real speed sign on the lanelet wins; else the lowest road ``<type>
+  <speed>`` of the roads the lanelet covers (``road_speed_limits``; crdesigner's own
+  virtual signs for them reach only some lanelets of a road, Town01: 36 of 124, and are
+  truncated to mm/s); else a virtual crdesigner sign. Written as ``subtype=speed_limit``
+  referring to a ``type=traffic_sign`` line at a real sign, or with the ``sign_type``
+  tag when there is no sign (road type); the sign type is the German sign (``de274-50``)
+  when the limit is one, else the speed in km/h (``40.2336km/h``), which lanelet2's
+  traffic rules read as a velocity;
 - traffic light: ``subtype=traffic_light`` referring to ``type=traffic_light``
   (``subtype=red_yellow_green``) lines at the lights, with the lanelet's stop line as
   ``ref_line``. crdesigner also attaches lights of far-away junctions (Town01: 7 of 43
@@ -46,6 +49,9 @@ SIGN_WIDTH_M: Final[float] = 0.6
 
 KMH_PER_MPS: Final[float] = 3.6
 
+_MPS_PER_UNIT: Final[dict[str, float]] = {"m/s": 1.0, "km/h": 1.0 / 3.6, "mph": 0.44704}
+"""OpenDRIVE speed units (``e_unitSpeed``) in m/s; m/s is the default."""
+
 _GERMAN_LIMITS_KMH: Final[frozenset[int]] = frozenset({5, 10, 15, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130})
 """Speeds with a ``de274-<v>`` sign type in lanelet2's German traffic rules."""
 
@@ -59,7 +65,8 @@ class LaneletRegulations:
 
     Fields:
         speed_limit_mps: lowest speed limit on the lanelet (m/s), None when none.
-        speed_sign: (x, y) of that limit's sign (m, inertial frame), None when none.
+        speed_sign: (x, y) of that limit's sign (m, inertial frame), None when the limit
+            has no physical sign (road type, virtual sign).
         traffic_lights: (x, y) of each light controlling the lanelet's exit (m).
         yield_sign: "de206" (stop) or "de205" (yield) when the lanelet must give way, "".
         yield_sign_at: (x, y) of that sign (m), None when none.
@@ -75,12 +82,34 @@ class LaneletRegulations:
     priority_lanelets: tuple[int, ...] = ()
 
 
-def regulations_of(network: Any) -> dict[int, LaneletRegulations]:
-    """Per lanelet id, the regulations of a CommonRoad ``LaneletNetwork`` (lanelets without any omitted)."""
+def road_speed_limits(opendrive: Any) -> dict[str, float]:
+    """Road id → lowest ``<type><speed max>`` (m/s) of crdesigner's parsed OpenDRIVE roads
+    (roads without a numeric one omitted)."""
+    limits = {}
+    for road in opendrive.roads:
+        speeds = []
+        for road_type in road.types:
+            speed = road_type.speed
+            try:
+                value = float(speed.max) * _MPS_PER_UNIT.get(str(speed.unit or "m/s"), 1.0)
+            except (AttributeError, TypeError, ValueError):
+                continue  # no speed, "no limit", "undefined"
+            if np.isfinite(value) and value > 0:
+                speeds.append(value)
+        if speeds:
+            limits[str(road.id)] = min(speeds)
+    return limits
+
+
+def regulations_of(network: Any, road_limits: Mapping[int, float]) -> dict[int, LaneletRegulations]:
+    """Per lanelet id, the regulations of a CommonRoad ``LaneletNetwork``, with
+    ``road_limits`` the road-type speed limit (m/s) per lanelet id (lanelets without any
+    regulation omitted)."""
     signs = {sign.traffic_sign_id: sign for sign in network.traffic_signs}
     lights = {light.traffic_light_id: light for light in network.traffic_lights}
     yielding: dict[int, tuple[str, tuple[float, float]]] = {}
-    limits: dict[int, tuple[float, tuple[float, float]]] = {}
+    limits: dict[int, tuple[float, tuple[float, float] | None]] = {}
+    signed: set[int] = set()
     for lanelet in network.lanelets:
         for sign_id in sorted(lanelet.traffic_signs):
             sign = signs.get(sign_id)
@@ -91,8 +120,11 @@ def regulations_of(network: Any) -> dict[int, LaneletRegulations]:
                 name = element.traffic_sign_element_id.name
                 if name == "MAX_SPEED" and element.additional_values:
                     speed = float(element.additional_values[0])
-                    if speed > 0 and speed < limits.get(lanelet.lanelet_id, (np.inf,))[0]:
-                        limits[lanelet.lanelet_id] = (speed, position)
+                    real = not sign.virtual
+                    better = speed < limits.get(lanelet.lanelet_id, (np.inf,))[0] or (real and lanelet.lanelet_id not in signed)
+                    if speed > 0 and (real or lanelet.lanelet_id not in signed) and better:
+                        limits[lanelet.lanelet_id] = (speed, position if real else None)
+                        signed.update({lanelet.lanelet_id} if real else ())
                 elif name in _RIGHT_OF_WAY_SIGNS:
                     yielding[lanelet.lanelet_id] = (_RIGHT_OF_WAY_SIGNS[name], position)
     incoming_groups: dict[int, tuple[int, ...]] = {}
@@ -112,6 +144,8 @@ def regulations_of(network: Any) -> dict[int, LaneletRegulations]:
         sign, sign_at = yielding.get(lanelet_id, ("", None))
         priority = tuple(i for i in incoming_groups.get(lanelet_id, ()) if i != lanelet_id and i not in yielding) if sign else ()
         limit, limit_at = limits.get(lanelet_id, (None, None))
+        if lanelet_id not in signed and lanelet_id in road_limits:
+            limit, limit_at = road_limits[lanelet_id], None
         regulations = LaneletRegulations(limit, limit_at, controlling, sign, sign_at, priority)
         if regulations != LaneletRegulations():
             result[lanelet_id] = regulations
@@ -199,10 +233,14 @@ def append_regulatory_elements(
         if exit_ is None:
             continue
         elements = []
-        if rules.speed_limit_mps is not None and rules.speed_sign is not None:
-            sign_tags = {"type": "traffic_sign", "subtype": sign_subtype(rules.speed_limit_mps)}
-            sign = writer.line_at(rules.speed_sign, exit_, SIGN_WIDTH_M, sign_tags)
-            elements.append(writer.regulatory_element([("way", "refers", sign)], {"subtype": "speed_limit"}))
+        if rules.speed_limit_mps is not None:
+            sign_type = sign_subtype(rules.speed_limit_mps)
+            if rules.speed_sign is None:
+                elements.append(writer.regulatory_element([], {"subtype": "speed_limit", "sign_type": sign_type}))
+            else:
+                sign_tags = {"type": "traffic_sign", "subtype": sign_type}
+                sign = writer.line_at(rules.speed_sign, exit_, SIGN_WIDTH_M, sign_tags)
+                elements.append(writer.regulatory_element([("way", "refers", sign)], {"subtype": "speed_limit"}))
         stop_line = None
         if rules.traffic_lights or rules.yield_sign:
             stop_line = writer.way([exit_.left_node, exit_.right_node], {"type": "stop_line"})

@@ -75,6 +75,7 @@ class Issue:
         id: the primitive's id (0 for the map or graph).
         check: the lanelet2_validation check name ("mapping.unknown_tags", ...).
         message: what is wrong.
+        tag: the tag concerned ("" when none).
     """
 
     severity: Severity
@@ -82,6 +83,7 @@ class Issue:
     id: int
     check: str
     message: str
+    tag: str = ""
 
     def __str__(self) -> str:
         return f"{self.severity}: {self.check}: {self.primitive} {self.id}: {self.message}"
@@ -92,7 +94,8 @@ def _tag_issues(primitive: str, element_id: int, attributes: dict[str, str]) -> 
     known = KNOWN_TAGS[primitive]
     for key, value in attributes.items():
         if not any(key.startswith(tag) for tag in known):
-            issues.append(Issue("warning", primitive, element_id, "mapping.unknown_tags", f"attribute {key} is not a known lanelet2 tag"))
+            message = f"attribute {key} is not a known lanelet2 tag"
+            issues.append(Issue("warning", primitive, element_id, "mapping.unknown_tags", message, key))
         if any(key.startswith(tag) for tag in BOOL_TAGS) and value.lower() not in _TRUE_FALSE:
             issues.append(Issue("warning", primitive, element_id, "mapping.bool_tags", f"attribute {key}: {value} is not a bool"))
     for tag in MANDATORY_TAGS.get(primitive, ()):
@@ -119,6 +122,12 @@ def _value_issues(primitive: str, element_id: int, attributes: dict[str, str]) -
         Issue("warning", primitive, element_id, "mapping.unknown_tag_value", message.format(attributes[key], key))
         for key in unknown
     ]
+
+
+def outside_namespaces(issues: list[Issue]) -> list[Issue]:
+    """The issues other than unknown-tag warnings on namespaced ("prefix:key") tags, the
+    documented extensions (``commonroad:types``, ``opendrive:lanes``)."""
+    return [issue for issue in issues if not (issue.check == "mapping.unknown_tags" and ":" in issue.tag)]
 
 
 def _attributes(primitive: Any) -> dict[str, str]:
