@@ -108,8 +108,7 @@ def regulations_of(network: Any, road_limits: Mapping[int, float]) -> dict[int, 
     signs = {sign.traffic_sign_id: sign for sign in network.traffic_signs}
     lights = {light.traffic_light_id: light for light in network.traffic_lights}
     yielding: dict[int, tuple[str, tuple[float, float]]] = {}
-    limits: dict[int, tuple[float, tuple[float, float] | None]] = {}
-    signed: set[int] = set()
+    limits: dict[int, list[tuple[bool, float, tuple[float, float] | None]]] = {}
     for lanelet in network.lanelets:
         for sign_id in sorted(lanelet.traffic_signs):
             sign = signs.get(sign_id)
@@ -118,13 +117,10 @@ def regulations_of(network: Any, road_limits: Mapping[int, float]) -> dict[int, 
             position = (float(sign.position[0]), float(sign.position[1]))
             for element in sign.traffic_sign_elements:
                 name = element.traffic_sign_element_id.name
-                if name == "MAX_SPEED" and element.additional_values:
-                    speed = float(element.additional_values[0])
-                    real = not sign.virtual
-                    better = speed < limits.get(lanelet.lanelet_id, (np.inf,))[0] or (real and lanelet.lanelet_id not in signed)
-                    if speed > 0 and (real or lanelet.lanelet_id not in signed) and better:
-                        limits[lanelet.lanelet_id] = (speed, position if real else None)
-                        signed.update({lanelet.lanelet_id} if real else ())
+                if name == "MAX_SPEED" and element.additional_values and float(element.additional_values[0]) > 0:
+                    real = not sign.virtual  # (virtual, speed): real signs sort first, then the lowest
+                    entry = (not real, float(element.additional_values[0]), position if real else None)
+                    limits.setdefault(lanelet.lanelet_id, []).append(entry)
                 elif name in _RIGHT_OF_WAY_SIGNS:
                     yielding[lanelet.lanelet_id] = (_RIGHT_OF_WAY_SIGNS[name], position)
     incoming_groups: dict[int, tuple[int, ...]] = {}
@@ -143,8 +139,8 @@ def regulations_of(network: Any, road_limits: Mapping[int, float]) -> dict[int, 
         )
         sign, sign_at = yielding.get(lanelet_id, ("", None))
         priority = tuple(i for i in incoming_groups.get(lanelet_id, ()) if i != lanelet_id and i not in yielding) if sign else ()
-        limit, limit_at = limits.get(lanelet_id, (None, None))
-        if lanelet_id not in signed and lanelet_id in road_limits:
+        virtual, limit, limit_at = min(limits.get(lanelet_id, [(True, None, None)]), key=lambda e: (e[0], e[1] or 0.0))
+        if virtual and lanelet_id in road_limits:
             limit, limit_at = road_limits[lanelet_id], None
         regulations = LaneletRegulations(limit, limit_at, controlling, sign, sign_at, priority)
         if regulations != LaneletRegulations():
