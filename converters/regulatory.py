@@ -20,7 +20,9 @@ into one ``LaneletRegulations`` per lanelet and ``append_regulatory_elements`` w
   ``LIGHT_REACH_M`` of the lanelet's exit and nearer its exit than its entry;
 - stop and yield signs: ``subtype=right_of_way`` with the sign (``de206``/``de205``) as
   ``refers``, the lanelet as ``yield``, the other incoming lanelets of its intersection
-  that carry no such sign as ``right_of_way``, and the stop line as ``ref_line``.
+  that carry no such sign as ``right_of_way``, and the stop line as ``ref_line``; when
+  no such lanelet is known (lanelet2 refuses a right_of_way without one), a plain
+  ``subtype=traffic_sign`` element with the sign and the stop line.
 
 A stop line is a ``type=stop_line`` way across the lanelet's exit (its last left and
 right border nodes).
@@ -247,8 +249,10 @@ def append_regulatory_elements(
             elements.append(writer.regulatory_element(members, {"subtype": "traffic_light"}))
         if rules.yield_sign and rules.yield_sign_at is not None and stop_line is not None:
             sign = writer.line_at(rules.yield_sign_at, exit_, SIGN_WIDTH_M, {"type": "traffic_sign", "subtype": rules.yield_sign})
-            members = [("way", "refers", sign), ("way", "ref_line", stop_line), ("relation", "yield", lanelet_id)]
-            members += [("relation", "right_of_way", other) for other in rules.priority_lanelets if other in exits]
-            elements.append(writer.regulatory_element(members, {"subtype": "right_of_way"}))
+            members = [("way", "refers", sign), ("way", "ref_line", stop_line)]
+            priority = [("relation", "right_of_way", other) for other in rules.priority_lanelets if other in exits]
+            if priority:
+                members += [("relation", "yield", lanelet_id), *priority]
+            elements.append(writer.regulatory_element(members, {"subtype": "right_of_way" if priority else "traffic_sign"}))
         for element in elements:
             etree.SubElement(exit_.relation, "member", type="relation", role="regulatory_element", ref=str(element))

@@ -177,3 +177,13 @@ def test_town04_every_node_carries_the_map_elevation(town04_path: Path, tmp_path
     dz = np.abs(points[near, 2] - ours[index[near], 2])
     assert near.mean() > 0.9
     assert np.percentile(dz, 99) < 0.02  # measured 6.2 mm (the rest: bridges over other roads)
+
+
+def test_yield_sign_without_a_priority_lanelet_is_a_plain_traffic_sign(tmp_path: Path) -> None:
+    sign = LaneletRegulations(yield_sign="de205", yield_sign_at=(LENGTH_M, 3.0))
+    path = tmp_path / "alone.osm"
+    path.write_bytes(build_osm([straight(1, 0.0, 0.0, regulations=sign)]))
+    (element,) = load(path).laneletLayer[1].regulatoryElements
+    assert element.attributes["subtype"] == "traffic_sign"
+    assert element.parameters["refers"][0].attributes["subtype"] == "de205"
+    assert outside_namespaces(validate_osm(path)) == []
