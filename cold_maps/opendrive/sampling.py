@@ -24,6 +24,9 @@ from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
 from cold_maps.opendrive.model import LaneSection, Road
 from cold_maps.opendrive.reference_line import check_s, reference_pose
 
+JOINED_M: Final[float] = 1e-6
+"""Geometry records whose end and next start are closer than this (m) join: one sample."""
+
 SLIVER_FRACTION: Final[float] = 1e-9
 """A grid point closer than this fraction of the step to the end point is merged into it."""
 
@@ -74,7 +77,8 @@ class LaneBorderSamples:
         lane_id: OpenDRIVE lane id.
         s: (N,) road s (m), strictly increasing (NOT the driving direction), both section
             ends included; with record ends, every interior start of a ``<geometry>``
-            record appears twice: first the end of the record before it, then its start.
+            record is sampled, twice where the records do not join (``JOINED_M``):
+            first the end of the record before it, then its start.
         inner: (N, 3) x, y, z (m, inertial frame) of the border nearer lane 0.
         outer: (N, 3) x, y, z (m, inertial frame) of the border farther from lane 0.
     """
@@ -96,14 +100,17 @@ def record_starts(road: Road, s_start: float, s_end: float) -> NDArrayFloat:
 def _reference_with_record_ends(
     road: Road, section: LaneSection, s: NDArrayFloat
 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """s with each interior record start doubled, and the reference pose there: the first
-    of a pair on the record that ends at it, the second on the record that starts."""
+    """s with each interior record start added, and doubled where the records do not join
+    (end and start farther apart than ``JOINED_M``), with the reference pose there: the
+    first of a pair on the record that ends at it, the second on the record that starts."""
     boundaries = record_starts(road, section.s, section.s_end)
-    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries)))
+    ends = [reference_pose(road, np.array([b]), before=b) for b in boundaries]
+    starts = [reference_pose(road, np.array([b]), before=section.s_end) for b in boundaries]
+    jumps = np.array([np.hypot(e[0][0] - t[0][0], e[1][0] - t[1][0]) > JOINED_M for e, t in zip(ends, starts)], dtype=bool)
+    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries[jumps])))
     x, y, hdg = reference_pose(road, s, before=section.s_end)
-    for boundary in boundaries:
+    for boundary, end in zip(boundaries[jumps], (e for e, jump in zip(ends, jumps) if jump)):
         first = int(np.searchsorted(s, boundary, side="left"))
-        end = reference_pose(road, s[first : first + 1], before=boundary)
         x[first], y[first], hdg[first] = (value[0] for value in end)
     return s, x, y, hdg
 
