@@ -64,7 +64,7 @@ def convert(
         data = _convert_bytes(xodr, verbose)
     atomic_write(out, data)
     return frame.LoadRecipe(
-        osm_path=str(out), geo_reference=read_geo_reference(xodr), lanelets=data.count(b"<relation ")
+        osm_path=str(out), geo_reference=read_geo_reference(xodr), lanelets=data.count(b'<tag k="type" v="lanelet"/>')
     )
 
 

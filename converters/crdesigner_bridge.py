@@ -43,7 +43,9 @@ import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
+from converters.elevation import RoadHeights
 from converters.errors import ConversionError
+from converters.regulatory import LaneletRegulations, regulations_of, road_speed_limits
 
 NDArrayFloat = npt.NDArray[np.float64]
 
@@ -68,6 +70,10 @@ class SourceLanelet:
             "solid", "no_marking", "curb", ...; "unknown" when crdesigner has none).
         opendrive_lanes: the OpenDRIVE lanes the lanelet covers, in driving order, as
             (road id, lane-section index, lane id); empty for crosswalks.
+        junctions: ids of the OpenDRIVE junctions its roads belong to.
+        left_z, right_z: (N,) heights (m) of the border vertices from the road's
+            elevation profile (``converters.elevation``); None when unknown.
+        regulations: speed limit, traffic lights and right of way crdesigner assigned.
     """
 
     id: int
@@ -77,6 +83,10 @@ class SourceLanelet:
     left_marking: str = "unknown"
     right_marking: str = "unknown"
     opendrive_lanes: tuple[tuple[str, int, int], ...] = ()
+    junctions: tuple[str, ...] = ()
+    left_z: NDArrayFloat | None = None
+    right_z: NDArrayFloat | None = None
+    regulations: LaneletRegulations = LaneletRegulations()
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -149,9 +159,25 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             source = Path(folder) / path.name
             source.write_bytes(renumbered[0])
         try:
-            scenario, sources = _run_crdesigner(source)
+            scenario, sources, opendrive = _run_crdesigner(source)
         except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
             raise ConversionError(str(path), f"converter crashed: {type(exc).__name__}: {exc}") from exc
+    heights = RoadHeights(opendrive)
+    junction_of = {str(road.id): str(road.junction.id) for road in opendrive.roads if road.junction is not None}
+    network = scenario.lanelet_network
+    roads_of = {lanelet: [road for road, _, _ in lanes] for lanelet, lanes in sources.items()}  # crdesigner's ids
+    speeds = road_speed_limits(opendrive)
+    road_limits = {
+        lanelet: min(speeds[road] for road in roads if road in speeds)
+        for lanelet, roads in roads_of.items()
+        if any(road in speeds for road in roads)
+    }
+    regulations = regulations_of(network, road_limits)
+    junctions = {lanelet: tuple(sorted({junction_of[r] for r in roads if r in junction_of})) for lanelet, roads in roads_of.items()}
+
+    def height(vertices: Any, lanelet_id: int) -> NDArrayFloat:
+        return heights.heights(np.asarray(vertices, dtype=np.float64)[:, :2], roads_of.get(lanelet_id, []))
+
     if renumbered is not None:
         original = renumbered[1]
         sources = {
@@ -167,8 +193,12 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             left_marking=str(lanelet.line_marking_left_vertices.value),
             right_marking=str(lanelet.line_marking_right_vertices.value),
             opendrive_lanes=sources.get(int(lanelet.lanelet_id), ()),
+            junctions=junctions.get(int(lanelet.lanelet_id), ()),
+            left_z=height(lanelet.left_vertices, int(lanelet.lanelet_id)),
+            right_z=height(lanelet.right_vertices, int(lanelet.lanelet_id)),
+            regulations=regulations.get(int(lanelet.lanelet_id), LaneletRegulations()),
         )
-        for lanelet in scenario.lanelet_network.lanelets
+        for lanelet in network.lanelets
     ]
     if not lanelets:
         raise ConversionError(str(path), "the converter produced no lanelets (no convertible lanes?)")
@@ -306,8 +336,9 @@ def _constant_spirals_to_arcs(root: etree._Element) -> int:
     return replaced
 
 
-def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]]]:
-    """crdesigner's CommonRoad scenario of ``path`` and, per lanelet id, its OpenDRIVE lanes."""
+def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]], Any]:
+    """crdesigner's CommonRoad scenario of ``path``, per lanelet id its OpenDRIVE lanes, and
+    crdesigner's parsed OpenDRIVE (for the elevation profiles)."""
     from crdesigner.common.config.general_config import GeneralConfig
     from crdesigner.common.config.opendrive_config import OpenDriveConfig
     from crdesigner.map_conversion.common.conversion_lanelet_network import ConversionLaneletNetwork
@@ -336,8 +367,9 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
         mock.patch.object(ParamPoly3, "calc_position", _param_poly3_by_arc_length(ParamPoly3.calc_position)),
         mock.patch.object(Poly3, "calc_position", _poly3_by_arc_length(Poly3.calc_position)),
     ):
-        network.load_opendrive(parse_opendrive(Path(os.fspath(path)), config))
-        return network.export_commonroad_scenario(GeneralConfig(), config), sources
+        opendrive = parse_opendrive(Path(os.fspath(path)), config)
+        network.load_opendrive(opendrive)
+        return network.export_commonroad_scenario(GeneralConfig(), config), sources, opendrive
 
 
 def _opendrive_lane(parametric_lane_id: str) -> tuple[str, int, int]:

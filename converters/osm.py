@@ -7,10 +7,21 @@ the distance (Town01: lanelets whose first point jumps 224 m) and shares adjacen
 merged (so consecutive and adjacent lanelets share points and ways, which Lanelet2
 routing needs), and no point moves farther than that. Each way is then thinned
 (Douglas-Peucker, ``SIMPLIFY_TOLERANCE_M``): Town04 drops from 135 k to 69 k points.
+
+Tags follow the Lanelet2 tagging specification: every node carries ``ele`` (m, from the
+OpenDRIVE elevation profile, ``converters.elevation``) when the lanelets know their
+heights; walkways and crosswalks are two-way (``one_way=no``), other lanelets one-way;
+``location`` is ``urban`` on every lanelet of an OpenDRIVE road or junction that
+crdesigner marks urban anywhere (sidewalks and shoulders included), else ``nonurban``; a border without a
+known marking is ``type=virtual`` with ``lane_change=no`` (no lane change, as before).
+Two tags outside the specification, both namespaced: ``commonroad:types`` (the
+CommonRoad lanelet types, ``TYPES_TAG``) and ``opendrive:lanes`` (the OpenDRIVE lanes a
+lanelet covers, ``OPENDRIVE_TAG``). Regulatory elements: ``converters.regulatory``.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -23,6 +34,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
+from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import simplify
 
 NDArrayInt = npt.NDArray[np.int64]
@@ -59,10 +71,11 @@ _MARKINGS: Final[dict[str, dict[str, str]]] = {
     "curb": {"type": "curbstone", "subtype": "high"},
     "lowered_curb": {"type": "curbstone", "subtype": "low"},
     "no_marking": {"type": "virtual"},
+    "unknown": {"type": "virtual", "lane_change": "no"},
 }
 """CommonRoad line marking → Lanelet2 way tags (lane changes follow from these under
 lanelet2's traffic rules). Mixed solid/dashed become solid_solid: CommonRoad does not
-say which side is which. "unknown" gets no tags (no lane change)."""
+say which side is which. "unknown" is virtual without lane change (every way needs a type)."""
 
 TYPES_TAG: Final[str] = "commonroad:types"
 """Lanelet tag listing the CommonRoad lanelet types (comma-separated, sorted)."""
@@ -85,16 +98,36 @@ def parse_opendrive_lanes_tag(value: str) -> tuple[tuple[str, int, int], ...]:
     return tuple(lanes)
 
 
-def lanelet_attributes(lanelet: SourceLanelet) -> dict[str, str]:
-    """Lanelet2 tags of a lanelet: type, subtype and location from its CommonRoad types,
-    the types themselves and the OpenDRIVE lanes it covers (when known)."""
+_TWO_WAY_SUBTYPES: Final[frozenset[str]] = frozenset({"walkway", "crosswalk"})
+"""Lanelet2 subtypes walked in both directions (``one_way=no``)."""
+
+
+def is_urban(lanelet: SourceLanelet) -> bool:
+    """True when crdesigner marks the lanelet urban (or as part of an intersection)."""
+    return "urban" in lanelet.types or "intersection" in lanelet.types
+
+
+def _places(lanelet: SourceLanelet) -> set[str]:
+    """Keys of the OpenDRIVE roads and junctions a lanelet lies on."""
+    return {f"road {road}" for road, _, _ in lanelet.opendrive_lanes} | {f"junction {j}" for j in lanelet.junctions}
+
+
+def urban_places(lanelets: Sequence[SourceLanelet]) -> frozenset[str]:
+    """Roads and junctions (``_places`` keys) with an urban lanelet: every lanelet on them is urban."""
+    return frozenset(place for lanelet in lanelets if is_urban(lanelet) for place in _places(lanelet))
+
+
+def lanelet_attributes(lanelet: SourceLanelet, urban: frozenset[str] = frozenset()) -> dict[str, str]:
+    """Lanelet2 tags of a lanelet: type, subtype and one_way from its CommonRoad types,
+    location (urban when it is, or lies on a road or junction of ``urban_places``), the
+    types themselves and the OpenDRIVE lanes it covers (when known)."""
     subtype = next((l2 for cr, l2 in _SUBTYPES if cr in lanelet.types), "road")
-    urban = "urban" in lanelet.types or "intersection" in lanelet.types
+    in_town = is_urban(lanelet) or not _places(lanelet).isdisjoint(urban)
     tags = {
         "type": "lanelet",
         "subtype": subtype,
-        "location": "urban" if urban else "nonurban",
-        "one_way": "yes",
+        "location": "urban" if in_town else "nonurban",
+        "one_way": "no" if subtype in _TWO_WAY_SUBTYPES else "yes",
         TYPES_TAG: ",".join(sorted(lanelet.types)),
     }
     if lanelet.opendrive_lanes:
@@ -139,6 +172,8 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
         right=lanelet.left,
         left_marking=lanelet.right_marking,
         right_marking=lanelet.left_marking,
+        left_z=lanelet.right_z,
+        right_z=lanelet.left_z,
     )
 
 
@@ -159,15 +194,18 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     if not borders:
         raise ConversionError(source, "no lanelets to write")
     stacked = np.vstack(borders)
+    heights = np.concatenate([_heights(lanelet, side) for lanelet in lanelets for side in ("left", "right")])
     unique, point_index = np.unique(merge_points(stacked, MERGE_TOLERANCE_M), return_inverse=True)
-    coordinates = stacked[unique]
+    coordinates = np.column_stack((stacked[unique], heights[unique]))
     starts = np.cumsum([0] + [len(border) for border in borders])
     ways: dict[tuple[int, ...], int] = {}
     way_points: list[NDArrayInt] = []
     way_tags: list[dict[str, str]] = []
     members: list[tuple[int, int]] = []
+    exit_points: list[tuple[int, int]] = []
     for index, lanelet in enumerate(lanelets):
         pair = []
+        ends = []
         for side, position, marking in (
             ("left", 2 * index, lanelet.left_marking),
             ("right", 2 * index + 1, lanelet.right_marking),
@@ -175,16 +213,18 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
             points = _without_repeats(point_index[starts[position] : starts[position + 1]])
             if len(points) < 2:
                 raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {MERGE_TOLERANCE_M} m")
+            ends.append(points[-1])
             way = ways.get(points, ways.get(points[::-1]))
             if way is None:
                 way = ways[points] = len(way_points)
                 chain = np.asarray(points)
-                way_points.append(chain[simplify(coordinates[chain], SIMPLIFY_TOLERANCE_M)])
+                way_points.append(chain[_kept_vertices(coordinates[chain])])
                 way_tags.append({})
             if not way_tags[way]:
                 way_tags[way] = _MARKINGS.get(marking, {})
             pair.append(way)
         members.append((pair[0], pair[1]))
+        exit_points.append((ends[0], ends[1]))
     used = np.unique(np.concatenate(way_points))
     first_id = max(lanelet.id for lanelet in lanelets) + 1
     node_id = np.full(len(coordinates), -1, dtype=np.int64)
@@ -196,22 +236,59 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     projector = frame.projector()
     from lanelet2.core import BasicPoint3d
 
+    def write_node(identifier: int, xyz: NDArrayFloat) -> None:
+        gps = projector.reverse(BasicPoint3d(float(xyz[0]), float(xyz[1]), 0.0))
+        element = etree.SubElement(root, "node", id=str(identifier), lat=repr(gps.lat), lon=repr(gps.lon))
+        if np.isfinite(xyz[2]):
+            etree.SubElement(element, "tag", k="ele", v=f"{xyz[2]:.4f}")
+
     for point in used:
-        gps = projector.reverse(BasicPoint3d(float(coordinates[point, 0]), float(coordinates[point, 1]), 0.0))
-        etree.SubElement(root, "node", id=str(node_id[point]), lat=repr(gps.lat), lon=repr(gps.lon))
+        write_node(int(node_id[point]), coordinates[point])
     for way, chain in enumerate(way_points):
         element = etree.SubElement(root, "way", id=str(way_id_base + way))
         for point in chain:
             etree.SubElement(element, "nd", ref=str(node_id[point]))
         for key, value in way_tags[way].items():
             etree.SubElement(element, "tag", k=key, v=value)
-    for lanelet, (left, right) in zip(lanelets, members):
+    urban = urban_places(lanelets)
+    exits = {}
+    for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
         element = etree.SubElement(root, "relation", id=str(lanelet.id))
         etree.SubElement(element, "member", type="way", role="left", ref=str(way_id_base + left))
         etree.SubElement(element, "member", type="way", role="right", ref=str(way_id_base + right))
-        for key, value in lanelet_attributes(lanelet).items():
+        for key, value in lanelet_attributes(lanelet, urban).items():
             etree.SubElement(element, "tag", k=key, v=value)
+        exits[lanelet.id] = LaneletExit(
+            element, int(node_id[left_end]), int(node_id[right_end]), coordinates[left_end], coordinates[right_end]
+        )
+    fresh = itertools.count(way_id_base + len(way_points))
+
+    def new_node(xyz: NDArrayFloat) -> int:
+        identifier = next(fresh)
+        write_node(identifier, xyz)
+        return identifier
+
+    regulations = {lanelet.id: lanelet.regulations for lanelet in lanelets}
+    append_regulatory_elements(root, regulations, exits, new_node, fresh)
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+
+
+def _kept_vertices(points: NDArrayFloat) -> npt.NDArray[np.bool_]:
+    """Douglas-Peucker (``SIMPLIFY_TOLERANCE_M``) of an (N, 3) way, in plan and in its
+    height profile over plan length (a crest on a straight road keeps its vertices)."""
+    keep = simplify(points[:, :2], SIMPLIFY_TOLERANCE_M)
+    heights = points[:, 2]
+    if np.all(np.isfinite(heights)):
+        along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points[:, :2], axis=0).T))))
+        keep |= simplify(np.column_stack((along, heights)), SIMPLIFY_TOLERANCE_M)
+    return keep
+
+
+def _heights(lanelet: SourceLanelet, side: str) -> NDArrayFloat:
+    """Heights (m) of one border's vertices; NaN (no ``ele``) when unknown."""
+    border = lanelet.left if side == "left" else lanelet.right
+    z = lanelet.left_z if side == "left" else lanelet.right_z
+    return np.full(len(border), np.nan) if z is None else np.asarray(z, dtype=np.float64)
 
 
 def _recipe_comment(geo_reference: str) -> str:

@@ -135,7 +135,7 @@ def test_export_geojson_matches_csv(tmp_path: Path) -> None:
     source = bundled_map("junction")
     csv_out, geo_out = tmp_path / "b.csv", tmp_path / "b.geojson"
     assert main(["export", str(source), "--step", "0.2", "-o", str(csv_out)]) == 0
-    assert main(["export", str(source), "--step", "0.2", "--format", "geojson", "-o", str(geo_out)]) == 0
+    assert main(["export", str(source), "--step", "0.2", "--format", "geojson", "--crs", "local", "-o", str(geo_out)]) == 0
     _, borders = read_csv(csv_out)
     assert _assert_left_is_left(borders) > 0
     collection = json.loads(geo_out.read_text())

@@ -34,8 +34,10 @@ def mutate(old: str, new: str, after: str = "") -> tuple[bytes, int]:
 
 
 def parse_error(data: bytes) -> OpenDriveError:
+    """The error of strict parsing (lenient parsing accepts omitted coefficients: see
+    tests/test_opendrive_lenient.py)."""
     with pytest.raises(OpenDriveError) as info:
-        parse_opendrive(data, path=NAME)
+        parse_opendrive(data, path=NAME, strict=True)
     return info.value
 
 

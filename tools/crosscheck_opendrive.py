@@ -1,7 +1,8 @@
 """Cross-check our sampled lane borders against commonroad-scenario-designer's OpenDRIVE code.
 
 For every lane of the selected types, our inner and outer border points (``sample_road``,
-every --step m) are compared with crdesigner's own parser and lane-border evaluation
+every --step m plus both ends of every ``<geometry>`` record, as ``cold-maps export``
+writes them) are compared with crdesigner's own parser and lane-border evaluation
 (``OpenDriveConverter.lane_section_to_parametric_lanes`` → ``ParametricLane`` borders),
 sampled on the same s grid into a polyline. Printed per map: p50 / p99 / max of the
 distance from each of our points to the other implementation's polyline of the same
@@ -9,7 +10,10 @@ lane border, the worst point, and lanes present on one side only. Maps with what
 crdesigner rejects although valid (non-integer ids, constant-curvature spirals) are
 rewritten first (``converters.crdesigner_bridge.crdesigner_copy``). crdesigner is evaluated
 at our s values (plus the ends of its width pieces), so where both agree the distances
-are round-off, and a purely along-track disagreement is absorbed by the polyline.
+are round-off, and a purely along-track disagreement is absorbed by the polyline. Where
+we sample a record's end and the next record's start at one s, crdesigner is evaluated
+``RECORD_END_OFFSET_M`` before that s as well, so a jump between records is compared
+point for point, not against a chord.
 
 Usage: crosscheck_opendrive.py MAP.xodr [MAP.xodr ...] [--step 0.1] [--all-lanes]
 """
@@ -36,6 +40,9 @@ from cold_maps.opendrive.errors import OpenDriveError  # noqa: E402
 from cold_maps.opendrive.parser import load_opendrive  # noqa: E402
 from cold_maps.opendrive.sampling import sample_road, sample_s  # noqa: E402
 from converters.crdesigner_bridge import crdesigner_copy  # noqa: E402
+
+RECORD_END_OFFSET_M: Final[float] = 1e-7
+"""crdesigner evaluates a record's end this far (m) before the next record's start."""
 
 LaneKey = tuple[str, int, int]
 """(road id, lane-section index, lane id)."""
@@ -135,6 +142,13 @@ def _their_borders(
     return borders
 
 
+def _record_end_grid(s: NDArrayFloat) -> NDArrayFloat:
+    """Our s grid with the first of each doubled s (a record's end) moved just before it."""
+    grid = s.copy()
+    grid[np.flatnonzero(np.diff(grid) == 0.0)] -= RECORD_END_OFFSET_M
+    return grid
+
+
 def point_to_polyline(points: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
     """Distance (m) from each point (P, 2) to the polyline (N, 2): nearest vertex, then its two segments.
 
@@ -166,9 +180,9 @@ def crosscheck(path: Path, step: float = 0.1, lane_types: Sequence[str] | None =
     ours = {
         (b.road_id, b.section, b.lane_id): b
         for road in odr_map.roads.values()
-        for b in sample_road(road, step=step, lane_types=lane_types)
+        for b in sample_road(road, step=step, lane_types=lane_types, record_ends=True)
     }
-    theirs = _their_borders(path, step, lane_types, {key: b.s for key, b in ours.items()})
+    theirs = _their_borders(path, step, lane_types, {key: _record_end_grid(b.s) for key, b in ours.items()})
     distances: list[NDArrayFloat] = []
     worst = ("", 0, 0, float("nan"))
     worst_value = -1.0

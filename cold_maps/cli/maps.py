@@ -33,6 +33,12 @@ PROG: Final[str] = "cold-maps"
 CSV_HEADER: Final[tuple[str, ...]] = ("road_id", "section", "lane_id", "side", "s", "x", "y", "z")
 COORDINATE_DECIMALS: Final[int] = 4
 """Decimals of s, x, y, z (m) in exports: 0.1 mm."""
+DEGREE_DECIMALS: Final[int] = 9
+"""Decimals of longitude and latitude (deg) in GeoJSON: 0.1 mm of latitude."""
+CRS_MEMBER: Final[str] = "cold_maps:crs"
+"""GeoJSON foreign member (RFC 7946 §6.1) of the FeatureCollection saying which frame the
+coordinates are in: ``{"frame": "wgs84" | "local", "description": ..., "geoReference":
+PROJ string or null}``."""
 EXPORT_LANE_TYPES: Final[tuple[str, ...]] = ("driving",)
 
 
@@ -64,23 +70,34 @@ class Command:
     run: Callable[[argparse.Namespace], int]
 
 
-def _load(path: str) -> OpenDriveMap:
+def _load(args: argparse.Namespace) -> OpenDriveMap:
     from cold_maps.opendrive.parser import load_opendrive
 
-    return load_opendrive(path)
+    return load_opendrive(args.map, strict=args.strict)
+
+
+def add_strict_option(parser: argparse.ArgumentParser) -> None:
+    """``--strict``: refuse records that omit coefficients (read as 0 with a warning otherwise)."""
+    parser.add_argument(
+        "--strict", action="store_true",
+        help="refuse geometry and profile records that omit coefficients (default: 0, with a warning)",
+    )
 
 
 def _configure_info(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
+    add_strict_option(parser)
 
 
 def _run_info(args: argparse.Namespace) -> int:
-    print("\n".join(map_info(_load(args.map))))
+    print("\n".join(map_info(_load(args))))
     return 0
 
 
 def map_info(odr_map: OpenDriveMap) -> list[str]:
-    """Summary lines of a map: header, roads, sections, lanes, junctions, geometry."""
+    """Summary lines of a map: header, roads, sections, lanes, junctions, geometry, then
+    reference-line gaps and kinks and lane links whose borders do not meet."""
+    from cold_maps.network.continuity import continuity_report
     from cold_maps.network.lane_graph import build_lane_graph
 
     header = odr_map.header
@@ -110,6 +127,7 @@ def map_info(odr_map: OpenDriveMap) -> list[str]:
         f"geometry: {_counts(geometry)}",
         f"lane graph: {len(graph.lanes)} driving lanes, {sum(1 for _ in graph.edges())} links, "
         f"{len(graph.issues)} issues",
+        *continuity_report(odr_map, graph),
     ]
 
 
@@ -131,8 +149,14 @@ def _configure_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
     parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
     parser.add_argument("--format", choices=("csv", "geojson"), default="csv")
+    parser.add_argument(
+        "--crs", choices=("wgs84", "local"), default="wgs84",
+        help="geojson coordinates: WGS84 lon/lat through the map's geoReference (RFC 7946, default) or the "
+        "OpenDRIVE inertial frame in m (csv is always the inertial frame)",
+    )
     parser.add_argument("-o", "--output", required=True, metavar="FILE",
                         help="file to write (its folder must exist); - for standard output")
+    add_strict_option(parser)
 
 
 @dataclass(frozen=True)
@@ -155,12 +179,14 @@ class BorderPolyline:
 
 
 def lane_border_polylines(odr_map: OpenDriveMap, step: float) -> Iterator[BorderPolyline]:
-    """Left then right border of every driving lane, road by road, section by section."""
+    """Left then right border of every driving lane, road by road, section by section,
+    every ``step`` m of s plus both ends of every ``<geometry>`` record (a jump between
+    records appears as two points at one s, never as a chord)."""
     from cold_maps.network.route import borders_in_driving_direction
     from cold_maps.opendrive.sampling import sample_road
 
     for road in odr_map.roads.values():
-        for samples in sample_road(road, step=step, lane_types=EXPORT_LANE_TYPES):
+        for samples in sample_road(road, step=step, lane_types=EXPORT_LANE_TYPES, record_ends=True):
             s, left, right = borders_in_driving_direction(road, samples)
             for side, xyz in (("left", left), ("right", right)):
                 yield BorderPolyline(road.id, samples.section, samples.lane_id, side, s, xyz)
@@ -179,14 +205,34 @@ def _write_csv(borders: Iterator[BorderPolyline], out: TextIO) -> None:
         out.write((row * len(values)) % tuple(values.ravel().tolist()))
 
 
-def _write_geojson(borders: Iterator[BorderPolyline], out: TextIO) -> None:
+def _geojson_crs(odr_map: OpenDriveMap, crs: str) -> tuple[dict[str, object], Callable[[NDArrayFloat], NDArrayFloat]]:
+    """The ``CRS_MEMBER`` value and the (N, 3) point transform (rounded) of ``--crs``.
+
+    Raises ValueError asking for ``--crs local`` when the map has no usable geoReference.
+    """
+    from cold_maps.opendrive.georeference import NoGeoReferenceError, Wgs84Transform
+
+    geo = odr_map.header.geo_reference
+    if crs == "local":
+        member = {"frame": "local", "description": "OpenDRIVE inertial frame: x east, y north, z up (m); not WGS84"}
+        return {**member, "geoReference": geo.proj or None}, lambda xyz: np.round(xyz, COORDINATE_DECIMALS)
+    try:
+        transform = Wgs84Transform(geo)
+    except NoGeoReferenceError as exc:
+        raise ValueError(f"{odr_map.path}: {exc}; write the inertial frame with --crs local") from None
+    member = {"frame": "wgs84", "description": "EPSG:4326 longitude, latitude (deg); height z + offset z (m)"}
+    scale = np.array([10.0**DEGREE_DECIMALS, 10.0**DEGREE_DECIMALS, 10.0**COORDINATE_DECIMALS])
+    return {**member, "geoReference": geo.proj}, lambda xyz: np.round(transform(xyz) * scale) / scale
+
+
+def _write_geojson(
+    borders: Iterator[BorderPolyline], out: TextIO, crs: tuple[dict[str, object], Callable[[NDArrayFloat], NDArrayFloat]]
+) -> None:
+    member, transform = crs
     features = [
         {
             "type": "Feature",
-            "geometry": {
-                "type": "LineString",
-                "coordinates": np.round(border.xyz, COORDINATE_DECIMALS).tolist(),
-            },
+            "geometry": {"type": "LineString", "coordinates": transform(border.xyz).tolist()},
             "properties": {
                 "road_id": border.road_id,
                 "section": border.section,
@@ -197,21 +243,28 @@ def _write_geojson(borders: Iterator[BorderPolyline], out: TextIO) -> None:
         }
         for border in borders
     ]
-    json.dump({"type": "FeatureCollection", "features": features}, out, separators=(",", ":"))
+    json.dump({"type": "FeatureCollection", CRS_MEMBER: member, "features": features}, out, separators=(",", ":"))
     out.write("\n")
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    odr_map = _load(args.map)
+    odr_map = _load(args)
     borders = lane_border_polylines(odr_map, args.step)
-    write = _write_csv if args.format == "csv" else _write_geojson
+    crs = _geojson_crs(odr_map, args.crs) if args.format == "geojson" else None
+
+    def write(out: TextIO) -> None:
+        if crs is None:
+            _write_csv(borders, out)
+        else:
+            _write_geojson(borders, out, crs)
+
     if args.output == "-":
-        write(borders, sys.stdout)
+        write(sys.stdout)
     else:
         from converters.atomic_io import atomic_output
 
         with atomic_output(Path(args.output), "w") as out:
-            write(borders, out)
+            write(out)
     return 0
 
 

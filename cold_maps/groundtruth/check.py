@@ -240,15 +240,16 @@ def check_map(
     lane_types: Sequence[str] | None = ("driving",),
     cache: bool = True,
     cache_dir: str | os.PathLike[str] | None = None,
+    strict: bool = False,
 ) -> CheckReport:
     """Convert (or load from the cache) the map's ground truth and cross-check it.
 
-    Raises ``OpenDriveError`` when our parser rejects the file and
-    ``converters.ConversionError`` when the converter does.
+    Raises ``OpenDriveError`` when our parser rejects the file (``strict``: see
+    ``load_opendrive``) and ``converters.ConversionError`` when the converter does.
     """
     from converters import load_lanelet2
 
-    odr_map = load_opendrive(xodr_path)
+    odr_map = load_opendrive(xodr_path, strict=strict)
     lanelet_map, _ = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
     return check_lanelet_map(
         odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types
@@ -300,16 +301,24 @@ def configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
     parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
+    parser.add_argument("--strict", action="store_true", help="refuse records that omit coefficients")
 
 
 def run_check(args: argparse.Namespace) -> int:
-    """Print the report; return its exit code. Raises OpenDriveError or ConversionError."""
+    """Print the report, then the map's geometry gaps (``network.continuity``); return
+    the report's exit code. Raises OpenDriveError or ConversionError."""
+    from cold_maps.network.continuity import continuity_report
+    from cold_maps.network.lane_graph import build_lane_graph
+
     report = check_map(
         args.map,
         threshold_m=args.threshold,
         step_m=args.step,
         lane_types=None if args.all_lanes else ("driving",),
         cache=not args.no_cache,
+        strict=args.strict,
     )
     print(format_report(report))
+    odr_map = load_opendrive(args.map, strict=args.strict)
+    print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
     return report.exit_code

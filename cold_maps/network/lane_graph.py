@@ -108,7 +108,7 @@ class LaneGraph:
     def _section_ends(self, lane: LaneKey) -> tuple[float, float]:
         road = self.odr_map.roads[lane.road_id]
         section = road.lane_sections[lane.section]
-        if road.drives_along_s(lane.lane_id):
+        if road.drives_along_s(lane.lane_id, lane.section):
             return section.s, section.s_end
         return section.s_end, section.s
 
@@ -166,7 +166,7 @@ def _nodes(odr_map: OpenDriveMap, types: tuple[str, ...] | None) -> dict[LaneKey
 
 
 def _is_exit(odr_map: OpenDriveMap, lane_end: _LaneEnd) -> bool:
-    forward = odr_map.roads[lane_end.lane.road_id].drives_along_s(lane_end.lane.lane_id)
+    forward = odr_map.roads[lane_end.lane.road_id].drives_along_s(lane_end.lane.lane_id, lane_end.lane.section)
     return (lane_end.end == "end") == forward
 
 

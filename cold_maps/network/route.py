@@ -75,7 +75,7 @@ def borders_in_driving_direction(
     Left is the inner border in right-hand traffic and the outer one in left-hand traffic.
     """
     left, right = (samples.inner, samples.outer) if road.rule == "RHT" else (samples.outer, samples.inner)
-    if road.drives_along_s(samples.lane_id):
+    if road.drives_along_s(samples.lane_id, samples.section):
         return samples.s, left, right
     return samples.s[::-1], left[::-1], right[::-1]
 

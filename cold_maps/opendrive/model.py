@@ -133,7 +133,7 @@ class Lane:
         predecessors, successors: ids of linked lanes in the previous / next section,
             or, at the road ends, in the linked road (empty when unlinked).
         direction: OpenDRIVE 1.7+ ``direction`` attribute ("standard", "reversed",
-            "both") or "" when absent.
+            "both") or "" when absent (standard); see ``Road.drives_along_s``.
     """
 
     id: int
@@ -214,6 +214,8 @@ class Road:
         lane_offsets: laneOffset records (t shift of lane 0 in m), s0 absolute.
         lane_sections: ordered by s; each knows its end.
         line: source line of the ``<road>`` element (for error messages).
+        superelevation: ``<lateralProfile><superelevation>`` records (roll angle of the
+            cross section in rad, positive = the left side (+t) higher), s0 absolute.
     """
 
     id: str
@@ -228,10 +230,19 @@ class Road:
     lane_offsets: tuple[CubicPoly, ...]
     lane_sections: tuple[LaneSection, ...]
     line: int = 0
+    superelevation: tuple[CubicPoly, ...] = ()
 
-    def drives_along_s(self, lane_id: int) -> bool:
-        """True when traffic in this lane moves towards increasing s."""
-        return (lane_id < 0) == (self.rule == "RHT")
+    def drives_along_s(self, lane_id: int, section: int | None = None) -> bool:
+        """True when traffic in this lane moves towards increasing s.
+
+        With ``section`` (index into ``lane_sections``) the lane's OpenDRIVE 1.7+
+        ``direction`` applies: "reversed" drives against its side's rule; "both" (either
+        way) is read as the side's direction, the one the lane graph follows.
+        """
+        along = (lane_id < 0) == (self.rule == "RHT")
+        if section is not None and lane_id != 0:
+            return along != (self.lane_sections[section].lane(lane_id).direction == "reversed")
+        return along
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,7 +1,7 @@
 """OpenDRIVE 1.4-1.8 reader: hardened XML in, immutable ``OpenDriveMap`` out.
 
 The tree is walked once, child by child; elements the model does not need (objects,
-signals, road marks, userData, lateral profile, surface, railroad, controllers, ...)
+signals, road marks, userData, lateral shape, surface, railroad, controllers, ...)
 are skipped. Invalid input raises ``OpenDriveError`` naming the file, the element and
 its source line.
 
@@ -22,10 +22,18 @@ junction (dropped: the model has none for junctions), a missing road ``junction`
 attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``Lane``),
 a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor.
 Numbers use Python ``float`` syntax.
+
+Lenient by default, like mainstream readers (libOpenDRIVE): a polynomial coefficient,
+curvature or record start that a record omits (RoadRunner writes ``<spiral curvEnd=".."/>``,
+``<paramPoly3/>``, ``<elevation/>``, ``<superelevation/>``) is 0, the value an empty
+record stands for (and ``pRange`` defaults to "normalized" as in the schema); one warning
+per element kind and road names the attributes taken as 0. ``strict=True`` refuses them
+("missing required attribute").
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import replace
@@ -63,16 +71,21 @@ _RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
 _P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
 _JUNCTION_TYPES: Final[tuple[str, ...]] = ("default", "direct", "virtual", "crossing")
 _LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
-_ONCE_PER_ROAD: Final[frozenset[str]] = frozenset({"link", "planView", "elevationProfile", "lanes"})
+_ONCE_PER_ROAD: Final[frozenset[str]] = frozenset(
+    {"link", "planView", "elevationProfile", "lateralProfile", "lanes"}
+)
 _BOOLEANS: Final[dict[str, bool]] = {"true": True, "1": True, "false": False, "0": False}
+_LOG: Final[logging.Logger] = logging.getLogger(__name__)
 
 
-def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) -> OpenDriveMap:
+def load_opendrive(
+    path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES, strict: bool = False
+) -> OpenDriveMap:
     """Read and parse the OpenDRIVE file at ``path``.
 
     Files larger than ``max_bytes`` are rejected before they are read (size from
     ``os.stat``, and the read itself stops at ``max_bytes + 1``). Unreadable files and
-    invalid content raise ``OpenDriveError``.
+    invalid content raise ``OpenDriveError``; ``strict``: see ``parse_opendrive``.
     """
     name = os.fspath(path)
     try:
@@ -85,13 +98,17 @@ def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BY
         raise OpenDriveError(f"cannot read file: {exc.strerror or exc}", path=name) from None
     if len(data) > max_bytes:
         raise OpenDriveError(f"file is more than the limit of {max_bytes} bytes", path=name)
-    return parse_opendrive(data, path=name)
+    return parse_opendrive(data, path=name, strict=strict)
 
 
-def parse_opendrive(data: bytes, *, path: str = "") -> OpenDriveMap:
-    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map."""
+def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> OpenDriveMap:
+    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map.
+
+    ``strict``: refuse records that omit a coefficient, curvature or start (else they
+    are 0 with a warning, see the module docstring).
+    """
     root = parse_xml(data, path=path)
-    return _Reader(path).read_map(root)
+    return _Reader(path, strict).read_map(root)
 
 
 def _strip_namespaces(root: etree._Element) -> None:
@@ -105,8 +122,11 @@ def _strip_namespaces(root: etree._Element) -> None:
 class _Reader:
     """Converts the element tree of one file into the model; knows the file name."""
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, strict: bool = False) -> None:
         self.path = path
+        self.strict = strict
+        self.road_id = ""
+        self.defaulted: dict[tuple[str, str], set[str]] = {}
 
     # -- attribute access -------------------------------------------------------------
 
@@ -146,6 +166,23 @@ class _Reader:
             return values
         return tuple(self.number(element, name) for name in names)
 
+    def coefficients(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
+        """Finite float attributes that are 0 when absent, recorded for one warning per
+        element kind and road; all required when strict."""
+        missing = [name for name in names if element.get(name) is None]
+        if not missing or self.strict:
+            return self.numbers(element, names)
+        self.defaulted.setdefault((str(element.tag), self.road_id), set()).update(missing)
+        return tuple(self.number(element, name, 0.0) for name in names)
+
+    def warn_defaults(self) -> None:
+        """One warning per element kind and road whose records omitted attributes."""
+        for (tag, road_id), names in self.defaulted.items():
+            _LOG.warning(
+                "%s: road %s: <%s> without %s: taken as 0 (strict mode refuses it)",
+                self.path or "<input>", road_id, tag, ", ".join(sorted(names)),
+            )
+
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
         try:
@@ -176,7 +213,7 @@ class _Reader:
         raise self.error(f"attribute '{name}' is {text[:40]!r}, expected one of {', '.join(allowed)}", element)
 
     def cubic(self, element: etree._Element, s_name: str) -> CubicPoly:
-        return CubicPoly(*self.numbers(element, (s_name, "a", "b", "c", "d")))
+        return CubicPoly(*self.coefficients(element, (s_name, "a", "b", "c", "d")))
 
     def cubics(self, elements: Iterable[etree._Element], s_name: str) -> tuple[CubicPoly, ...]:
         return tuple(sorted((self.cubic(e, s_name) for e in elements), key=_by_s0))
@@ -216,6 +253,7 @@ class _Reader:
             known = roads if element_type == "road" else junctions
             if element_id not in known:
                 raise self.error(f"links to {element_type} {element_id!r}, which does not exist", element)
+        self.warn_defaults()
         return OpenDriveMap(path=self.path, header=header, roads=roads, junctions=junctions)
 
     def header(self, element: etree._Element) -> Header:
@@ -245,6 +283,7 @@ class _Reader:
 
     def road(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Road:
         road_id = self.required(element, "id")
+        self.road_id = road_id
         length = self.number(element, "length")
         if length < 0.0:
             raise self.error(f"road {road_id!r} has negative length {length}", element)
@@ -254,6 +293,7 @@ class _Reader:
         ends: dict[str, RoadLink | None] = {"predecessor": None, "successor": None}
         plan_view: list[Geometry] = []
         elevation: tuple[CubicPoly, ...] = ()
+        superelevation: tuple[CubicPoly, ...] = ()
         lane_offsets: tuple[CubicPoly, ...] = ()
         sections: list[LaneSection] = []
         seen: set[str] = set()
@@ -270,6 +310,8 @@ class _Reader:
                 sections = self.lane_sections(child, road_id, length)
             elif tag == "elevationProfile":
                 elevation = self.cubics((e for e in child if e.tag == "elevation"), "s")
+            elif tag == "lateralProfile":
+                superelevation = self.cubics((e for e in child if e.tag == "superelevation"), "s")
             elif tag == "link":
                 for link in child:
                     end = link.tag
@@ -295,6 +337,7 @@ class _Reader:
             lane_offsets=lane_offsets,
             lane_sections=tuple(sections),
             line=element.sourceline or 0,
+            superelevation=superelevation,
         )
 
     def road_link(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> RoadLink:
@@ -307,7 +350,6 @@ class _Reader:
 
     def geometry(self, element: etree._Element) -> Geometry | None:
         """The record, or None for a zero-length one (it covers no s; real exporters write them)."""
-        number = self.number
         start = self.numbers(element, ("s", "x", "y", "hdg", "length"))
         length = start[4]
         if length < 0.0:
@@ -323,14 +365,16 @@ class _Reader:
         kind = shape.tag
         if kind == "line":
             return Geometry("line", *start)
+        coefficients = self.coefficients
         if kind == "arc":
-            return Geometry("arc", *start, curvature=number(shape, "curvature"))
+            return Geometry("arc", *start, curvature=coefficients(shape, ("curvature",))[0])
         if kind == "spiral":
-            return Geometry("spiral", *start, curv_start=number(shape, "curvStart"), curv_end=number(shape, "curvEnd"))
+            curv_start, curv_end = coefficients(shape, ("curvStart", "curvEnd"))
+            return Geometry("spiral", *start, curv_start=curv_start, curv_end=curv_end)
         if kind == "poly3":
-            a, b, c, d = self.numbers(shape, ("a", "b", "c", "d"))
+            a, b, c, d = coefficients(shape, ("a", "b", "c", "d"))
             return Geometry("poly3", *start, a=a, b=b, c=c, d=d)
-        au, bu, cu, du, av, bv, cv, dv = self.numbers(shape, ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV"))
+        au, bu, cu, du, av, bv, cv, dv = coefficients(shape, ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV"))
         return Geometry(
             "paramPoly3", *start,
             au=au, bu=bu, cu=cu, du=du, av=av, bv=bv, cv=cv, dv=dv,

@@ -48,5 +48,8 @@ def reference_pose(
     for i in np.unique(index):
         mask = index == i
         record = road.plan_view[i]
-        x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
+        try:
+            x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
+        except ValueError as exc:
+            raise ValueError(f"road {road.id}: {exc}") from None
     return x, y, hdg

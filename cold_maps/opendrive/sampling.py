@@ -1,8 +1,14 @@
 """Sampling lane borders into 3-D polylines, and road → world coordinates.
 
 Points are in the inertial frame (x, y, z in m). z is the reference line's elevation
-(``<elevationProfile>``) at the same s: superelevation, shape and lane height are not
-applied.
+(``<elevationProfile>``) at the same s, plus the superelevation (``<lateralProfile>``):
+the cross section is rolled by the angle θ(s) about the reference line, so a border at
+t lies tan θ·t higher, except across lanes with ``level="true"``, which stay flat at the
+height of their inner border (lanes beyond continue from there). The horizontal
+position stays t from the reference line (as in commonroad-scenario-designer and every
+2-D consumer; libOpenDRIVE instead measures t along the tilted surface, which moves a
+border by t·(1 − cos θ) inwards: 1.4 cm at t = 7 m and θ = 3.5°). Lane ``height``
+and lateral ``shape`` are not applied.
 """
 
 from __future__ import annotations
@@ -15,8 +21,11 @@ import numpy as np
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
-from cold_maps.opendrive.model import Road
+from cold_maps.opendrive.model import LaneSection, Road
 from cold_maps.opendrive.reference_line import check_s, reference_pose
+
+JOINED_M: Final[float] = 1e-6
+"""Geometry records whose end and next start are closer than this (m) join: one sample."""
 
 SLIVER_FRACTION: Final[float] = 1e-9
 """A grid point closer than this fraction of the step to the end point is merged into it."""
@@ -67,7 +76,9 @@ class LaneBorderSamples:
         section: index of the lane section in ``road.lane_sections``.
         lane_id: OpenDRIVE lane id.
         s: (N,) road s (m), strictly increasing (NOT the driving direction), both section
-            ends included.
+            ends included; with record ends, every interior start of a ``<geometry>``
+            record is sampled, twice where the records do not join (``JOINED_M``):
+            first the end of the record before it, then its start.
         inner: (N, 3) x, y, z (m, inertial frame) of the border nearer lane 0.
         outer: (N, 3) x, y, z (m, inertial frame) of the border farther from lane 0.
     """
@@ -80,25 +91,73 @@ class LaneBorderSamples:
     outer: NDArrayFloat
 
 
+def record_starts(road: Road, s_start: float, s_end: float) -> NDArrayFloat:
+    """Starts (m) of the road's ``<geometry>`` records strictly inside (s_start, s_end)."""
+    starts = np.array([g.s for g in road.plan_view], dtype=np.float64)
+    return starts[(starts > s_start) & (starts < s_end)]
+
+
+def _reference_with_record_ends(
+    road: Road, section: LaneSection, s: NDArrayFloat
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """s with each interior record start added, and doubled where the records do not join
+    (end and start farther apart than ``JOINED_M``), with the reference pose there: the
+    first of a pair on the record that ends at it, the second on the record that starts."""
+    boundaries = record_starts(road, section.s, section.s_end)
+    ends = [reference_pose(road, np.array([b]), before=b) for b in boundaries]
+    starts = [reference_pose(road, np.array([b]), before=section.s_end) for b in boundaries]
+    jumps = np.array([np.hypot(e[0][0] - t[0][0], e[1][0] - t[1][0]) > JOINED_M for e, t in zip(ends, starts)], dtype=bool)
+    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries[jumps])))
+    x, y, hdg = reference_pose(road, s, before=section.s_end)
+    for boundary, end in zip(boundaries[jumps], (e for e, jump in zip(ends, jumps) if jump)):
+        first = int(np.searchsorted(s, boundary, side="left"))
+        x[first], y[first], hdg[first] = (value[0] for value in end)
+    return s, x, y, hdg
+
+
+def _border_heights(
+    road: Road, section: LaneSection, s: NDArrayFloat, z: NDArrayFloat,
+    borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]],
+) -> dict[int, tuple[NDArrayFloat, NDArrayFloat]]:
+    """z (m) of each lane's (inner, outer) border: reference elevation plus superelevation."""
+    if not road.superelevation:
+        return {lane_id: (z, z) for lane_id in borders}
+    slope = np.tan(cubic_poly.evaluate(road.superelevation, s, before=section.s_end))
+    centre = z + slope * borders[0][0]
+    heights = {0: (centre, centre)}
+    for side in (section.left, section.right):
+        inner_z = centre
+        for lane in side:
+            if lane.id not in borders:
+                break
+            inner, outer = borders[lane.id]
+            outer_z = inner_z if lane.level else inner_z + slope * (outer - inner)
+            heights[lane.id] = (inner_z, outer_z)
+            inner_z = outer_z
+    return heights
+
+
 def _section_samples(
-    road: Road, section_index: int, step: float, lane_ids: Sequence[int]
+    road: Road, section_index: int, step: float, lane_ids: Sequence[int], record_ends: bool = False
 ) -> list[LaneBorderSamples]:
     """Samples of the listed lanes of one section; the reference line is evaluated once."""
     section = section_of(road, section_index)
     s = sample_s(section.s, section.s_end, step)
-    x, y, hdg = reference_pose(road, s, before=section.s_end)
+    if record_ends:
+        s, x, y, hdg = _reference_with_record_ends(road, section, s)
+    else:
+        x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
     z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
     outermost = max((abs(i) for i in lane_ids), default=0)
     borders = section_borders(road, section_index, s, outermost=outermost)
+    heights = _border_heights(road, section, s, z, borders)
 
-    def points(t: NDArrayFloat) -> NDArrayFloat:
-        return np.column_stack((x + t * normal_x, y + t * normal_y, z))
+    def points(lane_id: int, which: int) -> NDArrayFloat:
+        t = borders[lane_id][which]
+        return np.column_stack((x + t * normal_x, y + t * normal_y, heights[lane_id][which]))
 
-    return [
-        LaneBorderSamples(road.id, section_index, i, s, points(borders[i][0]), points(borders[i][1]))
-        for i in lane_ids
-    ]
+    return [LaneBorderSamples(road.id, section_index, i, s, points(i, 0), points(i, 1)) for i in lane_ids]
 
 
 def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: float = 0.1) -> LaneBorderSamples:
@@ -108,15 +167,18 @@ def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: floa
 
 
 def sample_road(
-    road: Road, step: float = 0.1, lane_types: Sequence[str] | None = ("driving",)
+    road: Road, step: float = 0.1, lane_types: Sequence[str] | None = ("driving",), *, record_ends: bool = False
 ) -> list[LaneBorderSamples]:
     """Borders of every lane whose type is in ``lane_types`` (None: all lanes), section by section.
 
-    Ordered by section, then left lanes outwards, then right lanes outwards.
+    Ordered by section, then left lanes outwards, then right lanes outwards. With
+    ``record_ends`` the end and start of every ``<geometry>`` record inside a section
+    are sampled too (see ``LaneBorderSamples.s``), so a jump between records is drawn
+    exactly rather than as a chord.
     """
     result: list[LaneBorderSamples] = []
     for index, section in enumerate(road.lane_sections):
         ids = [lane.id for lane in section.lanes if lane_types is None or lane.type in lane_types]
         if ids:
-            result.extend(_section_samples(road, index, step, ids))
+            result.extend(_section_samples(road, index, step, ids, record_ends))
     return result

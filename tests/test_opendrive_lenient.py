@@ -1,0 +1,166 @@
+"""Lenient reading of omitted coefficients (strict mode refuses them), superelevation,
+the lane ``direction`` attribute, geometry-record ends in exports and gap reports."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cold_maps.cli.maps import main
+from cold_maps.network.continuity import link_gaps, record_joints, reference_line_defects
+from cold_maps.network.lane_graph import LaneKey, build_lane_graph
+from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.parser import parse_opendrive
+from cold_maps.opendrive.sampling import sample_road
+
+LANES = """
+    <lanes><laneSection s="0">
+      <center><lane id="0" type="none"/></center>
+      <right><lane id="-1" type="driving" level="{level}"><link><predecessor id="-1"/><successor id="-1"/></link>
+               <width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>
+             <lane id="-2" type="driving"><link><predecessor id="-2"/><successor id="-2"/></link>
+               <width sOffset="0" a="3" b="0" c="0" d="0"/></lane></right>
+    </laneSection></lanes>"""
+
+
+def xodr(roads: str, header: str = "") -> bytes:
+    return f'<OpenDRIVE><header revMajor="1" revMinor="6">{header}</header>{roads}</OpenDRIVE>'.encode()
+
+
+def road(road_id: str, geometry: str, extra: str = "", level: str = "false", length: float = 20.0) -> str:
+    return (
+        f'<road id="{road_id}" length="{length}" junction="-1"><planView>{geometry}</planView>'
+        f"{extra}{LANES.format(level=level)}</road>"
+    )
+
+
+# RoadRunner-style empty records: a spiral without curvStart, a paramPoly3 with only its
+# non-zero coefficients, an elevation and a superelevation without values.
+ROADRUNNER = xodr(
+    road(
+        "1",
+        '<geometry s="0" x="0" y="0" hdg="0" length="10"><spiral curvEnd="0.02"/></geometry>'
+        '<geometry s="10" x="9.99667" y="0.33331" hdg="0.1" length="10"><paramPoly3 bU="1" pRange="arcLength"/></geometry>',
+        '<elevationProfile><elevation s="0"/></elevationProfile>'
+        "<lateralProfile><superelevation/></lateralProfile>",
+    )
+    + road("2", '<geometry s="0" x="0" y="50" hdg="0" length="20"><arc/></geometry>')
+)
+
+
+def test_omitted_coefficients_are_zero_with_one_warning_per_kind_and_road(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
+        odr_map = parse_opendrive(ROADRUNNER, path="rr.xodr")
+    spiral, poly = odr_map.roads["1"].plan_view
+    assert (spiral.curv_start, spiral.curv_end) == (0.0, 0.02)
+    assert (poly.au, poly.bu, poly.cu, poly.du, poly.av, poly.bv, poly.cv, poly.dv) == (0, 1, 0, 0, 0, 0, 0, 0)
+    assert odr_map.roads["1"].elevation[0] == odr_map.roads["1"].superelevation[0]  # all zeros
+    assert odr_map.roads["2"].plan_view[0].curvature == 0.0
+    messages = sorted(record.getMessage() for record in caplog.records)
+    assert messages == [
+        "rr.xodr: road 1: <elevation> without a, b, c, d: taken as 0 (strict mode refuses it)",
+        "rr.xodr: road 1: <paramPoly3> without aU, aV, bV, cU, cV, dU, dV: taken as 0 (strict mode refuses it)",
+        "rr.xodr: road 1: <spiral> without curvStart: taken as 0 (strict mode refuses it)",
+        "rr.xodr: road 1: <superelevation> without a, b, c, d, s: taken as 0 (strict mode refuses it)",
+        "rr.xodr: road 2: <arc> without curvature: taken as 0 (strict mode refuses it)",
+    ]
+    # the defaulted paramPoly3 is the straight line u = p: it ends 10 m along heading 0.1
+    x, y, _ = sample_road(odr_map.roads["1"], step=5.0)[0].inner[-1]
+    assert (x, y) == pytest.approx((9.99667 + 10 * math.cos(0.1), 0.33331 + 10 * math.sin(0.1)), abs=1e-9)
+
+
+def test_strict_mode_refuses_the_first_omission() -> None:
+    with pytest.raises(OpenDriveError, match="<spiral>: missing required attribute 'curvStart'"):
+        parse_opendrive(ROADRUNNER, path="rr.xodr", strict=True)
+
+
+def test_cli_strict_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    source = tmp_path / "rr.xodr"
+    source.write_bytes(ROADRUNNER)
+    assert main(["info", str(source)]) == 0
+    assert main(["info", "--strict", str(source)]) == 1
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_superelevation_raises_the_left_side_and_level_lanes_stay_flat() -> None:
+    slope = 0.05  # rad
+    extra = f'<lateralProfile><superelevation s="0" a="{slope}" b="0" c="0" d="0"/></lateralProfile>'
+    for level, flat in (("false", False), ("true", True)):
+        odr_map = parse_opendrive(xodr(road("1", '<geometry s="0" x="0" y="0" hdg="0" length="20"><line/></geometry>', extra, level)))
+        first, second = sample_road(odr_map.roads["1"], step=5.0)
+        np.testing.assert_allclose(first.inner[:, 2], 0.0, atol=1e-12)
+        lane1_outer = 0.0 if flat else -3.5 * math.tan(slope)
+        np.testing.assert_allclose(first.outer[:, 2], lane1_outer, atol=1e-12)
+        np.testing.assert_allclose(second.outer[:, 2], lane1_outer - 3.0 * math.tan(slope), atol=1e-12)
+        np.testing.assert_allclose(first.outer[:, 1], -3.5, atol=1e-12)  # horizontal position unchanged
+
+
+def test_reversed_lane_direction_turns_the_lane_graph_edge() -> None:
+    lanes = LANES.format(level="false").replace('<lane id="-2" type="driving">', '<lane id="-2" type="driving" direction="reversed">')
+    roads = "".join(
+        f'<road id="{i}" length="10" junction="-1"><link>{link}</link><planView>'
+        f'<geometry s="0" x="{10 * (i - 1)}" y="0" hdg="0" length="10"><line/></geometry></planView>{lanes}</road>'
+        for i, link in ((1, '<successor elementType="road" elementId="2" contactPoint="start"/>'),
+                        (2, '<predecessor elementType="road" elementId="1" contactPoint="end"/>'))
+    )
+    graph = build_lane_graph(parse_opendrive(xodr(roads)))
+    assert graph.successors[LaneKey("1", 0, -1)] == (LaneKey("2", 0, -1),)
+    assert graph.successors[LaneKey("2", 0, -2)] == (LaneKey("1", 0, -2),)
+    assert graph.successors[LaneKey("1", 0, -2)] == ()
+
+
+GAP_M = 0.04  # the second record starts 4 cm left of where the first ends, and 0.5 deg turned
+GAPPED = xodr(
+    road(
+        "7",
+        '<geometry s="0" x="0" y="0" hdg="0" length="10"><line/></geometry>'
+        f'<geometry s="10" x="10" y="{GAP_M}" hdg="{math.radians(0.5)}" length="10"><line/></geometry>',
+    )
+)
+
+
+def test_record_joints_size_gaps_and_kinks() -> None:
+    odr_map = parse_opendrive(GAPPED)
+    (joint,) = record_joints(odr_map)
+    assert (joint.road_id, joint.s) == ("7", 10.0)
+    assert joint.gap_m == pytest.approx(GAP_M, abs=1e-12)
+    assert math.degrees(joint.kink_rad) == pytest.approx(0.5, abs=1e-9)
+    assert reference_line_defects(odr_map, gap_m=0.05, kink_rad=math.radians(1.0)) == []
+
+
+def test_export_draws_the_jump_between_records_exactly(tmp_path: Path) -> None:
+    source, out = tmp_path / "gap.xodr", tmp_path / "gap.geojson"
+    source.write_bytes(GAPPED)
+    assert main(["export", str(source), "--step", "3", "--format", "geojson", "--crs", "local", "-o", str(out)]) == 0
+    collection = json.loads(out.read_text())
+    assert collection["cold_maps:crs"]["frame"] == "local"
+    inner = next(f for f in collection["features"] if f["properties"]["lane_id"] == -1 and f["properties"]["side"] == "left")
+    s = np.array(inner["properties"]["s"])
+    xy = np.array(inner["geometry"]["coordinates"])[:, :2]
+    at = np.flatnonzero(s == 10.0)
+    assert len(at) == 2  # driving along +s: the first record's end, then the second's start
+    np.testing.assert_allclose(xy[at[0]], (10.0, 0.0), atol=1e-4)
+    np.testing.assert_allclose(xy[at[1]], (10.0, GAP_M), atol=1e-4)
+
+
+def test_link_gaps_report_borders_that_miss(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    lanes = LANES.format(level="false")
+    roads = "".join(
+        f'<road id="{i}" length="10" junction="-1"><link>{link}</link><planView>'
+        f'<geometry s="0" x="{10 * (i - 1)}" y="{y}" hdg="0" length="10"><line/></geometry></planView>{lanes}</road>'
+        for i, y, link in ((1, 0.0, '<successor elementType="road" elementId="2" contactPoint="start"/>'),
+                           (2, 0.025, '<predecessor elementType="road" elementId="1" contactPoint="end"/>'))
+    )
+    gaps = link_gaps(build_lane_graph(parse_opendrive(xodr(roads))))
+    assert sorted((g.exit_lane.lane_id, round(g.distance_m, 9)) for g in gaps) == [(-2, 0.025), (-1, 0.025)]
+    source = tmp_path / "links.xodr"
+    source.write_bytes(xodr(roads))
+    assert main(["info", str(source)]) == 0
+    out = capsys.readouterr().out
+    assert "lane links whose borders miss by over 1 cm: 2 of 2" in out
+    assert "road 1 section 0 lane -1 -> road 2 section 0 lane -1: 2.5 cm" in out
