@@ -34,6 +34,7 @@ from typing import Final, Iterable
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
     Connection,
     CubicPoly,
@@ -67,8 +68,9 @@ _ONCE_PER_ROAD: Final[frozenset[str]] = frozenset({"link", "planView", "elevatio
 _BOOLEANS: Final[dict[str, bool]] = {"true": True, "1": True, "false": False, "0": False}
 
 
-def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) -> OpenDriveMap:
-    """Read and parse the OpenDRIVE file at ``path``.
+def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES,
+                   strict: bool = False) -> OpenDriveMap:
+    """Read and parse the OpenDRIVE file at ``path`` (``strict``: see ``parse_opendrive``).
 
     Files larger than ``max_bytes`` are rejected before they are read (size from
     ``os.stat``, and the read itself stops at ``max_bytes + 1``). Unreadable files and
@@ -85,13 +87,18 @@ def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BY
         raise OpenDriveError(f"cannot read file: {exc.strerror or exc}", path=name) from None
     if len(data) > max_bytes:
         raise OpenDriveError(f"file is more than the limit of {max_bytes} bytes", path=name)
-    return parse_opendrive(data, path=name)
+    return parse_opendrive(data, path=name, strict=strict)
 
 
-def parse_opendrive(data: bytes, *, path: str = "") -> OpenDriveMap:
-    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map."""
+def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> OpenDriveMap:
+    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map.
+
+    Road links and junction connections whose ``contactPoint`` contradicts the geometry
+    are repaired with a warning each (``links.repair_contact_points``), or refused with
+    ``OpenDriveError`` when ``strict``.
+    """
     root = parse_xml(data, path=path)
-    return _Reader(path).read_map(root)
+    return repair_contact_points(_Reader(path).read_map(root), strict=strict)
 
 
 def _strip_namespaces(root: etree._Element) -> None:
