@@ -135,6 +135,12 @@ class MapEvaluator:
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
             f"{self.coverage[0]} of {self.coverage[1]} driving lanes")
+        loop_m = min(d.ego.shortest_loop_m for d in self.drives)
+        farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
+        if loop_m < farthest_m:
+            collector.notes.append(
+                f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
+                f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
         frame_index = frame_offset
         for drive in self.drives:
             LOG.info("%s: route %s (%.0f m)", plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
