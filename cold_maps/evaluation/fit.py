@@ -78,7 +78,7 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
     if not 1 <= frames <= most:
         if most:
             all_fit = _most_frames(plan, longest_m, leads, distractors)
-            hint = f"at most {most} --frames fit ({all_fit} with every scenario)"
+            hint = f"at most {most} --frames fit" + (f" ({all_fit} with every scenario)" if all_fit else "")
         else:
             hint = (f"even one frame needs {_needed(plan, 1, (), ()):.0f} m ({SENSOR_RANGE_M:g} m sensor range, "
                     f"{ROUTE_MARGIN_M:g} m margin)")
