@@ -20,7 +20,9 @@ that differs from the sum of its geometry lengths, records and sections out of o
 zero-length lane sections, ``contactPoint`` on a link to a
 junction (dropped: the model has none for junctions), a missing road ``junction``
 attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``Lane``),
-a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor.
+a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor. Repaired with a
+warning (refused when ``strict``): a road link or junction connection whose
+``contactPoint`` names the far end of a road whose other end touches (``links``).
 Numbers use Python ``float`` syntax.
 """
 
