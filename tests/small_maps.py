@@ -12,7 +12,15 @@ from __future__ import annotations
 import math
 from typing import Final
 
-from adversarial_maps import LANE_WIDTH_M, LaneSpec, RoadSpec, SectionSpec, document, geometry, road_link
+from adversarial_maps import (
+    LANE_WIDTH_M,
+    LaneSpec,
+    RoadSpec,
+    SectionSpec,
+    document,
+    geometry,
+    road_link,
+)
 
 RING_REFERENCE_RADIUS_M: Final[float] = 4.4
 """Reference-line radius (m) of :func:`small_ring`; lane -1 (right of it, outside the

@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from small_maps import CONNECTING_ROAD_M, CONTRADICTING_ROAD_M, RING_REFERENCE_RADIUS_M, contradicting_links, \
-    ring_lap_m, small_ring, straight_road
+from small_maps import (
+    CONNECTING_ROAD_M,
+    CONTRADICTING_ROAD_M,
+    RING_REFERENCE_RADIUS_M,
+    contradicting_links,
+    ring_lap_m,
+    small_ring,
+    straight_road,
+)
 
 from cold_maps.cli import evaluate
 from cold_maps.evaluation.fit import fit_plan
@@ -25,7 +32,13 @@ from cold_maps.network.routing import longest_route_lengths
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.parser import parse_opendrive
-from cold_maps.simulation.drive import DriveError, Track, ahead_in_ego_frame, build_drive, lane_relation
+from cold_maps.simulation.drive import (
+    DriveError,
+    Track,
+    ahead_in_ego_frame,
+    build_drive,
+    lane_relation,
+)
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
 GAPS_M = (20.0, 30.0, 50.0)
@@ -101,7 +114,8 @@ def road_run(tmp_path_factory):
 def test_cold_eval_on_a_200_m_road_evaluates_what_fits(road_run, capsys):
     status, out = road_run
     assert status == 0
-    records = {(r["fusion"], r["d_s"], r["boundary"]): r for r in json.loads((out / "metrics.json").read_text())["scenarios"]}
+    document = json.loads((out / "metrics.json").read_text())
+    records = {(r["fusion"], r["d_s"], r["boundary"]): r for r in document["scenarios"]}
     assert {(f, d) for f, d, _ in records} == {("local", 0.0), ("convoy", 0.0), ("spline", 20.0), ("spline", 30.0)}
     for boundary in ("left", "right"):
         local = records[("local", 0.0, boundary)]

@@ -21,7 +21,12 @@ from dataclasses import dataclass, replace
 from typing import Final
 
 from cold_maps.evaluation.scenarios import MapPlan
-from cold_maps.simulation.drive import FRAME_RATE_HZ, ROUTE_MARGIN_M, DriveError, required_route_length
+from cold_maps.simulation.drive import (
+    FRAME_RATE_HZ,
+    ROUTE_MARGIN_M,
+    DriveError,
+    required_route_length,
+)
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
 FIT_TOLERANCE_M: Final[float] = 1e-6

@@ -23,7 +23,13 @@ from typing import Final, Iterable, Mapping
 import numpy as np
 
 from cold_maps.opendrive.errors import OpenDriveError
-from cold_maps.opendrive.model import ContactPoint, Junction, OpenDriveMap, Road, RoadLink
+from cold_maps.opendrive.model import (
+    ContactPoint,
+    Junction,
+    OpenDriveMap,
+    Road,
+    RoadLink,
+)
 from cold_maps.opendrive.reference_line import reference_pose
 
 LOG = logging.getLogger("cold_maps.opendrive")
@@ -72,7 +78,8 @@ def _road_ends(road: Road) -> dict[str, Point]:
     return {"start": (float(x[0]), float(y[0])), "end": (float(x[1]), float(y[1]))}
 
 
-def _check(what: str, written: ContactPoint, targets: Iterable[Point], ends: Mapping[str, Point]) -> Contradiction | None:
+def _check(what: str, written: ContactPoint, targets: Iterable[Point],
+           ends: Mapping[str, Point]) -> Contradiction | None:
     """The contradiction when the ``written`` end of a road (``ends``) is far from every
     point of ``targets`` and its other end touches one of them; None otherwise."""
     points = list(targets)
@@ -152,9 +159,11 @@ def repair_contact_points(odr_map: OpenDriveMap, *, strict: bool = False) -> Ope
     for contradiction in found:
         LOG.warning("%s: %s; repaired to contactPoint=\"%s\"", odr_map.path or "<input>", contradiction.describe(),
                     contradiction.repaired)
-    roads = {road_id: replace(road, predecessor=_repaired_link(road.predecessor, road_links.get((road_id, "predecessor"))),
+    roads = {road_id: replace(road,
+                              predecessor=_repaired_link(road.predecessor, road_links.get((road_id, "predecessor"))),
                               successor=_repaired_link(road.successor, road_links.get((road_id, "successor"))))
              for road_id, road in odr_map.roads.items()}
-    junctions = {junction_id: _repaired_junction(junction, {i: c for (j, i), c in connections.items() if j == junction_id})
+    junctions = {junction_id: _repaired_junction(junction, {i: c for (j, i), c in connections.items()
+                                                            if j == junction_id})
                  for junction_id, junction in odr_map.junctions.items()}
     return replace(odr_map, roads=roads, junctions=junctions)
