@@ -45,17 +45,20 @@ def straight_road(length_m: float = 200.0) -> str:
                     name="straight-road")
 
 
-def small_ring(radius_m: float = RING_REFERENCE_RADIUS_M) -> str:
-    """A one-way, one-lane ring: two half-circle roads (counter-clockwise reference arcs
-    of ``radius_m`` around the origin, lane -1 outside) each the other's successor."""
-    half = math.pi * radius_m
+def small_ring(radius_m: float = RING_REFERENCE_RADIUS_M, pieces: int = 2) -> str:
+    """A one-way, one-lane ring: ``pieces`` equal arc roads (counter-clockwise reference
+    arcs of ``radius_m`` around the origin, lane -1 outside), each the next one's
+    predecessor."""
+    piece = 2.0 * math.pi * radius_m / pieces
     roads = []
-    for index, (x, y, hdg) in enumerate(((radius_m, 0.0, math.pi / 2), (-radius_m, 0.0, -math.pi / 2))):
-        other = str(2 - index)
+    for index in range(pieces):
+        angle = 2.0 * math.pi * index / pieces
+        x, y, hdg = radius_m * math.cos(angle), radius_m * math.sin(angle), angle + math.pi / 2
+        before, after = str((index - 1) % pieces + 1), str((index + 1) % pieces + 1)
         section = SectionSpec(0.0, (LaneSpec(-1, predecessor=-1, successor=-1),))
-        roads.append(RoadSpec(str(index + 1), (geometry(0.0, x, y, hdg, half, f'<arc curvature="{1 / radius_m!r}"/>'),),
-                              half, (section,), predecessor=road_link("predecessor", "road", other, "end"),
-                              successor=road_link("successor", "road", other, "start")))
+        roads.append(RoadSpec(str(index + 1), (geometry(0.0, x, y, hdg, piece, f'<arc curvature="{1 / radius_m!r}"/>'),),
+                              piece, (section,), predecessor=road_link("predecessor", "road", before, "end"),
+                              successor=road_link("successor", "road", after, "start")))
     return document(roads, name="small-ring")
 
 
