@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import bundled_map, carla_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from small_maps import (
@@ -31,7 +32,7 @@ from cold_maps.network.lane_graph import build_lane_graph
 from cold_maps.network.routing import longest_route_lengths
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.links import repair_contact_points
-from cold_maps.opendrive.parser import parse_opendrive
+from cold_maps.opendrive.parser import load_opendrive, parse_opendrive
 from cold_maps.simulation.drive import (
     DriveError,
     Track,
@@ -253,3 +254,13 @@ def test_strict_mode_refuses_contradicting_links():
     with pytest.raises(OpenDriveError, match=r'bad\.xodr: road 1 successor road 2: contactPoint="start" is 50\.00 m '
                                              r"away.*\(and 2 more\); strict mode refuses"):
         parse_opendrive(contradicting_links().encode(), path="bad.xodr", strict=True)
+
+
+@pytest.mark.parametrize("name", ["straight", "curve90", "rural", "junction", "highway"])
+def test_bundled_maps_have_no_contradicting_links(name):
+    load_opendrive(bundled_map(name), strict=True)
+
+
+@pytest.mark.parametrize("name", ["Town01", "Town04"])
+def test_carla_towns_have_no_contradicting_links(name):
+    load_opendrive(carla_map(name), strict=True)
