@@ -225,21 +225,33 @@ def test_merge_and_param_poly3_under_every_error_model(tmp_path_factory):
         assert fused["fused_frames"] > 0 and fused["max_error_m"] < 1.5
 
 
-def test_map_shorter_than_a_drive_fails_cleanly(tmp_path_factory, capsys):
+def test_map_shorter_than_the_plan_evaluates_what_fits(tmp_path_factory, capsys):
     status, out = _run(tmp_path_factory, "short", two_roads(40.0))
+    assert status == 0
+    result = capsys.readouterr().out.strip().splitlines()
+    assert len(result) == 1 and "short: what did not fit the map is listed in summary.md" in result[0]
+    _, records = _scenarios(out)
+    # 6 frames (5 m) + 60 m spline coop + 35 m > 80 m; the convoy (25 m) fits, without its 25 m behind
+    assert {fusion for fusion, _ in records} == {"local", "convoy"}
+    summary = (out / "summary.md").read_text()
+    assert "short: no distractors 25, 60 m ahead and behind" in summary
+    assert "short: dropped spline-hermite-d30 (coops 60 m ahead): 6 frames need 100 m of route" in summary
+
+
+def test_map_shorter_than_one_frame_fails_cleanly(tmp_path_factory, capsys):
+    status, out = _run(tmp_path_factory, "tiny", two_roads(15.0))
     assert status == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
-    assert "no drivable route" in err[0] and "(longest 80 m)" in err[0]
-    assert "even one frame needs" in err[0] and "--no-distractors" in err[0]
+    assert "no drivable route" in err[0] and "(longest 30 m)" in err[0] and "even one frame needs 35 m" in err[0]
     assert not out.exists()
 
 
 def test_too_many_frames_names_the_most_that_fit(tmp_path_factory, capsys):
     status, out = _run(tmp_path_factory, "long", two_roads(150.0), "--no-distractors", "--frames", "1000")
     assert status == 1
-    # one frame needs 60 m (spline coop) + 30 m range + 5 m margin; 10 frames per second at 10 m/s
-    assert "at most 206 --frames fit" in capsys.readouterr().err
+    # local: 30 m range + 5 m margin; the spline coop 60 m more; 10 frames per second at 10 m/s
+    assert "at most 266 --frames fit (206 with every scenario)" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
                         help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
     parser.add_argument("--frames", type=_positive_int, default=None,
-                        help=f"frames per route (default {DEFAULT_FRAMES}; --paper: the whole route at 1 m per frame)")
+                        help=f"frames per route (default {DEFAULT_FRAMES}, fewer on a map too short for them; "
+                             "--paper: the whole route at 1 m per frame)")
     parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")
     parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
@@ -111,8 +112,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         seen[path.stem] = path
     params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)
-    return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, routes=args.routes, seed=args.seed,
-                    speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params)
+    return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, frames_at_most=args.frames is None,
+                    routes=args.routes, seed=args.seed, speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params)
             for path in args.map]
 
 
@@ -156,7 +157,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}",
               file=sys.stderr)
         return 1
-    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}")
+    reduced = run.collector.reduced_maps
+    fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
+    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}")
     return 0
 
 

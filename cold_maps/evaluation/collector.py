@@ -38,7 +38,9 @@ class Collector:
         check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
             overlap check for convoy (ms).
         overlays: (map, scenario label) → the frame with the largest error.
-        notes: lines for the summary (routes, lane coverage).
+        notes: lines for the summary (routes, lane coverage, what did not fit a map).
+        reduced_maps: names of the maps evaluated with fewer frames, distractors or
+            scenarios than asked, because their longest route is too short.
         frames_done: frames evaluated.
     """
 
@@ -47,6 +49,7 @@ class Collector:
     check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    reduced_maps: list[str] = field(default_factory=list)
     frames_done: int = 0
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:

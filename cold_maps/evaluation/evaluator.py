@@ -24,11 +24,13 @@ import numpy as np
 
 import fusion
 from cold_maps.evaluation.collector import Collector, Overlay
+from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.network.routing import longest_route_lengths
 from cold_maps.simulation.detection import Sensed, detection_pose, sense, world_borders
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
@@ -38,7 +40,6 @@ from cold_maps.simulation.drive import (
     build_drive,
     covering_routes,
     lane_relation,
-    required_route_length,
     route_from_start,
 )
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
@@ -59,7 +60,9 @@ class MapEvaluator:
     """Evaluates one :class:`MapPlan`: loads the map and its ground truth, builds the drives
     and runs them frame by frame into a :class:`Collector`.
 
-    Raises ``DriveError`` (no drivable route, route too short) on construction.
+    Raises ``DriveError`` (no drivable route, not even for the local scenario) on
+    construction; on a map too small for the whole plan it evaluates what fits
+    (``evaluation.fit``, ``fit_notes``).
     """
 
     def __init__(self, plan: MapPlan, *, ground_truth: GroundTruth | None = None,
@@ -67,6 +70,7 @@ class MapEvaluator:
         self.plan = plan
         self.graph = graph or load_graph(plan.path)
         self.rng = np.random.default_rng(plan.seed)
+        self.fit_notes: tuple[str, ...] = ()
         self.drives, self.coverage = self._drives()
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
@@ -79,40 +83,31 @@ class MapEvaluator:
         return sum(d.frames for d in self.drives)
 
     def _drives(self) -> tuple[list[Drive], tuple[int, int]]:
-        """The drives, and (lanes their routes cover, driving lanes of the map)."""
+        """The drives, and (lanes their routes cover, driving lanes of the map). Fits the
+        plan to the map's longest route first (``evaluation.fit``): ``self.plan`` then
+        holds only what fits, ``self.fit_notes`` says what was left out."""
         plan = self.plan
-        leads = plan.coop_leads_m
-        distractor_leads = leads if plan.distractors else ()
-        length = required_route_length(plan.frames, leads, behind_m=max(distractor_leads, default=0.0),
-                                       speed_mps=plan.speed_mps)
-        try:
-            if plan.start_lane is None:
-                routes = covering_routes(self.graph, plan.routes, length, self.rng)
-            else:
-                routes = [route_from_start(self.graph, plan.start_lane, length, self.rng)
-                          for _ in range(plan.routes or 1)]
-        except DriveError as exc:
-            if exc.longest_m is None:
-                raise
-            raise DriveError(f"{exc}; {self._length_hint(exc.longest_m)}", longest_m=exc.longest_m) from None
+        if not self.graph.lanes:
+            raise DriveError(f"{plan.path}: the map has no driving lanes")
+        longest = longest_route_lengths(self.graph)
+        if plan.start_lane is None:
+            fitted = fit_plan(plan, max(longest.values()), where=str(plan.path))
+        else:
+            if plan.start_lane not in longest:
+                raise DriveError(f"{plan.path}: start lane {tuple(plan.start_lane)} is not in the lane graph")
+            fitted = fit_plan(plan, longest[plan.start_lane], where=f"{plan.path} from lane {tuple(plan.start_lane)}")
+        self.plan = plan = fitted.plan
+        self.fit_notes = fitted.notes
+        if plan.start_lane is None:
+            routes = covering_routes(self.graph, plan.routes, fitted.needed_m, self.rng)
+        else:
+            routes = [route_from_start(self.graph, plan.start_lane, fitted.needed_m, self.rng)
+                      for _ in range(plan.routes or 1)]
         covered = {lane for route in routes for lane in route}
-        drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads, distractor_leads_m=distractor_leads,
-                              rng=self.rng, speed_mps=plan.speed_mps) for lanes in routes]
+        drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=plan.coop_leads_m,
+                              distractor_leads_m=fitted.distractor_leads_m, rng=self.rng, speed_mps=plan.speed_mps)
+                  for lanes in routes]
         return drives, (len(covered), len(self.graph.lanes))
-
-    def _length_hint(self, longest_m: float) -> str:
-        """What to change when the longest route (m) is too short for the plan's drives."""
-        plan = self.plan
-        leads = plan.coop_leads_m
-        behind = max(leads, default=0.0) if plan.distractors else 0.0
-        one = required_route_length(1, leads, behind_m=behind, speed_mps=plan.speed_mps)
-        if longest_m >= one:
-            step_m = plan.speed_mps / FRAME_RATE_HZ
-            return f"at most {1 + int((longest_m - one) // step_m)} --frames fit"
-        what = "shorter --gaps" + (" or --no-distractors" if behind > 0 else "")
-        return (f"even one frame needs {one:.0f} m (coops up to {max(leads, default=0.0):g} m ahead, "
-                f"{SENSOR_RANGE_M:g} m sensor range" + (f", a vehicle {behind:g} m behind" if behind > 0 else "")
-                + f"): use {what}")
 
     def prepare(self) -> None:
         """Loads (or converts, cached) the Lanelet2 ground truth if not given."""
@@ -134,9 +129,18 @@ class MapEvaluator:
         """
         self.prepare()
         plan = self.plan
+        collector.notes.extend(self.fit_notes)
+        if self.fit_notes:
+            collector.reduced_maps.append(plan.name)
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
             f"{self.coverage[0]} of {self.coverage[1]} driving lanes")
+        loop_m = min(d.ego.shortest_loop_m for d in self.drives)
+        farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
+        if loop_m < farthest_m:
+            collector.notes.append(
+                f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
+                f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
         frame_index = frame_offset
         for drive in self.drives:
             LOG.info("%s: route %s (%.0f m)", plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)

@@ -98,6 +98,8 @@ class MapPlan:
         path: the OpenDRIVE file.
         scenarios: the fusion set-ups.
         frames: frames per drive.
+        frames_at_most: ``frames`` is an upper bound: a map whose longest route is too
+            short for them is driven for as many as fit (``evaluation.fit``).
         routes: drives (routes) on the map; None for as many as cover its lanes.
         seed: seed of the route choice and of the error models.
         speed_mps: ego speed (m/s); frames at ``FRAME_RATE_HZ``.
@@ -111,6 +113,7 @@ class MapPlan:
     path: Path
     scenarios: tuple[Scenario, ...]
     frames: int = 100
+    frames_at_most: bool = False
     routes: int | None = 3
     seed: int = 0
     speed_mps: float = DEFAULT_SPEED_MPS

@@ -20,6 +20,21 @@ if TYPE_CHECKING:
 
 MATCH_CACHE_SIZE: Final[int] = 16
 """Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
+RANGE_ERROR_THRESHOLD_M: Final[float] = 1.0
+"""A stretch of a detected border counts towards the perception range only where its
+points lie within this distance (m) of the GT: the paper (sec. IV) calls interpolation
+distances whose maximum error exceeds 1 m not reliable."""
+
+
+def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
+                     threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> float:
+    """Perception range of a detected border: the arc length (m) along the border
+    (``(N, 2)``, world frame, driving order) of the segments whose two end points both
+    lie within ``threshold_m`` of the GT (``errors_m``, per point). Never negative; the
+    whole length of a border that is everywhere within the threshold."""
+    segments = np.hypot(*np.diff(border, axis=0).T)
+    within = errors_m <= threshold_m
+    return float(np.sum(segments[within[:-1] & within[1:]]))
 
 
 @dataclass(frozen=True)
@@ -29,8 +44,8 @@ class Measurement:
     Fields:
         left_errors_m, right_errors_m: per detected point, the distance to the GT border
             resampled every ``step_m``.
-        left_range_m, right_range_m: length of the lane along its GT border, from the
-            projection of its first point to that of its last.
+        left_range_m, right_range_m: perception range: length of the detected border
+            within ``RANGE_ERROR_THRESHOLD_M`` of the GT (``covered_length_m``).
         left_gt, right_gt: the GT borders (``(M, 2)``) the lane was matched to.
         matched: False when the lane does not follow the sender's lane (see gt_matching).
     """
@@ -74,8 +89,8 @@ class GroundTruthMeter:
         """Closest-point errors and range of a lane against the GT borders of ``match``."""
         found = self.ground_truth.errors(left, right, match, others=False)
         return Measurement(found.left.distances_m, found.right.distances_m,
-                           float(found.left.arc_m[-1] - found.left.arc_m[0]),
-                           float(found.right.arc_m[-1] - found.right.arc_m[0]),
+                           covered_length_m(np.asarray(left, dtype=np.float64), found.left.distances_m),
+                           covered_length_m(np.asarray(right, dtype=np.float64), found.right.distances_m),
                            match.left_gt, match.right_gt, match.matched)
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,

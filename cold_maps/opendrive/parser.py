@@ -20,7 +20,9 @@ that differs from the sum of its geometry lengths, records and sections out of o
 zero-length lane sections, ``contactPoint`` on a link to a
 junction (dropped: the model has none for junctions), a missing road ``junction``
 attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``Lane``),
-a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor.
+a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor. Repaired with a
+warning (refused when ``strict``): a road link or junction connection whose
+``contactPoint`` names the far end of a road whose other end touches (``links``).
 Numbers use Python ``float`` syntax.
 
 Lenient by default, like mainstream readers (libOpenDRIVE): a polynomial coefficient,
@@ -42,6 +44,7 @@ from typing import Final, Iterable
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
     Connection,
     CubicPoly,
@@ -81,7 +84,7 @@ _LOG: Final[logging.Logger] = logging.getLogger(__name__)
 def load_opendrive(
     path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES, strict: bool = False
 ) -> OpenDriveMap:
-    """Read and parse the OpenDRIVE file at ``path``.
+    """Read and parse the OpenDRIVE file at ``path`` (``strict``: see ``parse_opendrive``).
 
     Files larger than ``max_bytes`` are rejected before they are read (size from
     ``os.stat``, and the read itself stops at ``max_bytes + 1``). Unreadable files and
@@ -105,10 +108,12 @@ def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> Ope
     """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map.
 
     ``strict``: refuse records that omit a coefficient, curvature or start (else they
-    are 0 with a warning, see the module docstring).
+    are 0 with a warning, see the module docstring), and road links and junction
+    connections whose ``contactPoint`` contradicts the geometry (else repaired with a
+    warning each, ``links.repair_contact_points``).
     """
     root = parse_xml(data, path=path)
-    return _Reader(path, strict).read_map(root)
+    return repair_contact_points(_Reader(path, strict).read_map(root), strict=strict)
 
 
 def _strip_namespaces(root: etree._Element) -> None:

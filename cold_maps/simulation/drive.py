@@ -47,6 +47,9 @@ MAX_COVER_ROUTES: Final[int] = 1000
 """Most routes drawn to cover a map's lanes."""
 
 Role = Literal["ego", "coop", "turn", "adjacent", "opposite", "behind"]
+SHARED_STATION_ROLES: Final[tuple[str, ...]] = ("coop", "turn", "behind")
+"""Roles whose track shares the ego's stations (up to a branch point): their ``lead_m``
+is their distance along the drive from the ego."""
 
 
 class DriveError(ValueError):
@@ -96,6 +99,26 @@ class Track:
         stations = np.concatenate(([start], strip.station[inside], [end]))
         _, left, right = strip.interpolate(stations)
         return left, right
+
+    def _repeats(self) -> list[tuple[int, int]]:
+        """Index pairs (i, j), i < j, of the same lane passed twice."""
+        seen: dict[LaneKey, list[int]] = {}
+        for index, lane in enumerate(self.lanes):
+            seen.setdefault(lane, []).append(index)
+        return [(first, again) for indices in seen.values() for n, first in enumerate(indices)
+                for again in indices[n + 1:]]
+
+    @property
+    def shortest_loop_m(self) -> float:
+        """Length (m) of the shortest loop the track circles; inf when it passes no lane twice."""
+        return min((float(self.lane_starts[j] - self.lane_starts[i]) for i, j in self._repeats()), default=math.inf)
+
+    def wraps(self, start: float, end: float) -> bool:
+        """True when the stretch of stations [``start``, ``end``] (m) passes some point of a
+        lane twice: the track circles a loop shorter than the stretch."""
+        starts = self.lane_starts
+        return any(max(starts[i], start) <= min(starts[i + 1], end - (starts[j] - starts[i]))
+                   for i, j in self._repeats())
 
     def lane_at(self, station: float) -> tuple[int, float]:
         """Index of the lane at ``station`` and the distance (m) driven in it."""
@@ -184,7 +207,9 @@ class Drive:
 
     def states(self, frame: int) -> dict[str, VehicleState]:
         """Every vehicle present in ``frame`` (ego first), by name. A vehicle is present
-        when it stands on its track with a full sensor range of lane ahead of it."""
+        when it stands on its track with a full sensor range of lane ahead of it, and (on
+        a track through a loop) the stretch from the ego, or the vehicle behind it, to the
+        end of the farther one's detection does not circle the loop (``Track.wraps``)."""
         if not 0 <= frame < self.frames:
             raise ValueError(f"frame {frame} outside the drive's 0..{self.frames - 1}")
         ego_station = self.ego_station(frame)
@@ -208,6 +233,8 @@ class Drive:
             if vehicle.role == "turn" and not ego_station < vehicle.branch_station_m < target:
                 return None
             if not self._fits(vehicle.track, target):
+                return None
+            if vehicle.track.wraps(min(ego_station, target), max(ego_station, target) + self.sensor_range_m):
                 return None
             return self._state(vehicle.name, vehicle.role, vehicle.track, target, vehicle.lead_m)
         if not self._fits(self.ego, target):
@@ -382,14 +409,27 @@ def _reachable(graph: LaneGraph, lane: LaneKey, offset_m: float, coop: VehicleSt
     return entry is not None and 0.0 < entry + coop.lane_offset_m <= max_distance_m
 
 
+def ahead_in_ego_frame(ego: VehicleState, other: VehicleState) -> bool:
+    """True when ``other`` stands ahead of the ego in the ego's vehicle frame (x > 0),
+    both at their true positions on their tracks' centrelines."""
+    x, y, yaw = ego.track.strip.pose(ego.station)
+    other_x, other_y, _ = other.track.strip.pose(other.station)
+    return (other_x - x) * math.cos(yaw) + (other_y - y) * math.sin(yaw) > 0.0
+
+
 def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_distance_m: float,
                   detection_m: float = 0.0) -> bool:
-    """True when ``coop`` drives on the lane the ego detected: ahead of the ego along the
-    lane graph by at most ``max_distance_m`` (m) of lane, and either on the stretch of the
-    ego's track its detection covers (``detection_m`` ahead) or on a lane reachable from
-    where that detection ends. Adjacent and opposite lanes, vehicles behind, and a coop on
-    another branch of a fork the ego's detection has already passed are not."""
-    if not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
+    """True when ``coop`` drives on the lane the ego detected: ahead of the ego in the
+    ego's vehicle frame; ahead of it along the lane graph by at most ``max_distance_m``
+    (m) of lane, on the drive itself for a vehicle sharing the ego's stations (``coop``,
+    ``turn``, ``behind``: ``0 < lead_m``), so that on a loop a vehicle behind does not
+    count as reachable ahead around it; and either on the stretch of the ego's track its
+    detection covers (``detection_m`` ahead) or on a lane reachable from where that
+    detection ends. Adjacent and opposite lanes, vehicles behind, and a coop on another
+    branch of a fork the ego's detection has already passed are not."""
+    if coop.role in SHARED_STATION_ROLES and not 0.0 < coop.lead_m <= max_distance_m:
+        return False
+    if not ahead_in_ego_frame(ego, coop) or not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
         return False
     track = ego.track
     first, _ = track.lane_at(ego.station)
