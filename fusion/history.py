@@ -1,0 +1,179 @@
+"""Spline fusion across a gap the cooperative vehicle drove through: its lane history.
+
+A coop detection may carry :class:`fusion.types.LaneHistory`: the lane the coop perceived
+over its last metres of travel, registered with its own odometry, in its vehicle frame
+and ending where its current detection starts. Where that history covers the gap between
+the ego's detection end and the coop's detection start, the gap is *observed* geometry
+instead of an interpolation; only what no history covers is interpolated (``paper`` or
+``hermite``, :func:`fusion.fuse`).
+
+Seams (both borders, each on its own):
+
+- *ego seam*: the ego border's last point ``e`` projects onto the history at arc length
+  s_e (foot ``h(s_e)``); the history before s_e (behind the ego's end) is dropped.
+- *coop seam*: the history ends (at arc length s_c) where the coop border starts (``c``),
+  the same place seen at two instants; its offset there is ``c − h(s_c)`` across the
+  lane's direction there (the along-track part is only the two samplings' spacing).
+- Between them each history point at arc length s is moved by
+  ``(1 − w)·Δ_e + w·Δ_c`` with ``w = (s − s_e) / (s_c − s_e)``, Δ_e = ``e − h(s_e)`` and Δ_c
+  the coop seam offset: the two offsets (the coop's pose error, odometry drift, detection
+  noise) fade linearly along the gap. The result runs exactly through ``e`` and across
+  ``c`` (no jump, C0), keeps the history's shape (a constant offset is removed exactly, a
+  drift that grows linearly along the gap too), and its direction changes at a seam by
+  |Δ_e − Δ_c| / (s_c − s_e) at most.
+
+Checks: the history must pass within ``convoy_max_offset_m`` of the ego border end, with a
+heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps* the ego's
+detection, so the convoy tolerances apply: a neighbour lane lies a lane width away). A
+history that does not reach back to the ego's end is joined to the coop detection (same
+seam offset faded along the history) and the remaining gap goes to :func:`fusion.fuse`,
+whose fusibility check then sees the history's start.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+import numpy as np
+
+from fusion.api import DEFAULT_PARAMS, ego_frame_result, fuse
+from fusion.errors import InvalidDetectionError
+from fusion.fusibility import lane_ends, relative_pose
+from fusion.geometry import cumulative_length, end_direction, project_point, transform
+from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+
+_HEADING_WINDOW_M: Final[float] = 2.0
+_MIN_COVER_M: Final[float] = 1e-6
+_HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
+_EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
+
+
+def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
+    """Unit tangent (driving direction) of a polyline around vertex ``at`` by a ~2 m chord."""
+    lo, hi = max(0, at - 10), min(points.shape[0] - 1, at + 10)
+    return end_direction(points[lo: hi + 1], True, _HEADING_WINDOW_M)
+
+
+def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, ego_offset: NDArrayFloat,
+               coop_offset: NDArrayFloat, *, keep_first: bool = False) -> NDArrayFloat:
+    """History points after arc length ``s_from`` (from it with ``keep_first``) and before the
+    last one, each moved by the seam offsets faded linearly in arc length (see the module
+    docstring): ``ego_offset`` (m, 2-vector) at ``s_from``, ``coop_offset`` at the history's end."""
+    after = s_history >= s_from if keep_first else s_history > s_from + _MIN_COVER_M
+    keep = after & (s_history < s_history[-1])
+    span = s_history[-1] - s_from
+    w = ((s_history[keep] - s_from) / span)[:, None]
+    return history[keep] + (1.0 - w) * ego_offset + w * coop_offset
+
+
+def _foot(points: NDArrayFloat, s: NDArrayFloat, at: float) -> NDArrayFloat:
+    """Point of a polyline at arc length ``at`` (linear between vertices)."""
+    return np.array([np.interp(at, s, points[:, 0]), np.interp(at, s, points[:, 1])])
+
+
+def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
+    """Offset [m] of the coop border's first point from the history's end, across the
+    lane's direction there (the along-track part is the spacing of the two, not an error); the
+    direction is the mean of the two chords that end and start there, exact on an arc."""
+    (hx, hy), (cx, cy) = end_direction(history, True, _HEADING_WINDOW_M), end_direction(coop, False, _HEADING_WINDOW_M)
+    norm = math.hypot(hx + cx, hy + cy) or 1.0
+    tx, ty = (hx + cx) / norm, (hy + cy) / norm
+    dx, dy = (coop[0] - history[-1]).tolist()
+    across = -ty * dx + tx * dy
+    return np.array([-ty * across, tx * across])
+
+
+def _cover(ego: NDArrayFloat, history: NDArrayFloat, s_history: NDArrayFloat) -> tuple[float, float, float] | None:
+    """``(s_e, offset m, heading difference rad)`` of the ego border end on the history, or
+    None when the history does not reach back past it."""
+    s_e, offset, k = project_point(ego[-1], history, s_history)
+    if s_e <= _MIN_COVER_M or s_e >= s_history[-1] - _MIN_COVER_M:
+        return None
+    ex, ey = end_direction(ego, True, _HEADING_WINDOW_M)
+    hx, hy = _heading(history, k)
+    return s_e, offset, abs(math.atan2(ex * hy - ey * hx, ex * hx + ey * hy))
+
+
+def _reason(side: str, offset: float, heading: float, params: FusionParams) -> str:
+    if offset > params.convoy_max_offset_m:
+        return (f"coop history passes {offset:.2f} m from the ego {side} border end "
+                f"(> {params.convoy_max_offset_m:.2f} m): another lane")
+    if heading > params.convoy_max_heading_rad:
+        return (f"coop history heads {math.degrees(heading):.1f} deg away from the ego {side} border at its end "
+                f"(> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
+    return ""
+
+
+def _ahead_of(points: NDArrayFloat, end: tuple[float, float], direction: tuple[float, float]) -> NDArrayFloat:
+    """Mask of the points beyond the line through ``end`` normal to ``direction``."""
+    return (points - np.array(end)) @ np.array(direction) > _MIN_COVER_M
+
+
+def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
+                 params: FusionParams = DEFAULT_PARAMS) -> FusionResult:
+    """Collectively perceived lane of ``ego`` extended by ``coop`` and its history.
+
+    Without ``coop.history``, with ``mode="convoy"`` or when the detections overlap, this is
+    :func:`fusion.fuse`. When the history covers the gap on both borders the result is the ego
+    lane, the blended history (:class:`Source` ``COOP_HISTORY``) and the coop lane,
+    ``kind="history"`` (seams in the module docstring); otherwise the history extends the coop
+    detection backwards and :func:`fusion.fuse` interpolates the rest (history points still
+    labelled ``COOP_HISTORY``). Output in the world frame.
+    """
+    history = coop.history
+    if history is None or mode == "convoy":
+        return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+    if not isinstance(ego, LaneDetection):
+        raise InvalidDetectionError(f"ego must be a LaneDetection, got {type(ego).__name__}")
+    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
+    n_left, n_hist_left = coop.left.shape[0], history.left.shape[0]
+    moved = transform(np.concatenate((coop.points, history.left, history.right)), x_rel, y_rel, psi_rel)
+    cl, cr = moved[:n_left], moved[n_left: coop.points.shape[0]]
+    hl, hr = moved[coop.points.shape[0]: coop.points.shape[0] + n_hist_left], moved[coop.points.shape[0] + n_hist_left:]
+    el, er = ego.left, ego.right
+    ends = lane_ends(el, er, cl, cr)
+    if x_rel <= 0.0 or ends.gap_m <= 0.0:
+        return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+    s_hl, s_hr = cumulative_length(hl), cumulative_length(hr)
+    covers = (_cover(el, hl, s_hl), _cover(er, hr, s_hr))
+    if covers[0] is not None and covers[1] is not None:
+        for side, (_, offset, heading) in zip(("left", "right"), covers):
+            reason = _reason(side, offset, heading, params)
+            if reason:
+                return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
+        gaps = [seam_blend(h, s, cover[0], e[-1] - _foot(h, s, cover[0]), _coop_offset(h, c))
+                for h, s, cover, e, c in ((hl, s_hl, covers[0], el, cl), (hr, s_hr, covers[1], er, cr))]
+        return ego_frame_result(ego, (el, gaps[0], cl, er, gaps[1], cr), _HISTORY_SOURCES, "history", ends.gap_m)
+    return _partial(ego, coop, (hl, hr), ends.p_end, ends.t_end, mode, interpolation, params)
+
+
+def _partial(ego: LaneDetection, coop: LaneDetection, moved: tuple[NDArrayFloat, NDArrayFloat],
+             p_end: tuple[float, float], t_end: tuple[float, float], mode: str, interpolation: str,
+             params: FusionParams) -> FusionResult:
+    """A history short of the ego's end: its part beyond the ego's end (``moved``: the history
+    in the ego frame) joined to the coop detection, the seam offset faded in along it (in the
+    coop frame: the blend is affine, so frame-independent), the rest interpolated by
+    :func:`fusion.fuse`."""
+    assert coop.history is not None
+    extended = []
+    for in_ego, history, first in zip(moved, (coop.history.left, coop.history.right), (coop.left, coop.right)):
+        ahead = history[_ahead_of(in_ego, p_end, t_end)]
+        if ahead.shape[0] < 2:
+            return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+        joined = seam_blend(ahead, cumulative_length(ahead), 0.0, np.zeros(2), _coop_offset(ahead, first),
+                            keep_first=True)
+        extended.append(np.concatenate((joined, first)))
+    longer = LaneDetection(coop.pose, extended[0], extended[1], stamp=coop.stamp, sender=coop.sender)
+    result = fuse(ego, longer, mode=mode, interpolation=interpolation, params=params)
+    if result.kind == "none":
+        return result
+    labels = []
+    for source, border, own in ((result.left_source, longer.left, coop.left),
+                                (result.right_source, longer.right, coop.right)):
+        relabelled = source.copy()
+        n_coop = int(np.count_nonzero(source == Source.COOP))
+        first_coop = source.shape[0] - n_coop
+        relabelled[first_coop: first_coop + min(n_coop, border.shape[0] - own.shape[0])] = Source.COOP_HISTORY
+        labels.append(relabelled)
+    return FusionResult(result.left, result.right, labels[0], labels[1], result.kind, result.gap_m, result.reason)
