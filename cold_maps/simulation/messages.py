@@ -47,6 +47,10 @@ EXCHANGES: Final[tuple[str, ...]] = ("none", "sampled", "bezier")
 POSE_BYTES: Final[int] = 4 * 4
 """Message header: sender x, y (m), yaw (rad) and stamp (s) as float32 (the receiver sees the
 pose rounded to float32: 3·10⁻⁵ m at 500 m from the map origin)."""
+DEFAULT_MAX_INTERVAL_S: Final[float] = 1.0
+"""Longest time (s) between two messages (ETSI's T_GenCpmMax)."""
+DEFAULT_CHANGE_TOLERANCE_M: Final[float] = 0.10
+"""RMS lane change (m) that triggers a message."""
 DECODE_SPACING_M: Final[float] = 0.10
 """Point spacing (m) of a decoded Bézier lane (the sensor's)."""
 
@@ -68,9 +72,9 @@ class MessageModel:
     exchange: Exchange = "none"
     bezier_tolerance_m: float = fusion.bezier.DEFAULT_TOLERANCE_M
     min_interval_s: float = 0.1
-    max_interval_s: float = 1.0
+    max_interval_s: float = DEFAULT_MAX_INTERVAL_S
     move_tolerance_m: float = 4.0
-    change_tolerance_m: float = 0.10
+    change_tolerance_m: float = DEFAULT_CHANGE_TOLERANCE_M
     loss_probability: float = 0.0
     latency_s: float = 0.0
 
