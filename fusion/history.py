@@ -40,7 +40,7 @@ import numpy as np
 from fusion.api import DEFAULT_PARAMS, ego_frame_result, fuse
 from fusion.errors import InvalidDetectionError
 from fusion.fusibility import lane_ends, relative_pose
-from fusion.geometry import cumulative_length, end_direction, project_point, transform
+from fusion.geometry import cumulative_length, end_direction, norms, project_point, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 _HEADING_WINDOW_M: Final[float] = 2.0
@@ -60,16 +60,13 @@ def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, eg
     """History points after arc length ``s_from`` (from it with ``keep_first``) and before the
     last one, each moved by the seam offsets faded linearly in arc length (see the module
     docstring): ``ego_offset`` (m, 2-vector) at ``s_from``, ``coop_offset`` at the history's end."""
-    after = s_history >= s_from if keep_first else s_history > s_from + _MIN_COVER_M
-    keep = after & (s_history < s_history[-1])
-    span = s_history[-1] - s_from
-    w = ((s_history[keep] - s_from) / span)[:, None]
-    return history[keep] + (1.0 - w) * ego_offset + w * coop_offset
-
-
-def _foot(points: NDArrayFloat, s: NDArrayFloat, at: float) -> NDArrayFloat:
-    """Point of a polyline at arc length ``at`` (linear between vertices)."""
-    return np.array([np.interp(at, s, points[:, 0]), np.interp(at, s, points[:, 1])])
+    first = int(np.searchsorted(s_history, s_from if keep_first else s_from + _MIN_COVER_M,
+                                side="left" if keep_first else "right"))
+    last = s_history.shape[0] - 1
+    w = (s_history[first:last] - s_from) / (s_history[-1] - s_from)
+    e, c = complex(*ego_offset), complex(*coop_offset)
+    z = np.ascontiguousarray(history[first:last]).view(np.complex128)[:, 0] + e + w * (c - e)
+    return z.view(np.float64).reshape(-1, 2)
 
 
 def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
@@ -84,15 +81,25 @@ def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
     return np.array([-ty * across, tx * across])
 
 
-def _cover(ego: NDArrayFloat, history: NDArrayFloat, s_history: NDArrayFloat) -> tuple[float, float, float] | None:
-    """``(s_e, offset m, heading difference rad)`` of the ego border end on the history, or
-    None when the history does not reach back past it."""
-    s_e, offset, k = project_point(ego[-1], history, s_history)
-    if s_e <= _MIN_COVER_M or s_e >= s_history[-1] - _MIN_COVER_M:
+def _cover(end: NDArrayFloat, direction: complex,
+           history: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, float, float, float, NDArrayFloat] | None:
+    """Where an ego border end (point ``end``, unit direction ``direction`` as x + iy, in the
+    history's frame) meets the history: ``(rest, s_rest, s_e, offset m, heading difference
+    rad, foot)``, ``rest`` the history from the vertex before the nearest one on, ``s_rest``
+    its arc lengths [m] and ``s_e`` the foot's; None when the history does not reach back
+    past the end."""
+    k = int(norms(history - end).argmin())
+    if k == 0 or k == history.shape[0] - 1:
         return None
-    ex, ey = end_direction(ego, True, _HEADING_WINDOW_M)
-    hx, hy = _heading(history, k)
-    return s_e, offset, abs(math.atan2(ex * hy - ey * hx, ex * hx + ey * hy))
+    rest = history[k - 1:]
+    s_rest = cumulative_length(rest)
+    s_e, offset, i = project_point(end, rest[:3], s_rest[:3])
+    if s_e <= _MIN_COVER_M and k == 1:
+        return None
+    heading = complex(*_heading(rest, 1)) / direction
+    t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
+    foot = rest[i] + t * (rest[i + 1] - rest[i])
+    return rest, s_rest, s_e, offset, abs(math.atan2(heading.imag, heading.real)), foot
 
 
 def _reason(side: str, offset: float, heading: float, params: FusionParams) -> str:
@@ -105,9 +112,9 @@ def _reason(side: str, offset: float, heading: float, params: FusionParams) -> s
     return ""
 
 
-def _ahead_of(points: NDArrayFloat, end: tuple[float, float], direction: tuple[float, float]) -> NDArrayFloat:
+def _ahead_of(points: NDArrayFloat, end: NDArrayFloat, direction: tuple[float, float]) -> NDArrayFloat:
     """Mask of the points beyond the line through ``end`` normal to ``direction``."""
-    return (points - np.array(end)) @ np.array(direction) > _MIN_COVER_M
+    return (points - end) @ np.array(direction) > _MIN_COVER_M
 
 
 def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
@@ -127,38 +134,44 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     if not isinstance(ego, LaneDetection):
         raise InvalidDetectionError(f"ego must be a LaneDetection, got {type(ego).__name__}")
     x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
-    n_left, n_hist_left = coop.left.shape[0], history.left.shape[0]
-    moved = transform(np.concatenate((coop.points, history.left, history.right)), x_rel, y_rel, psi_rel)
-    cl, cr = moved[:n_left], moved[n_left: coop.points.shape[0]]
-    hl, hr = moved[coop.points.shape[0]: coop.points.shape[0] + n_hist_left], moved[coop.points.shape[0] + n_hist_left:]
+    n_left = coop.left.shape[0]
+    moved = transform(coop.points, x_rel, y_rel, psi_rel)
+    cl, cr = moved[:n_left], moved[n_left:]
     el, er = ego.left, ego.right
     ends = lane_ends(el, er, cl, cr)
     if x_rel <= 0.0 or ends.gap_m <= 0.0:
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-    s_hl, s_hr = cumulative_length(hl), cumulative_length(hr)
-    covers = (_cover(el, hl, s_hl), _cover(er, hr, s_hr))
-    if covers[0] is not None and covers[1] is not None:
-        for side, (_, offset, heading) in zip(("left", "right"), covers):
-            reason = _reason(side, offset, heading, params)
-            if reason:
-                return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
-        gaps = [seam_blend(h, s, cover[0], e[-1] - _foot(h, s, cover[0]), _coop_offset(h, c))
-                for h, s, cover, e, c in ((hl, s_hl, covers[0], el, cl), (hr, s_hr, covers[1], er, cr))]
-        return ego_frame_result(ego, (el, gaps[0], cl, er, gaps[1], cr), _HISTORY_SOURCES, "history", ends.gap_m)
-    return _partial(ego, coop, (hl, hr), ends.p_end, ends.t_end, mode, interpolation, params)
+    # the history stays in the coop frame; the ego's border ends (points, directions) go there
+    to_coop = relative_pose(coop.pose, ego.pose)
+    rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
+    ego_ends = transform(np.array([el[-1], er[-1], ends.p_end]), *to_coop)
+    ego_dirs = [complex(*end_direction(e, True, _HEADING_WINDOW_M)) * rotation for e in (el, er)]
+    covers = (_cover(ego_ends[0], ego_dirs[0], history.left), _cover(ego_ends[1], ego_dirs[1], history.right))
+    if covers[0] is None or covers[1] is None:
+        t_end = complex(*ends.t_end) * rotation
+        return _partial(ego, coop, ego_ends[2], (t_end.real, t_end.imag), mode, interpolation, params)
+    for side, cover in zip(("left", "right"), covers):
+        reason = _reason(side, cover[3], cover[4], params)
+        if reason:
+            return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
+    gaps = [seam_blend(rest, s_rest, s_e, e - foot, _coop_offset(rest, c))
+            for (rest, s_rest, s_e, _, _, foot), e, c in zip(covers, ego_ends, (coop.left, coop.right))]
+    n_gap = gaps[0].shape[0]
+    gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
+    return ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
+                            ends.gap_m)
 
 
-def _partial(ego: LaneDetection, coop: LaneDetection, moved: tuple[NDArrayFloat, NDArrayFloat],
-             p_end: tuple[float, float], t_end: tuple[float, float], mode: str, interpolation: str,
-             params: FusionParams) -> FusionResult:
-    """A history short of the ego's end: its part beyond the ego's end (``moved``: the history
-    in the ego frame) joined to the coop detection, the seam offset faded in along it (in the
-    coop frame: the blend is affine, so frame-independent), the rest interpolated by
+def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
+             interpolation: str, params: FusionParams) -> FusionResult:
+    """A history short of the ego's end: its part beyond the ego's end (the line through the
+    ego lane's end ``p_end`` normal to its direction ``t_end``, both in the coop frame) joined
+    to the coop detection, the seam offset faded in along it, the rest interpolated by
     :func:`fusion.fuse`."""
     assert coop.history is not None
     extended = []
-    for in_ego, history, first in zip(moved, (coop.history.left, coop.history.right), (coop.left, coop.right)):
-        ahead = history[_ahead_of(in_ego, p_end, t_end)]
+    for history, first in zip((coop.history.left, coop.history.right), (coop.left, coop.right)):
+        ahead = history[_ahead_of(history, p_end, t_end)]
         if ahead.shape[0] < 2:
             return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
         joined = seam_blend(ahead, cumulative_length(ahead), 0.0, np.zeros(2), _coop_offset(ahead, first),
