@@ -2,8 +2,10 @@
 
 Link k fuses coop k into the lane built so far (the ego's detection extended by coops
 1 … k−1), which stands in for the ego detection: :func:`fusion.fuse_history` (convoy or
-spline, with the coop's history when it carries one) in the ego's vehicle frame, so every
-coop is checked against the lane built so far, its far end included. A link whose check
+spline, with the coop's history when it carries one) in the frame of coop k−1 (the
+vehicle at the far end of the lane built so far: "ahead" means ahead of it, whatever the
+road did since the ego), so every coop is checked against the lane built so far, its far
+end included. A link whose check
 fails ends the chain there: the lane built so far is the result and the link's reason is
 the chain's reason. Per-point sources follow the points through every link. Only the last
 :data:`TAIL_M` of the lane built so far enter a link (the fusion keeps the ego lane it is
@@ -98,7 +100,7 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
     for i, coop in enumerate(coops):
         if not isinstance(coop, LaneDetection):
             raise InvalidDetectionError(f"coops[{i}] must be a LaneDetection, got {type(coop).__name__}")
-    built = ego
+    built = anchor = ego
     tail: list[tuple[NDArrayFloat, NDArrayInt8]] | None = None  # the last link's result, world frame
     done: list[tuple[NDArrayFloat, NDArrayInt8]] = [(np.empty((0, 2)), np.empty(0, np.int8))] * 2
     links: list[ChainLink] = []
@@ -109,8 +111,8 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
                 done[i] = (np.concatenate((done[i][0], border[:cut])), np.concatenate((done[i][1], source[:cut])))
                 tail[i] = (border[cut:], source[cut:])
             n_left = tail[0][0].shape[0]
-            lane = _to_vehicle(np.concatenate((tail[0][0], tail[1][0])), ego)
-            built = LaneDetection(ego.pose, lane[:n_left], lane[n_left:], ego.stamp, ego.sender)
+            lane = _to_vehicle(np.concatenate((tail[0][0], tail[1][0])), anchor)
+            built = LaneDetection(anchor.pose, lane[:n_left], lane[n_left:], ego.stamp, ego.sender)
         step = fuse_history(built, coop, mode=mode, interpolation=interpolation, params=params)
         links.append(ChainLink(coop.sender, step.kind, step.gap_m, step.reason))
         if step.kind == "none":
@@ -118,6 +120,7 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
         labels = ((np.full(ego.left.shape[0], _EGO, np.int8), np.full(ego.right.shape[0], _EGO, np.int8))
                   if tail is None else (tail[0][1], tail[1][1]))
         tail = [(step.left, _carried(labels[0], step.left_source)), (step.right, _carried(labels[1], step.right_source))]
+        anchor = coop
     reason = links[-1].reason if links and links[-1].kind == "none" else ""
     fused = sum(link.kind != "none" for link in links)
     if tail is None:
@@ -133,8 +136,8 @@ def _tail_start(border: NDArrayFloat) -> int:
     return int(np.searchsorted(s, s[-1] - TAIL_M, side="right")) - 1 if s[-1] > TAIL_M else 0
 
 
-def _to_vehicle(points: NDArrayFloat, ego: LaneDetection) -> NDArrayFloat:
-    """World points [m] in the ego's vehicle frame."""
-    p = ego.pose
+def _to_vehicle(points: NDArrayFloat, vehicle: LaneDetection) -> NDArrayFloat:
+    """World points [m] in the vehicle frame of a detection's sender."""
+    p = vehicle.pose
     c, s = math.cos(p.yaw), math.sin(p.yaw)
     return transform(points, -c * p.x - s * p.y, s * p.x - c * p.y, -p.yaw)
