@@ -220,7 +220,8 @@ class ScenarioResult:
         fusibility_precision, fusibility_recall: the fusibility check against the GT;
             NaN when undefined.
         correct_mean_error_m, correct_max_error_m, correct_p95_error_m: the same statistics
-            over the fusions whose partner truly continues the ego's lane (m; NaN without).
+            over the fusions whose partner truly continues the ego's lane (m; NaN without, and
+            when ``key.vehicles`` is 0: the record leaves them out).
         bytes_per_message: mean bytes on air per lane message of the scenario's coops.
         bytes_per_second: their bytes on air per vehicle-second.
     """
@@ -341,7 +342,7 @@ class ScenarioAccumulator:
         decided = [(r.predicted_fusible, r.truly_fusible) for r in self.records
                    if r.predicted_fusible is not None and r.truly_fusible is not None]
         true_positive = sum(p and t for p, t in decided)
-        correct = [r.errors_m for r in fused if r.truly_fusible]
+        correct = [r.errors_m for r in fused if r.truly_fusible] if self.key.vehicles > 0 else []
         right = np.concatenate(correct) if correct else np.empty(0)
         return ScenarioResult(
             key=self.key,
