@@ -1,21 +1,20 @@
 """Chains of vehicles: an ego and K cooperative vehicles ahead of it, fused link by link.
 
 Link k fuses coop k into the lane built so far (the ego's detection extended by coops
-1 … k−1), which stands in for the ego detection: :func:`fusion.fuse_history` (convoy or
-spline, with the coop's history when it carries one) in the frame of coop k−1 (the
-vehicle at the far end of the lane built so far: "ahead" means ahead of it, whatever the
-road did since the ego), so every coop is checked against the lane built so far, its far
-end included. A link whose check
+1 … k−1) with :func:`fusion.fuse_history` (convoy or spline, with the coop's history when
+it carries one). The lane built so far always ends with the last points of one detection,
+unchanged (a spline or history link keeps the whole coop detection, a convoy link its part
+past the overlap, or the lane so far when the coop ends inside it): those points, in their
+sender's frame, are the link's ego, so every coop is checked against the far end of the
+lane built so far ("ahead" means ahead of its sender, whatever the road did since the
+ego), and the link's result replaces them. A link whose check
 fails ends the chain there: the lane built so far is the result and the link's reason is
-the chain's reason. Per-point sources follow the points through every link. Only the last
-:data:`TAIL_M` of the lane built so far enter a link (the fusion keeps the ego lane it is
-given as a prefix of its result, so the rest is joined back unchanged): a chain's cost grows
-linearly with its length.
+the chain's reason. Per-point sources follow the points through every link. A chain
+costs its links' fusions and one concatenation per link.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Final, Sequence
 
@@ -23,14 +22,10 @@ import numpy as np
 
 from fusion.api import DEFAULT_PARAMS
 from fusion.errors import InvalidDetectionError
-from fusion.geometry import cumulative_length, to_world, transform
+from fusion.geometry import to_world
 from fusion.history import fuse_history
 from fusion.types import FusionKind, FusionParams, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
-TAIL_M: Final[float] = 60.0
-"""Length [m] of the end of the lane built so far that enters the next link (what a link
-reads of it: the end fits, at most 6 m, the gap, and a convoy overlap of at most one
-detection); the rest is kept as it is."""
 _EGO: Final[int] = int(Source.EGO)
 
 
@@ -100,44 +95,38 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
     for i, coop in enumerate(coops):
         if not isinstance(coop, LaneDetection):
             raise InvalidDetectionError(f"coops[{i}] must be a LaneDetection, got {type(coop).__name__}")
-    built = anchor = ego
-    tail: list[tuple[NDArrayFloat, NDArrayInt8]] | None = None  # the last link's result, world frame
-    done: list[tuple[NDArrayFloat, NDArrayInt8]] = [(np.empty((0, 2)), np.empty(0, np.int8))] * 2
+    end = ego  # the detection whose last points end the lane built so far
+    parts = [[to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)] for b in (ego.left, ego.right)]
     links: list[ChainLink] = []
     for coop in coops:
-        if tail is not None:
-            for i, (border, source) in enumerate(tail):
-                cut = _tail_start(border)
-                done[i] = (np.concatenate((done[i][0], border[:cut])), np.concatenate((done[i][1], source[:cut])))
-                tail[i] = (border[cut:], source[cut:])
-            n_left = tail[0][0].shape[0]
-            lane = _to_vehicle(np.concatenate((tail[0][0], tail[1][0])), anchor)
-            built = LaneDetection(anchor.pose, lane[:n_left], lane[n_left:], ego.stamp, ego.sender)
-        step = fuse_history(built, coop, mode=mode, interpolation=interpolation, params=params)
+        step = fuse_history(end, coop, mode=mode, interpolation=interpolation, params=params)
         links.append(ChainLink(coop.sender, step.kind, step.gap_m, step.reason))
         if step.kind == "none":
             break
-        labels = ((np.full(ego.left.shape[0], _EGO, np.int8), np.full(ego.right.shape[0], _EGO, np.int8))
-                  if tail is None else (tail[0][1], tail[1][1]))
-        tail = [(step.left, _carried(labels[0], step.left_source)), (step.right, _carried(labels[1], step.right_source))]
-        anchor = coop
+        runs = []
+        for part, own, border, source in zip(parts, (end.left, end.right), (step.left, step.right),
+                                             (step.left_source, step.right_source)):
+            n = own.shape[0]  # the lane so far ends with these points: the link's ego prefix copies them
+            part[:] = (np.concatenate((part[0][:-n], border)),
+                       np.concatenate((part[1][:-n], _carried(part[1][-n:], source))))
+            runs.append(_trailing(source))
+        end = _last_points(coop if runs[0][0] != _EGO else end, runs[0][1], runs[1][1])
     reason = links[-1].reason if links and links[-1].kind == "none" else ""
     fused = sum(link.kind != "none" for link in links)
-    if tail is None:
-        tail = [(to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)) for b in (ego.left, ego.right)]
-    (left, left_source), (right, right_source) = [
-        (np.concatenate((d[0], t[0])), np.concatenate((d[1], t[1]))) for d, t in zip(done, tail)]
+    (left, left_source), (right, right_source) = parts
     return ChainResult(left, right, left_source, right_source, tuple(links), 1 + fused, reason)
 
 
-def _tail_start(border: NDArrayFloat) -> int:
-    """Index where the last :data:`TAIL_M` of a border begin."""
-    s = cumulative_length(border)
-    return int(np.searchsorted(s, s[-1] - TAIL_M, side="right")) - 1 if s[-1] > TAIL_M else 0
+def _trailing(source: NDArrayInt8) -> tuple[int, int]:
+    """``(label, length)`` of the last run of equal labels."""
+    changes = np.flatnonzero(source != source[-1])
+    return int(source[-1]), source.shape[0] - (int(changes[-1]) + 1 if changes.size else 0)
 
 
-def _to_vehicle(points: NDArrayFloat, vehicle: LaneDetection) -> NDArrayFloat:
-    """World points [m] in the vehicle frame of a detection's sender."""
-    p = vehicle.pose
-    c, s = math.cos(p.yaw), math.sin(p.yaw)
-    return transform(points, -c * p.x - s * p.y, s * p.x - c * p.y, -p.yaw)
+def _last_points(detection: LaneDetection, n_left: int, n_right: int) -> LaneDetection:
+    """``detection`` restricted to its last ``n_left``/``n_right`` border points (at least 2)."""
+    n_left, n_right = max(n_left, 2), max(n_right, 2)
+    if n_left >= detection.left.shape[0] and n_right >= detection.right.shape[0]:
+        return detection
+    return LaneDetection(detection.pose, detection.left[-n_left:], detection.right[-n_right:], detection.stamp,
+                         detection.sender)
