@@ -87,3 +87,12 @@ def test_cli_rejects_bad_cooperation_values(capsys):
     with pytest.raises(SystemExit):
         evaluate.main(["--map", "x.xodr", "--exchange", "json"])
     assert "--history" in capsys.readouterr().err
+
+
+def test_cli_rejects_options_without_their_feature(tmp_path, capsys):
+    map_path = str(bundled_map("straight"))
+    assert evaluate.main(["--map", map_path, "--drift", "--out", str(tmp_path / "a")]) == 1
+    assert "--history" in capsys.readouterr().err
+    assert evaluate.main(["--map", map_path, "--loss", "0.2", "--out", str(tmp_path / "b")]) == 1
+    err = capsys.readouterr().err
+    assert "--exchange" in err and len(err.strip().splitlines()) == 1

@@ -22,6 +22,7 @@ from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_g
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
 from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
 from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
+from fusion.bezier import DEFAULT_TOLERANCE_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
@@ -73,8 +74,13 @@ def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
     scale = TYPICAL_SCALE_ERROR if args.drift else 0.0
     odometry = OdometryModel(heading if args.drift_heading is None else args.drift_heading,
                              scale if args.drift_scale is None else args.drift_scale)
-    messages = MessageModel(args.exchange or "none", loss_probability=args.loss, latency_s=args.latency,
+    messages = MessageModel(args.exchange or "none", bezier_tolerance_m=args.bezier_tolerance,
+                            loss_probability=args.loss, latency_s=args.latency,
                             max_interval_s=args.max_interval, change_tolerance_m=args.change_tolerance)
+    if args.history == 0 and (args.drift or args.drift_heading is not None or args.drift_scale is not None):
+        raise ValueError("--drift, --drift-heading and --drift-scale bend the lane history: add --history")
+    if not messages.enabled and (args.loss or args.latency):
+        raise ValueError("--loss and --latency act on lane messages: add --exchange sampled|bezier")
     if args.coops == 1 and args.history == 0 and not messages.enabled:
         return plan
     scenarios = extended_scenarios(plan.scenarios, coops=args.coops, history_m=args.history,
@@ -122,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     coop.add_argument("--drift-scale", type=_non_negative, default=None, help="σ of the odometry scale error")
     coop.add_argument("--exchange", choices=("sampled", "bezier"), default=None,
                       help="lanes travel as messages in this format (default: detections fused directly)")
+    coop.add_argument("--bezier-tolerance", type=_non_negative, default=DEFAULT_TOLERANCE_M,
+                      help=f"fit tolerance of the Bézier encoding, m (default {DEFAULT_TOLERANCE_M:g}; with "
+                           "detection noise σ use about 4σ, or the fit chases the noise)")
     coop.add_argument("--loss", type=_non_negative, default=0.0, help="message loss probability")
     coop.add_argument("--latency", type=_non_negative, default=0.0, help="message latency (s)")
     coop.add_argument("--max-interval", type=_non_negative, default=DEFAULT_MAX_INTERVAL_S,
