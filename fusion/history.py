@@ -44,14 +44,16 @@ from fusion.geometry import cumulative_length, end_direction, norms, project_poi
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 _HEADING_WINDOW_M: Final[float] = 2.0
+_HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex for its heading
 _MIN_COVER_M: Final[float] = 1e-6
 _HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
 _EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
 
 
 def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
-    """Unit tangent (driving direction) of a polyline around vertex ``at`` by a ~2 m chord."""
-    lo, hi = max(0, at - 10), min(points.shape[0] - 1, at + 10)
+    """Unit tangent (driving direction) of a polyline around vertex ``at`` by a chord of up to
+    ``_HEADING_WINDOW_M`` ending at most ``_HEADING_HALF_POINTS`` vertices after it."""
+    lo, hi = max(0, at - _HEADING_HALF_POINTS), min(points.shape[0] - 1, at + _HEADING_HALF_POINTS)
     return end_direction(points[lo: hi + 1], True, _HEADING_WINDOW_M)
 
 
