@@ -10,9 +10,11 @@ vehicle = ISO 8855. See :func:`fuse`.
 from fusion import bezier
 from fusion.api import DEFAULT_PARAMS, fuse, is_fusible
 from fusion.errors import BezierDecodeError, FusionError, InvalidDetectionError, InvalidParameterError
-from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Pose2D, Source
+from fusion.chain import ChainLink, ChainResult, fuse_chain
+from fusion.history import fuse_history
+from fusion.types import FusionParams, FusionResult, LaneDetection, LaneHistory, NDArrayFloat, NDArrayInt8, Pose2D, Source
 
 __all__ = [
-    "DEFAULT_PARAMS", "bezier", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
-    "InvalidParameterError", "LaneDetection", "NDArrayFloat", "NDArrayInt8", "Pose2D", "Source", "fuse", "is_fusible",
+    "DEFAULT_PARAMS", "bezier", "ChainLink", "ChainResult", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
+    "InvalidParameterError", "LaneDetection", "LaneHistory", "NDArrayFloat", "NDArrayInt8", "Pose2D", "Source", "fuse", "fuse_chain", "fuse_history", "is_fusible",
 ]

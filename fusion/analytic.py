@@ -15,8 +15,8 @@ from typing import Final, Sequence
 import numpy as np
 
 from fusion.errors import InvalidParameterError
-from fusion.geometry import cumulative_length, distance_to_polyline
-from fusion.types import LaneDetection, NDArrayFloat, Pose2D
+from fusion.geometry import cumulative_length, distance_to_polyline, transform
+from fusion.types import LaneDetection, LaneHistory, NDArrayFloat, Pose2D
 
 TABLE_STEP_M: Final[float] = 0.005
 
@@ -98,6 +98,20 @@ def detect(road: AnalyticRoad, s_from: float, length_m: float, left_m: float, ri
             pts = pts + (rng or np.random.default_rng(0)).normal(0.0, noise_m, pts.shape)
         borders.append((pts - (pose.x, pose.y)) @ rot)
     return LaneDetection(pose, borders[0], borders[1], sender=sender)
+
+
+def with_history(road: AnalyticRoad, detection: LaneDetection, s_vehicle: float, history_m: float, left_m: float,
+                 right_m: float, spacing_m: float = 0.10) -> LaneDetection:
+    """``detection`` (of a vehicle at ``s_vehicle``) carrying the exact lane history of its
+    last ``history_m`` [m] of reference line, borders at ``left_m``/``right_m``, each
+    resampled every ``spacing_m`` of its own length, in the detection's vehicle frame."""
+    start = max(0.0, s_vehicle - history_m)
+    behind = detect(road, start, s_vehicle - start, left_m, right_m, spacing_m)
+    borders = [transform(transform(b, behind.pose.x, behind.pose.y, behind.pose.yaw), 0.0, 0.0, -detection.pose.yaw)
+               for b in (behind.left, behind.right)]
+    shift = transform(np.array([[detection.pose.x, detection.pose.y]]), 0.0, 0.0, -detection.pose.yaw)[0]
+    history = LaneHistory(*(b - shift for b in borders))
+    return LaneDetection(detection.pose, detection.left, detection.right, detection.stamp, detection.sender, history)
 
 
 FAMILIES: Final[tuple[str, ...]] = ("corner", "clothoid corner", "arc", "s-bend")

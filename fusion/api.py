@@ -99,7 +99,7 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
     return not reason, reason
 
 
-def _result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind, gap_m: float,
+def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind, gap_m: float,
             reason: str = "") -> FusionResult:
     """Result from ego-frame ``parts``, the left border's then as many of the right border's, with
     one :class:`Source` per part: one concatenation and one transform to the world frame."""
@@ -128,14 +128,14 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, cl, cr = borders
     if reason:
-        return _result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
+        return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
     if kind == "convoy":
         assert starts is not None
         w, blend = params.coop_weight, params.convoy_blend_offset_m
         n_left = cl.shape[0]
         parts, sources = zip(*convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
                              *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend))
-        return _result(ego, parts, np.array(sources, dtype=np.int8), "convoy", ends.gap_m)
+        return ego_frame_result(ego, parts, np.array(sources, dtype=np.int8), "convoy", ends.gap_m)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(
@@ -143,4 +143,4 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
             params.spacing_m)
     else:
         gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
-    return _result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", ends.gap_m)
+    return ego_frame_result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", ends.gap_m)

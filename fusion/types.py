@@ -19,7 +19,7 @@ from fusion.errors import InvalidDetectionError, InvalidParameterError
 NDArrayFloat = npt.NDArray[np.float64]
 NDArrayInt8 = npt.NDArray[np.int8]
 
-FusionKind = Literal["convoy", "spline", "none"]
+FusionKind = Literal["convoy", "spline", "history", "none"]
 FusionMode = Literal["auto", "convoy", "spline"]
 Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
@@ -37,6 +37,7 @@ class Source(IntEnum):
     FUSED = 1
     INTERPOLATED = 2
     COOP = 3
+    COOP_HISTORY = 4
 
 
 def _frozen(array: NDArrayFloat) -> NDArrayFloat:
@@ -102,6 +103,26 @@ def stacked_arclength(points: NDArrayFloat, n_first: int) -> NDArrayFloat:
 
 
 @dataclass(frozen=True)
+class LaneHistory:
+    """The lane a vehicle perceived over its last metres of travel, registered with its own
+    odometry.
+
+    Fields:
+        left, right: lane borders, ``(N, 2)`` float64 in the sender's *vehicle* frame at the
+            detection's time [m] (x forward, y left), ordered in driving direction, ending
+            where the current detection starts (at the vehicle); validated like the
+            detection's borders.
+    """
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "left", validated_border("LaneHistory.left", self.left))
+        object.__setattr__(self, "right", validated_border("LaneHistory.right", self.right))
+
+
+@dataclass(frozen=True)
 class LaneDetection:
     """One vehicle's detection of one lane.
 
@@ -114,6 +135,8 @@ class LaneDetection:
             fewer than two distinct points, NaN or inf raise ``InvalidDetectionError``.
         stamp: detection time [s] (informative; the fusion is static, no time alignment).
         sender: identifier of the sending vehicle (informative).
+        history: the lane the sender perceived behind it (:class:`LaneHistory`, same frame),
+            or None (default); :func:`fusion.fuse_history` bridges a gap with it.
         points: both borders stacked, left then right, ``(N_left + N_right, 2)`` [m, vehicle
             frame]; ``left`` and ``right`` are read-only views of it (set on construction).
         arclength: ``(N_left + N_right,)`` arc length of every point of ``points`` along its
@@ -126,6 +149,7 @@ class LaneDetection:
     right: NDArrayFloat
     stamp: float = 0.0
     sender: str = ""
+    history: LaneHistory | None = field(default=None, repr=False, compare=False)
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
@@ -141,6 +165,9 @@ class LaneDetection:
         object.__setattr__(self, "arclength", _frozen(stacked_arclength(points, left.shape[0])))
         if not math.isfinite(float(self.stamp)):
             raise InvalidDetectionError(f"LaneDetection.stamp must be finite, got {self.stamp!r}")
+        if self.history is not None and not isinstance(self.history, LaneHistory):
+            raise InvalidDetectionError(
+                f"LaneDetection.history must be a LaneHistory or None, got {type(self.history).__name__}")
 
 
 @dataclass(frozen=True)
@@ -229,7 +256,8 @@ class FusionResult:
         left, right: fused borders, ``(N, 2)`` float64 in the *world* frame [m], ordered in
             driving direction (the ego detection alone when ``kind == "none"``).
         left_source, right_source: ``(N,)`` int8 per-point :class:`Source` labels.
-        kind: ``"convoy"``, ``"spline"`` or ``"none"`` (nothing fused).
+        kind: ``"convoy"``, ``"spline"``, ``"history"`` (the gap bridged by the coop's
+            history alone, :func:`fusion.fuse_history`) or ``"none"`` (nothing fused).
         gap_m: signed gap d_s between the ego end and the coop start on the centre line [m]
             (its length, negative along the ego end heading for an overlap).
         reason: why nothing was fused (empty when something was).

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import fusion  # noqa: E402
 from fusion import bezier  # noqa: E402
-from fusion.analytic import FAMILIES, AnalyticRoad, Segment, detect, family_case, gap_errors  # noqa: E402
+from fusion.analytic import FAMILIES, AnalyticRoad, Segment, detect, family_case, gap_errors, with_history  # noqa: E402
 from fusion.geometry import cumulative_length, distance_to_polyline, to_world  # noqa: E402
 
 RADIUS_M = 20.0
@@ -90,9 +90,24 @@ def baseline_spline(ego: fusion.LaneDetection, coop: fusion.LaneDetection) -> li
     return out
 
 
+def baseline_chain(ego: fusion.LaneDetection, coops: list[fusion.LaneDetection]) -> None:
+    """The scipy spline fusion of every link (ego, coop 1), (coop 1, coop 2), …: the same
+    interpolation work as a chain without history (output not stitched: no |Δ| for it)."""
+    for a, b in zip([ego, *coops], coops):
+        baseline_spline(a, b)
+
+
+def fuse_any(ego: fusion.LaneDetection, coop: fusion.LaneDetection, kwargs: dict) -> object:
+    """``fusion.fuse``, or ``fusion.fuse_chain`` of ego, coop and ``kwargs["chain"]``."""
+    if "chain" in kwargs:
+        rest = {k: v for k, v in kwargs.items() if k != "chain"}
+        return fusion.fuse_chain(ego, [coop, *kwargs["chain"]], **rest)
+    return fusion.fuse(ego, coop, **kwargs)
+
+
 def scenarios() -> dict[str, tuple[fusion.LaneDetection, fusion.LaneDetection, dict, object]]:
     straight = AnalyticRoad([Segment(300.0)])
-    curve = AnalyticRoad([Segment(60.0), Segment(math.pi / 2 * RADIUS_M, -1 / RADIUS_M), Segment(60.0)])
+    curve = AnalyticRoad([Segment(60.0), Segment(math.pi / 2 * RADIUS_M, -1 / RADIUS_M), Segment(200.0)])
     apex = 60.0 + math.pi / 4 * RADIUS_M
     lane = (0.0, -4.0)
     return {
@@ -114,6 +129,11 @@ def scenarios() -> dict[str, tuple[fusion.LaneDetection, fusion.LaneDetection, d
         "spline hermite, 90° curve, d_s 20 m": (detect(curve, apex - 40.0, LENGTH_M, *lane),
                                                 detect(curve, apex + 10.0, LENGTH_M, *lane),
                                                 {"interpolation": "hermite"}, baseline_spline),
+        "chain of 3, 100 m history, 90° curve, d_s 20 m": (
+            detect(curve, apex - 40.0, LENGTH_M, *lane),
+            with_history(curve, detect(curve, apex + 10.0, LENGTH_M, *lane), apex + 10.0, 100.0, *lane),
+            {"chain": [with_history(curve, detect(curve, apex + 60.0, LENGTH_M, *lane), apex + 60.0, 100.0, *lane)]},
+            lambda ego, coop: baseline_chain(ego, [coop, detect(curve, apex + 60.0, LENGTH_M, *lane)])),
     }
 
 
@@ -166,19 +186,20 @@ def main() -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     report = {}
     for name, (ego, coop, kwargs, baseline) in scenarios().items():
-        result = fusion.fuse(ego, coop, **kwargs)
-        assert result.kind != "none", result.reason
+        result = fuse_any(ego, coop, kwargs)
+        assert getattr(result, "kind", "chain") != "none" and not result.reason, result.reason
         reference = baseline(ego, coop)
-        delta = max(float(distance_to_polyline(mine, ref).max()) for mine, ref in zip((result.left, result.right), reference))
+        delta = math.nan if reference is None else max(
+            float(distance_to_polyline(mine, ref).max()) for mine, ref in zip((result.left, result.right), reference))
         timings = {key: [] for key in ("steady", "steady_cpu", "cold", "baseline", "baseline_cold")}
         for _ in range(50):
-            fusion.fuse(ego, coop, **kwargs)
+            fuse_any(ego, coop, kwargs)
             baseline(ego, coop)
         gc.disable()  # as timeit does: no collector pauses inside the timed calls
         for _ in range(max(1, args.repeats // BLOCK)):
             for _ in range(BLOCK):
                 c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
-                fusion.fuse(ego, coop, **kwargs)
+                fuse_any(ego, coop, kwargs)
                 c1, t1 = time.thread_time_ns(), time.perf_counter_ns()
                 timings["steady"].append(t1 - t0)
                 timings["steady_cpu"].append(c1 - c0)
@@ -188,7 +209,7 @@ def main() -> int:
                 timings["baseline"].append(time.perf_counter_ns() - t0)
         for _ in range(args.repeats):
             t0 = time.perf_counter_ns()
-            fusion.fuse(ego, coop, **kwargs)
+            fuse_any(ego, coop, kwargs)
             t1 = time.perf_counter_ns()
             baseline(ego, coop)
             t2 = time.perf_counter_ns()

@@ -21,6 +21,9 @@ from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
+from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
+from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
+from fusion.bezier import DEFAULT_TOLERANCE_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
@@ -49,6 +52,41 @@ def _gaps(text: str) -> tuple[float, ...]:
     if not gaps or any(not 0 < g < 1e4 for g in gaps):
         raise argparse.ArgumentTypeError(f"gaps must be > 0 m, got {text!r}")
     return gaps
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 <= value < 1e6:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return value
+
+
+def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
+    """``plan`` with the chains, history and messages asked for (unchanged when none is)."""
+    from dataclasses import replace
+
+    from cold_maps.evaluation.scenarios import extended_scenarios
+    from cold_maps.simulation.odometry import OdometryModel
+
+    heading = TYPICAL_HEADING_DRIFT_RAD_PER_M if args.drift else 0.0
+    scale = TYPICAL_SCALE_ERROR if args.drift else 0.0
+    odometry = OdometryModel(heading if args.drift_heading is None else args.drift_heading,
+                             scale if args.drift_scale is None else args.drift_scale)
+    messages = MessageModel(args.exchange or "none", bezier_tolerance_m=args.bezier_tolerance,
+                            loss_probability=args.loss, latency_s=args.latency,
+                            max_interval_s=args.max_interval, change_tolerance_m=args.change_tolerance)
+    if args.history == 0 and (args.drift or args.drift_heading is not None or args.drift_scale is not None):
+        raise ValueError("--drift, --drift-heading and --drift-scale bend the lane history: add --history")
+    if not messages.enabled and (args.loss or args.latency):
+        raise ValueError("--loss and --latency act on lane messages: add --exchange sampled|bezier")
+    if args.coops == 1 and args.history == 0 and not messages.enabled:
+        return plan
+    scenarios = extended_scenarios(plan.scenarios, coops=args.coops, history_m=args.history,
+                                   exchange=args.exchange or "")
+    return replace(plan, scenarios=scenarios, history_m=args.history, odometry=odometry, messages=messages)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,6 +118,27 @@ def build_parser() -> argparse.ArgumentParser:
                              ("--pose-xy", "pose_sigma_xy_m", "m, σ, coop poses"),
                              ("--pose-yaw", "pose_sigma_yaw_rad", "rad, σ, coop poses")):
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
+    coop = parser.add_argument_group("chains, lane history and messages (all off by default, seeded)")
+    coop.add_argument("--coops", type=_positive_int, default=1,
+                      help="coops per chain: K > 1 adds chains of 2..K coops ahead, spaced like the pair (default 1)")
+    coop.add_argument("--history", type=_non_negative, nargs="?", const=DEFAULT_HISTORY_M, default=0.0, metavar="M",
+                      help=f"lane history every coop sends, m (no value: {DEFAULT_HISTORY_M:g}; default 0 = none)")
+    coop.add_argument("--drift", action="store_true",
+                      help=f"typical odometry drift: σ {TYPICAL_HEADING_DRIFT_RAD_PER_M:g} rad/m heading, "
+                           f"{TYPICAL_SCALE_ERROR:g} scale")
+    coop.add_argument("--drift-heading", type=_non_negative, default=None, help="σ of the heading drift (rad/m)")
+    coop.add_argument("--drift-scale", type=_non_negative, default=None, help="σ of the odometry scale error")
+    coop.add_argument("--exchange", choices=("sampled", "bezier"), default=None,
+                      help="lanes travel as messages in this format (default: detections fused directly)")
+    coop.add_argument("--bezier-tolerance", type=_non_negative, default=DEFAULT_TOLERANCE_M,
+                      help=f"fit tolerance of the Bézier encoding, m (default {DEFAULT_TOLERANCE_M:g}; with "
+                           "detection noise σ use about 4σ, or the fit chases the noise)")
+    coop.add_argument("--loss", type=_non_negative, default=0.0, help="message loss probability")
+    coop.add_argument("--latency", type=_non_negative, default=0.0, help="message latency (s)")
+    coop.add_argument("--max-interval", type=_non_negative, default=DEFAULT_MAX_INTERVAL_S,
+                      help=f"longest time between messages (s, default {DEFAULT_MAX_INTERVAL_S:g})")
+    coop.add_argument("--change-tolerance", type=_non_negative, default=DEFAULT_CHANGE_TOLERANCE_M,
+                      help=f"lane change (RMS, m) that triggers a message (default {DEFAULT_CHANGE_TOLERANCE_M:g})")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
@@ -103,7 +162,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [replace(plan, errors=errors) for plan in plans]
+        return [_cooperation(replace(plan, errors=errors), args) for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -112,8 +171,10 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         seen[path.stem] = path
     params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)
-    return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, frames_at_most=args.frames is None,
-                    routes=args.routes, seed=args.seed, speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params)
+    return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
+                                 frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
+                                 speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
+                                 params=params), args)
             for path in args.map]
 
 

@@ -54,7 +54,15 @@ class Collector:
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:
         """Adds one evaluation to the scenario ``key``."""
+        self._accumulator(key).add(record)
+
+    def add_traffic(self, key: ScenarioKey, sent_bytes: int, seconds: float) -> None:
+        """Counts one frame of ``seconds`` (s) of one of the scenario's senders, which sent
+        ``sent_bytes`` in it (0: no message)."""
+        self._accumulator(key).add_traffic(sent_bytes, seconds)
+
+    def _accumulator(self, key: ScenarioKey) -> ScenarioAccumulator:
         accumulator = self.accumulators.get(key)
         if accumulator is None:
             accumulator = self.accumulators[key] = ScenarioAccumulator(key)
-        accumulator.add(record)
+        return accumulator

@@ -32,6 +32,7 @@ from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
 from cold_maps.simulation.detection import Sensed, detection_pose, sense, world_borders
+from cold_maps.simulation.exchange import LaneExchange
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
     Drive,
@@ -76,6 +77,8 @@ class MapEvaluator:
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
+        self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
+                         if plan.history_m > 0 or plan.messages.enabled else None)
 
     @property
     def total_frames(self) -> int:
@@ -104,7 +107,8 @@ class MapEvaluator:
             routes = [route_from_start(self.graph, plan.start_lane, fitted.needed_m, self.rng)
                       for _ in range(plan.routes or 1)]
         covered = {lane for route in routes for lane in route}
-        drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=plan.coop_leads_m,
+        leads = (*plan.coop_leads_m, *plan.chain_leads_m)
+        drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads,
                               distractor_leads_m=fitted.distractor_leads_m, rng=self.rng, speed_mps=plan.speed_mps)
                   for lanes in routes]
         return drives, (len(covered), len(self.graph.lanes))
@@ -165,6 +169,9 @@ class MapEvaluator:
         stamp = index / FRAME_RATE_HZ
         sensed = {name: sense(state, self.sensor, plan.errors, self.rng, stamp_s=stamp)
                   for name, state in drive.states(frame).items()}
+        sent: dict[str, int] = {}
+        if self.exchange is not None:
+            sensed, sent = self.exchange.apply(id(drive), sensed, stamp)
         ego = sensed["ego"]
         metrics: dict[str, float | None] = {}
         fused_lines: dict[str, NDArrayFloat] = {}
@@ -174,9 +181,15 @@ class MapEvaluator:
                 lines = self._local(collector, scenario, ego, index, stamp, metrics)
                 gt_lines.update(lines)
                 continue
+            if scenario.vehicles > 2:
+                self._chain(collector, scenario, sensed, index, stamp, sent)
+                continue
             for name, other in sensed.items():
                 if name == "ego" or abs(abs(other.state.lead_m) - scenario.lead_m) > 1e-9:
                     continue
+                if name in sent:
+                    for key in (scenario.key(plan.name, b) for b in ("left", "right")):
+                        collector.add_traffic(key, sent[name], 1.0 / FRAME_RATE_HZ)
                 fused = self._pair(collector, scenario, ego, other, index, stamp, metrics)
                 if fused is not None:
                     fused_lines[f"{scenario.label}-left"], fused_lines[f"{scenario.label}-right"] = fused
@@ -241,8 +254,8 @@ class MapEvaluator:
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
         start = time.perf_counter()
-        result = fusion.fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation,
-                             params=plan.params)
+        fuse = fusion.fuse_history if plan.history_m > 0 else fusion.fuse
+        result = fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation, params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
         if main:
             start = time.perf_counter()
@@ -264,6 +277,53 @@ class MapEvaluator:
             self._keep_overlay(collector, scenario, index, measured, detections,
                                {"left": result.left, "right": result.right})
         return result.left, result.right
+
+    def _chain(self, collector: Collector, scenario: Scenario, sensed: dict[str, Sensed], index: int, stamp: float,
+               sent: dict[str, int]) -> None:
+        """A chain of the ego and the scenario's coops (:func:`fusion.fuse_chain`), when all of
+        them are present; a chain that ends early is rejected with its failing link's reason."""
+        plan = self.plan
+        keys = [scenario.key(plan.name, b) for b in ("left", "right")]
+        members = [sensed.get(f"coop{lead:g}") for lead in scenario.chain_leads_m]
+        ego = sensed["ego"]
+        if any(member is None for member in members):
+            return
+        coops = [member for member in members if member is not None]
+        for coop in coops:
+            if coop.state.name in sent:
+                for key in keys:
+                    collector.add_traffic(key, sent[coop.state.name], 1.0 / FRAME_RATE_HZ)
+        states = [ego.state, *(c.state for c in coops)]
+        truth = all(lane_relation(self.graph, a, b, self.relation_max_m, self.sensor.range_m)
+                    for a, b in zip(states, states[1:]))
+        last = coops[-1].state.name
+
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan) -> None:
+            for key in keys:
+                collector.add(key, FrameRecord(index, stamp, "ego", last, np.empty(0), runtime_ms=runtime,
+                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth))
+
+        if ego.detection is None or any(c.detection is None for c in coops):
+            reject("ego_dropped" if ego.detection is None else "coop_dropped")
+            return
+        start = time.perf_counter()
+        chain = fusion.fuse_chain(ego.detection, [c.detection for c in coops if c.detection is not None],
+                                  mode=scenario.fusion, interpolation=scenario.interpolation or "paper",
+                                  params=plan.params)
+        runtime = (time.perf_counter() - start) * 1e3
+        collector.fuse_ms.setdefault((plan.name, scenario.label), []).append(runtime)
+        if chain.vehicles < scenario.vehicles:
+            reject(reason_category(chain.reason), False, runtime)
+            return
+        measured = self._measure(chain.left, chain.right, detection_pose(ego.detection),
+                                 self.true_lane(ego.state, coops[-1].state))
+        if isinstance(measured, str):
+            reject(measured, True, runtime)
+            return
+        self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None)
+        detections = {c.state.name: world_borders(c.detection) for c in coops if c.detection is not None}
+        self._keep_overlay(collector, scenario, index, measured, {"ego": world_borders(ego.detection), **detections},
+                           {"left": chain.left, "right": chain.right})
 
     def true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
         """The lane a fusion of ``other`` into the ego should reproduce: the other's track

@@ -73,8 +73,8 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
     ``where`` names the map (or the start lane) in the error; the notes name the map. Raises
     ``DriveError`` when not even the local scenario fits.
     """
-    leads = plan.coop_leads_m
-    distractors = leads if plan.distractors else ()
+    leads = tuple(sorted({*plan.coop_leads_m, *plan.chain_leads_m}))
+    distractors = plan.coop_leads_m if plan.distractors else ()
     whole = _needed(plan, plan.frames, leads, distractors)
     if whole <= longest_m + FIT_TOLERANCE_M:
         return FittedPlan(plan, distractors, whole, ())
@@ -107,10 +107,10 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
         fitting = fitting[:-1]
     if fitting != leads:
         dropped = leads[len(fitting):]
-        labels = [s.label for s in plan.scenarios if s.fusion != "local" and s.lead_m in dropped]
+        labels = [s.label for s in plan.scenarios if s.fusion != "local" and not set(s.chain_leads_m) <= set(fitting)]
         notes.append(f"{plan.name}: dropped {', '.join(labels)} (coops {', '.join(f'{d:g}' for d in dropped)} m "
                      f"ahead): {frames} frames need {_needed(plan, frames, fitting + dropped[:1], ()):.0f} m of "
                      f"route and more, the longest is {longest_m:.0f} m")
-    scenarios = tuple(s for s in plan.scenarios if s.fusion == "local" or s.lead_m in fitting)
+    scenarios = tuple(s for s in plan.scenarios if s.fusion == "local" or set(s.chain_leads_m) <= set(fitting))
     fitted = replace(plan, scenarios=scenarios, frames=frames, distractors=bool(kept))
     return FittedPlan(fitted, kept, _needed(plan, frames, fitting, kept), tuple(notes))

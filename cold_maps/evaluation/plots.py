@@ -1,6 +1,8 @@
 """PNG plots of a run (matplotlib, Agg canvas, imported lazily).
 
 - :func:`plot_frame_errors`: mean and max error per frame for each boundary (the paper's Fig. 7).
+- :func:`plot_error_vs_range`: max error of every fusion against its perception range, per
+  chain length.
 - :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
   frame in the world frame, equal aspect (the paper's Fig. 8).
 
@@ -105,4 +107,32 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
     axes.grid(True, alpha=0.3)
     axes.legend(loc="best", fontsize="small")
     figure.tight_layout()
+    _save(figure, path)
+
+
+def plot_error_vs_range(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
+    """Max error (m) of every fused evaluation against its perception range (m), one colour per
+    vehicle count (chain length); correct fusions filled, the others hollow."""
+    groups: dict[int, list[tuple[float, float, bool]]] = {}
+    for scenario in scenarios:
+        groups.setdefault(scenario.key.vehicles, []).extend(
+            (r.perception_range_m, float(r.errors_m.max()), bool(r.truly_fusible)) for r in scenario.records
+            if r.fused and np.isfinite(r.perception_range_m))
+    if not any(groups.values()):
+        raise ValueError("plot_error_vs_range: no fused evaluation to plot")
+    figure = _figure()
+    axes = figure.add_subplot()
+    for index, (vehicles, points) in enumerate(sorted(groups.items())):
+        values = np.array(points, dtype=float).reshape(-1, 3)
+        right = values[:, 2] > 0
+        color = f"C{index}"
+        axes.scatter(values[right, 0], values[right, 1], s=8, color=color, label=f"{vehicles} vehicle(s)")
+        if (~right).any():
+            axes.scatter(values[~right, 0], values[~right, 1], s=8, facecolors="none", edgecolors=color,
+                         label=f"{vehicles} vehicle(s), not on one lane")
+    axes.set_xlabel("perception range [m]")
+    axes.set_ylabel("max error per fusion [m]")
+    axes.set_title(title)
+    axes.legend(fontsize="small")
+    axes.grid(True, alpha=0.3)
     _save(figure, path)

@@ -23,7 +23,15 @@
           "fused_frames": 280,       # evaluations that produced a lane
           "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
           "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
-          "fusibility": {"precision": 0.98, "recall": 1.0}     # fusibility check vs GT
+          "fusibility": {"precision": 0.98, "recall": 1.0},    # fusibility check vs GT
+          # only in runs with --coops > 1, --history or --exchange (absent otherwise):
+          "vehicles": 3,             # vehicles fused: 1 local, 2 a pair, more a chain
+          "history_m": 100.0,        # lane history the coops send (m)
+          "exchange": "bezier",      # "sampled" | "bezier" | "" (detections fused directly)
+          "bytes_per_message": 136.0,  # mean bytes on air per message of the scenario's coops
+          "bytes_per_second": 340.0,   # their bytes on air per vehicle-second
+          "correct_only": {"mean_error_m": 0.02, "max_error_m": 0.3, "p95_error_m": 0.1}
+                                     # the same over fusions whose partner truly continues the ego's lane
         }
       ]
     }
@@ -118,6 +126,11 @@ class ScenarioKey:
         interpolation: spline interpolation variant ("" when not used).
         d_s: interpolation distance (m), 0 when not used.
         boundary: "left" or "right" border in driving direction.
+        vehicles: vehicles fused (1 local, 2 a pair, more a chain); 0 when the run uses
+            neither chains, history nor messages (the record then leaves out the fields of
+            :data:`EXTENDED_KEYS`).
+        history_m: lane history the coops send (m).
+        exchange: "sampled" or "bezier" when lanes travel as messages, "" otherwise.
     """
 
     map: str
@@ -125,6 +138,9 @@ class ScenarioKey:
     interpolation: str
     d_s: float
     boundary: str
+    vehicles: int = 0
+    history_m: float = 0.0
+    exchange: str = ""
 
     def __post_init__(self) -> None:
         if self.fusion not in FUSIONS:
@@ -203,6 +219,11 @@ class ScenarioResult:
         runtime_ms: fusion runtime statistics (ms).
         fusibility_precision, fusibility_recall: the fusibility check against the GT;
             NaN when undefined.
+        correct_mean_error_m, correct_max_error_m, correct_p95_error_m: the same statistics
+            over the fusions whose partner truly continues the ego's lane (m; NaN without, and
+            when ``key.vehicles`` is 0: the record leaves them out).
+        bytes_per_message: mean bytes on air per lane message of the scenario's coops.
+        bytes_per_second: their bytes on air per vehicle-second.
     """
 
     key: ScenarioKey
@@ -219,10 +240,21 @@ class ScenarioResult:
     runtime_ms: RuntimeStats
     fusibility_precision: float
     fusibility_recall: float
+    correct_mean_error_m: float = math.nan
+    correct_max_error_m: float = math.nan
+    correct_p95_error_m: float = math.nan
+    bytes_per_message: float = math.nan
+    bytes_per_second: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``metrics.json`` record (NaN as null)."""
+        """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
+        ``key.vehicles`` is recorded (> 0)."""
         f = _finite_or_none
+        extended = {} if self.key.vehicles <= 0 else {
+            "vehicles": self.key.vehicles, "history_m": self.key.history_m, "exchange": self.key.exchange,
+            "bytes_per_message": f(self.bytes_per_message), "bytes_per_second": f(self.bytes_per_second),
+            "correct_only": {"mean_error_m": f(self.correct_mean_error_m), "max_error_m": f(self.correct_max_error_m),
+                             "p95_error_m": f(self.correct_p95_error_m)}}
         return {
             "map": self.key.map, "fusion": self.key.fusion, "interpolation": self.key.interpolation,
             "d_s": self.key.d_s, "boundary": self.key.boundary, "points": self.points,
@@ -233,7 +265,7 @@ class ScenarioResult:
             "runtime_ms": {"mean": f(self.runtime_ms.mean), "std": f(self.runtime_ms.std),
                            "max": f(self.runtime_ms.max)},
             "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall)},
-        }
+        } | extended
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
@@ -242,7 +274,9 @@ class ScenarioResult:
             d_s = _none_to_nan(record["d_s"], f"{where}.d_s")
             try:
                 key = ScenarioKey(str(record["map"]), str(record["fusion"]), str(record["interpolation"]), d_s,
-                                  str(record["boundary"]))
+                                  str(record["boundary"]), int(record.get("vehicles", 0)),
+                                  _none_to_nan(record.get("history_m", 0.0), f"{where}.history_m"),
+                                  str(record.get("exchange", "")))
             except ReportError as exc:
                 raise ReportError(f"{where}: {exc}") from exc
             num = {name: _none_to_nan(record[name], f"{where}.{name}") for name in (
@@ -251,6 +285,11 @@ class ScenarioResult:
             runtime = RuntimeStats(*(_none_to_nan(record["runtime_ms"][k], f"{where}.runtime_ms.{k}")
                                      for k in ("mean", "std", "max")))
             rejected = tuple(sorted((str(k), int(v)) for k, v in record["rejected"].items()))
+            correct = record.get("correct_only", {})
+            for name in ("mean_error_m", "max_error_m", "p95_error_m"):
+                num[f"correct_{name}"] = _none_to_nan(correct.get(name), f"{where}.correct_only.{name}")
+            for name in ("bytes_per_message", "bytes_per_second"):
+                num[name] = _none_to_nan(record.get(name), f"{where}.{name}")
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
@@ -279,10 +318,19 @@ class ScenarioAccumulator:
 
     key: ScenarioKey
     records: list[FrameRecord] = field(default_factory=list)
+    messages: int = 0
+    message_bytes: int = 0
+    sender_seconds: float = 0.0
 
     def add(self, record: FrameRecord) -> None:
         """Adds one evaluation."""
         self.records.append(record)
+
+    def add_traffic(self, sent_bytes: int, seconds: float) -> None:
+        """Counts one sender-frame of ``seconds`` (s) in which ``sent_bytes`` were sent (0: none)."""
+        self.messages += sent_bytes > 0
+        self.message_bytes += sent_bytes
+        self.sender_seconds += seconds
 
     def result(self) -> ScenarioResult:
         """The aggregate over all records (pooled distances, see the module docstring)."""
@@ -294,6 +342,8 @@ class ScenarioAccumulator:
         decided = [(r.predicted_fusible, r.truly_fusible) for r in self.records
                    if r.predicted_fusible is not None and r.truly_fusible is not None]
         true_positive = sum(p and t for p, t in decided)
+        correct = [r.errors_m for r in fused if r.truly_fusible] if self.key.vehicles > 0 else []
+        right = np.concatenate(correct) if correct else np.empty(0)
         return ScenarioResult(
             key=self.key,
             points=int(errors.size),
@@ -312,6 +362,11 @@ class ScenarioAccumulator:
                 max=float(runtimes.max()) if runtimes.size else nan),
             fusibility_precision=_ratio(true_positive, sum(p for p, _ in decided)),
             fusibility_recall=_ratio(true_positive, sum(t for _, t in decided)),
+            correct_mean_error_m=float(right.mean()) if right.size else nan,
+            correct_max_error_m=float(right.max()) if right.size else nan,
+            correct_p95_error_m=float(np.percentile(right, P95_PERCENT)) if right.size else nan,
+            bytes_per_message=self.message_bytes / self.messages if self.messages else nan,
+            bytes_per_second=self.message_bytes / self.sender_seconds if self.sender_seconds > 0 else nan,
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
@@ -399,7 +454,8 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
 
 def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
     k = result.key
-    return k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, BOUNDARIES.index(k.boundary)
+    return (k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, BOUNDARIES.index(k.boundary), k.vehicles,
+            k.history_m, k.exchange)
 
 
 def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
@@ -422,8 +478,30 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
                      _fmt(r.fusibility_recall), " / ".join(_fmt(v, 2) for v in
                                                           (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max))])
     parts += ["\n## Results per scenario\n\n", _table(header, rows)]
+    if any(r.key.vehicles > 0 for r in results):
+        parts += ["\n## Chains, history and exchange\n\n", extended_markdown(results)]
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
+    return "".join(parts)
+
+
+def extended_markdown(results: Sequence[ScenarioResult]) -> str:
+    """One table per (vehicles, history, exchange): errors of all and of the correct fusions,
+    perception range and message cost, per map, scenario and boundary."""
+    groups: dict[tuple[int, float, str], list[ScenarioResult]] = {}
+    for r in sorted(results, key=_sort_key):
+        groups.setdefault((r.key.vehicles, r.key.history_m, r.key.exchange), []).append(r)
+    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "max [m]", "p95 [m]",
+              "correct mean / max / p95 [m]", "range [m]", "fused / frames", "bytes / msg", "bytes / s"]
+    parts = []
+    for (vehicles, history, exchange), group in sorted(groups.items()):
+        rows = [[r.key.map, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,
+                 _fmt(r.mean_error_m), _fmt(r.max_error_m), _fmt(r.p95_error_m),
+                 " / ".join(_fmt(v) for v in (r.correct_mean_error_m, r.correct_max_error_m, r.correct_p95_error_m)),
+                 _fmt(r.perception_range_m, 1), f"{r.fused_frames} / {r.frames}", _fmt(r.bytes_per_message, 0),
+                 _fmt(r.bytes_per_second, 0)] for r in group]
+        parts.append(f"### {vehicles} vehicle(s), history {history:g} m, exchange {exchange or 'none'}\n\n"
+                     + _table(header, rows) + "\n")
     return "".join(parts)
 
 

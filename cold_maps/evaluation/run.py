@@ -69,8 +69,9 @@ def _file_part(text: str) -> str:
 
 def write_plots(out: Path, collector: Collector) -> list[Path]:
     """Per map and scenario: the error per frame of its own coop (Fig. 7) and the overlay
-    of its worst frame (Fig. 8), into ``out/plots``; returns the files."""
-    from cold_maps.evaluation.plots import plot_frame_errors, plot_frame_overlay
+    of its worst frame (Fig. 8); per map, when the run records vehicle counts, the max error
+    against the perception range of every fusion; into ``out/plots``; returns the files."""
+    from cold_maps.evaluation.plots import plot_error_vs_range, plot_frame_errors, plot_frame_overlay
 
     folder = out / PLOTS_DIR
     folder.mkdir(exist_ok=True)
@@ -78,6 +79,7 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
     groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         label = key.fusion if key.fusion != "spline" else f"spline-{key.interpolation}-d{key.d_s:g}"
+        label += f"-v{key.vehicles}" if key.vehicles > 2 else ""
         own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
         groups.setdefault((key.map, label), []).append(ScenarioAccumulator(key, own))
     for (map_name, label), accumulators in groups.items():
@@ -85,6 +87,14 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
             continue
         path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
         plot_frame_errors(path, accumulators, title=f"{map_name}: {label}, error per frame")
+        written.append(path)
+    extended: dict[str, list[ScenarioAccumulator]] = {}
+    for key, accumulator in collector.accumulators.items():
+        if key.vehicles > 1 and any(r.fused for r in accumulator.records):
+            extended.setdefault(key.map, []).append(accumulator)
+    for map_name, accumulators in extended.items():
+        path = folder / f"error_vs_range_{_file_part(map_name)}.png"
+        plot_error_vs_range(path, accumulators, title=f"{map_name}: max error against perception range")
         written.append(path)
     for (map_name, label), overlay in collector.overlays.items():
         path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"

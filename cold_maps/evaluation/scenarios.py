@@ -8,7 +8,7 @@ error models and fusion parameters one map is evaluated with.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final, Literal, Sequence
 
@@ -16,6 +16,8 @@ import fusion
 from cold_maps.evaluation.report import ScenarioKey
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
+from cold_maps.simulation.messages import MessageModel
+from cold_maps.simulation.odometry import OdometryModel
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 
@@ -53,21 +55,36 @@ class Scenario:
         interpolation: ``paper`` or ``hermite`` for ``spline``, "" otherwise.
         d_s: spline gap between the ego's detection end and the coop's start (m), 0 otherwise.
         lead_m: station distance of the scenario's coop ahead of the ego (m); 0 for local.
+        vehicles: vehicles fused (1 local, 2 a pair, more a chain of coops every ``lead_m``
+            ahead, :func:`fusion.fuse_chain`); 0 (default) when the run uses neither
+            chains, history nor messages and the report leaves these fields out.
+        history_m: lane history the coops send (m; 0 = none).
+        exchange: how lanes travel (``sampled``/``bezier``; "" = detections directly).
     """
 
     fusion: FusionName
     interpolation: str = ""
     d_s: float = 0.0
     lead_m: float = 0.0
+    vehicles: int = 0
+    history_m: float = 0.0
+    exchange: str = ""
 
     @property
     def label(self) -> str:
-        """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``."""
-        return self.fusion if self.fusion != "spline" else f"spline-{self.interpolation}-d{self.d_s:g}"
+        """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``, ``-v<vehicles>`` for a chain."""
+        base = self.fusion if self.fusion != "spline" else f"spline-{self.interpolation}-d{self.d_s:g}"
+        return base if self.vehicles <= 2 else f"{base}-v{self.vehicles}"
+
+    @property
+    def chain_leads_m(self) -> tuple[float, ...]:
+        """Leads (m) of the coops of a chain, nearest first (the pair's one coop otherwise)."""
+        return tuple(self.lead_m * i for i in range(1, max(2, self.vehicles)))
 
     def key(self, map_name: str, boundary: str) -> ScenarioKey:
         """The report key of one boundary."""
-        return ScenarioKey(map_name, self.fusion, self.interpolation, float(self.d_s), boundary)
+        return ScenarioKey(map_name, self.fusion, self.interpolation, float(self.d_s), boundary, self.vehicles,
+                           float(self.history_m), self.exchange)
 
 
 def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
@@ -82,6 +99,24 @@ def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
     splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
                for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
     return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
+
+
+def extended_scenarios(scenarios: Sequence[Scenario], *, coops: int, history_m: float,
+                       exchange: str) -> tuple[Scenario, ...]:
+    """``scenarios`` with their vehicle count, history and exchange recorded, plus for each
+    convoy and spline scenario the chains of 2 … ``coops`` coops (spaced by its lead)."""
+    if coops < 1:
+        raise ValueError(f"coops: expected at least 1, got {coops!r}")
+    if not (math.isfinite(history_m) and history_m >= 0):
+        raise ValueError(f"history: expected a finite length >= 0 m, got {history_m!r}")
+    out = []
+    for scenario in scenarios:
+        base = replace(scenario, vehicles=1 if scenario.fusion == "local" else 2, history_m=history_m,
+                       exchange=exchange)
+        out.append(base)
+        if scenario.fusion != "local":
+            out += [replace(base, vehicles=k) for k in range(3, coops + 2)]
+    return tuple(out)
 
 
 def params_for_gaps(gaps_m: Sequence[float]) -> fusion.FusionParams:
@@ -108,6 +143,9 @@ class MapPlan:
         errors: sensor error models (all off by default).
         params: fusion parameters.
         road_type: the paper's road type of this map (for the side-by-side), or None.
+        history_m: lane history every vehicle keeps and sends (m; 0 = none, as the paper).
+        odometry: dead-reckoning errors of the history (off by default).
+        messages: how lanes are exchanged (default: detections fused directly).
     """
 
     path: Path
@@ -122,6 +160,9 @@ class MapPlan:
     errors: SensorErrorModel = SensorErrorModel()
     params: fusion.FusionParams = fusion.DEFAULT_PARAMS
     road_type: str | None = None
+    history_m: float = 0.0
+    odometry: OdometryModel = field(default_factory=OdometryModel)
+    messages: MessageModel = field(default_factory=MessageModel)
 
     @property
     def name(self) -> str:
@@ -132,3 +173,9 @@ class MapPlan:
     def coop_leads_m(self) -> tuple[float, ...]:
         """Distinct coop leads of the scenarios (m)."""
         return tuple(sorted({s.lead_m for s in self.scenarios if s.fusion != "local"}))
+
+    @property
+    def chain_leads_m(self) -> tuple[float, ...]:
+        """Leads (m) of the further coops of the chain scenarios, not in :attr:`coop_leads_m`."""
+        pairs = set(self.coop_leads_m)
+        return tuple(sorted({lead for s in self.scenarios if s.vehicles > 2 for lead in s.chain_leads_m} - pairs))

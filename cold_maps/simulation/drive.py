@@ -422,12 +422,13 @@ def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_d
     """True when ``coop`` drives on the lane the ego detected: ahead of the ego in the
     ego's vehicle frame; ahead of it along the lane graph by at most ``max_distance_m``
     (m) of lane, on the drive itself for a vehicle sharing the ego's stations (``coop``,
-    ``turn``, ``behind``: ``0 < lead_m``), so that on a loop a vehicle behind does not
+    ``turn``, ``behind``: ``0 < lead_m`` relative to ``ego``, itself a chain's coop or the
+    ego), so that on a loop a vehicle behind does not
     count as reachable ahead around it; and either on the stretch of the ego's track its
     detection covers (``detection_m`` ahead) or on a lane reachable from where that
     detection ends. Adjacent and opposite lanes, vehicles behind, and a coop on another
     branch of a fork the ego's detection has already passed are not."""
-    if coop.role in SHARED_STATION_ROLES and not 0.0 < coop.lead_m <= max_distance_m:
+    if coop.role in SHARED_STATION_ROLES and not 0.0 < coop.lead_m - ego.lead_m <= max_distance_m:
         return False
     if not ahead_in_ego_frame(ego, coop) or not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
         return False

@@ -1,0 +1,132 @@
+"""Chains of vehicles: an ego and K cooperative vehicles ahead of it, fused link by link.
+
+Link k fuses coop k into the lane built so far (the ego's detection extended by coops
+1 … k−1) with :func:`fusion.fuse_history` (convoy or spline, with the coop's history when
+it carries one). The lane built so far always ends with the last points of one detection,
+unchanged (a spline or history link keeps the whole coop detection, a convoy link its part
+past the overlap, or the lane so far when the coop ends inside it): those points, in their
+sender's frame, are the link's ego, so every coop is checked against the far end of the
+lane built so far ("ahead" means ahead of its sender, whatever the road did since the
+ego), and the link's result replaces them. A link whose check
+fails ends the chain there: the lane built so far is the result and the link's reason is
+the chain's reason. Per-point sources follow the points through every link. A chain
+costs its links' fusions and one concatenation per link.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, Sequence
+
+import numpy as np
+
+from fusion.api import DEFAULT_PARAMS
+from fusion.errors import InvalidDetectionError
+from fusion.geometry import to_world
+from fusion.history import fuse_history
+from fusion.types import FusionKind, FusionParams, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+
+_EGO: Final[int] = int(Source.EGO)
+
+
+@dataclass(frozen=True)
+class ChainLink:
+    """One link of a chain.
+
+    Fields: ``sender`` the coop's id; ``kind`` as :attr:`FusionResult.kind` (``"none"``
+    when the link failed); ``gap_m`` its signed gap to the lane built so far [m];
+    ``reason`` why it failed ("" when fused).
+    """
+
+    sender: str
+    kind: FusionKind
+    gap_m: float
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class ChainResult:
+    """The lane of a chain of vehicles.
+
+    Fields:
+        left, right: fused borders, ``(N, 2)`` float64, world frame [m], driving direction.
+        left_source, right_source: ``(N,)`` int8 :class:`Source` labels per point.
+        links: the links tried, in order (the failing one last, if any).
+        vehicles: vehicles whose lanes the result holds (1 + fused links).
+        reason: why the chain ended before its last coop ("" when every link fused).
+    """
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+    left_source: NDArrayInt8
+    right_source: NDArrayInt8
+    links: tuple[ChainLink, ...]
+    vehicles: int
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        for array in (self.left, self.right, self.left_source, self.right_source):
+            array.setflags(write=False)
+
+
+def _carried(previous: NDArrayInt8, new: NDArrayInt8) -> NDArrayInt8:
+    """Labels of a link's result: its leading (and, for a coop ending inside the lane, trailing)
+    ``EGO`` run is the lane built so far, unchanged, so it keeps that lane's labels."""
+    out = new.copy()
+    not_ego = np.flatnonzero(new != _EGO)
+    if not not_ego.size:
+        return previous.copy()
+    lead, trail = int(not_ego[0]), new.shape[0] - 1 - int(not_ego[-1])
+    out[:lead] = previous[:lead]
+    if trail:
+        out[-trail:] = previous[-trail:]
+    return out
+
+
+def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str = "auto",
+               interpolation: str = "paper", params: FusionParams = DEFAULT_PARAMS) -> ChainResult:
+    """Lane of ``ego`` extended by ``coops`` (nearest first), link by link (module docstring).
+
+    ``mode``, ``interpolation`` and ``params`` as in :func:`fusion.fuse`, for every link.
+    Output in the world frame.
+    """
+    if not isinstance(ego, LaneDetection):
+        raise InvalidDetectionError(f"ego must be a LaneDetection, got {type(ego).__name__}")
+    for i, coop in enumerate(coops):
+        if not isinstance(coop, LaneDetection):
+            raise InvalidDetectionError(f"coops[{i}] must be a LaneDetection, got {type(coop).__name__}")
+    end = ego  # the detection whose last points end the lane built so far
+    parts = [[to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)] for b in (ego.left, ego.right)]
+    links: list[ChainLink] = []
+    for coop in coops:
+        step = fuse_history(end, coop, mode=mode, interpolation=interpolation, params=params)
+        links.append(ChainLink(coop.sender, step.kind, step.gap_m, step.reason))
+        if step.kind == "none":
+            break
+        runs = []
+        for part, own, border, source in zip(parts, (end.left, end.right), (step.left, step.right),
+                                             (step.left_source, step.right_source)):
+            n = own.shape[0]  # the lane so far ends with these points: the link's ego prefix copies them
+            part[:] = (np.concatenate((part[0][:-n], border)),
+                       np.concatenate((part[1][:-n], _carried(part[1][-n:], source))))
+            runs.append(_trailing(source))
+        end = _last_points(coop if runs[0][0] != _EGO else end, runs[0][1], runs[1][1])
+    reason = links[-1].reason if links and links[-1].kind == "none" else ""
+    fused = sum(link.kind != "none" for link in links)
+    (left, left_source), (right, right_source) = parts
+    return ChainResult(left, right, left_source, right_source, tuple(links), 1 + fused, reason)
+
+
+def _trailing(source: NDArrayInt8) -> tuple[int, int]:
+    """``(label, length)`` of the last run of equal labels."""
+    changes = np.flatnonzero(source != source[-1])
+    return int(source[-1]), source.shape[0] - (int(changes[-1]) + 1 if changes.size else 0)
+
+
+def _last_points(detection: LaneDetection, n_left: int, n_right: int) -> LaneDetection:
+    """``detection`` restricted to its last ``n_left``/``n_right`` border points (at least 2)."""
+    n_left, n_right = max(n_left, 2), max(n_right, 2)
+    if n_left >= detection.left.shape[0] and n_right >= detection.right.shape[0]:
+        return detection
+    return LaneDetection(detection.pose, detection.left[-n_left:], detection.right[-n_right:], detection.stamp,
+                         detection.sender)

@@ -1,0 +1,194 @@
+"""Spline fusion across a gap the cooperative vehicle drove through: its lane history.
+
+A coop detection may carry :class:`fusion.types.LaneHistory`: the lane the coop perceived
+over its last metres of travel, registered with its own odometry, in its vehicle frame
+and ending where its current detection starts. Where that history covers the gap between
+the ego's detection end and the coop's detection start, the gap is *observed* geometry
+instead of an interpolation; only what no history covers is interpolated (``paper`` or
+``hermite``, :func:`fusion.fuse`).
+
+Seams (both borders, each on its own):
+
+- *ego seam*: the ego border's last point ``e`` projects onto the history at arc length
+  s_e (foot ``h(s_e)``); the history before s_e (behind the ego's end) is dropped.
+- *coop seam*: the history ends (at arc length s_c) where the coop border starts (``c``),
+  the same place seen at two instants; its offset there is ``c − h(s_c)`` across the
+  lane's direction there (the along-track part is only the two samplings' spacing).
+- Between them each history point at arc length s is moved by
+  ``(1 − w)·Δ_e + w·Δ_c`` with ``w = (s − s_e) / (s_c − s_e)``, Δ_e = ``e − h(s_e)`` and Δ_c
+  the coop seam offset: the two offsets (the coop's pose error, odometry drift, detection
+  noise) fade linearly along the gap. The result runs exactly through ``e`` and across
+  ``c`` (no jump, C0), keeps the history's shape (a constant offset is removed exactly, a
+  drift that grows linearly along the gap too), and its direction changes at a seam by
+  |Δ_e − Δ_c| / (s_c − s_e) at most.
+
+Checks: the history must pass within ``convoy_max_offset_m`` of the ego border end, with a
+heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps* the ego's
+detection, so the convoy tolerances apply: a neighbour lane lies a lane width away). A
+history that does not reach back to the ego's end is joined to the coop detection (same
+seam offset faded along the history) and the remaining gap goes to :func:`fusion.fuse`,
+whose fusibility check then sees the history's start.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+import numpy as np
+
+from fusion.api import DEFAULT_PARAMS, ego_frame_result, fuse
+from fusion.errors import InvalidDetectionError
+from fusion.fusibility import lane_ends, relative_pose
+from fusion.geometry import cumulative_length, end_direction, norms, project_point, transform
+from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+
+_HEADING_WINDOW_M: Final[float] = 2.0
+_HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex for its heading
+_MIN_COVER_M: Final[float] = 1e-6
+_HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
+_EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
+
+
+def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
+    """Unit tangent (driving direction) of a polyline around vertex ``at`` by a chord of up to
+    ``_HEADING_WINDOW_M`` ending at most ``_HEADING_HALF_POINTS`` vertices after it."""
+    lo, hi = max(0, at - _HEADING_HALF_POINTS), min(points.shape[0] - 1, at + _HEADING_HALF_POINTS)
+    return end_direction(points[lo: hi + 1], True, _HEADING_WINDOW_M)
+
+
+def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, ego_offset: NDArrayFloat,
+               coop_offset: NDArrayFloat, *, keep_first: bool = False) -> NDArrayFloat:
+    """History points after arc length ``s_from`` (from it with ``keep_first``) and before the
+    last one, each moved by the seam offsets faded linearly in arc length (see the module
+    docstring): ``ego_offset`` (m, 2-vector) at ``s_from``, ``coop_offset`` at the history's end."""
+    first = int(np.searchsorted(s_history, s_from if keep_first else s_from + _MIN_COVER_M,
+                                side="left" if keep_first else "right"))
+    last = s_history.shape[0] - 1
+    w = (s_history[first:last] - s_from) / (s_history[-1] - s_from)
+    e, c = complex(*ego_offset), complex(*coop_offset)
+    z = np.ascontiguousarray(history[first:last]).view(np.complex128)[:, 0] + e + w * (c - e)
+    return z.view(np.float64).reshape(-1, 2)
+
+
+def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
+    """Offset [m] of the coop border's first point from the history's end, across the
+    lane's direction there (the along-track part is the spacing of the two, not an error); the
+    direction is the mean of the two chords that end and start there, exact on an arc."""
+    (hx, hy), (cx, cy) = end_direction(history, True, _HEADING_WINDOW_M), end_direction(coop, False, _HEADING_WINDOW_M)
+    norm = math.hypot(hx + cx, hy + cy) or 1.0
+    tx, ty = (hx + cx) / norm, (hy + cy) / norm
+    dx, dy = (coop[0] - history[-1]).tolist()
+    across = -ty * dx + tx * dy
+    return np.array([-ty * across, tx * across])
+
+
+def _cover(end: NDArrayFloat, direction: complex,
+           history: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, float, float, float, NDArrayFloat] | None:
+    """Where an ego border end (point ``end``, unit direction ``direction`` as x + iy, in the
+    history's frame) meets the history: ``(rest, s_rest, s_e, offset m, heading difference
+    rad, foot)``, ``rest`` the history from the vertex before the nearest one on, ``s_rest``
+    its arc lengths [m] and ``s_e`` the foot's; None when the history does not reach back
+    past the end."""
+    k = int(norms(history - end).argmin())
+    if k == 0 or k == history.shape[0] - 1:
+        return None
+    rest = history[k - 1:]
+    s_rest = cumulative_length(rest)
+    s_e, offset, i = project_point(end, rest[:3], s_rest[:3])
+    if s_e <= _MIN_COVER_M and k == 1:
+        return None
+    heading = complex(*_heading(rest, 1)) / direction
+    t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
+    foot = rest[i] + t * (rest[i + 1] - rest[i])
+    return rest, s_rest, s_e, offset, abs(math.atan2(heading.imag, heading.real)), foot
+
+
+def _reason(side: str, offset: float, heading: float, params: FusionParams) -> str:
+    if offset > params.convoy_max_offset_m:
+        return (f"coop history passes {offset:.2f} m from the ego {side} border end "
+                f"(> {params.convoy_max_offset_m:.2f} m): another lane")
+    if heading > params.convoy_max_heading_rad:
+        return (f"coop history heads {math.degrees(heading):.1f} deg away from the ego {side} border at its end "
+                f"(> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
+    return ""
+
+
+def _ahead_of(points: NDArrayFloat, end: NDArrayFloat, direction: tuple[float, float]) -> NDArrayFloat:
+    """Mask of the points beyond the line through ``end`` normal to ``direction``."""
+    return (points - end) @ np.array(direction) > _MIN_COVER_M
+
+
+def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
+                 params: FusionParams = DEFAULT_PARAMS) -> FusionResult:
+    """Collectively perceived lane of ``ego`` extended by ``coop`` and its history.
+
+    Without ``coop.history``, with ``mode="convoy"`` or when the detections overlap, this is
+    :func:`fusion.fuse`. When the history covers the gap on both borders the result is the ego
+    lane, the blended history (:class:`Source` ``COOP_HISTORY``) and the coop lane,
+    ``kind="history"`` (seams in the module docstring); otherwise the history extends the coop
+    detection backwards and :func:`fusion.fuse` interpolates the rest (history points still
+    labelled ``COOP_HISTORY``). Output in the world frame.
+    """
+    history = coop.history
+    if history is None or mode == "convoy":
+        return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+    if not isinstance(ego, LaneDetection):
+        raise InvalidDetectionError(f"ego must be a LaneDetection, got {type(ego).__name__}")
+    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
+    n_left = coop.left.shape[0]
+    moved = transform(coop.points, x_rel, y_rel, psi_rel)
+    cl, cr = moved[:n_left], moved[n_left:]
+    el, er = ego.left, ego.right
+    ends = lane_ends(el, er, cl, cr)
+    if x_rel <= 0.0 or ends.gap_m <= 0.0:
+        return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+    # the history stays in the coop frame; the ego's border ends (points, directions) go there
+    to_coop = relative_pose(coop.pose, ego.pose)
+    rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
+    ego_ends = transform(np.array([el[-1], er[-1], ends.p_end]), *to_coop)
+    ego_dirs = [complex(*end_direction(e, True, _HEADING_WINDOW_M)) * rotation for e in (el, er)]
+    covers = (_cover(ego_ends[0], ego_dirs[0], history.left), _cover(ego_ends[1], ego_dirs[1], history.right))
+    if covers[0] is None or covers[1] is None:
+        t_end = complex(*ends.t_end) * rotation
+        return _partial(ego, coop, ego_ends[2], (t_end.real, t_end.imag), mode, interpolation, params)
+    for side, cover in zip(("left", "right"), covers):
+        reason = _reason(side, cover[3], cover[4], params)
+        if reason:
+            return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
+    gaps = [seam_blend(rest, s_rest, s_e, e - foot, _coop_offset(rest, c))
+            for (rest, s_rest, s_e, _, _, foot), e, c in zip(covers, ego_ends, (coop.left, coop.right))]
+    n_gap = gaps[0].shape[0]
+    gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
+    return ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
+                            ends.gap_m)
+
+
+def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
+             interpolation: str, params: FusionParams) -> FusionResult:
+    """A history short of the ego's end: its part beyond the ego's end (the line through the
+    ego lane's end ``p_end`` normal to its direction ``t_end``, both in the coop frame) joined
+    to the coop detection, the seam offset faded in along it, the rest interpolated by
+    :func:`fusion.fuse`."""
+    assert coop.history is not None
+    extended = []
+    for history, first in zip((coop.history.left, coop.history.right), (coop.left, coop.right)):
+        ahead = history[_ahead_of(history, p_end, t_end)]
+        if ahead.shape[0] < 2:
+            return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
+        joined = seam_blend(ahead, cumulative_length(ahead), 0.0, np.zeros(2), _coop_offset(ahead, first),
+                            keep_first=True)
+        extended.append(np.concatenate((joined, first)))
+    longer = LaneDetection(coop.pose, extended[0], extended[1], stamp=coop.stamp, sender=coop.sender)
+    result = fuse(ego, longer, mode=mode, interpolation=interpolation, params=params)
+    if result.kind == "none":
+        return result
+    labels = []
+    for source, border, own in ((result.left_source, longer.left, coop.left),
+                                (result.right_source, longer.right, coop.right)):
+        relabelled = source.copy()
+        n_coop = int(np.count_nonzero(source == Source.COOP))
+        first_coop = source.shape[0] - n_coop
+        relabelled[first_coop: first_coop + min(n_coop, border.shape[0] - own.shape[0])] = Source.COOP_HISTORY
+        labels.append(relabelled)
+    return FusionResult(result.left, result.right, labels[0], labels[1], result.kind, result.gap_m, result.reason)

@@ -1,0 +1,118 @@
+"""fusion.fuse_history: the coop's lane history bridges the gap (observed, not interpolated),
+seams without a jump, the checks, and a history short of the gap."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import fusion
+from fusion.analytic import AnalyticRoad, Segment, bend_segments, detect, with_history
+from fusion.geometry import distance_to_polyline
+
+LANE = (0.0, -3.5)
+CORNER = AnalyticRoad([Segment(80.0), *bend_segments(-1.0 / 12.0, math.pi / 2), Segment(200.0)])
+CORNER_END_M = 80.0 + math.pi / 2 * 12.0  # the turn lies wholly inside [75, 75 + d_s] for d_s >= 24
+STRAIGHT = AnalyticRoad([Segment(400.0)])
+
+
+def _pair(road, s_end, d_s, history_m, noise_m=0.0, seed=0, lane=LANE):
+    rng = np.random.default_rng(seed)
+    ego = detect(road, s_end - 30.0, 30.0, *LANE, noise_m=noise_m, rng=rng)
+    s_coop = s_end + d_s
+    coop = detect(road, s_coop, 30.0, *lane, noise_m=noise_m, rng=rng)
+    return ego, with_history(road, coop, s_coop, history_m, *lane)
+
+
+def _errors(road, result, source=None):
+    out = []
+    for border, labels, offset in ((result.left, result.left_source, LANE[0]),
+                                   (result.right, result.right_source, LANE[1])):
+        points = border if source is None else border[labels == source]
+        out.append(distance_to_polyline(points, road.border(offset)))
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize("d_s", [30.0, 40.0])
+def test_history_covering_the_gap_reproduces_a_corner_inside_it(d_s):
+    ego, coop = _pair(CORNER, 75.0, d_s, 100.0)
+    result = fusion.fuse_history(ego, coop, interpolation="hermite")
+    assert result.kind == "history" and not result.reason
+    assert set(np.unique(result.left_source)) == {fusion.Source.EGO, fusion.Source.COOP_HISTORY, fusion.Source.COOP}
+    assert _errors(CORNER, result).max() < 1e-3  # exact history: the lane to rounding
+    # the same pair without history: the turn inside the gap is interpolated, off by decimetres
+    plain = fusion.fuse(ego, coop, interpolation="hermite")
+    assert plain.kind == "spline" and _errors(CORNER, plain).max() > 0.3
+
+
+def test_noisy_history_keeps_the_detection_error():
+    sigma = 0.05
+    worst = []
+    for seed in range(5):
+        ego, coop = _pair(CORNER, 75.0, 30.0, 100.0, noise_m=sigma, seed=seed)
+        noisy = np.random.default_rng(100 + seed)
+        history = fusion.LaneHistory(*(b + noisy.normal(0.0, sigma, b.shape) for b in (coop.history.left,
+                                                                                       coop.history.right)))
+        result = fusion.fuse_history(ego, replace(coop, history=history))
+        assert result.kind == "history"
+        worst.append(_errors(CORNER, result, fusion.Source.COOP_HISTORY).max())
+    # per-coordinate noise σ: a point is off by |N(0, σ)²| (≤ 5σ), plus the seam offsets (≤ 2·5σ·(1-w)...)
+    assert max(worst) < 6 * sigma
+
+
+def test_seams_have_no_jump_under_a_coop_pose_error():
+    ego, coop = _pair(STRAIGHT, 100.0, 30.0, 100.0)
+    shift = 0.4  # the coop believes it stands 0.4 m further left: its whole message moves
+    p = coop.pose
+    moved = replace(coop, pose=fusion.Pose2D(p.x - shift * math.sin(p.yaw), p.y + shift * math.cos(p.yaw), p.yaw))
+    result = fusion.fuse_history(ego, moved)
+    assert result.kind == "history"
+    for border, labels, offset in ((result.left, result.left_source, LANE[0]),
+                                   (result.right, result.right_source, LANE[1])):
+        steps = np.hypot(*np.diff(border, axis=0).T)
+        assert steps.max() < 0.1 * math.hypot(1.0, shift / 30.0) + 1e-9  # no jump, seams included
+        gap = border[labels == fusion.Source.COOP_HISTORY]
+        # closed form (road along x from the origin): the history lies 0.4 m left; the ego seam
+        # offset −0.4 m fades linearly to 0 at the coop seam (x = 130), so the error grows
+        # linearly from 0 at the ego end (x = 100) to the coop's own 0.4 m
+        np.testing.assert_allclose(gap[:, 1] - offset, shift * (gap[:, 0] - 100.0) / 30.0, atol=1e-6)
+
+
+def test_adjacent_lane_history_is_rejected():
+    ego, coop = _pair(STRAIGHT, 100.0, 30.0, 100.0, lane=(3.5, 0.0))
+    result = fusion.fuse_history(ego, coop)
+    assert result.kind == "none" and "another lane" in result.reason
+
+
+def test_history_short_of_the_gap_is_interpolated_only_where_missing():
+    ego, coop = _pair(CORNER, 75.0, 30.0, 12.0)  # covers the last 12 m of the 30 m gap
+    result = fusion.fuse_history(ego, coop, interpolation="hermite")
+    assert result.kind == "spline"
+    labels = set(np.unique(result.left_source))
+    assert {fusion.Source.INTERPOLATED, fusion.Source.COOP_HISTORY} <= labels
+    n_hist = int(np.count_nonzero(result.left_source == fusion.Source.COOP_HISTORY))
+    assert abs(n_hist - 120) <= 2  # 12 m every 0.10 m
+    assert _errors(CORNER, result, fusion.Source.COOP_HISTORY).max() < 1e-3
+    labels = result.left_source
+    runs = [int(v) for i, v in enumerate(labels) if i == 0 or labels[i - 1] != v]
+    S = fusion.Source
+    assert runs == [S.EGO, S.INTERPOLATED, S.COOP_HISTORY, S.COOP]
+
+
+def test_without_history_it_is_fuse():
+    ego = detect(CORNER, 45.0, 30.0, *LANE)
+    coop = detect(CORNER, 105.0, 30.0, *LANE)
+    a, b = fusion.fuse_history(ego, coop), fusion.fuse(ego, coop)
+    np.testing.assert_array_equal(a.left, b.left)
+    np.testing.assert_array_equal(a.right_source, b.right_source)
+
+
+def test_history_must_be_a_lane_history():
+    ego = detect(STRAIGHT, 0.0, 30.0, *LANE)
+    with pytest.raises(fusion.InvalidDetectionError, match="history"):
+        fusion.LaneDetection(ego.pose, ego.left, ego.right, history=(ego.left, ego.right))
+    with pytest.raises(fusion.InvalidDetectionError, match="LaneHistory.left"):
+        fusion.LaneHistory(np.full((3, 2), np.nan), ego.right)
