@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="spline interpolation (default both)")
     parser.add_argument("--gaps", type=_gaps, default=PAPER_GAPS_M,
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
+    parser.add_argument("--method", action="append", default=[], metavar="NAME",
+                        help="also evaluate this fusion method across the gaps: a name registered in the "
+                             "cold_maps.fusion_methods entry points or package.module:function (repeatable)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
@@ -78,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
                              ("--pose-xy", "pose_sigma_xy_m", "m, σ, coop poses"),
                              ("--pose-yaw", "pose_sigma_yaw_rad", "rad, σ, coop poses")):
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
+    parser.add_argument("--workers", type=_positive_int, default=None,
+                        help="worker processes, one drive (route) each at a time (default: this machine's cores)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
@@ -85,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _interpolations(args: argparse.Namespace) -> tuple[str, ...]:
-    return INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+    chosen = INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+    return tuple(dict.fromkeys((*chosen, *args.method)))
 
 
 def _plans(args: argparse.Namespace) -> list[MapPlan]:
@@ -133,16 +139,24 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``cold-eval``; returns the exit status."""
+    """Entry point of ``cold-eval`` (``cold-eval sweep ...``: :mod:`cold_maps.cli.sweep`);
+    returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["sweep"]:
+        from cold_maps.cli import sweep
+
+        return sweep.main(argv[1:])
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
+    from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
 
     configure_logging(args.verbose)
     try:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
-                             run_params={k: str(v) for k, v in sorted(vars(args).items())})
+                             run_params={k: str(v) for k, v in sorted(vars(args).items()) if k != "workers"},
+                             workers=args.workers or default_workers())
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)

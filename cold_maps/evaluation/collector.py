@@ -55,3 +55,19 @@ class Collector:
         if accumulator is None:
             accumulator = self.accumulators[key] = ScenarioAccumulator(key)
         accumulator.add(record)
+
+    def merge(self, later: Collector) -> None:
+        """Appends what ``later`` measured after everything in this collector (a work unit
+        run elsewhere): the same state as if its frames had been evaluated into this one."""
+        for key, accumulator in later.accumulators.items():
+            for record in accumulator.records:
+                self.add(key, record)
+        for mine, theirs in ((self.fuse_ms, later.fuse_ms), (self.check_ms, later.check_ms)):
+            for label, runtimes in theirs.items():
+                mine.setdefault(label, []).extend(runtimes)
+        for label, overlay in later.overlays.items():
+            kept = self.overlays.get(label)
+            if kept is None or overlay.max_error_m > kept.max_error_m:
+                self.overlays[label] = overlay
+        self.notes.extend(later.notes)
+        self.frames_done += later.frames_done

@@ -24,6 +24,7 @@ import numpy as np
 
 import fusion
 from cold_maps.evaluation.collector import Collector, Overlay
+from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
@@ -57,7 +58,9 @@ RELATION_MARGIN_M: Final[float] = 5.0
 
 class MapEvaluator:
     """Evaluates one :class:`MapPlan`: loads the map and its ground truth, builds the drives
-    and runs them frame by frame into a :class:`Collector`.
+    and runs them frame by frame into a :class:`Collector`. Each drive is a work unit
+    (:meth:`run_drive`): its sensor error models draw from its own generator, spawned from
+    the plan's seed after the route choice, so drives can run in any process in any order.
 
     Raises ``DriveError`` (no drivable route, route too short) on construction.
     """
@@ -68,6 +71,7 @@ class MapEvaluator:
         self.graph = graph or load_graph(plan.path)
         self.rng = np.random.default_rng(plan.seed)
         self.drives, self.coverage = self._drives()
+        self.drive_rngs = self.rng.spawn(len(self.drives))
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
@@ -133,19 +137,40 @@ class MapEvaluator:
         Frame indices (and MCAP stamps) continue from ``frame_offset`` across drives.
         """
         self.prepare()
-        plan = self.plan
-        collector.notes.append(
-            f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
-            f"{self.coverage[0]} of {self.coverage[1]} driving lanes")
+        collector.notes.append(self.drives_note())
         frame_index = frame_offset
-        for drive in self.drives:
-            LOG.info("%s: route %s (%.0f m)", plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-            for frame in range(drive.frames):
-                self._frame(collector, drive, frame, frame_index, recorder)
-                collector.frames_done += 1
-                frame_index += 1
-                if on_frame is not None:
-                    on_frame()
+        for drive in range(len(self.drives)):
+            frame_index = self.run_drive(drive, collector, recorder=recorder, frame_offset=frame_index,
+                                         on_frame=on_frame)
+        self.note_unmatched(collector)
+        return frame_index
+
+    def drives_note(self) -> str:
+        """The summary line on this map's drives and the lanes they cover."""
+        plan = self.plan
+        return (f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s "
+                f"covering {self.coverage[0]} of {self.coverage[1]} driving lanes")
+
+    def run_drive(self, drive_index: int, collector: Collector, *, recorder: Recorder | None = None,
+                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None) -> int:
+        """Evaluates every frame of one drive (a work unit: its error models draw from the
+        drive's own generator); returns the next free global frame index."""
+        self.prepare()
+        drive = self.drives[drive_index]
+        rng = self.drive_rngs[drive_index]
+        LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
+        frame_index = frame_offset
+        for frame in range(drive.frames):
+            self._frame(collector, drive, frame, frame_index, recorder, rng)
+            collector.frames_done += 1
+            frame_index += 1
+            if on_frame is not None:
+                on_frame()
+        return frame_index
+
+    def note_unmatched(self, collector: Collector) -> None:
+        """Notes (and logs) the ego detections of this map without ground truth, if any."""
+        plan = self.plan
         unmatched = sum(r.rejected == "no_ground_truth" for key, a in collector.accumulators.items()
                         if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
                         for r in a.records)
@@ -154,12 +179,12 @@ class MapEvaluator:
                     "Lanelet2 lanelet at the pose: the converted map does not overlay the OpenDRIVE map there)")
             LOG.warning(note)
             collector.notes.append(note)
-        return frame_index
 
-    def _frame(self, collector: Collector, drive: Drive, frame: int, index: int, recorder: Recorder | None) -> None:
+    def _frame(self, collector: Collector, drive: Drive, frame: int, index: int, recorder: Recorder | None,
+               rng: np.random.Generator) -> None:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
-        sensed = {name: sense(state, self.sensor, plan.errors, self.rng, stamp_s=stamp)
+        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp)
                   for name, state in drive.states(frame).items()}
         ego = sensed["ego"]
         metrics: dict[str, float | None] = {}
@@ -237,8 +262,11 @@ class MapEvaluator:
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
         start = time.perf_counter()
-        result = fusion.fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation,
-                             params=plan.params)
+        if mode == "spline":
+            result = resolve_method(interpolation)(ego.detection, other.detection, plan.params)
+        else:
+            result = fusion.fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation,
+                                 params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
         if main:
             start = time.perf_counter()
