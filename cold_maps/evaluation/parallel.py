@@ -54,7 +54,7 @@ def process_pool(workers: int) -> Iterator[Executor]:
     try:
         yield executor
     except BaseException:
-        processes = list(getattr(executor, "_processes", None) or {})
+        processes = list((getattr(executor, "_processes", None) or {}).values())
         executor.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             process.terminate()
