@@ -4,9 +4,11 @@
 ``--frames``, ``--seed``) with an ego, cooperative vehicles (convoy headway 25 m, spline
 gaps ``--gaps``) and distractors, fuses per frame (``--interpolation``) and measures against
 Lanelet2 ground truth. ``cold-eval --paper`` runs the paper's experiments on the bundled
-straight, curve90 and rural maps. Outputs in ``--out``: summary.md, metrics.json,
-frames.csv, plots/*.png, run.mcap. Exit 0; 1 with one line on stderr for bad input or a
-crash (partial outputs marked as such); 130 when interrupted.
+straight, curve90 and rural maps. The drives run in ``--workers`` processes (default: the
+cores) with the same outputs for any number; ``--method`` adds your own fusion method.
+Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
+1 with one line on stderr for bad input or a crash (partial outputs marked as such); 130
+when interrupted. ``cold-eval sweep ...``: a grid of evaluations (:mod:`cold_maps.cli.sweep`).
 """
 
 from __future__ import annotations
