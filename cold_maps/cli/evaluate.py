@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
+from cold_maps.cli.common import gap_list, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -31,25 +32,8 @@ DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
-    return value
-
-
 def _routes(text: str) -> int | None:
-    return None if text == "all" else _positive_int(text)
-
-
-def _gaps(text: str) -> tuple[float, ...]:
-    try:
-        gaps = tuple(float(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated distances in m, got {text!r}") from None
-    if not gaps or any(not 0 < g < 1e4 for g in gaps):
-        raise argparse.ArgumentTypeError(f"gaps must be > 0 m, got {text!r}")
-    return gaps
+    return None if text == "all" else positive_int(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,13 +46,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
                         help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
-    parser.add_argument("--frames", type=_positive_int, default=None,
+    parser.add_argument("--frames", type=positive_int, default=None,
                         help=f"frames per route (default {DEFAULT_FRAMES}; --paper: the whole route at 1 m per frame)")
     parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")
     parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
                         help="spline interpolation (default both)")
-    parser.add_argument("--gaps", type=_gaps, default=PAPER_GAPS_M,
+    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
                         help="also evaluate this fusion method across the gaps: a name registered in the "
@@ -83,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
                              ("--pose-xy", "pose_sigma_xy_m", "m, σ, coop poses"),
                              ("--pose-yaw", "pose_sigma_yaw_rad", "rad, σ, coop poses")):
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
-    parser.add_argument("--workers", type=_positive_int, default=None,
+    parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")

@@ -16,6 +16,9 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence, TypeVar
 
+from cold_maps.cli.common import gap_list, positive_int
+from cold_maps.simulation.drive import PAPER_GAPS_M
+
 PROG: Final[str] = "cold-eval sweep"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
@@ -45,13 +48,12 @@ def _sigmas(text: str) -> tuple[float, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval sweep`` argument parser."""
-    from cold_maps.cli.evaluate import _gaps, _positive_int
-
     description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
     parser = argparse.ArgumentParser(prog=PROG, description=description)
     parser.add_argument("--map", action="append", type=Path, required=True, metavar="MAP.xodr",
                         help="OpenDRIVE map (repeatable)")
-    parser.add_argument("--gaps", type=_gaps, default=(20.0, 30.0, 50.0), help="spline gaps d_s in m (default 20,30,50)")
+    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
+                        help="spline gaps d_s in m (default 20,30,50)")
     parser.add_argument("--interpolation", type=_list(str, "method names"), default=("paper", "hermite"),
                         help="spline methods: paper, hermite, registered names (default paper,hermite)")
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
@@ -59,12 +61,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--noise", type=_sigmas, default=(0.0,), help="sensor noise σ levels in m (default 0)")
     parser.add_argument("--pose-xy", type=_sigmas, default=(0.0,), help="coop pose σ levels in m (default 0)")
     parser.add_argument("--seeds", type=_list(int, "integers"), default=(0,), help="seeds (default 0)")
-    parser.add_argument("--frames", type=_positive_int, default=DEFAULT_FRAMES,
+    parser.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES,
                         help=f"frames per route (default {DEFAULT_FRAMES})")
-    parser.add_argument("--routes", type=_positive_int, default=DEFAULT_ROUTES,
+    parser.add_argument("--routes", type=positive_int, default=DEFAULT_ROUTES,
                         help=f"routes per map and cell (default {DEFAULT_ROUTES})")
     parser.add_argument("--out", type=Path, required=True, help="output folder (finished cells are kept there)")
-    parser.add_argument("--workers", type=_positive_int, default=None,
+    parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes (default: this machine's cores); ignored with --scheduler")
     parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
                         help="run the cells on this Dask scheduler's workers")

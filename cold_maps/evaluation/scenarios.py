@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Final, Literal, Sequence
 
 import fusion
-from cold_maps.evaluation.methods import resolve_method
+from cold_maps.evaluation.methods import MethodError, resolve_method
 from cold_maps.evaluation.report import ScenarioKey
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
@@ -82,7 +82,10 @@ def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
         if not (math.isfinite(gap) and gap > 0):
             raise ValueError(f"spline gap d_s: expected a finite distance > 0 m, got {gap!r}")
     for name in interpolations:
-        resolve_method(name)
+        try:
+            resolve_method(name)
+        except MethodError as exc:
+            raise MethodError(f"interpolation: {exc}") from None
     splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
                for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
     return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)
