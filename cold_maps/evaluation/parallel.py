@@ -159,15 +159,14 @@ def run_units(evaluators: Sequence[MapEvaluator], collector: Collector, recorder
     """Runs every drive of ``evaluators`` as a unit on ``executor`` and merges the results
     into ``collector`` and ``recorder`` in unit order (the notes as :meth:`MapEvaluator.run`
     writes them); on an exception the units finished so far are merged, then it propagates."""
-    by_plan = {id(e.plan): e for e in evaluators}
     units = work_units(evaluators)
+    owners = [evaluator for evaluator in evaluators for _ in evaluator.drives]
     futures: dict[Future[UnitResult], int] = {
         executor.submit(run_unit, unit, record=recorder is not None): n for n, unit in enumerate(units)}
     finished: dict[int, UnitResult] = {}
 
     def merge(n: int) -> None:
-        unit, result = units[n], finished.pop(n)
-        evaluator = by_plan[id(unit.plan)]
+        unit, result, evaluator = units[n], finished.pop(n), owners[n]
         if unit.drive == 0:
             collector.notes.append(evaluator.drives_note())
         collector.merge(result.collector)
