@@ -1,10 +1,11 @@
 """Outputs of ``cold-eval`` runs with their runtimes taken out, for comparing runs that
-must agree (worker counts, Dask against processes)."""
+must agree (worker counts, Dask against processes); Ctrl-C of a child process."""
 
 from __future__ import annotations
 
 import csv
 import json
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -35,3 +36,10 @@ def mcap_messages(out: Path) -> list[tuple[str, int, bytes]]:
     with open(out / "run.mcap", "rb") as stream:
         return [(channel.topic, message.log_time, message.data)
                 for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` of a child that the test interrupts: Ctrl-C raises KeyboardInterrupt
+    there even when the tests run in a background job (which ignores SIGINT, and children
+    inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

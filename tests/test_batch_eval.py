@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from batch_outputs import frames_without_runtimes, mcap_messages, metrics_without_runtimes
+from batch_outputs import default_sigint, frames_without_runtimes, mcap_messages, metrics_without_runtimes
 from conftest import BUNDLED_MAPS_DIR, bundled_map
 
 from cold_maps.cli import evaluate
@@ -66,7 +66,8 @@ def test_sigint_with_workers_leaves_partial_outputs(tmp_path):
     process = subprocess.Popen(
         [sys.executable, "-m", "cold_maps.cli.evaluate", "--map", str(bundled_map("rural")), "--frames", "600",
          "--routes", "3", "--workers", "2", "--no-plots", "--out", str(out)],
-        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1])
+        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1],
+        preexec_fn=default_sigint)
     deadline = time.monotonic() + 60
     while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.05)

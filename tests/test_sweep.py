@@ -13,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from batch_outputs import rows_without_runtimes
+from batch_outputs import default_sigint, rows_without_runtimes
 from conftest import bundled_map
 
 from cold_maps.cli import evaluate
@@ -45,7 +45,8 @@ def resumed(tmp_path_factory):
     process = subprocess.Popen([sys.executable, "-m", "cold_maps.cli.evaluate", "sweep", *_maps(), *GRID,
                                 "--workers", "1", "--no-plots", "--out", str(out)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               cwd=Path(__file__).resolve().parents[1])
+                               cwd=Path(__file__).resolve().parents[1],
+                               preexec_fn=default_sigint)
     deadline = time.monotonic() + 120
     while (len(list((out / CELLS_DIR).glob("*.json"))) if (out / CELLS_DIR).exists() else 0) < 3 \
             and time.monotonic() < deadline and process.poll() is None:
