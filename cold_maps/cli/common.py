@@ -4,6 +4,7 @@ and a reader that closes the pipe early ending the command quietly."""
 
 from __future__ import annotations
 
+import argparse
 import functools
 import logging
 import os
@@ -74,3 +75,22 @@ def startup_failure(prog: str, exc: BaseException) -> int:
     logging.getLogger(prog).debug("failed", exc_info=exc)
     print(f"{prog}: {exc}", file=sys.stderr)
     return EXIT_FAILURE
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
+    return value
+
+
+def gap_list(text: str) -> tuple[float, ...]:
+    """argparse type: comma-separated spline gaps d_s (m), each > 0."""
+    try:
+        gaps = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated distances in m, got {text!r}") from None
+    if not gaps or any(not 0 < g < 1e4 for g in gaps):
+        raise argparse.ArgumentTypeError(f"gaps must be > 0 m, got {text!r}")
+    return gaps

@@ -4,9 +4,11 @@
 ``--frames``, ``--seed``) with an ego, cooperative vehicles (convoy headway 25 m, spline
 gaps ``--gaps``) and distractors, fuses per frame (``--interpolation``) and measures against
 Lanelet2 ground truth. ``cold-eval --paper`` runs the paper's experiments on the bundled
-straight, curve90 and rural maps. Outputs in ``--out``: summary.md, metrics.json,
-frames.csv, plots/*.png, run.mcap. Exit 0; 1 with one line on stderr for bad input or a
-crash (partial outputs marked as such); 130 when interrupted.
+straight, curve90 and rural maps. The drives run in ``--workers`` processes (default: the
+cores) with the same outputs for any number; ``--method`` adds your own fusion method.
+Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
+1 with one line on stderr for bad input or a crash (partial outputs marked as such); 130
+when interrupted. ``cold-eval sweep ...``: a grid of evaluations (:mod:`cold_maps.cli.sweep`).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry
+from cold_maps.cli.common import cli_entry, gap_list, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -33,25 +35,8 @@ DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
-    return value
-
-
 def _routes(text: str) -> int | None:
-    return None if text == "all" else _positive_int(text)
-
-
-def _gaps(text: str) -> tuple[float, ...]:
-    try:
-        gaps = tuple(float(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated distances in m, got {text!r}") from None
-    if not gaps or any(not 0 < g < 1e4 for g in gaps):
-        raise argparse.ArgumentTypeError(f"gaps must be > 0 m, got {text!r}")
-    return gaps
+    return None if text == "all" else positive_int(text)
 
 
 def _non_negative(text: str) -> float:
@@ -99,15 +84,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
                         help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
-    parser.add_argument("--frames", type=_positive_int, default=None,
+    parser.add_argument("--frames", type=positive_int, default=None,
                         help=f"frames per route (default {DEFAULT_FRAMES}, fewer on a map too short for them; "
                              "--paper: the whole route at 1 m per frame)")
     parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")
     parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
                         help="spline interpolation (default both)")
-    parser.add_argument("--gaps", type=_gaps, default=PAPER_GAPS_M,
+    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
+    parser.add_argument("--method", action="append", default=[], metavar="NAME",
+                        help="also evaluate this fusion method across the gaps: a name registered in the "
+                             "cold_maps.fusion_methods entry points or package.module:function (repeatable)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
@@ -119,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
                              ("--pose-yaw", "pose_sigma_yaw_rad", "rad, σ, coop poses")):
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
     coop = parser.add_argument_group("chains, lane history and messages (all off by default, seeded)")
-    coop.add_argument("--coops", type=_positive_int, default=1,
+    coop.add_argument("--coops", type=positive_int, default=1,
                       help="coops per chain: K > 1 adds chains of 2..K coops ahead, spaced like the pair (default 1)")
     coop.add_argument("--history", type=_non_negative, nargs="?", const=DEFAULT_HISTORY_M, default=0.0, metavar="M",
                       help=f"lane history every coop sends, m (no value: {DEFAULT_HISTORY_M:g}; default 0 = none)")
@@ -139,6 +127,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help=f"longest time between messages (s, default {DEFAULT_MAX_INTERVAL_S:g})")
     coop.add_argument("--change-tolerance", type=_non_negative, default=DEFAULT_CHANGE_TOLERANCE_M,
                       help=f"lane change (RMS, m) that triggers a message (default {DEFAULT_CHANGE_TOLERANCE_M:g})")
+    parser.add_argument("--workers", type=positive_int, default=None,
+                        help="worker processes, one drive (route) each at a time (default: this machine's cores)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
@@ -146,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _interpolations(args: argparse.Namespace) -> tuple[str, ...]:
-    return INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+    chosen = INTERPOLATIONS if args.interpolation == "both" else (args.interpolation,)
+    return tuple(dict.fromkeys((*chosen, *args.method)))
 
 
 def _plans(args: argparse.Namespace) -> list[MapPlan]:
@@ -197,16 +188,24 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``cold-eval``; returns the exit status."""
+    """Entry point of ``cold-eval`` (``cold-eval sweep ...``: :mod:`cold_maps.cli.sweep`);
+    returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["sweep"]:
+        from cold_maps.cli import sweep
+
+        return sweep.main(argv[1:])
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import configure_logging, interruption, startup_failure
+    from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
 
     configure_logging(args.verbose)
     try:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
-                             run_params={k: str(v) for k, v in sorted(vars(args).items())})
+                             run_params={k: str(v) for k, v in sorted(vars(args).items()) if k != "workers"},
+                             workers=args.workers or default_workers())
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)

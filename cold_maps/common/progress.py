@@ -1,9 +1,8 @@
-"""A dependency-free terminal progress bar: drawn only when its stream is a TTY."""
+"""A terminal progress bar over tqdm: drawn only when its stream is a TTY."""
 
 from __future__ import annotations
 
 import sys
-import time
 from types import TracebackType
 from typing import Final, TextIO
 
@@ -12,11 +11,11 @@ REDRAW_INTERVAL_S: Final[float] = 0.1
 
 
 class ProgressBar:
-    """``label [#####.....]  12/100  ETA 3 s`` on one line of ``stream`` (stderr by default).
+    """``label [#####.....] 12/100  ETA 00:03`` on one line of ``stream`` (stderr by default).
 
     Silent when the stream is not a TTY (logs, CI, pipes). Use as a context manager or
     call :meth:`close`, which ends the line. Redraws at most every ``min_interval_s``
-    seconds, and always at the last step.
+    seconds, and always at the last step. Drawn by ``tqdm`` (imported when a bar is made).
     """
 
     def __init__(self, total: int, label: str = "", stream: TextIO | None = None,
@@ -25,41 +24,29 @@ class ProgressBar:
             raise ValueError(f"ProgressBar total: expected an integer > 0, got {total!r}")
         if width <= 0:
             raise ValueError(f"ProgressBar width: expected > 0 characters, got {width!r}")
+        from tqdm import tqdm
+
         self.total = total
         self.label = label
-        self.width = width
-        self.min_interval_s = min_interval_s
         self.stream = sys.stderr if stream is None else stream
         self.done = 0
-        self._enabled = bool(getattr(self.stream, "isatty", lambda: False)())
-        self._start = time.monotonic()
-        self._last_draw = -float("inf")
-        self._drawn = False
+        enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        prefix = "{desc} " if label else ""
+        self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not enabled, ascii=".#",
+                         bar_format=prefix + "[{bar:%d}] {n_fmt}/{total_fmt}  ETA {remaining}" % width,
+                         mininterval=min_interval_s, miniters=1, dynamic_ncols=False)
 
     def update(self, steps: int = 1) -> None:
         """Advances by ``steps`` (clamped to the total) and redraws when due."""
-        self.done = min(self.total, self.done + steps)
-        now = time.monotonic()
-        if self._enabled and (self.done == self.total or now - self._last_draw >= self.min_interval_s):
-            self._draw(now)
-
-    def _draw(self, now: float) -> None:
-        filled = self.width * self.done // self.total
-        elapsed = now - self._start
-        eta = f"ETA {elapsed * (self.total - self.done) / self.done:.0f} s" if self.done else "ETA ?"
-        prefix = f"{self.label} " if self.label else ""
-        self.stream.write(f"\r{prefix}[{'#' * filled}{'.' * (self.width - filled)}] "
-                          f"{self.done}/{self.total}  {eta}")
-        self.stream.flush()
-        self._last_draw = now
-        self._drawn = True
+        steps = min(steps, self.total - self.done)
+        self.done += steps
+        self._bar.update(steps)
+        if self.done == self.total:
+            self._bar.refresh()
 
     def close(self) -> None:
         """Ends the bar's line (only if something was drawn)."""
-        if self._drawn:
-            self.stream.write("\n")
-            self.stream.flush()
-            self._drawn = False
+        self._bar.close()
 
     def __enter__(self) -> ProgressBar:
         return self

@@ -66,3 +66,24 @@ class Collector:
         if accumulator is None:
             accumulator = self.accumulators[key] = ScenarioAccumulator(key)
         return accumulator
+
+    def merge(self, later: Collector) -> None:
+        """Appends what ``later`` measured after everything in this collector (a work unit
+        run elsewhere): the same state as if its frames had been evaluated into this one."""
+        for key, accumulator in later.accumulators.items():
+            mine = self._accumulator(key)
+            for record in accumulator.records:
+                mine.add(record)
+            mine.messages += accumulator.messages
+            mine.message_bytes += accumulator.message_bytes
+            mine.sender_ns += accumulator.sender_ns
+        for mine_ms, theirs in ((self.fuse_ms, later.fuse_ms), (self.check_ms, later.check_ms)):
+            for label, runtimes in theirs.items():
+                mine_ms.setdefault(label, []).extend(runtimes)
+        for label, overlay in later.overlays.items():
+            kept = self.overlays.get(label)
+            if kept is None or overlay.max_error_m > kept.max_error_m:
+                self.overlays[label] = overlay
+        self.notes.extend(later.notes)
+        self.reduced_maps.extend(name for name in later.reduced_maps if name not in self.reduced_maps)
+        self.frames_done += later.frames_done

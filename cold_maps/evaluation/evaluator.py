@@ -25,6 +25,7 @@ import numpy as np
 import fusion
 from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
+from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
@@ -59,7 +60,9 @@ RELATION_MARGIN_M: Final[float] = 5.0
 
 class MapEvaluator:
     """Evaluates one :class:`MapPlan`: loads the map and its ground truth, builds the drives
-    and runs them frame by frame into a :class:`Collector`.
+    and runs them frame by frame into a :class:`Collector`. Each drive is a work unit
+    (:meth:`run_drive`): its sensor error models draw from its own generator, spawned from
+    the plan's seed after the route choice, so drives can run in any process in any order.
 
     Raises ``DriveError`` (no drivable route, not even for the local scenario) on
     construction; on a map too small for the whole plan it evaluates what fits
@@ -73,6 +76,7 @@ class MapEvaluator:
         self.rng = np.random.default_rng(plan.seed)
         self.fit_notes: tuple[str, ...] = ()
         self.drives, self.coverage = self._drives()
+        self.drive_rngs = self.rng.spawn(len(self.drives))
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
@@ -132,6 +136,17 @@ class MapEvaluator:
         Frame indices (and MCAP stamps) continue from ``frame_offset`` across drives.
         """
         self.prepare()
+        self.note_drives(collector)
+        frame_index = frame_offset
+        for drive in range(len(self.drives)):
+            frame_index = self.run_drive(drive, collector, recorder=recorder, frame_offset=frame_index,
+                                         on_frame=on_frame)
+        self.note_unmatched(collector)
+        return frame_index
+
+    def note_drives(self, collector: Collector) -> None:
+        """Notes what of the plan did not fit the map, this map's drives and the lanes they
+        cover, and a loop shorter than the farthest detection."""
         plan = self.plan
         collector.notes.extend(self.fit_notes)
         if self.fit_notes:
@@ -145,15 +160,26 @@ class MapEvaluator:
             collector.notes.append(
                 f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
                 f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
+
+    def run_drive(self, drive_index: int, collector: Collector, *, recorder: Recorder | None = None,
+                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None) -> int:
+        """Evaluates every frame of one drive (a work unit: its error models draw from the
+        drive's own generator); returns the next free global frame index."""
+        self.prepare()
+        drive = self.drives[drive_index]
+        LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
         frame_index = frame_offset
-        for drive in self.drives:
-            LOG.info("%s: route %s (%.0f m)", plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-            for frame in range(drive.frames):
-                self._frame(collector, drive, frame, frame_index, recorder)
-                collector.frames_done += 1
-                frame_index += 1
-                if on_frame is not None:
-                    on_frame()
+        for frame in range(drive.frames):
+            self._frame(collector, drive_index, frame, frame_index, recorder)
+            collector.frames_done += 1
+            frame_index += 1
+            if on_frame is not None:
+                on_frame()
+        return frame_index
+
+    def note_unmatched(self, collector: Collector) -> None:
+        """Notes (and logs) the ego detections of this map without ground truth, if any."""
+        plan = self.plan
         unmatched = sum(r.rejected == "no_ground_truth" for key, a in collector.accumulators.items()
                         if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
                         for r in a.records)
@@ -162,16 +188,17 @@ class MapEvaluator:
                     "Lanelet2 lanelet at the pose: the converted map does not overlay the OpenDRIVE map there)")
             LOG.warning(note)
             collector.notes.append(note)
-        return frame_index
 
-    def _frame(self, collector: Collector, drive: Drive, frame: int, index: int, recorder: Recorder | None) -> None:
+    def _frame(self, collector: Collector, drive_index: int, frame: int, index: int,
+               recorder: Recorder | None) -> None:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
-        sensed = {name: sense(state, self.sensor, plan.errors, self.rng, stamp_s=stamp)
+        drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
+        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp)
                   for name, state in drive.states(frame).items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:
-            sensed, sent = self.exchange.apply(id(drive), sensed, stamp)
+            sensed, sent = self.exchange.apply(drive_index, sensed, stamp)
         ego = sensed["ego"]
         metrics: dict[str, float | None] = {}
         fused_lines: dict[str, NDArrayFloat] = {}
@@ -254,8 +281,14 @@ class MapEvaluator:
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
         start = time.perf_counter()
-        fuse = fusion.fuse_history if plan.history_m > 0 else fusion.fuse
-        result = fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation, params=plan.params)
+        if plan.history_m > 0:
+            result = fusion.fuse_history(ego.detection, other.detection, mode=mode, interpolation=interpolation,
+                                         params=plan.params)
+        elif mode == "spline":
+            result = resolve_method(interpolation)(ego.detection, other.detection, plan.params)
+        else:
+            result = fusion.fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation,
+                                 params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
         if main:
             start = time.perf_counter()

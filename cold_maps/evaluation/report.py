@@ -314,13 +314,17 @@ class ScenarioAccumulator:
     Fields:
         key: the scenario.
         records: the evaluations added so far, in order.
+        messages: lane messages its senders sent.
+        message_bytes: their bytes.
+        sender_ns: time its senders were counted, integer ns (a sum independent of the
+            order the frames are added in, so parallel runs give the same rates).
     """
 
     key: ScenarioKey
     records: list[FrameRecord] = field(default_factory=list)
     messages: int = 0
     message_bytes: int = 0
-    sender_seconds: float = 0.0
+    sender_ns: int = 0
 
     def add(self, record: FrameRecord) -> None:
         """Adds one evaluation."""
@@ -330,7 +334,7 @@ class ScenarioAccumulator:
         """Counts one sender-frame of ``seconds`` (s) in which ``sent_bytes`` were sent (0: none)."""
         self.messages += sent_bytes > 0
         self.message_bytes += sent_bytes
-        self.sender_seconds += seconds
+        self.sender_ns += round(seconds * 1e9)
 
     def result(self) -> ScenarioResult:
         """The aggregate over all records (pooled distances, see the module docstring)."""
@@ -366,7 +370,7 @@ class ScenarioAccumulator:
             correct_max_error_m=float(right.max()) if right.size else nan,
             correct_p95_error_m=float(np.percentile(right, P95_PERCENT)) if right.size else nan,
             bytes_per_message=self.message_bytes / self.messages if self.messages else nan,
-            bytes_per_second=self.message_bytes / self.sender_seconds if self.sender_seconds > 0 else nan,
+            bytes_per_second=self.message_bytes * 1e9 / self.sender_ns if self.sender_ns > 0 else nan,
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:

@@ -154,6 +154,8 @@ class RunOptions:
         plots: write the PNG plots.
         progress: stream of the progress bar (drawn only on a TTY).
         run_params: the run's parameters for the MCAP ``cold.run`` metadata.
+        workers: processes evaluating the drives (work units) in parallel; 1 runs them
+            in this process. The outputs are the same for any number.
     """
 
     out: Path
@@ -161,6 +163,7 @@ class RunOptions:
     plots: bool = True
     progress: TextIO | None = None
     run_params: Mapping[str, Any] | None = None
+    workers: int = 1
 
 
 @dataclass(frozen=True)
@@ -211,9 +214,9 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
 
                 with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
                               params=options.run_params) as recorder:
-                    _run_all(evaluators, collector, recorder, bar)
+                    _run_all(evaluators, collector, recorder, bar, options.workers)
             else:
-                _run_all(evaluators, collector, None, bar)
+                _run_all(evaluators, collector, None, bar, options.workers)
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
         error = exc
         LOG.debug("run ended early", exc_info=True)
@@ -224,7 +227,15 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     return RunResult(results, collector, partial, error)
 
 
-def _run_all(evaluators: Sequence[MapEvaluator], collector: Collector, recorder: Any, bar: ProgressBar) -> None:
+def _run_all(evaluators: Sequence[MapEvaluator], collector: Collector, recorder: Any, bar: ProgressBar,
+             workers: int) -> None:
+    drives = sum(len(e.drives) for e in evaluators)
+    if min(workers, drives) > 1:
+        from cold_maps.evaluation.parallel import process_pool, run_units
+
+        with process_pool(min(workers, drives)) as executor:
+            run_units(evaluators, collector, recorder, bar.update, executor)
+        return
     offset = 0
     for evaluator in evaluators:
         offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Final, Literal, Sequence
 
 import fusion
+from cold_maps.evaluation.methods import MethodError, resolve_method
 from cold_maps.evaluation.report import ScenarioKey
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
@@ -52,7 +53,8 @@ class Scenario:
 
     Fields:
         fusion: ``local`` (ego only), ``convoy`` or ``spline``.
-        interpolation: ``paper`` or ``hermite`` for ``spline``, "" otherwise.
+        interpolation: the fusion method for ``spline`` (``paper``, ``hermite`` or a name
+            :func:`methods.resolve_method` resolves), "" otherwise.
         d_s: spline gap between the ego's detection end and the coop's start (m), 0 otherwise.
         lead_m: station distance of the scenario's coop ahead of the ego (m); 0 for local.
         vehicles: vehicles fused (1 local, 2 a pair, more a chain of coops every ``lead_m``
@@ -89,13 +91,18 @@ class Scenario:
 
 def scenarios_for(gaps_m: Sequence[float], interpolations: Sequence[str], *,
                   sensor_range_m: float = SENSOR_RANGE_M) -> tuple[Scenario, ...]:
-    """local, convoy (headway d_v = 25 m) and spline for each distinct interpolation and gap."""
+    """local, convoy (headway d_v = 25 m) and spline for each distinct interpolation and gap.
+
+    An interpolation is any fusion method name :func:`methods.resolve_method` resolves
+    (``paper``, ``hermite``, a registered name or ``package.module:function``)."""
     for gap in gaps_m:
         if not (math.isfinite(gap) and gap > 0):
             raise ValueError(f"spline gap d_s: expected a finite distance > 0 m, got {gap!r}")
     for name in interpolations:
-        if name not in INTERPOLATIONS:
-            raise ValueError(f"interpolation: expected one of {INTERPOLATIONS}, got {name!r}")
+        try:
+            resolve_method(name)
+        except MethodError as exc:
+            raise MethodError(f"interpolation: {exc}") from None
     splines = [Scenario("spline", name, float(gap), sensor_range_m + gap)
                for name in dict.fromkeys(interpolations) for gap in dict.fromkeys(gaps_m)]
     return (Scenario("local"), Scenario("convoy", lead_m=CONVOY_HEADWAY_M), *splines)

@@ -4,14 +4,15 @@
 the ego fuses: each other vehicle's detection with its lane history attached
 (:func:`odometry.lane_history`, when ``history_m`` > 0) and, when messages are on, the last
 message the ego received from it (:class:`messages.LaneChannel`). It draws from its own
-generators (seeded from the run's seed), so switching it on leaves the detections
-themselves unchanged.
+generators, one pair per drive (seeded from the run's seed and the drive's index), so
+switching it on leaves the detections themselves unchanged and a drive gives the same
+draws in whatever process or order it runs.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Final, Hashable
+from typing import Final
 
 import numpy as np
 
@@ -37,14 +38,18 @@ class LaneExchange:
     def __init__(self, history_m: float, odometry: OdometryModel, messages: MessageModel,
                  errors: SensorErrorModel, seed: int) -> None:
         self.history_m, self.odometry, self.messages, self.errors = history_m, odometry, messages, errors
-        self._history_rng = np.random.default_rng([seed, HISTORY_STREAM])
-        self._message_rng = np.random.default_rng([seed, MESSAGE_STREAM])
-        self.channels: dict[tuple[Hashable, str], LaneChannel] = {}
+        self.seed = seed
+        self.channels: dict[tuple[int, str], LaneChannel] = {}
+        self._rngs: dict[int, tuple[np.random.Generator, np.random.Generator]] = {}
 
-    def apply(self, drive: Hashable, sensed: dict[str, Sensed], stamp: float) -> tuple[dict[str, Sensed],
-                                                                                     dict[str, int]]:
-        """What the ego fuses in this frame of ``drive`` (by vehicle name, the ego's own
-        detection unchanged), and the bytes each vehicle sent in it (0 when none)."""
+    def apply(self, drive: int, sensed: dict[str, Sensed], stamp: float) -> tuple[dict[str, Sensed],
+                                                                                dict[str, int]]:
+        """What the ego fuses in this frame of drive number ``drive`` (by vehicle name, the
+        ego's own detection unchanged), and the bytes each vehicle sent in it (0 when none)."""
+        if drive not in self._rngs:
+            self._rngs[drive] = (np.random.default_rng([self.seed, HISTORY_STREAM, drive]),
+                                 np.random.default_rng([self.seed, MESSAGE_STREAM, drive]))
+        history_rng, message_rng = self._rngs[drive]
         out: dict[str, Sensed] = {}
         sent: dict[str, int] = {}
         for name, item in sensed.items():
@@ -55,11 +60,11 @@ class LaneExchange:
             if detection is not None and self.history_m > 0:
                 state = item.state
                 history = lane_history(state.track, state.station, self.history_m, self.errors, self.odometry,
-                                       self._history_rng)
+                                       history_rng)
                 detection = replace(detection, history=history)
             if self.messages.enabled:
                 channel = self.channels.setdefault((drive, name), LaneChannel(self.messages))
-                sent[name] = channel.step(detection, stamp, self._message_rng)
+                sent[name] = channel.step(detection, stamp, message_rng)
                 detection = channel.received
             out[name] = Sensed(item.state, detection)
         return out, sent

@@ -1,0 +1,172 @@
+"""The report of a sweep: ``summary.md`` and plots over the rows of its finished cells.
+
+Per map, spline method and error level (sensor noise σ, coop pose σ), against the gap d_s:
+the largest error (max over seeds and both borders), the 95th percentile (likewise the
+worst), the mean perception range, and the safe gap: the longest d_s whose largest error
+stays within ``SAFE_MAX_ERROR_M`` (the paper's criterion).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final, Sequence
+
+from converters.atomic_io import atomic_output
+
+SAFE_MAX_ERROR_M: Final[float] = 0.75
+"""A gap is safe when the fused lane's largest error stays within this (m), as in the paper."""
+SUMMARY_NAME: Final[str] = "summary.md"
+PLOTS_DIR: Final[str] = "plots"
+
+
+@dataclass(frozen=True)
+class GapPoint:
+    """One map, method, error level and gap, over its seeds and both borders.
+
+    Fields:
+        map: map name; interpolation: the spline method; noise_sigma_m, pose_sigma_xy_m:
+        the error level (m); d_s_m: the gap (m); max_error_m, p95_error_m: the worst over
+        seeds and borders (m, None when nothing was fused); range_m: mean perception range
+        (m, None when nothing was fused); fused_frames, frames: summed.
+    """
+
+    map: str
+    interpolation: str
+    noise_sigma_m: float
+    pose_sigma_xy_m: float
+    d_s_m: float
+    max_error_m: float | None
+    p95_error_m: float | None
+    range_m: float | None
+    fused_frames: int
+    frames: int
+
+    @property
+    def level(self) -> str:
+        """The error level as a label."""
+        return f"noise {self.noise_sigma_m:g} m, pose {self.pose_sigma_xy_m:g} m"
+
+
+def _worst(values: list[Any]) -> float | None:
+    found = [v for v in values if v is not None]
+    return max(found) if found else None
+
+
+def gap_points(rows: Sequence[dict[str, Any]]) -> list[GapPoint]:
+    """The spline rows aggregated per map, method, error level and gap, sorted."""
+    groups: dict[tuple[str, str, float, float, float], list[dict[str, Any]]] = {}
+    for row in rows:
+        if row["fusion"] == "spline":
+            key = (row["map"], row["interpolation"], row["cell_noise_sigma_m"], row["cell_pose_sigma_xy_m"],
+                   row["cell_d_s_m"])
+            groups.setdefault(key, []).append(row)
+    points = []
+    for key, group in sorted(groups.items()):
+        ranges = [r["perception_range_m"] for r in group if r["perception_range_m"] is not None]
+        points.append(GapPoint(*key, _worst([r["max_error_m"] for r in group]),
+                               _worst([r["p95_error_m"] for r in group]),
+                               sum(ranges) / len(ranges) if ranges else None,
+                               sum(r["fused_frames"] for r in group), sum(r["frames"] for r in group)))
+    return points
+
+
+def safe_gaps(points: Sequence[GapPoint]) -> dict[tuple[str, str, float, float], float | None]:
+    """(map, method, noise σ, pose σ) → the longest d_s (m) whose largest error is within
+    ``SAFE_MAX_ERROR_M``, None when no gap is."""
+    found: dict[tuple[str, str, float, float], float | None] = {}
+    for p in points:
+        key = (p.map, p.interpolation, p.noise_sigma_m, p.pose_sigma_xy_m)
+        found.setdefault(key, None)
+        if p.max_error_m is not None and p.max_error_m <= SAFE_MAX_ERROR_M:
+            found[key] = max(found[key] or 0.0, p.d_s_m)
+    return found
+
+
+def _number(value: float | None, digits: int = 3) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: int) -> str:
+    """The sweep's summary: the error and range table against d_s and the safe gaps."""
+    points = gap_points(rows)
+    status = "" if finished == cells else f"**PARTIAL SWEEP: {finished} of {cells} cells finished.**\n\n"
+    lines = [f"# Sweep\n\n{status}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over seeds "
+             "and both borders, the range their mean.\n\n## Spline fusion against the gap d_s\n\n"
+             "| map | method | noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | range [m] | "
+             "fused / frames |\n|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {p.map} | {p.interpolation} | {p.noise_sigma_m:g} | {p.pose_sigma_xy_m:g} | {p.d_s_m:g} | "
+              f"{_number(p.max_error_m)} | {_number(p.p95_error_m)} | {_number(p.range_m, 1)} | "
+              f"{p.fused_frames} / {p.frames} |" for p in points]
+    lines.append(f"\n## Safe gap (longest d_s with max error <= {SAFE_MAX_ERROR_M:g} m)\n\n"
+                 "| map | method | noise σ [m] | pose σ [m] | safe d_s [m] |\n|---|---|---|---|---|")
+    lines += [f"| {m} | {method} | {noise:g} | {pose:g} | {'none' if gap is None else f'{gap:g}'} |"
+              for (m, method, noise, pose), gap in sorted(safe_gaps(points).items())]
+    return "\n".join(lines) + "\n"
+
+
+def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
+    """Per map ``plots/sweep_<map>.png`` (max error, p95 error and range against d_s, one
+    line per method and error level) and ``plots/safe_gap.png`` (safe gap per error level);
+    returns the files."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    points = gap_points(rows)
+    folder = out / PLOTS_DIR
+    folder.mkdir(exist_ok=True)
+    written = []
+    for map_name in dict.fromkeys(p.map for p in points):
+        figure, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+        lines: dict[tuple[str, str], list[GapPoint]] = {}
+        for p in points:
+            if p.map == map_name:
+                lines.setdefault((p.interpolation, p.level), []).append(p)
+        for (method, level), line in lines.items():
+            for axis, values in zip(axes, ([p.max_error_m for p in line], [p.p95_error_m for p in line],
+                                           [p.range_m for p in line])):
+                axis.plot([p.d_s_m for p in line], [float("nan") if v is None else v for v in values], marker="o",
+                          label=f"{method}, {level}")
+        for axis, title in zip(axes, ("max error [m]", "p95 error [m]", "perception range [m]")):
+            axis.set_xlabel("gap d_s [m]")
+            axis.set_title(f"{map_name}: {title}")
+            axis.grid(True, alpha=0.3)
+        axes[0].axhline(SAFE_MAX_ERROR_M, color="grey", linestyle="--", linewidth=1)
+        axes[0].legend(fontsize="small")
+        written.append(_save(figure, folder / f"sweep_{map_name}.png"))
+    gaps = safe_gaps(points)
+    if gaps:
+        figure, axis = plt.subplots(figsize=(8, 4.5))
+        levels = list(dict.fromkeys(f"{noise:g} / {pose:g}" for (_, _, noise, pose) in gaps))
+        series: dict[tuple[str, str], dict[str, float]] = {}
+        for (map_name, method, noise, pose), gap in gaps.items():
+            series.setdefault((map_name, method), {})[f"{noise:g} / {pose:g}"] = 0.0 if gap is None else gap
+        for (map_name, method), values in series.items():
+            axis.plot(levels, [values.get(level, float("nan")) for level in levels], marker="o",
+                      label=f"{map_name}, {method}")
+        axis.set_xlabel("noise σ / pose σ [m]")
+        axis.set_ylabel(f"safe gap d_s [m] (max error <= {SAFE_MAX_ERROR_M:g} m; 0: none)")
+        axis.grid(True, alpha=0.3)
+        axis.legend(fontsize="small")
+        written.append(_save(figure, folder / "safe_gap.png"))
+    return written
+
+
+def _save(figure: Any, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    figure.tight_layout()
+    with atomic_output(path, "wb") as stream:
+        figure.savefig(stream, format="png", dpi=100)
+    plt.close(figure)
+    return path
+
+
+def write_report(out: Path, rows: Sequence[dict[str, Any]], *, cells: int, finished: int, plots: bool = True) -> None:
+    """``summary.md`` (atomically) and, unless ``plots`` is False, the plots."""
+    with atomic_output(out / SUMMARY_NAME) as stream:
+        stream.write(summary_markdown(rows, cells=cells, finished=finished))
+    if plots and rows:
+        write_plots(out, rows)

@@ -1,0 +1,45 @@
+"""Outputs of ``cold-eval`` runs with their runtimes taken out, for comparing runs that
+must agree (worker counts, Dask against processes); Ctrl-C of a child process."""
+
+from __future__ import annotations
+
+import csv
+import json
+import signal
+from pathlib import Path
+from typing import Any
+
+
+def metrics_without_runtimes(out: Path) -> dict[str, Any]:
+    """``metrics.json`` without the ``runtime_ms`` fields."""
+    document = json.loads((out / "metrics.json").read_text())
+    for record in document["scenarios"]:
+        del record["runtime_ms"]
+    return document
+
+
+def rows_without_runtimes(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows without their ``runtime_ms*`` columns."""
+    return [{k: v for k, v in row.items() if not k.startswith("runtime_ms")} for row in rows]
+
+
+def frames_without_runtimes(out: Path) -> list[dict[str, Any]]:
+    """``frames.csv`` rows in file order without the ``runtime_ms`` column."""
+    with open(out / "frames.csv", newline="") as stream:
+        return rows_without_runtimes(list(csv.DictReader(stream)))
+
+
+def mcap_messages(out: Path) -> list[tuple[str, int, bytes]]:
+    """(topic, log time ns, payload) of every message of ``run.mcap`` in file order."""
+    from mcap.reader import make_reader
+
+    with open(out / "run.mcap", "rb") as stream:
+        return [(channel.topic, message.log_time, message.data)
+                for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` of a child that the test interrupts: Ctrl-C raises KeyboardInterrupt
+    there even when the tests run in a background job (which ignores SIGINT, and children
+    inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -1,0 +1,47 @@
+"""A fusion method defined outside the package, for the method protocol tests
+(``cold-eval --method fusion_method_example:straight_bridge``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import fusion
+from cold_maps.simulation.detection import world_borders
+
+
+def _bridged(ego: np.ndarray, coop: np.ndarray, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """``ego``, points on the straight segment to ``coop``'s start every ``spacing_m`` at
+    most, then ``coop``; and the source of every point."""
+    steps = max(2, int(np.ceil(np.linalg.norm(coop[0] - ego[-1]) / spacing_m)))
+    t = np.linspace(0.0, 1.0, steps + 1)[1:-1, None]
+    gap = ego[-1] + t * (coop[0] - ego[-1])
+    sources = np.concatenate([np.full(len(ego), fusion.Source.EGO), np.full(len(gap), fusion.Source.INTERPOLATED),
+                              np.full(len(coop), fusion.Source.COOP)]).astype(np.int8)
+    return np.vstack([ego, gap, coop]), sources
+
+
+def straight_bridge(ego: fusion.LaneDetection, coop: fusion.LaneDetection,
+                    params: fusion.FusionParams) -> fusion.FusionResult:
+    """Joins each ego border's end to the coop border's start by a straight segment (world
+    frame): exact on a straight road, a chord across a bend. Pairs the paper's check finds
+    not fusible are rejected with its reason."""
+    fusible, reason = fusion.is_fusible(ego, coop, params, mode="spline")
+    if not fusible:
+        return _rejected(ego, reason)
+    (ego_left, ego_right), (coop_left, coop_right) = world_borders(ego), world_borders(coop)
+    left, left_source = _bridged(ego_left, coop_left, params.spacing_m)
+    right, right_source = _bridged(ego_right, coop_right, params.spacing_m)
+    gap_m = float(np.linalg.norm((coop_left[0] + coop_right[0] - ego_left[-1] - ego_right[-1]) / 2))
+    return fusion.FusionResult(left, right, left_source, right_source, "spline", gap_m)
+
+
+def never_fuses(ego: fusion.LaneDetection, coop: fusion.LaneDetection,
+                params: fusion.FusionParams) -> fusion.FusionResult:
+    """Rejects every pair (returns the ego lane with a reason)."""
+    return _rejected(ego, "refuses on principle")
+
+
+def _rejected(ego: fusion.LaneDetection, reason: str) -> fusion.FusionResult:
+    left, right = world_borders(ego)
+    sources = np.zeros(len(left), dtype=np.int8), np.zeros(len(right), dtype=np.int8)
+    return fusion.FusionResult(left, right, *sources, "none", 0.0, reason)
