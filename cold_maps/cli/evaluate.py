@@ -12,6 +12,7 @@ crash (partial outputs marked as such); 130 when interrupted.
 from __future__ import annotations
 
 import argparse
+import decimal
 import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
@@ -34,6 +35,17 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
     return value
+
+
+def _stamp_base(text: str) -> int:
+    """Seconds since the Unix epoch (decimal, >= 0) as whole ns."""
+    try:
+        seconds = decimal.Decimal(text)
+    except decimal.InvalidOperation:
+        seconds = decimal.Decimal("NaN")
+    if not seconds.is_finite() or seconds < 0:
+        raise argparse.ArgumentTypeError(f"expected seconds since the Unix epoch >= 0, got {text}")
+    return int(seconds * 1_000_000_000)
 
 
 def _routes(text: str) -> int | None:
@@ -80,6 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    parser.add_argument("--stamp-base", type=_stamp_base, default=None, metavar="UNIX_S",
+                        help="MCAP log time of frame 0 in s since the Unix epoch (default: the run's start)")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
@@ -142,7 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
-                             run_params={k: str(v) for k, v in sorted(vars(args).items())})
+                             run_params={k: str(v) for k, v in sorted(vars(args).items())},
+                             stamp_base_ns=args.stamp_base)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)

@@ -175,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
-    from cold_maps.recording.recorder import Recorder, read_detections
+    from cold_maps.recording.recorder import Recorder, read_detections, read_stamp_base
 
     configure_logging(args.verbose)
     error: BaseException | None = None
@@ -196,7 +196,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             report_dir = prepare_out_dir(args.report)
         run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
                       "interpolation": args.interpolation, "d_i_m": params.d_i_m}
-        recorder = Recorder(args.output, map_path=map_path or "", params=run_params).__enter__()
+        recorder = Recorder(args.output, map_path=map_path or "", params=run_params,
+                            stamp_base_ns=read_stamp_base(args.input)).__enter__()
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
         return startup_failure(PROG, exc)
     count = 0

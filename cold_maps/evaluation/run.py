@@ -144,6 +144,8 @@ class RunOptions:
         plots: write the PNG plots.
         progress: stream of the progress bar (drawn only on a TTY).
         run_params: the run's parameters for the MCAP ``cold.run`` metadata.
+        stamp_base_ns: MCAP log time of frame 0 (ns since the Unix epoch); None: the
+            recording's wall-clock start.
     """
 
     out: Path
@@ -151,6 +153,7 @@ class RunOptions:
     plots: bool = True
     progress: TextIO | None = None
     run_params: Mapping[str, Any] | None = None
+    stamp_base_ns: int | None = None
 
 
 @dataclass(frozen=True)
@@ -200,7 +203,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
                 from cold_maps.recording.recorder import Recorder
 
                 with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
-                              params=options.run_params) as recorder:
+                              params=options.run_params, stamp_base_ns=options.stamp_base_ns) as recorder:
                     _run_all(evaluators, collector, recorder, bar)
             else:
                 _run_all(evaluators, collector, None, bar)
