@@ -2,9 +2,10 @@
 
 Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
 :mod:`cold_maps.recording.recorder`) of an MCAP file written by ``cold-eval`` or by any other source
-in that format, fuses the ego's detection (sender ``--ego``) with every other sender's of
-the same frame, and writes a new MCAP: the detections again, the fused lanes on
-``/fused`` and per-frame metrics on ``/metrics``. With ``--map`` (or the map named in the
+in that format (recording version 1 or 2), fuses the ego's detection (sender ``--ego``)
+with every other sender's of the same frame, and writes a new MCAP (version 2, on the
+input's stamp base): the detections again, the fused lanes on ``/fused`` and per-frame
+metrics on ``/metrics``. With ``--map`` (or the map named in the
 recording's ``cold.run`` metadata) the local and fused lanes are measured against Lanelet2
 ground truth; ``--report DIR`` writes summary.md, metrics.json and frames.csv there
 (fusion ``convoy`` when the detections overlap, else ``spline``; d_s 0 = all gaps pooled).
