@@ -274,11 +274,17 @@ class Recorder:
             raise RecordingError(f"{self.partial_path}: cannot create recording: {exc.strerror}") from exc
         self.stamp_base_ns = time.time_ns() if self._requested_base_ns is None else self._requested_base_ns
         self._context = foxglove.Context()
-        self._writer = foxglove.open_mcap(self._stream, context=self._context, writer_options=MCAPWriteOptions(
-            compression=MCAPCompression.Zstd, profile=""))
-        self._writer.write_metadata(METADATA_RUN, {
-            "map": self._map_path, "params": self._params, "recording_version": str(RECORDING_VERSION),
-            "stamp_base_ns": str(self.stamp_base_ns)})
+        try:
+            self._writer = foxglove.open_mcap(self._stream, context=self._context, writer_options=MCAPWriteOptions(
+                compression=MCAPCompression.Zstd, profile=""))
+            self._writer.write_metadata(METADATA_RUN, {
+                "map": self._map_path, "params": self._params, "recording_version": str(RECORDING_VERSION),
+                "stamp_base_ns": str(self.stamp_base_ns)})
+        except Exception as exc:
+            self._writer = None
+            self._stream.close()
+            self.partial_path.unlink(missing_ok=True)
+            raise RecordingError(f"{self.partial_path}: cannot start recording: {exc}") from exc
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
