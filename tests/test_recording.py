@@ -279,6 +279,9 @@ def test_bad_input_is_rejected_with_the_name(tmp_path):
             recorder.write_metrics(0.0, -3, {})
         with pytest.raises(ValueError, match=r"metrics\['x'\]: expected a number or None"):
             recorder.write_metrics(0.0, 0, {"x": "high"})
+    for bad in (-1, 2**63, 1.5, True):
+        with pytest.raises(ValueError, match="stamp_base_ns: expected an integer 0"):
+            Recorder(tmp_path / "z.mcap", stamp_base_ns=bad)
     with pytest.raises(RecordingError, match="not open"):
         recorder.write_gt(0.0, {"left": left})
     with pytest.raises(RecordingError, match="nowhere/y.mcap.partial: cannot create recording"):

@@ -20,6 +20,7 @@ from typing import Callable, Final, Sequence
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
+from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
@@ -43,9 +44,10 @@ def _stamp_base(text: str) -> int:
         seconds = decimal.Decimal(text)
     except decimal.InvalidOperation:
         seconds = decimal.Decimal("NaN")
-    if not seconds.is_finite() or seconds < 0:
-        raise argparse.ArgumentTypeError(f"expected seconds since the Unix epoch >= 0, got {text}")
-    return int(seconds * 1_000_000_000)
+    if not seconds.is_finite() or not 0 <= seconds * NS_PER_S <= MAX_STAMP_BASE_NS:
+        raise argparse.ArgumentTypeError(f"expected seconds since the Unix epoch, 0 ... "
+                                         f"{MAX_STAMP_BASE_NS // NS_PER_S}, got {text}")
+    return int(seconds * NS_PER_S)
 
 
 def _routes(text: str) -> int | None:

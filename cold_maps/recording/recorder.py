@@ -66,6 +66,7 @@ DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (r
 DISPLAY_TOLERANCE_M: Final[float] = 0.01  # SceneUpdate lines simplified to within this distance
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 NS_PER_S: Final[int] = 1_000_000_000
+MAX_STAMP_BASE_NS: Final[int] = 2**63 - 1 - 10**6 * NS_PER_S  # log times stay int64 for 11 days of frames
 
 RGBA = tuple[float, float, float, float]
 COLOR_GT: Final[RGBA] = (0.2, 0.8, 0.2, 1.0)
@@ -163,8 +164,9 @@ def _time_ns(stamp: Any) -> int:
 
 def _check_stamp_base(stamp_base_ns: int | None) -> int | None:
     if stamp_base_ns is not None and (isinstance(stamp_base_ns, bool) or not isinstance(stamp_base_ns, int)
-                                      or stamp_base_ns < 0):
-        raise ValueError(f"stamp_base_ns: expected an integer >= 0 (ns since the Unix epoch), got {stamp_base_ns!r}")
+                                      or not 0 <= stamp_base_ns <= MAX_STAMP_BASE_NS):
+        raise ValueError(f"stamp_base_ns: expected an integer 0 ... {MAX_STAMP_BASE_NS} (ns since the Unix epoch), "
+                         f"got {stamp_base_ns!r}")
     return stamp_base_ns
 
 
@@ -424,7 +426,7 @@ def _stamp_base(path: Path, metadata: Mapping[str, Mapping[str, str]]) -> int:
     try:
         return _check_stamp_base(int(text)) or 0
     except ValueError as exc:
-        raise RecordingError(f"{path}: {METADATA_RUN} stamp_base_ns: expected an integer >= 0, got {text!r}") from exc
+        raise RecordingError(f"{path}: {METADATA_RUN} stamp_base_ns: {exc}") from exc
 
 
 def read_stamp_base(path: str | os.PathLike[str]) -> int:
