@@ -64,7 +64,7 @@ def _meter(map_path: Path | None) -> Any:
     from converters import load_lanelet2
     from gt_matching import GroundTruth
 
-    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path)))
+    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path), prepare_all=False))
 
 
 class Refuser:
