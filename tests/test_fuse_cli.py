@@ -8,11 +8,10 @@ import json
 import numpy as np
 import pytest
 from conftest import bundled_map
+from mcap_helpers import read_all, write_v1_recording
 
 from cold_maps.cli import evaluate
 from cold_maps.cli import fuse
-from mcap_helpers import read_all, write_v1_recording
-
 from cold_maps.recording.recorder import METADATA_STATUS, Recorder, read_detections, read_metadata, read_stamp_base
 
 

@@ -25,10 +25,10 @@ from cold_maps.recording.recorder import (
     Recorder,
     RecordingError,
     display_lines,
-    simplify_lines,
     read_detections,
     read_metadata,
     read_stamp_base,
+    simplify_lines,
 )
 
 FRAMES = 3
@@ -65,7 +65,7 @@ def recording(tmp_path_factory) -> Path:
 
 
 def test_recording_has_the_channels_schemas_counts_and_summary(recording):
-    summary, messages, metadata = read_all(recording)
+    summary, _, metadata = read_all(recording)
     assert summary is not None and summary.statistics is not None
     topics = {c.topic: c for c in summary.channels.values()}
     assert set(topics) == {"/gt", "/fused", "/detections/ego", "/detections/coop1", "/tf", "/cold/detections",

@@ -19,8 +19,8 @@ import argparse
 import statistics
 import sys
 import time
-from typing import Callable
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
