@@ -129,7 +129,9 @@ class GroundTruth:
     """A Lanelet2 map prepared for matching detections: built once, reused per frame.
 
     Construction extracts every lanelet's geometry, border samples and the borders'
-    clearances to other lines, and every line string's samples and KD-tree; lanelet
+    clearances to other lines, and every line string's samples and KD-tree (with
+    ``prepare_all=False`` the clearances and KD-trees are built on first use instead:
+    the same results, cheaper when frames match few of the map's lanelets); lanelet
     sequences matched by frames are assembled from them on first use (joining arrays) and
     kept (LRU, ``ROUTE_CACHE_SIZE``).
 
@@ -143,6 +145,7 @@ class GroundTruth:
         *,
         traffic_rules: Any = None,
         config: MatchingConfig | None = None,
+        prepare_all: bool = True,
     ) -> None:
         """``traffic_rules`` (default: Lanelet2 Germany, vehicle) should be those of
         ``routing_graph``; they remove matches against the allowed driving direction."""
@@ -161,9 +164,12 @@ class GroundTruth:
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
             for side in ("left", "right"):
-                self._part(geometry, side).clearances
-        for slot in range(len(self.lines.vertices)):
-            self.lines.tree(slot, self.config.step_m)
+                part = self._part(geometry, side)
+                if prepare_all:
+                    part.clearances
+        if prepare_all:
+            for slot in range(len(self.lines.vertices)):
+                self.lines.tree(slot, self.config.step_m)
 
     def match(self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]) -> LaneMatch:
         """Ground truth of a detected lane given its borders (``(N, 2)``, world frame,

@@ -20,7 +20,9 @@ BUNDLED = ("straight", "curve90", "rural", "junction", "highway")
 
 def _run(out: Path, maps: list[Path], workers: int, *extra: str) -> Path:
     argv = [arg for path in maps for arg in ("--map", str(path))]
-    assert evaluate.main([*argv, "--workers", str(workers), "--out", str(out), "--no-plots", *extra]) == 0
+    # one log-time base for both runs (the default is each run's own wall-clock start)
+    assert evaluate.main([*argv, "--workers", str(workers), "--out", str(out), "--no-plots", "--stamp-base", "0",
+                          *extra]) == 0
     return out
 
 

@@ -186,3 +186,26 @@ def test_false_fusions_are_counted_and_kept_apart():
     collector.add(key, FrameRecord(1, 0.1, "ego", "opposite", np.empty(0), rejected="opposite_direction",
                                    predicted_fusible=False, truly_fusible=False))
     assert "| m | spline | paper | 20 | left | 2 | 1 | 0.200 | 0.300 |" in false_fusion_markdown(collector)
+
+
+def test_stamp_base_sets_the_log_times(tmp_path):
+    """--stamp-base 1700000000.25: frame i is logged at that time plus i / 10 Hz, exactly in ns."""
+    from mcap.reader import make_reader
+
+    out = tmp_path / "out"
+    assert evaluate.main(["--map", str(bundled_map("straight")), "--frames", "3", "--routes", "1", "--gaps", "30",
+                          "--interpolation", "paper", "--no-plots", "--stamp-base", "1700000000.25",
+                          "--out", str(out)]) == 0
+    with open(out / "run.mcap", "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary.statistics.message_start_time == 1_700_000_000_250_000_000
+    assert summary.statistics.message_end_time == 1_700_000_000_250_000_000 + 200_000_000
+    assert read_metadata(out / "run.mcap")["cold.run"]["stamp_base_ns"] == "1700000000250000000"
+    assert [d["stamp_s"] for _, group in read_detections(out / "run.mcap") for d in group[:1]] == [0.0, 0.1, 0.2]
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "soon", "1e12"])
+def test_bad_stamp_base_is_a_usage_error(value, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        evaluate.main(["--map", "x.xodr", "--stamp-base", value])
+    assert exit_info.value.code == 2 and "--stamp-base" in capsys.readouterr().err

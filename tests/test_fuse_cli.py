@@ -8,10 +8,11 @@ import json
 import numpy as np
 import pytest
 from conftest import bundled_map
+from mcap_helpers import read_all, write_v1_recording
 
 from cold_maps.cli import evaluate
 from cold_maps.cli import fuse
-from cold_maps.recording.recorder import METADATA_STATUS, Recorder, read_detections, read_metadata
+from cold_maps.recording.recorder import METADATA_STATUS, Recorder, read_detections, read_metadata, read_stamp_base
 
 
 @pytest.fixture(scope="module")
@@ -54,14 +55,41 @@ def test_fuses_detections_from_another_source(tmp_path):
             recorder.write_detection(frame * 0.1, frame, "car1", (20.0, 0.0, 0.0), left, right)
     out = tmp_path / "fused.mcap"
     assert fuse.main(["--input", str(path), "-o", str(out), "--ego", "car0"]) == 0
-    from mcap.reader import make_reader
-
-    with open(out, "rb") as stream:
-        fused = [json.loads(m.data) for _, c, m in make_reader(stream).iter_messages(topics=["/fused"])]
+    _, messages, _ = read_all(out)
+    fused = [m for topic, _, m, _ in messages if topic == "/fused"]
     assert len(fused) == 3
-    line = next(e for e in fused[0]["entities"] if e["id"] == "car1-left")["lines"][0]["points"]
-    assert (line[0]["x"], line[-1]["x"]) == pytest.approx((0.0, 50.0))
-    assert all(p["y"] == pytest.approx(2.0) for p in line)
+    line = next(e for e in fused[0].entities if e.id == "car1-left").lines[0].points
+    assert (line[0].x, line[-1].x) == pytest.approx((0.0, 50.0))
+    assert all(p.y == pytest.approx(2.0) for p in line)
+    assert read_stamp_base(out) == read_stamp_base(path)
+
+
+def test_version_1_recording_is_fused_like_version_2(tmp_path):
+    """The same detections in a version-1 file (float stamps, JSON only) and in a version-2
+    file fuse to the same report; the output keeps the input's stamps (base 0 for v1)."""
+    xs = np.arange(0.0, 30.01, 0.1)
+    left, right = np.column_stack((xs, np.full_like(xs, 2.0))), np.column_stack((xs, np.full_like(xs, -2.0)))
+    detections = [(frame * 0.1, frame, sender, pose, left, right) for frame in range(3)
+                  for sender, pose in (("car0", (0.0, 0.0, 0.0)), ("car1", (20.0, 0.0, 0.1)))]
+    (tmp_path / "v1").mkdir()
+    (tmp_path / "v2").mkdir()
+    old, new = tmp_path / "v1" / "rec.mcap", tmp_path / "v2" / "rec.mcap"
+    write_v1_recording(old, detections)
+    with Recorder(new) as recorder:
+        for stamp, frame, sender, pose, l, r in detections:
+            recorder.write_detection(stamp, frame, sender, pose, l, r, ego=sender == "car0")
+    reports = []
+    for path in (old, new):
+        out = path.with_name("fused.mcap")
+        assert fuse.main(["--input", str(path), "-o", str(out), "--ego", "car0", "--report",
+                          str(path.with_name("report"))]) == 0
+        rows = [row.split(",") for row in path.with_name("report").joinpath("frames.csv").read_text().splitlines()]
+        runtime = rows[0].index("runtime_ms")
+        reports.append([row[:runtime] + row[runtime + 1:] for row in rows])
+        assert [f for f, _ in read_detections(out)] == [0, 1, 2]
+    assert reports[0] == reports[1] and len(reports[0]) > 3
+    _, messages, _ = read_all(old.with_name("fused.mcap"))
+    assert [t for topic, _, _, t in messages if topic == "/metrics"] == [0, 100_000_000, 200_000_000]
 
 
 def _fails(capsys, argv):

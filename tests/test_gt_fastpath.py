@@ -136,3 +136,25 @@ def test_sequence_arc_equals_per_point_search(grid: tuple[Any, Any, GroundTruth]
             expected.append(sum(g.length_m for g in lanelets[:k]) + lanelets[k].centre_arc_m[vertex])
         found = _sequence_arc(lanelets, lambda g: g.centre_nearest(points))
         np.testing.assert_allclose(found, expected, rtol=0, atol=TOLERANCE_M)
+
+
+def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[Any, Any, GroundTruth]) -> None:
+    """prepare_all=False builds clearances and KD-trees only for the lanelets and lines a
+    frame needs; matches and errors (other-lane check included) are bit-identical."""
+    lanelet_map, graph, prepared = grid
+    lazy = GroundTruth(lanelet_map, graph, prepare_all=False)
+    assert not any("clearances" in vars(part) for part in lazy._parts.values())
+    assert not lazy.lines._trees
+    for left, right, pose in random_frames(lanelet_map, graph, 12, seed=7):
+        match, lazy_match = prepared.match(left, right, pose), lazy.match(left, right, pose)
+        assert lazy_match.route_key == match.route_key
+        np.testing.assert_array_equal(lazy_match.left_gt, match.left_gt)
+        for exact in (True, False):
+            expected, found = prepared.errors(left, right, match, exact=exact), lazy.errors(left, right, lazy_match,
+                                                                                              exact=exact)
+            for a, b in ((found.left, expected.left), (found.right, expected.right)):
+                np.testing.assert_array_equal(a.distances_m, b.distances_m)
+                np.testing.assert_array_equal(a.arc_m, b.arc_m)
+                np.testing.assert_array_equal(a.unmatched, b.unmatched)
+    built = sum("clearances" in vars(part) for part in lazy._parts.values())
+    assert 0 < built < len(lazy._parts)

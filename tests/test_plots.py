@@ -90,6 +90,6 @@ def test_overlay_rejects_bad_polylines_by_name(tmp_path):
 
 def test_heavy_dependencies_are_imported_lazily():
     code = ("import sys, cold_maps.evaluation.plots, cold_maps.recording.recorder, cold_maps.evaluation.report, cold_maps.simulation.sensor_errors, "
-            "cold_maps.common.progress; print(sorted(m for m in ('matplotlib', 'mcap') if m in sys.modules))")
+            "cold_maps.common.progress; print(sorted(m for m in ('matplotlib', 'mcap', 'foxglove', 'shapely', 'orjson') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"

@@ -14,6 +14,7 @@ when interrupted. ``cold-eval sweep ...``: a grid of evaluations (:mod:`cold_map
 from __future__ import annotations
 
 import argparse
+import decimal
 import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
@@ -22,6 +23,7 @@ from cold_maps.cli.common import cli_entry, gap_list, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
+from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
 from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
 from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
@@ -47,6 +49,18 @@ def _non_negative(text: str) -> float:
     if not 0 <= value < 1e6:
         raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
     return value
+
+
+def _stamp_base(text: str) -> int:
+    """Seconds since the Unix epoch (decimal, >= 0) as whole ns."""
+    try:
+        seconds = decimal.Decimal(text)
+    except decimal.InvalidOperation:
+        seconds = decimal.Decimal("NaN")
+    if not seconds.is_finite() or not 0 <= seconds * NS_PER_S <= MAX_STAMP_BASE_NS:
+        raise argparse.ArgumentTypeError(f"expected seconds since the Unix epoch, 0 ... "
+                                         f"{MAX_STAMP_BASE_NS // NS_PER_S}, got {text}")
+    return int(seconds * NS_PER_S)
 
 
 def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
@@ -131,6 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    parser.add_argument("--stamp-base", type=_stamp_base, default=None, metavar="UNIX_S",
+                        help="MCAP log time of frame 0 in s since the Unix epoch (default: the run's start)")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
@@ -205,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
                              run_params={k: str(v) for k, v in sorted(vars(args).items()) if k != "workers"},
-                             workers=args.workers or default_workers())
+                             workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)

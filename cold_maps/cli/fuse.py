@@ -2,9 +2,10 @@
 
 Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
 :mod:`cold_maps.recording.recorder`) of an MCAP file written by ``cold-eval`` or by any other source
-in that format, fuses the ego's detection (sender ``--ego``) with every other sender's of
-the same frame, and writes a new MCAP: the detections again, the fused lanes on
-``/fused`` and per-frame metrics on ``/metrics``. With ``--map`` (or the map named in the
+in that format (recording version 1 or 2), fuses the ego's detection (sender ``--ego``)
+with every other sender's of the same frame, and writes a new MCAP (version 2, on the
+input's stamp base): the detections again, the fused lanes on ``/fused`` and per-frame
+metrics on ``/metrics``. With ``--map`` (or the map named in the
 recording's ``cold.run`` metadata) the local and fused lanes are measured against Lanelet2
 ground truth; ``--report DIR`` writes summary.md, metrics.json and frames.csv there
 (fusion ``convoy`` when the detections overlap, else ``spline``; d_s 0 = all gaps pooled).
@@ -65,7 +66,7 @@ def _meter(map_path: Path | None) -> Any:
     from converters import load_lanelet2
     from gt_matching import GroundTruth
 
-    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path)))
+    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path), prepare_all=False))
 
 
 class Refuser:
@@ -178,7 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import configure_logging, interruption, startup_failure
-    from cold_maps.recording.recorder import Recorder, read_detections
+    from cold_maps.recording.recorder import Recorder, read_detections, read_stamp_base
 
     configure_logging(args.verbose)
     error: BaseException | None = None
@@ -199,7 +200,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             report_dir = prepare_out_dir(args.report)
         run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
                       "interpolation": args.interpolation, "d_i_m": params.d_i_m}
-        recorder = Recorder(args.output, map_path=map_path or "", params=run_params).__enter__()
+        recorder = Recorder(args.output, map_path=map_path or "", params=run_params,
+                            stamp_base_ns=read_stamp_base(args.input)).__enter__()
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
         return startup_failure(PROG, exc)
     count = 0

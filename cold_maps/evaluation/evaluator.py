@@ -126,7 +126,7 @@ class MapEvaluator:
             from gt_matching import GroundTruth
 
             lanelet_map, routing = load_lanelet2(self.plan.path)
-            self._ground_truth = GroundTruth(lanelet_map, routing)
+            self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
 
     def run(self, collector: Collector, *, recorder: Recorder | None = None, frame_offset: int = 0,

@@ -156,6 +156,8 @@ class RunOptions:
         run_params: the run's parameters for the MCAP ``cold.run`` metadata.
         workers: processes evaluating the drives (work units) in parallel; 1 runs them
             in this process. The outputs are the same for any number.
+        stamp_base_ns: MCAP log time of frame 0 (ns since the Unix epoch); None: the
+            recording's wall-clock start.
     """
 
     out: Path
@@ -164,6 +166,7 @@ class RunOptions:
     progress: TextIO | None = None
     run_params: Mapping[str, Any] | None = None
     workers: int = 1
+    stamp_base_ns: int | None = None
 
 
 @dataclass(frozen=True)
@@ -213,7 +216,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
                 from cold_maps.recording.recorder import Recorder
 
                 with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
-                              params=options.run_params) as recorder:
+                              params=options.run_params, stamp_base_ns=options.stamp_base_ns) as recorder:
                     _run_all(evaluators, collector, recorder, bar, options.workers)
             else:
                 _run_all(evaluators, collector, None, bar, options.workers)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from gt_matching.polyline import arc_lengths
@@ -85,20 +86,26 @@ class LaneStrip:
         """Centreline length (m)."""
         return float(self.station[-1])
 
+    def _weights(self, stations: NDArrayFloat) -> tuple[npt.NDArray[np.intp], NDArrayFloat]:
+        """Per station (clamped to the strip), the cross-section before it and the
+        interpolation weight ``(N, 1)`` of the one after it."""
+        stations = np.minimum(np.maximum(np.asarray(stations, dtype=np.float64), 0.0), self.length)
+        index = np.minimum(np.maximum(np.searchsorted(self.station, stations, side="right") - 1, 0),
+                           len(self.station) - 2)
+        span = self.station[index + 1] - self.station[index]
+        return index, ((stations - self.station[index]) / span)[:, None]
+
     def interpolate(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
         """Centreline, left and right points at the given stations (clamped to the strip)."""
-        stations = np.clip(np.asarray(stations, dtype=np.float64), 0.0, self.length)
-        index = np.clip(np.searchsorted(self.station, stations, side="right") - 1, 0, len(self.station) - 2)
-        span = self.station[index + 1] - self.station[index]
-        w = ((stations - self.station[index]) / span)[:, None]
-
-        def lerp(points: NDArrayFloat) -> NDArrayFloat:
-            return points[index] * (1.0 - w) + points[index + 1] * w
-
-        return lerp(self.centerline), lerp(self.left), lerp(self.right)
+        index, w = self._weights(stations)
+        after = index + 1
+        return (self.centerline[index] * (1.0 - w) + self.centerline[after] * w,
+                self.left[index] * (1.0 - w) + self.left[after] * w,
+                self.right[index] * (1.0 - w) + self.right[after] * w)
 
     def pose(self, station: float) -> tuple[float, float, float]:
         """Position (m) and heading (rad) of the centreline at a station."""
-        (centre,), _, _ = self.interpolate(np.array([station]))
+        (index,), (w,) = self._weights(np.array([station]))
+        centre = self.centerline[index] * (1.0 - w) + self.centerline[index + 1] * w
         yaw = float(np.interp(station, self.station, self.heading))
         return float(centre[0]), float(centre[1]), float(np.arctan2(np.sin(yaw), np.cos(yaw)))

@@ -1,26 +1,35 @@
 """MCAP recording of an evaluation run, viewable in Foxglove and re-readable for re-fusion.
 
-Channels (all JSON-encoded, schemas in ``jsonschema``):
+Recording version 2 (:data:`RECORDING_VERSION`), written with the ``foxglove-sdk`` MCAP
+writer (zstd chunks). Channels:
 
-- ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the Foxglove
-  JSON schema, with the item schemas of the primitive lists we always leave empty reduced to
-  their title). One entity per polyline, a ``LINE_STRIP`` in frame ``map`` (= the world
-  frame, m, z = 0), simplified to within 1 cm (Douglas-Peucker; the lines are drawn
-  0.15 m wide, straight stretches cost two points) and rounded to 0.1 mm. Every update
-  first deletes all older entities on its topic, so the 3D panel shows exactly the
-  current frame.
-- ``/cold/detections``: ``cold.LaneDetection`` (:data:`LANE_DETECTION_SCHEMA`), the raw
+- ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the official
+  Foxglove protobuf schema). One entity per polyline, a ``LINE_STRIP`` in frame ``map`` (=
+  the world frame, m, z = 0), simplified to within 1 cm (Douglas-Peucker, shapely/GEOS; the
+  lines are drawn 0.15 m wide, straight stretches cost two points) and rounded to 0.1 mm.
+  Every update first deletes all older entities on its topic, so the 3D panel shows
+  exactly the current frame.
+- ``/tf``: ``foxglove.FrameTransform`` (protobuf) ``map`` -> ``<sender>`` per detection,
+  the sender's reported pose (so Foxglove can follow a vehicle).
+- ``/cold/detections``: ``cold.LaneDetection`` (:data:`LANE_DETECTION_SCHEMA`, JSON), the raw
   detections for re-fusion.
-- ``/metrics``: ``cold.FrameMetrics`` (:data:`FRAME_METRICS_SCHEMA`), a flat object of
-  numbers per frame, for Foxglove's plot panel.
+- ``/metrics``: ``cold.FrameMetrics`` (:data:`FRAME_METRICS_SCHEMA`, JSON), a flat object
+  of numbers per frame, for Foxglove's plot panel.
 
-MCAP metadata records: ``cold.run`` (``map``: the map path, ``params``: the run
-parameters as a JSON object string) and ``cold.status`` (``status``: ``complete`` or
-``partial``; ``reason``: the exception that ended a partial run).
+Times: a frame at ``stamp_s`` seconds into the run is logged at ``stamp_base_ns +
+stamp_s * 1e9`` ns since the Unix epoch; the base is the run's wall-clock start unless
+given (``cold-eval --stamp-base``). ``cold.*`` messages carry that time as ``stamp:
+{sec, nsec}``. MCAP metadata records: ``cold.run`` (``map``: the map path, ``params``: the
+run parameters as a JSON object string, ``recording_version``, ``stamp_base_ns``) and
+``cold.status`` (``status``: ``complete`` or ``partial``; ``reason``: the exception that
+ended a partial run).
 
-Log times are the frame stamps in ns. The file is written as ``<path>.partial`` and
-renamed when finalised; a run ended by an exception (Ctrl-C included) is still finalised
-under the final name, marked ``partial``.
+Version 1 (before foxglove-sdk; no ``recording_version``): display channels as JSON
+``foxglove.SceneUpdate``, no ``/tf``, log times from 0, ``cold.*`` stamps as float seconds
+``stamp_s``. :func:`read_detections` reads both versions.
+
+The file is written as ``<path>.partial`` and renamed when finalised; a run ended by an
+exception (Ctrl-C included) is still finalised under the final name, marked ``partial``.
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ import json
 import math
 import os
 import re
+import time
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Final, Iterator, Mapping
@@ -38,11 +48,12 @@ import numpy as np
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
-from gt_matching.polyline import simplify
 
+RECORDING_VERSION: Final[int] = 2
 TOPIC_GT: Final[str] = "/gt"
 TOPIC_FUSED: Final[str] = "/fused"
 TOPIC_DETECTIONS_PREFIX: Final[str] = "/detections/"
+TOPIC_TF: Final[str] = "/tf"
 TOPIC_RAW_DETECTIONS: Final[str] = "/cold/detections"
 TOPIC_METRICS: Final[str] = "/metrics"
 FRAME_ID: Final[str] = "map"
@@ -54,6 +65,8 @@ LINE_THICKNESS_M: Final[float] = 0.15
 DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
 DISPLAY_TOLERANCE_M: Final[float] = 0.01  # SceneUpdate lines simplified to within this distance
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
+NS_PER_S: Final[int] = 1_000_000_000
+MAX_STAMP_BASE_NS: Final[int] = 2**63 - 1 - 10**6 * NS_PER_S  # log times stay int64 for 11 days of frames
 
 RGBA = tuple[float, float, float, float]
 COLOR_GT: Final[RGBA] = (0.2, 0.8, 0.2, 1.0)
@@ -68,125 +81,23 @@ class RecordingError(Exception):
     """A recording that cannot be written or read; the message is one line naming the file."""
 
 
-def _object(title: str, description: str, properties: dict[str, Any], required: bool = True) -> dict[str, Any]:
-    schema: dict[str, Any] = {"title": title, "description": description, "type": "object", "properties": properties}
-    if required:
-        schema["required"] = list(properties)
-    return schema
+def _object(title: str, description: str, properties: dict[str, Any]) -> dict[str, Any]:
+    return {"title": title, "description": description, "type": "object", "properties": properties,
+            "required": list(properties)}
 
 
 def _number(description: str) -> dict[str, str]:
     return {"type": "number", "description": description}
 
 
-def _time(title: str, description: str, sec_minimum: bool) -> dict[str, Any]:
-    sec: dict[str, Any] = {"type": "integer", "minimum": 0} if sec_minimum else {"type": "integer"}
-    return {
-        "type": "object",
-        "title": title,
-        "properties": {"sec": sec, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}},
-        "description": description,
-    }
-
-
-def _enum(title: str, description: str, values: list[tuple[str, int, str]]) -> dict[str, Any]:
-    return {
-        "title": title,
-        "description": description,
-        "oneOf": [{"title": name, "const": value, "description": text} for name, value, text in values],
-    }
-
-
-def _color(description: str) -> dict[str, Any]:
-    return _object("foxglove.Color", description, {c: _number(f"{n} value between 0 and 1") for c, n in
-                                                   (("r", "Red"), ("g", "Green"), ("b", "Blue"), ("a", "Alpha"))})
-
-
-def _pose(description: str) -> dict[str, Any]:
-    position = _object("foxglove.Vector3", "Point denoting position in 3D space",
-                       {a: _number(f"{a} coordinate length") for a in "xyz"})
-    orientation = _object("foxglove.Quaternion", "Quaternion denoting orientation in 3D space",
-                          {a: _number(f"{a} value") for a in "xyzw"})
-    return _object("foxglove.Pose", description, {"position": position, "orientation": orientation})
-
-
-def _array(items: dict[str, Any], description: str) -> dict[str, Any]:
-    return {"type": "array", "items": items, "description": description}
-
-
-def _unused_primitives(title: str, description: str) -> dict[str, Any]:
-    return _array({"title": title, "type": "object"}, description)
-
-
-_LINE_PRIMITIVE: Final = _object(
-    "foxglove.LinePrimitive",
-    "A primitive representing a series of points connected by lines",
-    {
-        "type": _enum("foxglove.LineType", "Drawing primitive to use for lines", [
-            ("LINE_STRIP", 0, "Connected line segments: 0-1, 1-2, ..., (n-1)-n"),
-            ("LINE_LOOP", 1, "Closed polygon: 0-1, 1-2, ..., (n-1)-n, n-0"),
-            ("LINE_LIST", 2, "Individual line segments: 0-1, 2-3, 4-5, ..."),
-        ]),
-        "pose": _pose("Origin of lines relative to reference frame"),
-        "thickness": _number("Line thickness"),
-        "scale_invariant": {"type": "boolean", "description": "Indicates whether `thickness` is a fixed size in "
-                            "screen pixels (true), or specified in world coordinates and scales with distance "
-                            "from the camera (false)"},
-        "points": _array(_object("foxglove.Point3", "A point representing a position in 3D space",
-                                 {a: _number(f"{a} coordinate position") for a in "xyz"}), "Points along the line"),
-        "color": _color("Solid color to use for the whole line. Ignored if `colors` is non-empty."),
-        "colors": _array(_color("A color in RGBA format"),
-                         "Per-point colors (if non-empty, must have the same length as `points`)."),
-        "indices": _array({"type": "integer", "minimum": 0}, "Indices into the `points` and `colors` attribute "
-                          "arrays, which can be used to avoid duplicating attribute data. If omitted or empty, "
-                          "indexing will not be used."),
-    },
-)
-
-SCENE_UPDATE_SCHEMA: Final[dict[str, Any]] = _object(
-    "foxglove.SceneUpdate",
-    "An update to the entities displayed in a 3D scene",
-    {
-        "deletions": _array(_object("foxglove.SceneEntityDeletion", "Command to remove previously published entities", {
-            "timestamp": _time("time", "Timestamp of the deletion. Only matching entities earlier than this "
-                               "timestamp will be deleted.", sec_minimum=True),
-            "type": _enum("foxglove.SceneEntityDeletionType", "Type of deletion action to perform", [
-                ("MATCHING_ID", 0, "Delete the existing entity on the same topic that has the provided `id`"),
-                ("ALL", 1, "Delete all existing entities on the same topic"),
-            ]),
-            "id": {"type": "string", "description": "Identifier which must match if `type` is `MATCHING_ID`."},
-        }), "Scene entities to delete"),
-        "entities": _array(_object(
-            "foxglove.SceneEntity",
-            "A visual element in a 3D scene. An entity may be composed of multiple primitives which all share "
-            "the same frame of reference.",
-            {
-                "timestamp": _time("time", "Timestamp of the entity", sec_minimum=True),
-                "frame_id": {"type": "string", "description": "Frame of reference"},
-                "id": {"type": "string", "description": "Identifier for the entity. A entity will replace any "
-                       "prior entity on the same topic with the same `id`."},
-                "lifetime": _time("duration", "Length of time (relative to `timestamp`) after which the entity "
-                                  "should be automatically removed. Zero value indicates the entity should "
-                                  "remain visible until it is replaced or deleted.", sec_minimum=False),
-                "frame_locked": {"type": "boolean", "description": "Whether the entity should keep its location "
-                                 "in the fixed frame (false) or follow the frame specified in `frame_id` as it "
-                                 "moves relative to the fixed frame (true)"},
-                "metadata": _array(_object("foxglove.KeyValuePair", "A key with its associated value", {
-                    "key": {"type": "string", "description": "Key"},
-                    "value": {"type": "string", "description": "Value"},
-                }), "Additional user-provided metadata associated with the entity. Keys must be unique."),
-                "arrows": _unused_primitives("foxglove.ArrowPrimitive", "Arrow primitives"),
-                "cubes": _unused_primitives("foxglove.CubePrimitive", "Cube primitives"),
-                "spheres": _unused_primitives("foxglove.SpherePrimitive", "Sphere primitives"),
-                "cylinders": _unused_primitives("foxglove.CylinderPrimitive", "Cylinder primitives"),
-                "lines": _array(_LINE_PRIMITIVE, "Line primitives"),
-                "triangles": _unused_primitives("foxglove.TriangleListPrimitive", "Triangle list primitives"),
-                "texts": _unused_primitives("foxglove.TextPrimitive", "Text primitives"),
-                "models": _unused_primitives("foxglove.ModelPrimitive", "Model primitives"),
-            },
-        ), "Scene entities to add or replace"),
-    },
-)
+_STAMP_SCHEMA: Final[dict[str, Any]] = {
+    "type": "object",
+    "title": "time",
+    "description": "Time of the frame (its log time): whole seconds and nanoseconds since the Unix epoch.",
+    "properties": {"sec": {"type": "integer", "minimum": 0},
+                   "nsec": {"type": "integer", "minimum": 0, "maximum": NS_PER_S - 1}},
+    "required": ["sec", "nsec"],
+}
 
 _POLYLINE_SCHEMA: Final = {
     "type": "array",
@@ -196,9 +107,9 @@ _POLYLINE_SCHEMA: Final = {
 
 LANE_DETECTION_SCHEMA: Final[dict[str, Any]] = _object(
     "cold.LaneDetection",
-    "One vehicle's lane detection in one frame, as sent to the fusion (cold-maps).",
+    "One vehicle's lane detection in one frame, as sent to the fusion (cold-maps recording version 2).",
     {
-        "stamp_s": _number("Time of the frame (s since the start of the run)."),
+        "stamp": _STAMP_SCHEMA,
         "frame": {"type": "integer", "minimum": 0, "description": "Frame index."},
         "sender": {"type": "string", "description": "Vehicle id, e.g. 'ego' or 'coop1'."},
         "pose": _object("cold.Pose2D", "The sender's pose as it reports it (localisation error included), "
@@ -217,18 +128,19 @@ FRAME_METRICS_SCHEMA: Final[dict[str, Any]] = {
                    "does not exist in this frame (e.g. no fused lane).",
     "type": "object",
     "properties": {
-        "stamp_s": _number("Time of the frame (s)."),
+        "stamp": _STAMP_SCHEMA,
         "frame": {"type": "integer", "minimum": 0, "description": "Frame index."},
     },
-    "required": ["stamp_s", "frame"],
+    "required": ["stamp", "frame"],
     "additionalProperties": {"type": ["number", "null"]},
 }
 
 
 def _stamp_ns(stamp_s: float) -> int:
+    """``stamp_s`` (s since the stamp base) in ns."""
     if not math.isfinite(stamp_s) or stamp_s < 0:
         raise ValueError(f"stamp_s: expected a finite time >= 0 s, got {stamp_s!r}")
-    return round(stamp_s * 1e9)
+    return round(stamp_s * NS_PER_S)
 
 
 def _check_frame(frame: int) -> int:
@@ -238,64 +150,123 @@ def _check_frame(frame: int) -> int:
 
 
 def _time_msg(ns: int) -> dict[str, int]:
-    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+    return {"sec": ns // NS_PER_S, "nsec": ns % NS_PER_S}
 
 
-def _simplified(points: NDArrayFloat) -> NDArrayFloat:
-    """The polyline's points within ``DISPLAY_TOLERANCE_M`` (Douglas-Peucker)."""
-    return points[simplify(points, DISPLAY_TOLERANCE_M)] if len(points) > 2 else points
+def _time_ns(stamp: Any) -> int:
+    """A ``{sec, nsec}`` object in ns; ValueError naming what is wrong."""
+    sec, nsec = stamp["sec"], stamp["nsec"]
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (sec, nsec)) or sec < 0 \
+            or not 0 <= nsec < NS_PER_S:
+        raise ValueError(f"stamp: expected integers sec >= 0 and 0 <= nsec < 1e9, got {stamp!r}")
+    return sec * NS_PER_S + nsec
 
 
-def _line_entity(entity_id: str, ns: int, points: NDArrayFloat, color: RGBA) -> dict[str, Any]:
-    line = {
-        "type": 0,
-        "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
-        "thickness": LINE_THICKNESS_M,
-        "scale_invariant": False,
-        "points": [{"x": x, "y": y, "z": 0.0}
-                   for x, y in np.round(_simplified(points), DISPLAY_DECIMALS).tolist()],
-        "color": dict(zip("rgba", color)),
-        "colors": [],
-        "indices": [],
-    }
-    return {
-        "timestamp": _time_msg(ns), "frame_id": FRAME_ID, "id": entity_id,
-        "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": False, "metadata": [],
-        "arrows": [], "cubes": [], "spheres": [], "cylinders": [], "lines": [line],
-        "triangles": [], "texts": [], "models": [],
-    }
+def _check_stamp_base(stamp_base_ns: int | None) -> int | None:
+    if stamp_base_ns is not None and (isinstance(stamp_base_ns, bool) or not isinstance(stamp_base_ns, int)
+                                      or not 0 <= stamp_base_ns <= MAX_STAMP_BASE_NS):
+        raise ValueError(f"stamp_base_ns: expected an integer 0 ... {MAX_STAMP_BASE_NS} (ns since the Unix epoch), "
+                         f"got {stamp_base_ns!r}")
+    return stamp_base_ns
 
 
-def scene_update(ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> dict[str, Any]:
+def simplify_lines(lines: list[NDArrayFloat], tolerance_m: float) -> list[NDArrayFloat]:
+    """Douglas-Peucker (shapely/GEOS, all lines in one call): each ``(N >= 2, 2)`` polyline's
+    vertices such that no dropped one is farther than ``tolerance_m`` from the kept line;
+    the ends are kept."""
+    import shapely
+
+    if not lines:
+        return []
+    counts = [len(line) for line in lines]
+    geometries = shapely.linestrings(np.vstack(lines), indices=np.repeat(np.arange(len(lines)), counts))
+    with np.errstate(divide="ignore", invalid="ignore"):  # GEOS on a zero-length line: kept as is
+        simple = shapely.simplify(geometries, tolerance_m, preserve_topology=False)
+    coordinates, owner = shapely.get_coordinates(simple, return_index=True)
+    return np.split(coordinates, np.cumsum(np.bincount(owner, minlength=len(lines)))[:-1])
+
+
+def display_lines(lines: Mapping[str, NDArrayFloat]) -> list[NDArrayFloat]:
+    """Each ``(N, 2)`` polyline (m) as drawn: simplified to within ``DISPLAY_TOLERANCE_M``
+    and rounded to ``DISPLAY_DECIMALS``."""
+    simple = simplify_lines([check_polyline(name, points) for name, points in lines.items()], DISPLAY_TOLERANCE_M)
+    return [np.round(line, DISPLAY_DECIMALS) for line in simple]
+
+
+def _timestamp(ns: int) -> Any:
+    from foxglove.messages import Timestamp
+
+    return Timestamp(ns // NS_PER_S, ns % NS_PER_S)
+
+
+def scene_update(ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> Any:
     """A ``foxglove.SceneUpdate`` replacing everything on its topic with one entity per line.
 
-    ``lines`` maps entity ids to ``(N, 2)`` world-frame polylines (m); ``ns`` is the stamp.
+    ``lines`` maps entity ids to ``(N, 2)`` world-frame polylines (m); ``ns`` is the log time
+    (ns since the Unix epoch).
     """
-    return {
-        "deletions": [{"timestamp": _time_msg(ns), "type": 1, "id": ""}],
-        "entities": [_line_entity(name, ns, check_polyline(name, points), color) for name, points in lines.items()],
-    }
+    from foxglove.messages import (
+        Color,
+        LinePrimitive,
+        LinePrimitiveLineType,
+        Point3,
+        Pose,
+        Quaternion,
+        SceneEntity,
+        SceneEntityDeletion,
+        SceneEntityDeletionType,
+        SceneUpdate,
+        Vector3,
+    )
+
+    stamp = _timestamp(ns)
+    rgba = Color(r=color[0], g=color[1], b=color[2], a=color[3])
+    entities = []
+    for name, points in zip(lines, display_lines(lines)):
+        line = LinePrimitive(
+            type=LinePrimitiveLineType.LineStrip,
+            pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+            thickness=LINE_THICKNESS_M, scale_invariant=False,
+            points=[Point3(x=x, y=y, z=0.0) for x, y in points.tolist()], color=rgba)
+        entities.append(SceneEntity(timestamp=stamp, frame_id=FRAME_ID, id=name, frame_locked=False, lines=[line]))
+    return SceneUpdate(deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
+                       entities=entities)
+
+
+def frame_transform(ns: int, sender: str, x: float, y: float, yaw: float) -> Any:
+    """``foxglove.FrameTransform`` ``map`` -> ``sender`` at log time ``ns``: the vehicle at
+    (x m, y m) heading ``yaw`` (rad, counter-clockwise from x) in the world frame."""
+    from foxglove.messages import FrameTransform, Quaternion, Vector3
+
+    return FrameTransform(timestamp=_timestamp(ns), parent_frame_id=FRAME_ID, child_frame_id=sender,
+                          translation=Vector3(x=x, y=y, z=0.0),
+                          rotation=Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw)))
 
 
 class Recorder:
     """Context manager writing one run's MCAP file (see the module docstring).
 
-    ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata.
+    ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata;
+    ``stamp_base_ns`` (ns since the Unix epoch) is the log time of stamp 0 s, by default
+    the wall-clock time when the recording opens.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, map_path: str | os.PathLike[str] = "",
-                 params: Mapping[str, Any] | None = None):
+                 params: Mapping[str, Any] | None = None, stamp_base_ns: int | None = None):
         self.path = Path(path)
         self.partial_path = self.path.with_name(self.path.name + ".partial")
-        self._run_metadata = {"map": str(map_path), "params": json.dumps(dict(params or {}), sort_keys=True)}
+        self._map_path = str(map_path)
+        self._params = json.dumps(dict(params or {}), sort_keys=True)
+        self._requested_base_ns = _check_stamp_base(stamp_base_ns)
+        self.stamp_base_ns = 0
         self._writer: Any = None
         self._stream: Any = None
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._sequence = 0
+        self._context: Any = None
+        self._channels: dict[str, Any] = {}
 
     def __enter__(self) -> Recorder:
-        from mcap.writer import CompressionType, Writer
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
         if self._writer is not None:
             raise RecordingError(f"{self.path}: recording is already open")
@@ -303,9 +274,19 @@ class Recorder:
             self._stream = open(self.partial_path, "wb")
         except OSError as exc:
             raise RecordingError(f"{self.partial_path}: cannot create recording: {exc.strerror}") from exc
-        self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
-        self._writer.start(profile="", library="cold-maps")
-        self._writer.add_metadata(METADATA_RUN, self._run_metadata)
+        self.stamp_base_ns = time.time_ns() if self._requested_base_ns is None else self._requested_base_ns
+        self._context = foxglove.Context()
+        try:
+            self._writer = foxglove.open_mcap(self._stream, context=self._context, writer_options=MCAPWriteOptions(
+                compression=MCAPCompression.Zstd, profile=""))
+            self._writer.write_metadata(METADATA_RUN, {
+                "map": self._map_path, "params": self._params, "recording_version": str(RECORDING_VERSION),
+                "stamp_base_ns": str(self.stamp_base_ns)})
+        except Exception as exc:
+            self._writer = None
+            self._stream.close()
+            self.partial_path.unlink(missing_ok=True)
+            raise RecordingError(f"{self.partial_path}: cannot start recording: {exc}") from exc
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
@@ -318,48 +299,65 @@ class Recorder:
     def _finish(self, status: dict[str, str]) -> None:
         if self._writer is None:
             raise RecordingError(f"{self.path}: recording is not open")
-        writer, stream = self._writer, self._stream
-        self._writer = self._stream = None
+        writer, stream, channels = self._writer, self._stream, self._channels
+        self._writer = self._stream = self._context = None
+        self._channels = {}
         try:
-            writer.add_metadata(METADATA_STATUS, status)
-            writer.finish()
+            writer.write_metadata(METADATA_STATUS, status)
+            writer.close()
+            for channel in channels.values():
+                channel.close()
             stream.flush()
             os.fsync(stream.fileno())
         finally:
             stream.close()
         os.replace(self.partial_path, self.path)
 
-    def _channel(self, topic: str, schema: Mapping[str, Any]) -> int:
+    def _ns(self, stamp_s: float) -> int:
+        """Log time (ns since the Unix epoch) of a stamp (s since the stamp base)."""
         if self._writer is None:
             raise RecordingError(f"{self.path}: recording is not open (use it as a context manager)")
-        if topic not in self._channels:
-            name = schema["title"]
-            if name not in self._schemas:
-                self._schemas[name] = self._writer.register_schema(
-                    name=name, encoding="jsonschema", data=json.dumps(schema).encode())
-            self._channels[topic] = self._writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=self._schemas[name])
-        return self._channels[topic]
+        return self.stamp_base_ns + _stamp_ns(stamp_s)
 
-    def _write(self, topic: str, schema: Mapping[str, Any], ns: int, message: Mapping[str, Any]) -> None:
-        channel = self._channel(topic, schema)
-        self._writer.add_message(channel_id=channel, log_time=ns, publish_time=ns, sequence=self._sequence,
-                                 data=json.dumps(message, allow_nan=False, separators=(",", ":")).encode())
-        self._sequence += 1
+    def _channel(self, topic: str, kind: str) -> Any:
+        """The channel of ``topic``: ``kind`` is ``scene``, ``transform`` or a JSON schema title."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            import foxglove
+            from foxglove.channels import FrameTransformChannel, SceneUpdateChannel
+
+            if kind == "scene":
+                channel = SceneUpdateChannel(topic, context=self._context)
+            elif kind == "transform":
+                channel = FrameTransformChannel(topic, context=self._context)
+            else:
+                schema = {s["title"]: s for s in (LANE_DETECTION_SCHEMA, FRAME_METRICS_SCHEMA)}[kind]
+                channel = foxglove.Channel(topic, message_encoding="json", context=self._context, schema=foxglove.Schema(
+                    name=kind, encoding="jsonschema", data=json.dumps(schema).encode()))
+            self._channels[topic] = channel
+        return channel
+
+    def _write_json(self, topic: str, ns: int, message: Mapping[str, Any]) -> None:
+        import orjson
+
+        schema = LANE_DETECTION_SCHEMA if topic == TOPIC_RAW_DETECTIONS else FRAME_METRICS_SCHEMA
+        self._channel(topic, schema["title"]).log(orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY),
+                                                  log_time=ns)
 
     def write_gt(self, stamp_s: float, lines: Mapping[str, NDArrayFloat]) -> None:
         """Ground-truth polylines (world frame, m) of one frame on ``/gt``."""
-        ns = _stamp_ns(stamp_s)
-        self._write(TOPIC_GT, SCENE_UPDATE_SCHEMA, ns, scene_update(ns, lines, COLOR_GT))
+        ns = self._ns(stamp_s)
+        self._channel(TOPIC_GT, "scene").log(scene_update(ns, lines, COLOR_GT), log_time=ns)
 
     def write_fused(self, stamp_s: float, lines: Mapping[str, NDArrayFloat]) -> None:
         """The fused lane's polylines (world frame, m) of one frame on ``/fused``; {} clears it."""
-        ns = _stamp_ns(stamp_s)
-        self._write(TOPIC_FUSED, SCENE_UPDATE_SCHEMA, ns, scene_update(ns, lines, COLOR_FUSED))
+        ns = self._ns(stamp_s)
+        self._channel(TOPIC_FUSED, "scene").log(scene_update(ns, lines, COLOR_FUSED), log_time=ns)
 
     def write_detection(self, stamp_s: float, frame: int, sender: str, pose: tuple[float, float, float],
                         left: NDArrayFloat, right: NDArrayFloat, *, ego: bool = False) -> None:
-        """One detection: raw on ``/cold/detections`` and drawn on ``/detections/<sender>``.
+        """One detection: raw on ``/cold/detections``, drawn on ``/detections/<sender>`` and
+        the sender's frame on ``/tf``.
 
         ``pose`` is the sender's reported (x m, y m, yaw rad) in the world frame; ``left``
         and ``right`` are ``(N, 2)`` borders in its vehicle frame (ISO 8855, m).
@@ -369,26 +367,28 @@ class Recorder:
         x, y, yaw = (float(v) for v in pose)
         if not all(math.isfinite(v) for v in (x, y, yaw)):
             raise ValueError(f"pose of {sender}: expected finite (x, y, yaw), got {pose!r}")
-        left, right = check_polyline(f"{sender} left", left), check_polyline(f"{sender} right", right)
-        ns = _stamp_ns(stamp_s)
-        raw = {"stamp_s": float(stamp_s), "frame": _check_frame(frame), "sender": sender,
-               "pose": {"x": x, "y": y, "yaw": yaw}, "left": left.tolist(), "right": right.tolist()}
-        self._write(TOPIC_RAW_DETECTIONS, LANE_DETECTION_SCHEMA, ns, raw)
+        left = np.ascontiguousarray(check_polyline(f"{sender} left", left))
+        right = np.ascontiguousarray(check_polyline(f"{sender} right", right))
+        ns = self._ns(stamp_s)
+        raw = {"stamp": _time_msg(ns), "frame": _check_frame(frame), "sender": sender,
+               "pose": {"x": x, "y": y, "yaw": yaw}, "left": left, "right": right}
+        self._write_json(TOPIC_RAW_DETECTIONS, ns, raw)
+        self._channel(TOPIC_TF, "transform").log(frame_transform(ns, sender, x, y, yaw), log_time=ns)
         world = {"left": vehicle_to_world(left, x, y, yaw), "right": vehicle_to_world(right, x, y, yaw)}
-        self._write(TOPIC_DETECTIONS_PREFIX + sender, SCENE_UPDATE_SCHEMA, ns,
-                    scene_update(ns, world, COLOR_EGO if ego else COLOR_COOP))
+        self._channel(TOPIC_DETECTIONS_PREFIX + sender, "scene").log(
+            scene_update(ns, world, COLOR_EGO if ego else COLOR_COOP), log_time=ns)
 
     def write_metrics(self, stamp_s: float, frame: int, values: Mapping[str, float | int | None]) -> None:
         """Per-frame metrics on ``/metrics``; NaN and None are written as null."""
-        ns = _stamp_ns(stamp_s)
-        message: dict[str, Any] = {"stamp_s": float(stamp_s), "frame": _check_frame(frame)}
+        ns = self._ns(stamp_s)
+        message: dict[str, Any] = {"stamp": _time_msg(ns), "frame": _check_frame(frame)}
         for key, value in values.items():
             if key in message or not isinstance(key, str):
                 raise ValueError(f"metrics: invalid or reserved key {key!r}")
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float, np.number))):
                 raise ValueError(f"metrics[{key!r}]: expected a number or None, got {value!r}")
             message[key] = None if value is None or not math.isfinite(value) else float(value)
-        self._write(TOPIC_METRICS, FRAME_METRICS_SCHEMA, ns, message)
+        self._write_json(TOPIC_METRICS, ns, message)
 
 
 def _open_reader(path: Path, stream: Any) -> tuple[Any, Any]:
@@ -408,12 +408,30 @@ def _open_reader(path: Path, stream: Any) -> tuple[Any, Any]:
     return reader, summary
 
 
+def _metadata(reader: Any) -> dict[str, dict[str, str]]:
+    return {record.name: dict(record.metadata) for record in reader.iter_metadata()}
+
+
 def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, str]]:
     """The MCAP metadata records of a recording, by name (``cold.run``, ``cold.status``)."""
     path = Path(path)
     with _open_file(path) as stream:
         reader, _ = _open_reader(path, stream)
-        return {record.name: dict(record.metadata) for record in reader.iter_metadata()}
+        return _metadata(reader)
+
+
+def _stamp_base(path: Path, metadata: Mapping[str, Mapping[str, str]]) -> int:
+    """The ``stamp_base_ns`` of ``cold.run`` (0 without one: version 1 or another source)."""
+    text = metadata.get(METADATA_RUN, {}).get("stamp_base_ns", "0")
+    try:
+        return _check_stamp_base(int(text)) or 0
+    except ValueError as exc:
+        raise RecordingError(f"{path}: {METADATA_RUN} stamp_base_ns: {exc}") from exc
+
+
+def read_stamp_base(path: str | os.PathLike[str]) -> int:
+    """The log time (ns since the Unix epoch) of stamp 0 s of a recording; 0 for version 1."""
+    return _stamp_base(Path(path), read_metadata(path))
 
 
 def _open_file(path: Path) -> Any:
@@ -423,13 +441,17 @@ def _open_file(path: Path) -> Any:
         raise RecordingError(f"{path}: cannot open recording: {exc.strerror}") from exc
 
 
-def _decode_detection(path: Path, index: int, data: bytes) -> dict[str, Any]:
+def _decode_detection(path: Path, index: int, data: bytes, stamp_base_ns: int) -> dict[str, Any]:
+    import orjson
+
     where = f"{path}: {TOPIC_RAW_DETECTIONS} message {index}"
     try:
-        message = json.loads(data)
+        message = orjson.loads(data)
         pose = message["pose"]
+        stamp_s = ((_time_ns(message["stamp"]) - stamp_base_ns) / NS_PER_S if "stamp" in message
+                   else float(message["stamp_s"]))
         detection = {
-            "stamp_s": float(message["stamp_s"]),
+            "stamp_s": stamp_s,
             "frame": _check_frame(message["frame"]),
             "sender": str(message["sender"]),
             "pose": {"x": float(pose["x"]), "y": float(pose["y"]), "yaw": float(pose["yaw"])},
@@ -455,26 +477,28 @@ def _check_detection_channel(path: Path, summary: Any) -> None:
 
 
 def read_detections(path: str | os.PathLike[str]) -> Iterator[tuple[int, list[dict[str, Any]]]]:
-    """The raw detections of a recording, grouped by frame in recording order.
+    """The raw detections of a recording (version 1 or 2), grouped by frame in recording order.
 
-    Yields ``(frame, detections)``; each detection is a dict with the keys of
-    :data:`LANE_DETECTION_SCHEMA`, ``left`` and ``right`` as ``(N, 2)`` float64 arrays.
-    Raises :class:`RecordingError` at once for a file that is not a finalised MCAP, has no
-    ``/cold/detections`` channel or carries a foreign schema, and while iterating for a
-    malformed message.
+    Yields ``(frame, detections)``; each detection is a dict with the keys ``stamp_s`` (s
+    since the recording's stamp base, ns resolution), ``frame``, ``sender``, ``pose`` and
+    ``left`` and ``right`` as ``(N, 2)`` float64 arrays. Raises :class:`RecordingError` at
+    once for a file that is not a finalised MCAP, has no ``/cold/detections`` channel or
+    carries a foreign schema, and while iterating for a malformed message.
     """
     path = Path(path)
     stream = _open_file(path)
     try:
         reader, summary = _open_reader(path, stream)
         _check_detection_channel(path, summary)
+        stamp_base_ns = _stamp_base(path, _metadata(reader))
     except BaseException:
         stream.close()
         raise
-    return _iter_detections(path, stream, reader)
+    return _iter_detections(path, stream, reader, stamp_base_ns)
 
 
-def _iter_detections(path: Path, stream: Any, reader: Any) -> Iterator[tuple[int, list[dict[str, Any]]]]:
+def _iter_detections(path: Path, stream: Any, reader: Any,
+                     stamp_base_ns: int) -> Iterator[tuple[int, list[dict[str, Any]]]]:
     from mcap.exceptions import McapError
 
     frame = -1
@@ -482,7 +506,7 @@ def _iter_detections(path: Path, stream: Any, reader: Any) -> Iterator[tuple[int
     try:
         messages = reader.iter_messages(topics=[TOPIC_RAW_DETECTIONS], log_time_order=False)
         for index, (_, _, message) in enumerate(messages):
-            detection = _decode_detection(path, index, message.data)
+            detection = _decode_detection(path, index, message.data, stamp_base_ns)
             if group and detection["frame"] != frame:
                 yield frame, group
                 group = []

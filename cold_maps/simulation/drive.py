@@ -95,10 +95,11 @@ class Track:
         """Left and right borders (world frame, m) from station ``start`` to ``end``,
         the strip's own points plus both ends."""
         strip = self.strip
-        inside = (strip.station > start) & (strip.station < end)
-        stations = np.concatenate(([start], strip.station[inside], [end]))
-        _, left, right = strip.interpolate(stations)
-        return left, right
+        first = int(np.searchsorted(strip.station, start, side="right"))
+        last = int(np.searchsorted(strip.station, end, side="left"))
+        _, left_ends, right_ends = strip.interpolate(np.array([start, end]))
+        return (np.concatenate((left_ends[:1], strip.left[first:last], left_ends[1:])),
+                np.concatenate((right_ends[:1], strip.right[first:last], right_ends[1:])))
 
     def _repeats(self) -> list[tuple[int, int]]:
         """Index pairs (i, j), i < j, of the same lane passed twice."""
