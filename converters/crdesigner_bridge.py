@@ -68,6 +68,8 @@ class SourceLanelet:
             "solid", "no_marking", "curb", ...; "unknown" when crdesigner has none).
         opendrive_lanes: the OpenDRIVE lanes the lanelet covers, in driving order, as
             (road id, lane-section index, lane id); empty for crosswalks.
+        successors: ids of the lanelets crdesigner links after this one (from the
+            OpenDRIVE road, lane and junction links), whether or not their ends touch.
     """
 
     id: int
@@ -77,6 +79,7 @@ class SourceLanelet:
     left_marking: str = "unknown"
     right_marking: str = "unknown"
     opendrive_lanes: tuple[tuple[str, int, int], ...] = ()
+    successors: tuple[int, ...] = ()
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -167,6 +170,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             left_marking=str(lanelet.line_marking_left_vertices.value),
             right_marking=str(lanelet.line_marking_right_vertices.value),
             opendrive_lanes=sources.get(int(lanelet.lanelet_id), ()),
+            successors=tuple(int(i) for i in lanelet.successor),
         )
         for lanelet in scenario.lanelet_network.lanelets
     ]
