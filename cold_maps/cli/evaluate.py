@@ -137,6 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import EXIT_INTERRUPTED, configure_logging, startup_failure
     from cold_maps.evaluation.run import RunOptions, run_evaluation
+    from cold_maps.evaluation.trust import run_warnings
 
     configure_logging(args.verbose)
     try:
@@ -153,7 +154,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}",
               file=sys.stderr)
         return 1
-    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}")
+    warnings = run_warnings(run.collector)
+    verdict = f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
+    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{verdict}")
     return 0
 
 

@@ -39,6 +39,7 @@ class Collector:
             overlap check for convoy (ms).
         overlays: (map, scenario label) → the frame with the largest error.
         notes: lines for the summary (routes, lane coverage).
+        gt_warnings: per map, why its ground truth is not trustworthy on the driven lanes.
         frames_done: frames evaluated.
     """
 
@@ -47,6 +48,7 @@ class Collector:
     check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    gt_warnings: list[str] = field(default_factory=list)
     frames_done: int = 0
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
-from cold_maps.network.lane_graph import LaneKey, build_lane_graph
+from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
@@ -288,10 +288,12 @@ def check_lanelet_map(
     lane_types: Sequence[str] | None = ("driving",),
     routing_graph: Any = None,
     only: Collection[tuple[str, int, int]] | None = None,
+    lane_graph: LaneGraph | None = None,
 ) -> CheckReport:
     """Compare a parsed OpenDRIVE map with a Lanelet2 map in its inertial frame (lanes and
     lane-graph edges; the routing graph defaults to ``converters.routing_graph``'s).
-    ``only``: check just these lanes (road id, section, lane id) and the edges between them."""
+    ``only``: check just these lanes (road id, section, lane id) and the edges between them;
+    ``lane_graph``: the engine's lane graph of ``odr_map`` over ``lane_types`` (built if None)."""
     if not (np.isfinite(threshold_m) and threshold_m > 0.0):
         raise ValueError(f"check: threshold must be a positive length in m, got {threshold_m}")
     if routing_graph is None:
@@ -310,7 +312,7 @@ def check_lanelet_map(
     skipped = tuple((s.road_id, s.section, s.lane_id) for (_, s), empty in zip(sampled, zero) if empty)
     edges = [
         (a, b)
-        for a, b in build_lane_graph(odr_map, lane_types).edges()
+        for a, b in (lane_graph or build_lane_graph(odr_map, lane_types)).edges()
         if not {tuple(a), tuple(b)} & set(skipped) and (only is None or {tuple(a), tuple(b)} <= set(only))
     ]
     disconnected = check_connectivity(edges, index, routing_graph)
