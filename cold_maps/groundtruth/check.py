@@ -219,7 +219,7 @@ def _connected(index: _LaneletIndex, routing: Any, source: int, target: int, lan
                after: tuple[str, int, int]) -> bool:
     """True when lanelet slot ``target`` follows ``source`` in the routing graph, or both
     are one lanelet naming ``lane`` and then ``after``."""
-    if source == target:
+    if source == target and lane != after:
         named = parse_opendrive_lanes_tag(dict(index.lanelets[source].attributes).get(OPENDRIVE_TAG, ""))
         return lane in named and after in named and named.index(after) > named.index(lane)
     return any(int(f.id) == index.ids[target] for f in routing.following(index.lanelets[source]))
@@ -244,7 +244,7 @@ def check_connectivity(
         pairs = [(s, t) for s in sources for t in targets]
         if any(_connected(index, routing, s, t, lane, after) for s, t in pairs):
             continue
-        gaps = [(_end_gap_m(index, s, t), s, t) for s, t in pairs if s != t]
+        gaps = [(_end_gap_m(index, s, t), s, t) for s, t in pairs if s != t or lane == after]
         gap, s, t = min(gaps, default=(np.inf, None, None))
         missing.append(EdgeCheck(tuple(a), tuple(b), None if s is None else index.ids[s],
                                  None if t is None else index.ids[t], gap))
