@@ -48,13 +48,16 @@ def check_driven(map_name: str, graph: LaneGraph, lanelet_map: Any, routing_grap
     flagged = sorted(report.flagged_lanes())
     if not flagged:
         return None
-    gaps = [edge.gap_m for edge in report.disconnected]
-    worst = max((lane.max_m for lane in report.failing), default=0.0)
+    why = []
+    if report.failing:
+        worst = max(lane.max_m for lane in report.failing)
+        why.append(f"{len(report.failing)} with borders off by up to {worst:.3f} m")
+    if report.disconnected:
+        why.append(f"{len(report.disconnected)} links without a Lanelet2 successor "
+                   f"(gaps up to {report.disconnected[0].gap_m:.3f} m)")
     named = ", ".join(f"{road}:{section}:{lane}" for road, section, lane in flagged[:5])
     more = f" and {len(flagged) - 5} more" if len(flagged) > 5 else ""
-    return (f"{map_name}: cold-maps check flags {len(flagged)} driven lanes ({named}{more}): "
-            f"{len(report.failing)} with borders off by up to {worst:.3f} m, "
-            f"{len(gaps)} links without a Lanelet2 successor (gaps up to {max(gaps, default=0.0):.3f} m)")
+    return f"{map_name}: cold-maps check flags {len(flagged)} driven lanes ({named}{more}): {', '.join(why)}"
 
 
 def unmatched_warnings(collector: Collector) -> list[str]:
