@@ -240,3 +240,27 @@ def test_branch_map_geometry_is_what_the_issue_describes() -> None:
     graph = build_lane_graph(parse_opendrive(branch_gap_map(0.02).encode()))
     assert sorted((a.road_id, b.road_id) for a, b in graph.edges()) == [("1", "2"), ("1", "3"), ("2", "4")]
     assert graph.lengths[LaneKey("1", 0, -1)] == pytest.approx(ROAD1_LENGTH_M, abs=0.01)
+
+
+def test_gt_follows_the_branch_the_detection_takes(tmp_path) -> None:
+    from converters import load_lanelet2
+    from converters.osm import OPENDRIVE_TAG
+    from gt_matching import GroundTruth
+    from tests.gap_maps import ARC_RADIUS_M
+
+    lanelet_map, routing = load_lanelet2(_write(tmp_path, "branch", branch_gap_map(0.02, arc_exit=True)), cache=False)
+    by_road = {dict(l.attributes)[OPENDRIVE_TAG].split(":")[0]: int(l.id) for l in lanelet_map.laneletLayer}
+    truth = GroundTruth(lanelet_map, routing)
+    x = np.linspace(25.0, 55.0, 301)
+    left = np.column_stack((x, np.where(x < ROAD1_LENGTH_M, 0.0, 0.02)))
+    straight = truth.match(left, left - [0.0, LANE_M], (25.0, -LANE_M / 2, 0.0))
+    assert straight.matched and straight.lanelet_ids == (by_road["1"], by_road["2"])
+    before = np.column_stack((np.linspace(25.0, ROAD1_LENGTH_M, 151)[:-1], np.zeros(150)))
+    angle = np.linspace(0.0, 10.0 / ARC_RADIUS_M, 101)
+
+    def arc(radius: float) -> np.ndarray:
+        return np.column_stack((ROAD1_LENGTH_M + radius * np.sin(angle), radius * np.cos(angle) - ARC_RADIUS_M))
+
+    turn = truth.match(np.vstack((before, arc(ARC_RADIUS_M))),
+                       np.vstack((before - [0.0, LANE_M], arc(ARC_RADIUS_M - LANE_M))), (25.0, -LANE_M / 2, 0.0))
+    assert turn.matched and turn.lanelet_ids == (by_road["1"], by_road["3"])
