@@ -186,14 +186,22 @@ def test_points_past_the_gt_ends_are_counted_beyond_the_tolerance() -> None:
 # ---- maps crdesigner rejects ------------------------------------------------------------------
 
 
-def _road(shape: str, length: float, road_length: float, extra: str = "") -> str:
+SECTION_BEYOND_RECORD = (
+    '<laneSection s="27"><center><lane id="0" type="none"/></center><right><lane id="-1" type="driving">'
+    '<width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane></right></laneSection>'
+)
+"""A second lane section starting past a 25 m record's end (crdesigner: "Tried to calculate
+a position outside of the borders of the reference path")."""
+
+
+def _road(shape: str, length: float, road_length: float, extra: str = "", sections: str = "") -> str:
     return (
         '<?xml version="1.0"?><OpenDRIVE><header revMajor="1" revMinor="6"/>'
         f'<road id="1" length="{road_length!r}" junction="-1"><link/>'
         f'<planView><geometry s="0" x="0" y="0" hdg="0" length="{length!r}">{shape}</geometry></planView>'
         '<lanes><laneSection s="0"><center><lane id="0" type="none"/></center><right>'
         '<lane id="-1" type="driving"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane></right></laneSection>'
-        f"</lanes>{extra}</road></OpenDRIVE>"
+        f"{sections}</lanes>{extra}</road></OpenDRIVE>"
     )
 
 
@@ -216,20 +224,20 @@ def test_crdesigner_copy_rewrites_what_crdesigner_rejects() -> None:
 
 
 @pytest.mark.parametrize(
-    ("shape", "length", "road_length", "extra"),
+    ("shape", "length", "extra", "sections"),
     [
-        ("<line/>", 30.0, 30.0, '<signals><signal s="10" t="-4" id="1" dynamic="no" orientation="+" '
-         'country="se" type="c" subtype="31" value="5"/></signals>'),
-        ('<spiral curvStart="0.01" curvEnd="0.0100000001"/>', 30.0, 30.0, ""),
-        ('<arc curvature="0.01"/>', 25.0, 30.0, ""),
+        ("<line/>", 30.0, '<signals><signal s="10" t="-4" id="1" dynamic="no" orientation="+" '
+         'country="se" type="c" subtype="31" value="5"/></signals>', ""),
+        ('<spiral curvStart="0.01" curvEnd="0.0100000001"/>', 30.0, "", ""),
+        ('<arc curvature="0.01"/>', 25.0, "", SECTION_BEYOND_RECORD),
     ],
     ids=["swedish-signal", "nearly-constant-spiral", "record-short-of-road"],
 )
-def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, road_length, extra) -> None:
+def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, extra, sections) -> None:
     from cold_maps.groundtruth.check import check_map
 
-    report = check_map(_write(tmp_path, "m", _road(shape, length, road_length, extra)), cache=False)
-    assert report.trustworthy and len(report.lanes) == 1
+    report = check_map(_write(tmp_path, "m", _road(shape, length, 30.0, extra, sections)), cache=False)
+    assert report.trustworthy and len(report.lanes) == 1 + bool(sections)
 
 
 def test_branch_map_geometry_is_what_the_issue_describes() -> None:
