@@ -232,7 +232,7 @@ def _end_gap_m(index: _LaneletIndex, source: int, target: int) -> float:
     return float(max(ends))
 
 
-def check_connectivity(
+def _disconnected_edges(
     edges: Sequence[tuple[LaneKey, LaneKey]], index: _LaneletIndex, routing: Any
 ) -> tuple[EdgeCheck, ...]:
     """The lane-graph ``edges`` that are no routing-graph successor, largest gap first."""
@@ -315,7 +315,7 @@ def check_lanelet_map(
         for a, b in (lane_graph or build_lane_graph(odr_map, lane_types)).edges()
         if not {tuple(a), tuple(b)} & set(skipped) and (only is None or {tuple(a), tuple(b)} <= set(only))
     ]
-    disconnected = check_connectivity(edges, index, routing_graph)
+    disconnected = _disconnected_edges(edges, index, routing_graph)
     return CheckReport(path, threshold_m, step_m, lanes, len(index.ids), skipped, len(edges), disconnected)
 
 
