@@ -272,3 +272,16 @@ def test_gt_follows_the_branch_the_detection_takes(tmp_path) -> None:
     turn = truth.match(np.vstack((before, arc(ARC_RADIUS_M))),
                        np.vstack((before - [0.0, LANE_M], arc(ARC_RADIUS_M - LANE_M))), (25.0, -LANE_M / 2, 0.0))
     assert turn.matched and turn.lanelet_ids == (by_road["1"], by_road["3"])
+
+
+def test_border_fit_is_the_mean_capped_offset_of_the_detected_borders(tmp_path) -> None:
+    from gt_matching.geometry import LaneletGeometry
+    from gt_matching.ground_truth import _border_fit_m
+
+    lanelet_map, _ = _load(tmp_path, build_osm([_straight(1, 0.0, 10.0, successors=(2,)), _straight(2, 10.0, 30.0)]))
+    lanelets = [LaneletGeometry.of(lanelet_map.laneletLayer[i]) for i in (1, 2)]
+    x = np.linspace(2.0, 28.0, 261)
+    left = np.column_stack((x, np.full_like(x, 0.03)))
+    right = np.column_stack((x, np.full_like(x, -LANE_M + 0.07)))
+    assert _border_fit_m(lanelets, left, right, 1.5) == pytest.approx(0.05, abs=1e-9)
+    assert _border_fit_m(lanelets, left + [0.0, 4.0], right + [0.0, 4.0], 1.5) == pytest.approx(1.5)
