@@ -18,9 +18,16 @@ off by dw/ds·Δs laterally, lanelet ends by Δs along track: 0.77 m on a 50 m c
 speed 1 ± 30 %); we evaluate them at the parameter whose arc length is s
 (``_arc_length_parameter``; for paramPoly3 scaled so the record still ends at p_end, as
 ``cold_maps.opendrive.geometry.param_poly3`` does).
-crdesigner also reads road and junction ids as integers (OpenDRIVE ids are strings) and
-rejects spirals of constant curvature: such maps are converted from a rewritten copy
-(``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
+crdesigner also reads road and junction ids as integers (OpenDRIVE ids are strings),
+rejects spirals of (nearly, ``np.isclose``) constant curvature, reads only
+``connectingRoad`` in junction connections (``int(None)`` on a direct junction's
+``linkedRoad``) and places each ``<geometry>`` record at the running sum of the lengths
+before it, not at its ``s`` (raising "Tried to calculate a position outside of the
+borders of the reference path" when the sum falls short of the road length): such maps
+are converted from a rewritten copy (``crdesigner_copy``), and the lanelets' OpenDRIVE
+lanes name the original roads. A signal whose country crdesigner has no sign catalogue
+for (``KeyError: 'SWE'``) is read as its fallback country "ZAM" (signs are not part of
+our output).
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -74,6 +81,8 @@ class SourceLanelet:
         left_z, right_z: (N,) heights (m) of the border vertices from the road's
             elevation profile (``converters.elevation``); None when unknown.
         regulations: speed limit, traffic lights and right of way crdesigner assigned.
+        successors: ids of the lanelets crdesigner links after this one (from the
+            OpenDRIVE road, lane and junction links), whether or not their ends touch.
     """
 
     id: int
@@ -87,6 +96,7 @@ class SourceLanelet:
     left_z: NDArrayFloat | None = None
     right_z: NDArrayFloat | None = None
     regulations: LaneletRegulations = LaneletRegulations()
+    successors: tuple[int, ...] = ()
 
 
 def _hardened_parser() -> etree.XMLParser:
@@ -197,6 +207,7 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
             left_z=height(lanelet.left_vertices, int(lanelet.lanelet_id)),
             right_z=height(lanelet.right_vertices, int(lanelet.lanelet_id)),
             regulations=regulations.get(int(lanelet.lanelet_id), LaneletRegulations()),
+            successors=tuple(int(i) for i in lanelet.successor),
         )
         for lanelet in network.lanelets
     ]
@@ -272,12 +283,15 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     Non-integer road and junction ids become fresh integers (crdesigner parses ids with
     ``int``), with every reference; spirals of constant curvature (crdesigner raises
     "Curvature at the start and at the end of a spiral must be different") become the
-    arcs or lines they are. ``data`` has been checked by ``read_geo_reference``.
+    arcs or lines they are; a junction connection naming only a ``linkedRoad`` (direct
+    junction) names it as ``connectingRoad`` too; line, arc and spiral records are
+    lengthened or shortened to end where the next record (or the road) starts
+    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
-    spirals = _constant_spirals_to_arcs(root)
-    if original is None and not spirals:
+    rewrites = _constant_spirals_to_arcs(root) + _linked_as_connecting(root) + _align_records(root)
+    if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
 
@@ -318,22 +332,83 @@ def _renumber(root: etree._Element) -> dict[str, str] | None:
 
 
 def _constant_spirals_to_arcs(root: etree._Element) -> int:
-    """Replace each ``<spiral>`` whose curvStart equals curvEnd by that ``<arc>`` (or a
-    ``<line>`` at zero curvature); the number replaced."""
+    """Replace each ``<spiral>`` whose curvStart and curvEnd crdesigner calls equal
+    (``np.isclose``, as its parser tests them) by the ``<arc>`` of their mean curvature (or
+    a ``<line>`` at zero curvature; the lateral difference is below Δκ·L²/8, 1e-4 m for a
+    100 m spiral at κ = 0.01 1/m); the number replaced."""
     replaced = 0
     for spiral in list(root.iter("{*}spiral")):
         start, end = spiral.get("curvStart"), spiral.get("curvEnd")
         try:
-            constant = float(start) == float(end)  # type: ignore[arg-type]
+            constant = bool(np.isclose(float(start), float(end)))  # type: ignore[arg-type]
         except (TypeError, ValueError):
             continue  # crdesigner names the bad attribute itself
         if not constant:
             continue
-        curvature = float(start)  # type: ignore[arg-type]
+        curvature = 0.5 * (float(start) + float(end))  # type: ignore[arg-type]
         shape = etree.Element("arc", curvature=repr(curvature)) if curvature else etree.Element("line")
         spiral.getparent().replace(spiral, shape)
         replaced += 1
     return replaced
+
+
+ALIGN_TOLERANCE_M: Final[float] = 1e-6
+"""A ``<geometry>`` record ending farther than this (m) from where the next record (or
+the road) starts is lengthened or shortened to end there."""
+
+
+def _linked_as_connecting(root: etree._Element) -> int:
+    """Give each junction ``<connection>`` with a ``linkedRoad`` and no ``connectingRoad``
+    (OpenDRIVE 1.7 direct junction) that road as ``connectingRoad``; the number changed."""
+    changed = 0
+    for connection in root.iter("{*}connection"):
+        if connection.get("connectingRoad") is None and connection.get("linkedRoad") is not None:
+            connection.set("connectingRoad", connection.get("linkedRoad", ""))
+            changed += 1
+    return changed
+
+
+def _align_records(root: etree._Element) -> int:
+    """Make each line, arc or spiral record of a road end where the next record starts
+    (the last: where the road ends), as the OpenDRIVE ``s`` attributes place them and as
+    our reader evaluates them (a record covers s up to the next record's start); a
+    spiral keeps its curvature rate. Other records and unreadable numbers are left to
+    crdesigner. Returns the number of records changed."""
+    changed = 0
+    for road in root.iter("{*}road"):
+        records = [g for g in road.iter("{*}geometry")]
+        try:
+            starts = [float(g.get("s", "")) for g in records]
+            ends = [*starts[1:], float(road.get("length", ""))]
+            lengths = [float(g.get("length", "")) for g in records]
+        except ValueError:
+            continue
+        for record, start, end, length in zip(records, starts, ends, lengths):
+            shape = next((_local_name(c) for c in record if _local_name(c)), "")
+            target = end - start
+            if shape not in ("line", "arc", "spiral") or target <= 0.0 or abs(target - length) <= ALIGN_TOLERANCE_M:
+                continue
+            if shape == "spiral":
+                spiral = record.find("{*}spiral")
+                try:
+                    k0, k1 = float(spiral.get("curvStart", "")), float(spiral.get("curvEnd", ""))
+                except ValueError:
+                    continue
+                spiral.set("curvEnd", repr(k0 + (k1 - k0) * target / length))
+            record.set("length", repr(target))
+            changed += 1
+    return changed
+
+
+def _known_country(original: Any, catalogues: Any) -> Any:
+    """crdesigner's ``get_signal_country`` answering "ZAM" (its fallback) for a country
+    it has no traffic-sign catalogue for."""
+
+    def get_signal_country(signal_country: str) -> str:
+        country = original(signal_country)
+        return country if country in catalogues else "ZAM"
+
+    return get_signal_country
 
 
 def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, int], ...]], Any]:
@@ -344,6 +419,8 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
     from crdesigner.map_conversion.common.conversion_lanelet_network import ConversionLaneletNetwork
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion import network as network_module
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.elements.geometry import ParamPoly3, Poly3
+    from commonroad.scenario.traffic_sign import TrafficSignIDCountries
+    from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion import utils as conversion_utils
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
 
     config = OpenDriveConfig()
@@ -366,6 +443,8 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
         mock.patch.object(network_module, "convert_to_base_lanelet_network", recording_to_base),
         mock.patch.object(ParamPoly3, "calc_position", _param_poly3_by_arc_length(ParamPoly3.calc_position)),
         mock.patch.object(Poly3, "calc_position", _poly3_by_arc_length(Poly3.calc_position)),
+        mock.patch.object(conversion_utils, "get_signal_country",
+                          _known_country(conversion_utils.get_signal_country, TrafficSignIDCountries)),
     ):
         opendrive = parse_opendrive(Path(os.fspath(path)), config)
         network.load_opendrive(opendrive)

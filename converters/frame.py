@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Final
 if TYPE_CHECKING:
     import lanelet2.projection
 
-FORMAT_VERSION: Final[int] = 6
+FORMAT_VERSION: Final[int] = 7
 """Version of our OSM layout and frame convention; part of the cache key."""
 
 GENERATOR_PREFIX: Final[str] = "cold-maps-converters/"

@@ -5,8 +5,11 @@ first/last nodes of a lanelet with its CommonRoad predecessor/successor without 
 the distance (Town01: lanelets whose first point jumps 224 m) and shares adjacent ways on
 ``max(signed difference) < tol``. Here points closer than ``MERGE_TOLERANCE_M`` are
 merged (so consecutive and adjacent lanelets share points and ways, which Lanelet2
-routing needs), and no point moves farther than that. Each way is then thinned
-(Douglas-Peucker, ``SIMPLIFY_TOLERANCE_M``): Town04 drops from 135 k to 69 k points.
+routing needs), and no point moves farther than that, except where linked lane ends
+are joined across a small gap (``converters.joins``: snapped to shared nodes within
+``JOIN_TOLERANCE_M``). A border shorter than that merge (the inner border of a lane
+turning about its own edge) keeps its last point as a node of its own. Each way is then
+thinned (Douglas-Peucker, ``SIMPLIFY_TOLERANCE_M``): Town04 drops from 135 k to 69 k points.
 
 Tags follow the Lanelet2 tagging specification: every node carries ``ele`` (m, from the
 OpenDRIVE elevation profile, ``converters.elevation``) when the lanelets know their
@@ -34,6 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
+from converters.joins import join_ends, successor_gaps
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import simplify
 
@@ -183,6 +187,30 @@ def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
     return tuple(int(i) for i in ids[keep])
 
 
+def _joined_ends(lanelets: Sequence[SourceLanelet], starts: NDArrayInt) -> list[tuple[int, int]]:
+    """(border end, successor's border start) point pairs, as indices into the stacked
+    borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
+    across a gap (``converters.joins.successor_gaps``)."""
+    slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
+    pairs = []
+    for gap in successor_gaps(lanelets, MERGE_TOLERANCE_M):
+        if gap.joined:
+            before, after = slot[gap.lanelet], slot[gap.successor]
+            for side in (0, 1):
+                pairs.append((int(starts[2 * before + side + 1]) - 1, int(starts[2 * after + side])))
+    return pairs
+
+
+def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArrayInt:
+    """``representative`` with the last point of each border that the merge reduced to a
+    single node made a node of its own, so every border keeps two nodes."""
+    kept = representative.copy()
+    for first, end in zip(starts[:-1], starts[1:]):
+        if end - first >= 2 and np.all(representative[first:end] == representative[first]):
+            kept[end - 1] = end - 1
+    return kept
+
+
 def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", source: str = "") -> bytes:
     """The OSM document (UTF-8 bytes) of ``lanelets``, in our frame convention.
 
@@ -195,9 +223,12 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
         raise ConversionError(source, "no lanelets to write")
     stacked = np.vstack(borders)
     heights = np.concatenate([_heights(lanelet, side) for lanelet in lanelets for side in ("left", "right")])
-    unique, point_index = np.unique(merge_points(stacked, MERGE_TOLERANCE_M), return_inverse=True)
-    coordinates = np.column_stack((stacked[unique], heights[unique]))
     starts = np.cumsum([0] + [len(border) for border in borders])
+    representative, positions = join_ends(stacked, merge_points(stacked, MERGE_TOLERANCE_M),
+                                          _joined_ends(lanelets, starts))
+    representative = _keep_short_borders(representative, starts)
+    unique, point_index = np.unique(representative, return_inverse=True)
+    coordinates = np.column_stack((positions[unique], heights[unique]))
     ways: dict[tuple[int, ...], int] = {}
     way_points: list[NDArrayInt] = []
     way_tags: list[dict[str, str]] = []

@@ -43,6 +43,12 @@ MIN_FIT_SHARE: Final = 0.5
 #: The detection follows another lane when a sequence from a lanelet off the sender's
 #: pose fits it better (mean capped centreline distance) by more than this, m.
 OTHER_LANE_GAIN_M: Final = 0.5
+#: Sequences of the sender's lane whose scores lie within this of the best one (m; the
+#: score measures to mid-line vertices every 0.1 m, so it cannot separate branches or
+#: merging lanelets that differ by centimetres) are told apart by ``_border_fit_m``.
+TIE_SCORE_M: Final = 0.05
+#: ``_border_fit_m`` measures every this many detected border points.
+BORDER_FIT_STRIDE: Final = 5
 
 Pose = tuple[float, float, float]
 """Sender pose (x m, y m, yaw rad), world frame."""
@@ -123,6 +129,18 @@ def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNeares
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
     return float(np.sum(steps))
+
+
+def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float) -> float:
+    """Mean exact distance (m, each capped at ``cap_m``) of every ``BORDER_FIT_STRIDE``-th
+    detected border point to the joined borders of ``lanelets``, both sides."""
+    fits = []
+    for points, side in ((left, "left"), (right, "right")):
+        vertices = np.vstack([getattr(g, side) for g in lanelets])
+        distinct = np.concatenate(([True], np.any(np.diff(vertices, axis=0) != 0.0, axis=1)))
+        distances = closest_distances(points[::BORDER_FIT_STRIDE], vertices[distinct])[0]
+        fits.append(float(np.mean(np.minimum(distances, cap_m))))
+    return float(np.mean(fits))
 
 
 class GroundTruth:
@@ -321,6 +339,10 @@ class GroundTruth:
         order = sorted(range(len(sequences)), key=lambda i: (sequences[i].score_m, not sequences[i].candidate.on_pose))
         best = sequences[order[0]]
         own = next(sequences[i] for i in order if sequences[i].candidate.on_pose)
+        tied = [sequences[i] for i in order if sequences[i].candidate.on_pose
+                and sequences[i].score_m - own.score_m <= TIE_SCORE_M and sequences[i].lanelets != own.lanelets]
+        if tied:
+            own = min([own, *tied], key=lambda s: _border_fit_m(s.lanelets, left, right, config.max_distance_m))
         pose_ids = tuple(sorted(c.geometry.key[0] for c in candidates if c.on_pose))
         mismatch = None
         if own.score_m - best.score_m > OTHER_LANE_GAIN_M:

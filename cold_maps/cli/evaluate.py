@@ -215,6 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from cold_maps.cli.common import configure_logging, interruption, startup_failure
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
+    from cold_maps.evaluation.trust import run_warnings
 
     configure_logging(args.verbose)
     try:
@@ -235,7 +236,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     reduced = run.collector.reduced_maps
     fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
-    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}")
+    warnings = run_warnings(run.collector)
+    verdict = f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
+    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}"
+          f"{verdict}")
     return 0
 
 

@@ -133,8 +133,8 @@ class Refuser:
                  reference: tuple[np.ndarray, np.ndarray] | None = None) -> Any:
         """The lane's ``Measurement``, or None without a map, or the reason it has none:
         ``no_ground_truth`` (no lanelet at the pose) or ``gt_unmatched`` (the lanelets
-        matched to ``reference`` do not cover it; without the drive's true path a spline
-        across a junction may cut the corner by more than the matcher's 1.5 m and is then
+        matched to ``reference`` do not cover it: ``Measurement.gt_unmatched``; without the
+        drive's true path a spline across a junction may cut the corner by more than the matcher's 1.5 m and is then
         not measured). ``reference`` defaults to the lane; for a fused lane it is the ego's
         and the coop's detections."""
         from gt_matching import MatchingError
@@ -145,7 +145,7 @@ class Refuser:
             measured = self.meter.measure(left, right, pose, reference=reference)
         except MatchingError:
             return "no_ground_truth"
-        return measured if measured.matched else "gt_unmatched"
+        return "gt_unmatched" if measured.gt_unmatched else measured
 
     def _add(self, fusion_name: str, frame: int, stamp: float, coop: str, measured: Any, runtime: float,
              rejected: str, predicted: bool | None) -> None:

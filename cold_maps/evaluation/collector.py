@@ -41,6 +41,7 @@ class Collector:
         notes: lines for the summary (routes, lane coverage, what did not fit a map).
         reduced_maps: names of the maps evaluated with fewer frames, distractors or
             scenarios than asked, because their longest route is too short.
+        gt_warnings: per map, why its ground truth is not trustworthy on the driven lanes.
         frames_done: frames evaluated.
     """
 
@@ -50,6 +51,7 @@ class Collector:
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     reduced_maps: list[str] = field(default_factory=list)
+    gt_warnings: list[str] = field(default_factory=list)
     frames_done: int = 0
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:
@@ -86,4 +88,5 @@ class Collector:
                 self.overlays[label] = overlay
         self.notes.extend(later.notes)
         self.reduced_maps.extend(name for name in later.reduced_maps if name not in self.reduced_maps)
+        self.gt_warnings.extend(later.gt_warnings)
         self.frames_done += later.frames_done

@@ -28,6 +28,7 @@ from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
+from cold_maps.evaluation.trust import GT_UNMATCHED, check_driven, driven_lanes
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
@@ -79,6 +80,7 @@ class MapEvaluator:
         self.drive_rngs = self.rng.spawn(len(self.drives))
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
+        self.gt_warning: str | None = None
         self.sensor = LaneSensor()
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
@@ -128,6 +130,8 @@ class MapEvaluator:
             lanelet_map, routing = load_lanelet2(self.plan.path)
             self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
+        self.gt_warning = check_driven(self.plan.name, self.graph, self._ground_truth.lanelet_map,
+                                       self._ground_truth.routing_graph, driven_lanes(self.drives))
 
     def run(self, collector: Collector, *, recorder: Recorder | None = None, frame_offset: int = 0,
             on_frame: Callable[[], None] | None = None) -> int:
@@ -146,7 +150,8 @@ class MapEvaluator:
 
     def note_drives(self, collector: Collector) -> None:
         """Notes what of the plan did not fit the map, this map's drives and the lanes they
-        cover, and a loop shorter than the farthest detection."""
+        cover, a loop shorter than the farthest detection, and why the ground truth of the
+        driven lanes is not trustworthy (if it is not)."""
         plan = self.plan
         collector.notes.extend(self.fit_notes)
         if self.fit_notes:
@@ -160,6 +165,9 @@ class MapEvaluator:
             collector.notes.append(
                 f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
                 f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
+        if self.gt_warning is not None:
+            LOG.warning(self.gt_warning)
+            collector.gt_warnings.append(self.gt_warning)
 
     def run_drive(self, drive_index: int, collector: Collector, *, recorder: Recorder | None = None,
                   frame_offset: int = 0, on_frame: Callable[[], None] | None = None) -> int:
@@ -241,9 +249,11 @@ class MapEvaluator:
         state = ego.state
         truth = state.track.borders_between(state.station, state.station + self.sensor.range_m)
         measured = self._measure(left, right, detection_pose(ego.detection), truth)
-        if isinstance(measured, str):
+        if isinstance(measured, str) or measured.gt_unmatched:
+            rejected, why = _rejection(measured)
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=measured))
+                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=rejected,
+                                               gt_unmatched=why))
             return {}
         self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
         self._keep_overlay(collector, scenario, index, measured, {"ego": (left, right)}, {})
@@ -270,10 +280,11 @@ class MapEvaluator:
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan) -> None:
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan, why: str = "") -> None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
-                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth))
+                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
+                                               gt_unmatched=why))
 
         if ego.detection is None or other.detection is None:
             reject("ego_dropped" if ego.detection is None else "coop_dropped")
@@ -300,8 +311,9 @@ class MapEvaluator:
             return None
         measured = self._measure(result.left, result.right, detection_pose(ego.detection),
                                  self.true_lane(ego.state, other.state))
-        if isinstance(measured, str):
-            reject(measured, True, runtime)
+        if isinstance(measured, str) or measured.gt_unmatched:
+            rejected, why = _rejection(measured)
+            reject(rejected, True, runtime, why)
             return None
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                      truth, metrics if main else None)
@@ -390,6 +402,14 @@ class MapEvaluator:
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, detections, fused)
+
+
+def _rejection(measured: Measurement | str) -> tuple[str, str]:
+    """(``FrameRecord.rejected``, ``FrameRecord.gt_unmatched``) of a lane without a score:
+    no ground truth at all, or a GT that does not cover it ("gt_unmatched" and why)."""
+    if isinstance(measured, str):
+        return measured, ""
+    return GT_UNMATCHED, measured.gt_unmatched
 
 
 def _crop(line: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat) -> NDArrayFloat:

@@ -22,6 +22,7 @@
           "frames": 300,             # evaluations: frames x vehicle pairs
           "fused_frames": 280,       # evaluations that produced a lane
           "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
+          "gt_unmatched": {"past_gt_end": 3},  # only when any: why the GT did not cover a lane
           "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
           "fusibility": {"precision": 0.98, "recall": 1.0},    # fusibility check vs GT
           # only in runs with --coops > 1, --history or --exchange (absent otherwise):
@@ -166,6 +167,8 @@ class FrameRecord:
         rejected: why no lane was produced ("" when one was).
         predicted_fusible: the fusibility check's decision, None when not applicable.
         truly_fusible: whether the pair is fusible by the ground truth, None when unknown.
+        gt_unmatched: why the GT did not cover the lane when ``rejected`` is "gt_unmatched"
+            ("off_lane", "past_gt_end"; see ``groundtruth.meter``), else "".
     """
 
     frame: int
@@ -178,6 +181,7 @@ class FrameRecord:
     rejected: str = ""
     predicted_fusible: bool | None = None
     truly_fusible: bool | None = None
+    gt_unmatched: str = ""
 
     def __post_init__(self) -> None:
         errors = np.asarray(self.errors_m, dtype=np.float64)
@@ -224,6 +228,7 @@ class ScenarioResult:
             when ``key.vehicles`` is 0: the record leaves them out).
         bytes_per_message: mean bytes on air per lane message of the scenario's coops.
         bytes_per_second: their bytes on air per vehicle-second.
+        gt_unmatched: (reason, count) of the evaluations rejected as "gt_unmatched".
     """
 
     key: ScenarioKey
@@ -245,6 +250,7 @@ class ScenarioResult:
     correct_p95_error_m: float = math.nan
     bytes_per_message: float = math.nan
     bytes_per_second: float = math.nan
+    gt_unmatched: tuple[tuple[str, int], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
@@ -265,7 +271,7 @@ class ScenarioResult:
             "runtime_ms": {"mean": f(self.runtime_ms.mean), "std": f(self.runtime_ms.std),
                            "max": f(self.runtime_ms.max)},
             "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall)},
-        } | extended
+        } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {})
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
@@ -290,8 +296,10 @@ class ScenarioResult:
                 num[f"correct_{name}"] = _none_to_nan(correct.get(name), f"{where}.correct_only.{name}")
             for name in ("bytes_per_message", "bytes_per_second"):
                 num[name] = _none_to_nan(record.get(name), f"{where}.{name}")
+            gt_unmatched = tuple(sorted((str(k), int(v)) for k, v in record.get("gt_unmatched", {}).items()))
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
-                       fused_frames=int(record["fused_frames"]), rejected=rejected, runtime_ms=runtime,
+                       fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
+                       runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        **num)
@@ -371,6 +379,7 @@ class ScenarioAccumulator:
             correct_p95_error_m=float(np.percentile(right, P95_PERCENT)) if right.size else nan,
             bytes_per_message=self.message_bytes / self.messages if self.messages else nan,
             bytes_per_second=self.message_bytes * 1e9 / self.sender_ns if self.sender_ns > 0 else nan,
+            gt_unmatched=tuple(sorted(Counter(r.gt_unmatched for r in self.records if r.gt_unmatched).items())),
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
@@ -463,19 +472,25 @@ def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
 
 
 def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
-                     road_types: Mapping[str, str] | None = None) -> str:
-    """``summary.md``: one row per scenario (like the paper's Table II), then, for maps
-    named in ``road_types`` (map -> paper road type), the side-by-side with the paper."""
+                     road_types: Mapping[str, str] | None = None, warnings: Sequence[str] = ()) -> str:
+    """``summary.md``: ``warnings`` on the ground truth first, one row per scenario (like
+    the paper's Table II), then, for maps named in ``road_types`` (map -> paper road
+    type), the side-by-side with the paper."""
     parts = ["# cold-eval summary\n"]
     if partial:
         parts.append("\n**PARTIAL RUN: interrupted; the figures cover only the frames evaluated.**\n")
+    if warnings:
+        parts.append("\n**GROUND TRUTH NOT TRUSTWORTHY on this run:**\n\n" + "".join(f"- {w}\n" for w in warnings))
     header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "RMSE [m]", "max [m]", "p95 [m]",
               "range [m]", "fused / frames", "rejected", "fus. precision", "fus. recall",
               "runtime mean / σ / max [ms]"]
     rows = []
     for r in sorted(results, key=_sort_key):
         k = r.key
-        rejected = ", ".join(f"{reason}: {count}" for reason, count in r.rejected) or "–"
+        why = dict(r.gt_unmatched)
+        rejected = ", ".join(f"{reason}: {count}" + (f" ({', '.join(f'{w}: {n}' for w, n in why.items())})"
+                                                      if reason == "gt_unmatched" and why else "")
+                             for reason, count in r.rejected) or "–"
         rows.append([k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1), k.boundary, _fmt(r.mean_error_m),
                      _fmt(r.rmse_m), _fmt(r.max_error_m), _fmt(r.p95_error_m), _fmt(r.perception_range_m, 1),
                      f"{r.fused_frames} / {r.frames}", rejected, _fmt(r.fusibility_precision),

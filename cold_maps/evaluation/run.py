@@ -31,6 +31,7 @@ from cold_maps.evaluation.report import (
     write_metrics_json,
 )
 from cold_maps.evaluation.scenarios import MapPlan
+from cold_maps.evaluation.trust import run_warnings
 
 LOG = logging.getLogger("cold_maps.evaluation.run")
 
@@ -131,7 +132,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators]
     write_frames_csv(out / "frames.csv", accumulators)
-    text = summary_markdown(results, partial=partial)
+    text = summary_markdown(results, partial=partial, warnings=run_warnings(collector))
     if collector.notes:
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
     sections = [*sections, ("False fusions", false_fusion_markdown(collector))]

@@ -10,6 +10,12 @@ is the lanelet's left one in RHT, its right one in LHT. A lane over the threshol
 with no lanelet near it, makes the ground truth untrustworthy. A lane narrower than
 ``ZERO_WIDTH_M`` over its whole section has no area to drive: converters drop it
 (crdesigner does), so it is listed apart and not checked.
+
+Connectivity: every edge a → b of the engine's lane graph (lanes of the checked types)
+must be a successor in the converted map's Lanelet2 routing graph (or a and b lie in one
+lanelet); an edge that is not is listed with the gap between the lanelets' ends and
+makes the ground truth untrustworthy (``gt_matching`` extends the GT only through
+``routing_graph.following()``).
 """
 
 from __future__ import annotations
@@ -17,12 +23,13 @@ from __future__ import annotations
 import argparse
 import os
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
+from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
@@ -81,6 +88,25 @@ class LaneCheck:
 
 
 @dataclass(frozen=True)
+class EdgeCheck:
+    """An edge of the engine's lane graph that the converted map's routing graph lacks.
+
+    Fields:
+        source, target: the lanes (road id, section index, lane id); target follows source.
+        source_lanelet, target_lanelet: the lanelets naming them (the pair with the
+            smallest gap), None when no lanelet names the lane.
+        gap_m: largest distance (m) between the source lanelet's left/right border end
+            and the target lanelet's left/right border start; inf without lanelets.
+    """
+
+    source: tuple[str, int, int]
+    target: tuple[str, int, int]
+    source_lanelet: int | None
+    target_lanelet: int | None
+    gap_m: float
+
+
+@dataclass(frozen=True)
 class CheckReport:
     """Result of ``check_map``.
 
@@ -92,6 +118,8 @@ class CheckReport:
         lanelets: number of lanelets in the converted map.
         zero_width: (road id, section index, lane id) of the lanes of the checked types
             that are zero-width over their whole section (not checked).
+        edges: lane-graph edges checked for connectivity.
+        disconnected: the edges that are not routing-graph successors, largest gap first.
     """
 
     path: str
@@ -100,6 +128,8 @@ class CheckReport:
     lanes: tuple[LaneCheck, ...]
     lanelets: int
     zero_width: tuple[tuple[str, int, int], ...] = ()
+    edges: int = 0
+    disconnected: tuple[EdgeCheck, ...] = ()
 
     @property
     def failing(self) -> tuple[LaneCheck, ...]:
@@ -109,8 +139,16 @@ class CheckReport:
 
     @property
     def trustworthy(self) -> bool:
-        """True when at least one lane was checked and every lane passes."""
-        return bool(self.lanes) and not self.failing
+        """True when at least one lane was checked, every lane passes and every lane-graph
+        edge is a routing-graph successor."""
+        return bool(self.lanes) and not self.failing and not self.disconnected
+
+    def flagged_lanes(self) -> frozenset[tuple[str, int, int]]:
+        """(road id, section, lane id) of the failing lanes and of both ends of every
+        disconnected edge."""
+        lanes = {(lane.road_id, lane.section, lane.lane_id) for lane in self.failing}
+        lanes |= {end for edge in self.disconnected for end in (edge.source, edge.target)}
+        return frozenset(lanes)
 
     @property
     def exit_code(self) -> int:
@@ -138,6 +176,7 @@ class _LaneletIndex:
         from scipy.spatial import cKDTree
 
         self.ids: list[int] = []
+        self.lanelets: list[Any] = []
         self.borders: list[tuple[_Border, _Border]] = []
         self.by_lane: dict[tuple[str, int, int], list[int]] = {}
         owners: list[NDArrayInt] = []
@@ -150,6 +189,7 @@ class _LaneletIndex:
                 vertices.append(xy)
                 owners.append(np.full(len(xy), slot, dtype=np.int64))
             self.ids.append(int(lanelet.id))
+            self.lanelets.append(lanelet)
             self.borders.append((pair[0], pair[1]))
             for lane in parse_opendrive_lanes_tag(dict(lanelet.attributes).get(OPENDRIVE_TAG, "")):
                 self.by_lane.setdefault(lane, []).append(slot)
@@ -173,6 +213,42 @@ def _crdesigner_road_id(road_id: str) -> str:
         return str(int(road_id))
     except ValueError:
         return road_id
+
+
+def _connected(index: _LaneletIndex, routing: Any, source: int, target: int, lane: tuple[str, int, int],
+               after: tuple[str, int, int]) -> bool:
+    """True when lanelet slot ``target`` follows ``source`` in the routing graph, or both
+    are one lanelet naming ``lane`` and then ``after``."""
+    if source == target and lane != after:
+        named = parse_opendrive_lanes_tag(dict(index.lanelets[source].attributes).get(OPENDRIVE_TAG, ""))
+        return lane in named and after in named and named.index(after) > named.index(lane)
+    return any(int(f.id) == index.ids[target] for f in routing.following(index.lanelets[source]))
+
+
+def _end_gap_m(index: _LaneletIndex, source: int, target: int) -> float:
+    """Largest distance (m) between the border ends of lanelet slot ``source`` and the
+    border starts of slot ``target``."""
+    ends = [np.hypot(*(a.vertices[-1] - b.vertices[0])) for a, b in zip(index.borders[source], index.borders[target])]
+    return float(max(ends))
+
+
+def _disconnected_edges(
+    edges: Sequence[tuple[LaneKey, LaneKey]], index: _LaneletIndex, routing: Any
+) -> tuple[EdgeCheck, ...]:
+    """The lane-graph ``edges`` that are no routing-graph successor, largest gap first."""
+    missing = []
+    for a, b in edges:
+        lane = (_crdesigner_road_id(a.road_id), a.section, a.lane_id)
+        after = (_crdesigner_road_id(b.road_id), b.section, b.lane_id)
+        sources, targets = index.by_lane.get(lane, []), index.by_lane.get(after, [])
+        pairs = [(s, t) for s in sources for t in targets]
+        if any(_connected(index, routing, s, t, lane, after) for s, t in pairs):
+            continue
+        gaps = [(_end_gap_m(index, s, t), s, t) for s, t in pairs if s != t or lane == after]
+        gap, s, t = min(gaps, default=(np.inf, None, None))
+        missing.append(EdgeCheck(tuple(a), tuple(b), None if s is None else index.ids[s],
+                                 None if t is None else index.ids[t], gap))
+    return tuple(sorted(missing, key=lambda edge: -edge.gap_m))
 
 
 def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
@@ -210,21 +286,37 @@ def check_lanelet_map(
     threshold_m: float = THRESHOLD_M,
     step_m: float = STEP_M,
     lane_types: Sequence[str] | None = ("driving",),
+    routing_graph: Any = None,
+    only: Collection[tuple[str, int, int]] | None = None,
+    lane_graph: LaneGraph | None = None,
 ) -> CheckReport:
-    """Compare a parsed OpenDRIVE map with a Lanelet2 map in its inertial frame."""
+    """Compare a parsed OpenDRIVE map with a Lanelet2 map in its inertial frame (lanes and
+    lane-graph edges; the routing graph defaults to ``converters.routing_graph``'s).
+    ``only``: check just these lanes (road id, section, lane id) and the edges between them;
+    ``lane_graph``: the engine's lane graph of ``odr_map`` over ``lane_types`` (built if None)."""
     if not (np.isfinite(threshold_m) and threshold_m > 0.0):
         raise ValueError(f"check: threshold must be a positive length in m, got {threshold_m}")
+    if routing_graph is None:
+        from converters import routing_graph as make_routing_graph
+
+        routing_graph = make_routing_graph(lanelet_map)
     index = _LaneletIndex(lanelet_map)
     sampled = [
         (road.rule, samples)
         for road in odr_map.roads.values()
         for samples in sample_road(road, step_m, lane_types)
-        if len(samples.s) > 1
+        if len(samples.s) > 1 and (only is None or (samples.road_id, samples.section, samples.lane_id) in only)
     ]
     zero = [_is_zero_width(samples) for _, samples in sampled]
     lanes = tuple(_check_lane(samples, rule, index) for (rule, samples), empty in zip(sampled, zero) if not empty)
     skipped = tuple((s.road_id, s.section, s.lane_id) for (_, s), empty in zip(sampled, zero) if empty)
-    return CheckReport(path, threshold_m, step_m, lanes, len(index.ids), skipped)
+    edges = [
+        (a, b)
+        for a, b in (lane_graph or build_lane_graph(odr_map, lane_types)).edges()
+        if not {tuple(a), tuple(b)} & set(skipped) and (only is None or {tuple(a), tuple(b)} <= set(only))
+    ]
+    disconnected = _disconnected_edges(edges, index, routing_graph)
+    return CheckReport(path, threshold_m, step_m, lanes, len(index.ids), skipped, len(edges), disconnected)
 
 
 def _is_zero_width(samples: LaneBorderSamples) -> bool:
@@ -250,9 +342,10 @@ def check_map(
     from converters import load_lanelet2
 
     odr_map = load_opendrive(xodr_path, strict=strict)
-    lanelet_map, _ = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
+    lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
     return check_lanelet_map(
-        odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types
+        odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types,
+        routing_graph=routing,
     )
 
 
@@ -279,9 +372,15 @@ def format_report(report: CheckReport) -> str:
         named = ", ".join(f"road {road} section {section} lane {lane}" for road, section, lane in report.zero_width[:5])
         more = f" and {len(report.zero_width) - 5} more" if len(report.zero_width) > 5 else ""
         lines.append(f"zero-width lanes not checked: {len(report.zero_width)} ({named}{more})")
+    lines.append(
+        f"lane-graph edges that are Lanelet2 routing successors: {report.edges - len(report.disconnected)} "
+        f"of {report.edges}"
+    )
     failing = report.failing
     verdict = "TRUSTWORTHY" if report.trustworthy else "NOT TRUSTWORTHY"
     reason = f"{len(failing)} of {len(report.lanes)} lanes over {_mm(report.threshold_m)} mm or unmatched"
+    if report.disconnected:
+        reason += f", {len(report.disconnected)} of {report.edges} lane-graph edges not routing successors"
     lines.append(f"ground truth: {verdict} ({reason if report.lanes else 'no lane checked'})")
     if failing:
         lines.append(f"{'road':>8} {'section':>7} {'lane':>5} {'lanelet':>8} {'match':>8} {'median mm':>10} {'max mm':>10}")
@@ -291,6 +390,12 @@ def format_report(report: CheckReport) -> str:
                 f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} {lane.matched_by or '-':>8} "
                 f"{_mm(lane.median_m):>10} {_mm(lane.max_m):>10}"
             )
+    if report.disconnected:
+        lines.append(f"{'from lane':>16} {'to lane':>16} {'lanelets':>17} {'gap mm':>10}")
+        for edge in report.disconnected:
+            lanelets = "->".join("none" if i is None else str(i) for i in (edge.source_lanelet, edge.target_lanelet))
+            lines.append(f"{':'.join(map(str, edge.source)):>16} {':'.join(map(str, edge.target)):>16} "
+                         f"{lanelets:>17} {_mm(edge.gap_m):>10}")
     return "\n".join(lines)
 
 

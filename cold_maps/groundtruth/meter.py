@@ -3,6 +3,13 @@
 :class:`GroundTruthMeter` is the evaluation's one door to ``gt_matching.GroundTruth``:
 it matches a lane (or the lane the vehicles truly drive) to its lanelets and measures
 every detected point against the GT borders resampled every ``step_m``.
+
+A measurement *covers* the lane only when the GT does: the lane follows the sender's lane
+(``LaneMatch.matched``) and no detected point lies beyond either end of the GT sequence
+(its nearest GT point is the end and it lies more than ``GT_END_TOLERANCE_M`` past it
+along the GT's end direction). Otherwise ``Measurement.gt_unmatched`` names why, and the
+evaluation does not score the frame: a GT that stops at a lane end the routing graph
+does not continue would measure every point beyond to that end.
 """
 
 from __future__ import annotations
@@ -36,6 +43,16 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
     within = errors_m <= threshold_m
     return float(np.sum(segments[within[:-1] & within[1:]]))
 
+GT_END_TOLERANCE_M: Final[float] = 0.1
+"""A detected point more than this (m) past an end of its GT border, along the border's
+end direction, lies beyond the GT (one detection sample spacing)."""
+
+OFF_LANE: Final[str] = "off_lane"
+"""``Measurement.gt_unmatched``: the lane does not follow the sender's lane (gt_matching)."""
+PAST_GT_END: Final[str] = "past_gt_end"
+"""``Measurement.gt_unmatched``: detected points lie beyond the end of the GT sequence
+(no routing-graph successor where the lane goes on)."""
+
 
 @dataclass(frozen=True)
 class Measurement:
@@ -48,6 +65,8 @@ class Measurement:
             within ``RANGE_ERROR_THRESHOLD_M`` of the GT (``covered_length_m``).
         left_gt, right_gt: the GT borders (``(M, 2)``) the lane was matched to.
         matched: False when the lane does not follow the sender's lane (see gt_matching).
+        gt_unmatched: "" when the GT covers the lane, else why not: ``OFF_LANE`` or
+            ``PAST_GT_END``.
     """
 
     left_errors_m: NDArrayFloat
@@ -57,6 +76,26 @@ class Measurement:
     left_gt: NDArrayFloat
     right_gt: NDArrayFloat
     matched: bool
+    gt_unmatched: str = ""
+
+
+def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat, distances_m: NDArrayFloat, step_m: float) -> int:
+    """How many ``points`` (``(N, 2)``, m) lie more than ``GT_END_TOLERANCE_M`` past the
+    first or last vertex of the polyline ``gt`` along its end direction while that vertex is
+    their nearest GT point (within ``step_m`` of their GT distance ``distances_m``)."""
+    count = 0
+    for end, inner in ((gt[-1], gt[:-1][::-1]), (gt[0], gt[1:])):
+        away = end - inner
+        length = np.hypot(*away.T)
+        apart = np.flatnonzero(length > GT_END_TOLERANCE_M)
+        if not apart.size:
+            continue
+        direction = away[apart[0]] / length[apart[0]]
+        offset = points - end
+        past = offset @ direction > GT_END_TOLERANCE_M
+        nearest = np.hypot(*offset.T) <= distances_m + step_m
+        count += int(np.count_nonzero(past & nearest))
+    return count
 
 
 class GroundTruthMeter:
@@ -88,10 +127,13 @@ class GroundTruthMeter:
     def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``."""
         found = self.ground_truth.errors(left, right, match, others=False)
+        past = sum(points_past_ends(np.asarray(points, dtype=np.float64), gt, border.distances_m, self.step_m)
+                   for points, gt, border in ((left, match.left_gt, found.left), (right, match.right_gt, found.right)))
+        reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
         return Measurement(found.left.distances_m, found.right.distances_m,
                            covered_length_m(np.asarray(left, dtype=np.float64), found.left.distances_m),
                            covered_length_m(np.asarray(right, dtype=np.float64), found.right.distances_m),
-                           match.left_gt, match.right_gt, match.matched)
+                           match.left_gt, match.right_gt, match.matched, reason)
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
