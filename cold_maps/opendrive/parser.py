@@ -48,6 +48,7 @@ from cold_maps.opendrive.model import (
     Road,
     RoadLink,
 )
+from cold_maps.opendrive.validation import validate_map
 from cold_maps.opendrive.xml_safety import parse_xml
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
@@ -89,9 +90,12 @@ def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BY
 
 
 def parse_opendrive(data: bytes, *, path: str = "") -> OpenDriveMap:
-    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map."""
+    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map.
+
+    The parsed map is checked by ``validation.validate_map`` (values that cannot describe
+    a road are refused)."""
     root = parse_xml(data, path=path)
-    return _Reader(path).read_map(root)
+    return validate_map(_Reader(path).read_map(root))
 
 
 def _strip_namespaces(root: etree._Element) -> None:

@@ -20,6 +20,9 @@ from cold_maps.opendrive.reference_line import check_s, reference_pose
 
 SLIVER_FRACTION: Final[float] = 1e-9
 """A grid point closer than this fraction of the step to the end point is merged into it."""
+MAX_SAMPLES: Final[int] = 10_000_000
+"""Most points ``sample_s`` returns (checked before allocating): 80 MB per float64 array,
+ten times a 100 km road (``validation.MAX_ROAD_LENGTH_M``) at the default 0.1 m step."""
 
 
 def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
@@ -28,7 +31,8 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
     Every interval is ``step`` except the last, which is in (0, step]; a sliver shorter
     than ``SLIVER_FRACTION``·step is merged into the last interval instead of creating a
     near-duplicate end point (unless it is the whole range). s_start == s_end gives the
-    single point s_start.
+    single point s_start. ValueError (before any allocation) when that is more than
+    ``MAX_SAMPLES`` points.
     """
     if not (np.isfinite(s_start) and np.isfinite(s_end)):
         raise ValueError(f"sample_s: s_start={s_start} and s_end={s_end} must be finite")
@@ -38,7 +42,11 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
         raise ValueError(f"sample_s: s_end={s_end} is before s_start={s_start}")
     if s_end == s_start:
         return np.array([float(s_start)])
-    count = int(np.ceil((s_end - s_start) / step))
+    intervals = np.ceil((s_end - s_start) / step)
+    if not intervals < MAX_SAMPLES:
+        raise ValueError(f"sampling [{s_start:.6g}, {s_end:.6g}] m every {step:g} m takes {intervals:.3g} points, "
+                         f"more than {MAX_SAMPLES}: use a longer step")
+    count = int(intervals)
     grid = s_start + step * np.arange(count, dtype=np.float64)
     interior = grid[1:][grid[1:] < s_end - SLIVER_FRACTION * step]
     return np.concatenate(([float(s_start)], interior, [float(s_end)]))
@@ -83,22 +91,30 @@ class LaneBorderSamples:
 def _section_samples(
     road: Road, section_index: int, step: float, lane_ids: Sequence[int]
 ) -> list[LaneBorderSamples]:
-    """Samples of the listed lanes of one section; the reference line is evaluated once."""
+    """Samples of the listed lanes of one section; the reference line is evaluated once.
+
+    ValueError naming road, section, lane and s where a border point is not finite."""
     section = section_of(road, section_index)
     s = sample_s(section.s, section.s_end, step)
     x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
-    z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
     outermost = max((abs(i) for i in lane_ids), default=0)
-    borders = section_borders(road, section_index, s, outermost=outermost)
+    with np.errstate(over="ignore", invalid="ignore"):  # non-finite values are refused in points()
+        z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
+        borders = section_borders(road, section_index, s, outermost=outermost)
 
-    def points(t: NDArrayFloat) -> NDArrayFloat:
-        return np.column_stack((x + t * normal_x, y + t * normal_y, z))
+    def points(lane_id: int, which: int) -> NDArrayFloat:
+        t = borders[lane_id][which]
+        with np.errstate(over="ignore", invalid="ignore"):  # a non-finite border is refused just below
+            xyz = np.column_stack((x + t * normal_x, y + t * normal_y, z))
+        bad = ~np.all(np.isfinite(xyz), axis=1)
+        if np.any(bad):
+            side = ("inner", "outer")[which]
+            raise ValueError(f"road {road.id}: lane section {section_index} (s={section.s:.6g} m), lane {lane_id}: "
+                             f"the {side} border is not finite at s={float(s[bad][0]):.6g} m")
+        return xyz
 
-    return [
-        LaneBorderSamples(road.id, section_index, i, s, points(borders[i][0]), points(borders[i][1]))
-        for i in lane_ids
-    ]
+    return [LaneBorderSamples(road.id, section_index, i, s, points(i, 0), points(i, 1)) for i in lane_ids]
 
 
 def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: float = 0.1) -> LaneBorderSamples:

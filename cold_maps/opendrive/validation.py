@@ -1,0 +1,168 @@
+"""Plausibility of a parsed map: values that cannot describe a road are refused.
+
+The parser checks syntax (finite numbers, known enumerations, consistent ids); this
+module checks that the numbers describe road geometry the engine can evaluate without
+overflow, in work bounded by the geometry itself. Every problem raises one
+``OpenDriveError`` naming the file, the road (with its source line), the element and the
+attribute.
+
+From the specification (ASAM OpenDRIVE 1.4-1.8, ``<road>`` and ``<planView>``): the
+road's ``length`` is the total length of its reference line, which the ``<geometry>``
+records describe one after another from s = 0, so the records lie inside [0, length] and
+the last one ends at ``length``. We refuse a record that starts or ends more than
+``coverage_tolerance_m(length)`` outside [0, length] and a last record that ends more
+than that before ``length``: max(``COVERAGE_TOLERANCE_M``, ``COVERAGE_TOLERANCE_FRACTION``
+· length), i.e. 1 m, or 1 % on roads longer than 100 m (the CARLA towns and the esmini
+maps agree to 2e-13 m; the tolerance leaves room for rounding writers, and gaps between
+records are reported elsewhere). Lane sections start inside the road (the parser checks
+that).
+
+Bounds on magnitudes (none is in the specification, which allows any double): a map is a
+piece of the Earth's surface, so every position of a reference line and every lateral
+offset, width, border and elevation stays within ``MAX_EXTENT_M`` = 1e8 m of the origin,
+above any projected coordinate on Earth (UTM eastings < 1e6 m, northings < 1e7 m, Web
+Mercator < 2.1e7 m; the maps we know stay within 1.5 km). A road is at most
+``MAX_ROAD_LENGTH_M`` = 1e5 m (the longest road of the CARLA and esmini maps is 1.5 km),
+which bounds the samples of a road to 1e6 at the default 0.1 m step. Curvatures are at
+most ``MAX_CURVATURE_PER_M`` = 1e3 1/m (a 1 mm radius; the maps we know stay below 0.5)
+and headings at most ``MAX_HEADING_RAD`` = 1e6 rad in magnitude (the maps we know write
+up to 9.5). A cubic record is bounded over the span it applies to by the sum of its
+coefficients' magnitudes times the powers of that span, so a coefficient of 1e308 or a
+width that reaches 1e9 m within its section is refused, while a large coefficient on a
+record that ends a few centimetres later is not.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final, Sequence
+
+from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.model import CubicPoly, Geometry, Lane, LaneSection, OpenDriveMap, Road
+
+MAX_EXTENT_M: Final[float] = 1e8
+"""Largest |x|, |y|, |z|, lateral offset, width or border (m) a map may describe."""
+MAX_ROAD_LENGTH_M: Final[float] = 1e5
+"""Longest road (m)."""
+MAX_CURVATURE_PER_M: Final[float] = 1e3
+"""Largest |curvature| (1/m) of an arc or spiral end."""
+MAX_HEADING_RAD: Final[float] = 1e6
+"""Largest |hdg| (rad) of a geometry record."""
+COVERAGE_TOLERANCE_M: Final[float] = 1.0
+"""Absolute part of the tolerance (m) between the geometry records' extent and the road length."""
+COVERAGE_TOLERANCE_FRACTION: Final[float] = 0.01
+"""Relative part of that tolerance (fraction of the road length)."""
+
+
+def coverage_tolerance_m(length: float) -> float:
+    """How far (m) the geometry records may extend past [0, length] or end before length."""
+    return max(COVERAGE_TOLERANCE_M, COVERAGE_TOLERANCE_FRACTION * length)
+
+
+def validate_map(odr_map: OpenDriveMap) -> OpenDriveMap:
+    """The map unchanged; ``OpenDriveError`` at the first value that cannot describe a road."""
+    for road in odr_map.roads.values():
+        _RoadCheck(odr_map.path, road).run()
+    return odr_map
+
+
+def cubic_bound(record: CubicPoly, span: float) -> float:
+    """Upper bound of |a + b·ds + c·ds² + d·ds³| for ds in [0, span] (inf on overflow)."""
+    return abs(record.a) + span * (abs(record.b) + span * (abs(record.c) + span * abs(record.d)))
+
+
+class _RoadCheck:
+    """The checks of one road; knows the file for the error messages."""
+
+    def __init__(self, path: str, road: Road) -> None:
+        self.path = path
+        self.road = road
+
+    def refuse(self, element: str, attribute: str, reason: str) -> OpenDriveError:
+        """The error for ``attribute`` (or several, comma-separated) of ``element``."""
+        named = f"attributes {attribute}" if "," in attribute else f"attribute '{attribute}'"
+        return OpenDriveError(f"road {self.road.id!r}: {named} {reason}", path=self.path, element=element,
+                              line=self.road.line or None)
+
+    def run(self) -> None:
+        road = self.road
+        if road.length > MAX_ROAD_LENGTH_M:
+            raise self.refuse("road", "length", f"is {road.length:.6g} m, more than the {MAX_ROAD_LENGTH_M:g} m "
+                              "a road may be")
+        for geometry in road.plan_view:
+            self.geometry(geometry)
+        self.coverage()
+        self.profiles("elevation", road.elevation, road.length, "s")
+        self.profiles("laneOffset", road.lane_offsets, road.length, "s")
+        for section in road.lane_sections:
+            for lane in section.lanes:
+                self.lane(section, lane)
+
+    def coverage(self) -> None:
+        road = self.road
+        tolerance = coverage_tolerance_m(road.length)
+        for geometry in road.plan_view:
+            where = f"of the <geometry> at s={geometry.s:.6g}"
+            if geometry.s < -tolerance or geometry.s > road.length + tolerance:
+                raise self.refuse("geometry", "s", f"{where} is outside the road [0, {road.length:.6g}] m "
+                                  f"(tolerance {tolerance:g} m)")
+            if geometry.s + geometry.length > road.length + tolerance:
+                raise self.refuse("geometry", "length", f"{where} is {geometry.length:.6g} m: the record ends "
+                                  f"after the road length {road.length:.6g} m (tolerance {tolerance:g} m)")
+        last = road.plan_view[-1]
+        end = last.s + last.length
+        if end < road.length - tolerance:
+            raise self.refuse("road", "length", f"is {road.length:.6g} m but its <geometry> records end at "
+                              f"s={end:.6g} m (tolerance {tolerance:g} m)")
+
+    def geometry(self, geometry: Geometry) -> None:
+        where = f"of the <geometry> at s={geometry.s:.6g}"
+        for attribute in ("x", "y"):
+            value = getattr(geometry, attribute)
+            if abs(value) > MAX_EXTENT_M:
+                raise self.refuse("geometry", attribute, f"{where} is {value:.6g} m, farther than "
+                                  f"{MAX_EXTENT_M:g} m from the origin")
+        if abs(geometry.hdg) > MAX_HEADING_RAD:
+            raise self.refuse("geometry", "hdg", f"{where} is {geometry.hdg:.6g} rad, more than "
+                              f"{MAX_HEADING_RAD:g} rad in magnitude")
+        if geometry.kind in ("arc", "spiral"):
+            names = ("curvature",) if geometry.kind == "arc" else ("curvStart", "curvEnd")
+            fields = ("curvature",) if geometry.kind == "arc" else ("curv_start", "curv_end")
+            for name, field in zip(names, fields):
+                value = getattr(geometry, field)
+                if abs(value) > MAX_CURVATURE_PER_M:
+                    raise self.refuse(geometry.kind, name, f"{where} is {value:.6g} 1/m, more than "
+                                      f"{MAX_CURVATURE_PER_M:g} 1/m in magnitude")
+        elif geometry.kind == "poly3":
+            self.curve_bound("poly3", CubicPoly(0.0, geometry.a, geometry.b, geometry.c, geometry.d),
+                             geometry.length, where, "a, b, c, d")
+        elif geometry.kind == "paramPoly3":
+            p_end = geometry.length if geometry.p_range == "arcLength" else 1.0
+            u = CubicPoly(0.0, geometry.au, geometry.bu, geometry.cu, geometry.du)
+            v = CubicPoly(0.0, geometry.av, geometry.bv, geometry.cv, geometry.dv)
+            self.curve_bound("paramPoly3", u, p_end, where, "aU, bU, cU, dU")
+            self.curve_bound("paramPoly3", v, p_end, where, "aV, bV, cV, dV")
+
+    def curve_bound(self, element: str, record: CubicPoly, span: float, where: str, names: str) -> None:
+        """A local curve coordinate (m) over the parameter range [0, span]."""
+        bound = cubic_bound(record, span)
+        if not bound <= MAX_EXTENT_M:
+            raise self.refuse(element, names, f"{where} reach {bound:.6g} m over the record, more than "
+                              f"{MAX_EXTENT_M:g} m")
+
+    def profiles(self, element: str, records: Sequence[CubicPoly], end: float, s_name: str, owner: str = "") -> None:
+        """Each record of a cubic profile applies from its s0 to the next record or ``end``
+        (in the profile's own s: road s, or s relative to the section for lanes)."""
+        for index, record in enumerate(records):
+            following = records[index + 1].s0 if index + 1 < len(records) else end
+            span = max(min(following, end) - record.s0, 0.0)
+            bound = cubic_bound(record, span)
+            if not bound <= MAX_EXTENT_M:
+                raise self.refuse(element, "a, b, c, d", f"{owner}of the <{element}> at {s_name}={record.s0:.6g} "
+                                  f"reach {bound:.6g} m over its {span:.6g} m, more than {MAX_EXTENT_M:g} m")
+
+    def lane(self, section: LaneSection, lane: Lane) -> None:
+        owner = f"(lane {lane.id} of the section at s={section.s:.6g}) "
+        length = section.s_end - section.s
+        self.profiles("width", lane.widths, length, "sOffset", owner)
+        self.profiles("border", lane.borders, length, "sOffset", owner)
