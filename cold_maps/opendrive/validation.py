@@ -15,7 +15,12 @@ than that before ``length``: max(``COVERAGE_TOLERANCE_M``, ``COVERAGE_TOLERANCE_
 · length), i.e. 1 m, or 1 % on roads longer than 100 m (the CARLA towns and the esmini
 maps agree to 2e-13 m; the tolerance leaves room for rounding writers, and gaps between
 records are reported elsewhere). Lane sections start inside the road (the parser checks
-that).
+that). The records of one reference line follow each other, so the end of one and the
+start of the next may be apart by rounding (real maps: up to 10 cm), not by
+kilometres: a jump of more than max(``MAX_JUMP_M``, the length the records draw), i.e.
+10 m or the whole drawn reference line, is refused. Such a jump (a record moved 1e7 m away) is no road, yet every border
+and the Lanelet2 ground truth sampled every 0.02 m along it would span it, so the work
+would follow the jump rather than the geometry.
 
 Bounds on magnitudes (none is in the specification, which allows any double): a map is a
 piece of the Earth's surface, so every position of a reference line and every lateral
@@ -37,7 +42,12 @@ from __future__ import annotations
 import math
 from typing import Final, Sequence
 
+import numpy as np
+
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.geometry import evaluate as evaluate_record
+from cold_maps.opendrive.geometry import param_poly3, poly3
+from cold_maps.opendrive.geometry.cubic_curve import arc_length_table
 from cold_maps.opendrive.model import CubicPoly, Geometry, Lane, LaneSection, OpenDriveMap, Road
 
 MAX_EXTENT_M: Final[float] = 1e8
@@ -48,10 +58,22 @@ MAX_CURVATURE_PER_M: Final[float] = 1e3
 """Largest |curvature| (1/m) of an arc or spiral end."""
 MAX_HEADING_RAD: Final[float] = 1e6
 """Largest |hdg| (rad) of a geometry record."""
+MAX_JUMP_M: Final[float] = 10.0
+"""Largest jump (m) between consecutive geometry records on a road whose records draw less."""
 COVERAGE_TOLERANCE_M: Final[float] = 1.0
 """Absolute part of the tolerance (m) between the geometry records' extent and the road length."""
 COVERAGE_TOLERANCE_FRACTION: Final[float] = 0.01
 """Relative part of that tolerance (fraction of the road length)."""
+
+
+def drawn_length_m(record: Geometry) -> float:
+    """Length (m) of the curve a record draws: its ``length``, or for a poly3/paramPoly3 the
+    cubic curve's own arc length when that is longer (the engine stretches ds over it)."""
+    if record.kind not in ("poly3", "paramPoly3"):
+        return record.length
+    curve = (poly3 if record.kind == "poly3" else param_poly3).curve_of(record)
+    with np.errstate(all="ignore"):  # a non-finite arc length is refused by arc_length_table
+        return max(record.length, arc_length_table(curve).total)
 
 
 def coverage_tolerance_m(length: float) -> float:
@@ -90,8 +112,9 @@ class _RoadCheck:
             raise self.refuse("road", "length", f"is {road.length:.6g} m, more than the {MAX_ROAD_LENGTH_M:g} m "
                               "a road may be")
         for geometry in road.plan_view:
-            self.geometry(geometry)
+            self.record(geometry)
         self.coverage()
+        self.jumps()
         self.profiles("elevation", road.elevation, road.length, "s")
         self.profiles("laneOffset", road.lane_offsets, road.length, "s")
         for section in road.lane_sections:
@@ -115,7 +138,26 @@ class _RoadCheck:
             raise self.refuse("road", "length", f"is {road.length:.6g} m but its <geometry> records end at "
                               f"s={end:.6g} m (tolerance {tolerance:g} m)")
 
-    def geometry(self, geometry: Geometry) -> None:
+    def jumps(self) -> None:
+        """Consecutive records join within the length the records draw (after the bounds: evaluation is safe)."""
+        road = self.road
+        try:
+            limit = max(MAX_JUMP_M, sum(drawn_length_m(record) for record in road.plan_view))
+        except ValueError as exc:
+            raise self.refuse("geometry", "a, b, c, d", f"of a cubic <geometry>: {exc}") from None
+        for before, after in zip(road.plan_view, road.plan_view[1:]):
+            try:
+                with np.errstate(all="ignore"):  # a non-finite end is refused just below
+                    x, y, _ = evaluate_record(before, np.array([before.length]))
+            except ValueError as exc:
+                raise self.refuse(before.kind, "length", f"of the <geometry> at s={before.s:.6g}: {exc}") from None
+            jump = float(np.hypot(x[0] - after.x, y[0] - after.y))
+            if not jump <= limit:
+                raise self.refuse("geometry", "x, y", f"of the <geometry> at s={after.s:.6g} are {jump:.6g} m from "
+                                  f"the end of the record before it, more than the {limit:g} m a reference line "
+                                  "may jump (the length its records draw)")
+
+    def record(self, geometry: Geometry) -> None:
         where = f"of the <geometry> at s={geometry.s:.6g}"
         for attribute in ("x", "y"):
             value = getattr(geometry, attribute)
