@@ -13,7 +13,7 @@ record is evaluated as its starting arc (chord form) plus the small clothoid cor
 ∫ e^{i(hdg + k0·u)}·(e^{i·c·u²/2} - 1) du, which Gauss–Legendre quadrature resolves to a
 tiny fraction of its already tiny size. A record so short that the rate overflows (a
 length below ~1e-300 m) is its starting arc: the curvature change turns its heading by at
-most |curvEnd - curvStart|·length/2, and that exactly.
+most |curvEnd - curvStart|·length/2, and that exactly (no more past the record's end).
 """
 
 from __future__ import annotations
@@ -69,7 +69,9 @@ def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFlo
         rate = change / np.float64(geom.length)
     if not np.isfinite(rate):
         x, y, _ = chord_pose(geom.x, geom.y, geom.hdg, k0, ds)
-        return x, y, geom.hdg + ds * (k0 + 0.5 * change * (ds / geom.length))
+        with np.errstate(over="ignore"):  # ds / length is capped at 1 (past the end of the record)
+            fraction = np.minimum(ds / geom.length, 1.0)
+        return x, y, geom.hdg + ds * k0 + 0.5 * change * geom.length * fraction * fraction
     heading = geom.hdg + ds * (k0 + 0.5 * rate * ds)
     if abs(k0) >= FRESNEL_MAX_SHIFT_M * abs(rate) or 0.5 * abs(rate) * geom.length**2 < NEAR_ARC_TURN_RAD:
         x, y, _ = chord_pose(geom.x, geom.y, geom.hdg, k0, ds)
