@@ -15,6 +15,7 @@ from cold_maps.cli import evaluate as cold_eval
 from cold_maps.cli import maps
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.geometry.cubic_curve import CubicCurve, arc_length_table
+from cold_maps.opendrive.model import CubicPoly
 from cold_maps.opendrive.parser import parse_opendrive
 from cold_maps.opendrive.reference_line import reference_pose
 from cold_maps.opendrive.sampling import MAX_SAMPLES, sample_road, sample_s
@@ -25,7 +26,6 @@ from cold_maps.opendrive.validation import (
     coverage_tolerance_m,
     cubic_bound,
 )
-from cold_maps.opendrive.model import CubicPoly
 
 SMALL_MAP = Path(__file__).parent / "data" / "small_1_8.xodr"
 NAME = "extreme.xodr"

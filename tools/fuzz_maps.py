@@ -33,7 +33,6 @@ import copy
 import csv
 import io
 import json
-import math
 import os
 import queue
 import random
@@ -204,13 +203,10 @@ def _finite_json(text: str) -> bool:
     return True
 
 
-def _finite_csv(text: str, numeric_columns: Sequence[str]) -> bool:
-    for row in csv.DictReader(io.StringIO(text)):
-        for name in numeric_columns:
-            value = row.get(name) or ""
-            if value and value.lower() not in ("", "none") and not math.isfinite(float(value)):
-                return False
-    return True
+def _finite_csv(text: str, numeric_columns: int) -> bool:
+    """No NaN or infinity among the last ``numeric_columns`` fields of any row."""
+    tail = "(?:,[^,\n]*)" + "{0," + str(numeric_columns - 1) + "}"
+    return re.search(r"(?im),[-+]?(?:nan|inf|infinity)" + tail + "$", text) is None
 
 
 def _finite_info(text: str) -> bool:
@@ -230,11 +226,16 @@ def classify(command: str, run: Callable[[], int], outputs: Sequence[Path],
     ``finite(stdout, {output: text})`` says whether a successful run's outputs are finite.
     """
     out, err = io.StringIO(), io.StringIO()
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:  # type: ignore[no-untyped-def]
+        err.write(warnings.formatwarning(message, category, filename, lineno, line))
+
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
             warnings.simplefilter("always")
+            warnings.showwarning = show
             status = run()
-    except BaseException as exc:  # noqa: BLE001 - anything out of main is a crash
+    except BaseException as exc:
         if isinstance(exc, KeyboardInterrupt):
             raise
         return Verdict(command, "crash", f"{type(exc).__name__} out of main: {' '.join(str(exc).split())[:300]}")
@@ -254,24 +255,27 @@ def classify(command: str, run: Callable[[], int], outputs: Sequence[Path],
     return Verdict(command, "ok", "")
 
 
-def run_commands(path: Path, work: Path, evaluate: bool, step_m: float) -> list[Verdict]:
-    """Every command on one map file, exports every ``step_m``; outputs go to ``work`` (emptied first)."""
+def run_commands(path: Path, work: Path, evaluate: bool, step_m: float, geojson: bool = True) -> list[Verdict]:
+    """The commands on one map file (``geojson``: also that export; ``evaluate``: also
+    ``cold-eval``), exports every ``step_m``; outputs go to ``work`` (emptied first)."""
     from cold_maps.cli import evaluate as cold_eval
     from cold_maps.cli import maps
 
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     csv_out, geojson_out = work / "borders.csv", work / "borders.geojson"
-    columns = ("s", "x", "y", "z")
+    columns = len(maps.CSV_HEADER) - maps.CSV_HEADER.index("s")
     verdicts = [
         classify("cold-maps info", lambda: maps.main(["info", str(path)]), [], lambda out, _: _finite_info(out)),
-        classify("cold-maps export csv", lambda: maps.main(["export", str(path), "--step", str(step_m), "-o", str(csv_out)]), [csv_out],
+        classify("cold-maps export csv",
+                 lambda: maps.main(["export", str(path), "--step", str(step_m), "-o", str(csv_out)]), [csv_out],
                  lambda _, texts: all(_finite_csv(t, columns) for t in texts.values())),
-        classify("cold-maps export geojson",
-                 lambda: maps.main(["export", str(path), "--step", str(step_m), "--format", "geojson",
-                                   "-o", str(geojson_out)]),
-                 [geojson_out], lambda _, texts: all(_finite_json(t) for t in texts.values())),
     ]
+    if geojson:
+        verdicts.append(classify(
+            "cold-maps export geojson",
+            lambda: maps.main(["export", str(path), "--step", str(step_m), "--format", "geojson", "-o", str(geojson_out)]),
+            [geojson_out], lambda _, texts: all(_finite_json(t) for t in texts.values())))
     if evaluate and all(v.outcome == "ok" for v in verdicts):
         run_dir = work / "eval"
         argv = ["--map", str(path), "--frames", "5", "--routes", "1", "--no-plots", "--out", str(run_dir)]
@@ -295,7 +299,7 @@ def worker(memory_mb: int) -> None:
     import logging
 
     logging.disable(logging.CRITICAL)
-    import cold_maps.cli.evaluate  # noqa: F401 - imported before the limit, like a fresh CLI process
+    import cold_maps.cli.evaluate
     import cold_maps.cli.maps  # noqa: F401
 
     hard = resource.getrlimit(resource.RLIMIT_AS)[1]
@@ -306,7 +310,8 @@ def worker(memory_mb: int) -> None:
         soft = _address_space_bytes() + memory_mb * 1024 * 1024
         resource.setrlimit(resource.RLIMIT_AS, (soft if hard == resource.RLIM_INFINITY else min(soft, hard), hard))
         try:
-            verdicts = run_commands(Path(job["path"]), Path(job["work"]), job["evaluate"], job["step"])
+            verdicts = run_commands(Path(job["path"]), Path(job["work"]), job["evaluate"], job["step"],
+                                    job["geojson"])
         finally:
             resource.setrlimit(resource.RLIMIT_AS, (hard, hard))
         answer.write(json.dumps([v.__dict__ for v in verdicts]) + "\n")
@@ -401,8 +406,11 @@ def _outcome(verdicts: list[dict[str, str]]) -> str:
 
 def fuzz(sources: Sequence[Path], *, seed: int, cases: int, seconds: float, workers: int = 1,
          case_timeout_s: float = 20.0, eval_timeout_s: float = 300.0, memory_mb: int = 2048, eval_every: int = 0,
-         step_m: float = 0.1, failures: Path | None = None, progress: Callable[[Report], None] | None = None) -> Report:
-    """Runs up to ``cases`` cases, stopping dispatch after ``seconds``; returns the counts."""
+         step_m: float = 0.1, geojson_every: int = 1, failures: Path | None = None, progress: Callable[[Report], None] | None = None) -> Report:
+    """Runs up to ``cases`` cases, stopping dispatch after ``seconds``; returns the counts.
+
+    Every case runs ``info`` and the CSV export; every ``geojson_every``-th also the GeoJSON
+    export, every ``eval_every``-th (0: none) also ``cold-eval``."""
     report = Report()
     start = time.monotonic()
     pending: queue.Queue[int] = queue.Queue()
@@ -424,7 +432,7 @@ def fuzz(sources: Sequence[Path], *, seed: int, cases: int, seconds: float, work
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_bytes(case.data)
                 job = {"path": str(path), "work": str(scratch / f"w{slot}" / "out"), "evaluate": case.evaluate,
-                       "step": step_m}
+                       "step": step_m, "geojson": index % geojson_every == 0}
                 answer = runner.run(job, eval_timeout_s if case.evaluate else case_timeout_s)
                 verdicts = [{"command": "worker", "outcome": answer, "detail": ""}] if isinstance(answer, str) else answer
                 outcome = _outcome(verdicts)
@@ -481,6 +489,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--eval-timeout", type=float, default=300.0, help="limit per case through cold-eval (s)")
     parser.add_argument("--memory-mb", type=int, default=2048, help="address space a case may add (MB)")
     parser.add_argument("--step", type=float, default=0.1, help="export step (m)")
+    parser.add_argument("--geojson-every", type=int, default=1, help="every Nth case also exports GeoJSON")
     parser.add_argument("--eval-every", type=int, default=250, help="every Nth case also through cold-eval (0: none)")
     parser.add_argument("--failures", type=Path, default=Path("out/fuzz_maps"), help="folder for failing cases")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
@@ -498,7 +507,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     report = fuzz(default_maps() + args.map, seed=args.seed, cases=args.cases, seconds=args.seconds,
                   workers=args.workers, case_timeout_s=args.case_timeout, eval_timeout_s=args.eval_timeout,
-                  memory_mb=args.memory_mb, eval_every=args.eval_every, step_m=args.step, failures=args.failures, progress=progress)
+                  memory_mb=args.memory_mb, eval_every=args.eval_every, step_m=args.step,
+                  geojson_every=args.geojson_every, failures=args.failures, progress=progress)
     print("\n".join(report.lines()))
     for note in report.failures[:20]:
         print(f"case {note['case']} ({Path(str(note['source'])).name}) {note['outcome']}: {note['verdicts']}")

@@ -39,7 +39,6 @@ record that ends a few centimetres later is not.
 
 from __future__ import annotations
 
-import math
 from typing import Final, Sequence
 
 import numpy as np
@@ -48,7 +47,14 @@ from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.geometry import evaluate as evaluate_record
 from cold_maps.opendrive.geometry import param_poly3, poly3
 from cold_maps.opendrive.geometry.cubic_curve import arc_length_table
-from cold_maps.opendrive.model import CubicPoly, Geometry, Lane, LaneSection, OpenDriveMap, Road
+from cold_maps.opendrive.model import (
+    CubicPoly,
+    Geometry,
+    Lane,
+    LaneSection,
+    OpenDriveMap,
+    Road,
+)
 
 MAX_EXTENT_M: Final[float] = 1e8
 """Largest |x|, |y|, |z|, lateral offset, width or border (m) a map may describe."""
