@@ -3,23 +3,13 @@ small seeded budget over the bundled maps finds no crash, hang, NaN or noisy std
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 import warnings
 from pathlib import Path
 
-from conftest import PROJECT_ROOT
+from conftest import load_tool
 
-
-def _load_fuzzer():
-    spec = importlib.util.spec_from_file_location("fuzz_maps", PROJECT_ROOT / "tools" / "fuzz_maps.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["fuzz_maps"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-fuzz_maps = _load_fuzzer()
+fuzz_maps = load_tool("fuzz_maps")
 SEED = 16
 BUDGET_CASES = 36
 

@@ -3,13 +3,11 @@ and attribute; values that can are evaluated finitely, in work bounded by the ge
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import bundled_map
-from lxml import etree
+from conftest import bundled_map, load_tool
 
 from cold_maps.cli import evaluate as cold_eval
 from cold_maps.cli import maps
@@ -30,6 +28,9 @@ from cold_maps.opendrive.validation import (
 SMALL_MAP = Path(__file__).parent / "data" / "small_1_8.xodr"
 NAME = "extreme.xodr"
 FAR_OFFSET_M = 1e7
+
+
+bench_far_road = load_tool("bench_far_road")
 
 
 def variant(source: Path, old: str, new: str) -> bytes:
@@ -128,20 +129,9 @@ def test_tiny_spiral_is_finite_and_keeps_its_start() -> None:
         assert np.all(np.isfinite(samples.inner)) and np.all(np.isfinite(samples.outer))
 
 
-def far_road_map(source: Path) -> bytes:
-    """The map plus a copy of its first road, id 'far', moved ``FAR_OFFSET_M`` east."""
-    root = etree.fromstring(source.read_bytes())
-    road = root.find("road")
-    far = copy.deepcopy(road)
-    far.set("id", "far")
-    for record in far.find("planView"):
-        record.set("x", repr(float(record.get("x")) + FAR_OFFSET_M))
-    road.addnext(far)
-    return etree.tostring(root)
-
-
-def test_far_off_road_is_a_translated_copy() -> None:
-    odr_map = parse_opendrive(far_road_map(bundled_map("curve90")), path=NAME)
+def test_far_off_road_is_a_translated_copy(tmp_path: Path) -> None:
+    path = bench_far_road.with_far_road(bundled_map("curve90"), tmp_path / "far.xodr", FAR_OFFSET_M)
+    odr_map = parse_opendrive(path.read_bytes(), path=NAME)
     near, far = sample_road(odr_map.roads["1"], step=0.5), sample_road(odr_map.roads["far"], step=0.5)
     for a, b in zip(near, far, strict=True):
         np.testing.assert_allclose(b.outer[:, 0] - a.outer[:, 0], FAR_OFFSET_M, atol=1e-6)
