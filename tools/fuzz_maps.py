@@ -1,5 +1,6 @@
 """Seeded mutation fuzzer of the map commands: mutated OpenDRIVE maps through ``cold-maps
-info``, ``cold-maps export`` (CSV and GeoJSON) and, for a sample of cases, ``cold-eval``.
+info``, ``cold-maps export`` (CSV and GeoJSON) and, for a sample of cases, ``cold-maps
+check`` (which converts the map to Lanelet2) and ``cold-eval``.
 
 Each case takes one of the maps (``maps/*.xodr`` and any ``--map``), applies one to three
 mutations (a numeric attribute set to NaN, ±inf, 0, a negative, 1e308, 1e-300, 5e-324,
@@ -220,10 +221,11 @@ def _frames_csv_finite(text: str) -> bool:
 
 
 def classify(command: str, run: Callable[[], int], outputs: Sequence[Path],
-             finite: Callable[[str, dict[Path, str]], bool]) -> Verdict:
+             finite: Callable[[str, dict[Path, str]], bool], successes: tuple[int, ...] = (0,)) -> Verdict:
     """Runs ``run`` (a CLI ``main``) with stdout and stderr captured and classifies it.
 
-    ``finite(stdout, {output: text})`` says whether a successful run's outputs are finite.
+    ``finite(stdout, {output: text})`` says whether a successful run's outputs are finite;
+    ``successes`` are the exit statuses of a run that did its job.
     """
     out, err = io.StringIO(), io.StringIO()
 
@@ -241,7 +243,7 @@ def classify(command: str, run: Callable[[], int], outputs: Sequence[Path],
         return Verdict(command, "crash", f"{type(exc).__name__} out of main: {' '.join(str(exc).split())[:300]}")
     lines = err.getvalue().splitlines()
     left = [p for p in outputs if p.exists() and p.is_file()]
-    if status != 0:
+    if status not in successes:
         if len(lines) != 1 or "Traceback" in lines[0] or "Warning" in lines[0]:
             return Verdict(command, "crash", f"exit {status} with {len(lines)} stderr lines: {lines[:6]}")
         if left:
@@ -260,6 +262,7 @@ def run_commands(path: Path, work: Path, evaluate: bool, step_m: float, geojson:
     ``cold-eval``), exports every ``step_m``; outputs go to ``work`` (emptied first)."""
     from cold_maps.cli import evaluate as cold_eval
     from cold_maps.cli import maps
+    from cold_maps.groundtruth.check import EXIT_UNTRUSTWORTHY
 
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
@@ -277,6 +280,8 @@ def run_commands(path: Path, work: Path, evaluate: bool, step_m: float, geojson:
             lambda: maps.main(["export", str(path), "--step", str(step_m), "--format", "geojson", "-o", str(geojson_out)]),
             [geojson_out], lambda _, texts: all(_finite_json(t) for t in texts.values())))
     if evaluate and all(v.outcome == "ok" for v in verdicts):
+        verdicts.append(classify("cold-maps check", lambda: maps.main(["check", str(path)]), [],
+                                 lambda out, _: _finite_info(out), successes=(0, EXIT_UNTRUSTWORTHY)))
         run_dir = work / "eval"
         argv = ["--map", str(path), "--frames", "5", "--routes", "1", "--no-plots", "--out", str(run_dir)]
         outputs = [run_dir / name for name in ("metrics.json", "frames.csv", "summary.md", "run.mcap")]

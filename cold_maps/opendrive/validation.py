@@ -18,13 +18,14 @@ records are reported elsewhere). Lane sections start inside the road (the parser
 that). The records of one reference line follow each other, so the end of one and the
 start of the next may be apart by rounding (real maps: up to 10 cm), not by
 kilometres: a jump of more than max(``MAX_JUMP_M``, the length the records draw), i.e.
-10 m or the whole drawn reference line, is refused. Such a jump (a record moved 1e7 m away) is no road, yet every border
-and the Lanelet2 ground truth sampled every 0.02 m along it would span it, so the work
-would follow the jump rather than the geometry.
+10 m or the whole drawn reference line, is refused. Such a jump (a record moved 1e7 m
+away) is no road, yet every border and the Lanelet2 ground truth sampled every 0.02 m
+along it would span it, so the work would follow the jump rather than the geometry.
 
 Bounds on magnitudes (none is in the specification, which allows any double): a map is a
-piece of the Earth's surface, so every position of a reference line and every lateral
-offset, width, border and elevation stays within ``MAX_EXTENT_M`` = 1e8 m of the origin,
+piece of the Earth's surface, so every geometry record's start (a record draws at most
+its length from there, or the bounded reach of its cubic) and every lateral offset,
+width, border and elevation stays within ``MAX_EXTENT_M`` = 1e8 m of the origin,
 above any projected coordinate on Earth (UTM eastings < 1e6 m, northings < 1e7 m, Web
 Mercator < 2.1e7 m; the maps we know stay within 1.5 km). A road is at most
 ``MAX_ROAD_LENGTH_M`` = 1e5 m (the longest road of the CARLA and esmini maps is 1.5 km),
