@@ -91,6 +91,16 @@ def test_cubic_geometry_coefficients_bounded(old: str, new: str, element: str) -
     assert error.element == element and "road '1'" in str(error) and "more than 1e+08 m" in str(error)
 
 
+def test_border_length_bound() -> None:
+    """curve90: 331.4 m, arc curvature 0.05 1/m. Lanes 4 m wide draw up to (1 + 4 * 0.05) *
+    331.4 m; a 6000 m wide lane would draw (1 + 6000 * 0.05) * 331.4 = 99756 m (accepted),
+    a 6100 m wide one 101413 m (refused, more than MAX_ROAD_LENGTH_M)."""
+    width = '<width sOffset="0" a="4" b="0" c="0" d="0"/>'
+    parse_opendrive(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="6000"')), path=NAME)
+    error = refused(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="6100"')))
+    assert error.element == "lane" and "up to 6100 m" in str(error) and "101413 m long" in str(error)
+
+
 def test_cubic_bound_is_the_sum_of_magnitudes_times_powers_of_the_span() -> None:
     record = CubicPoly(0.0, 1.0, -2.0, 3.0, -4.0)
     assert cubic_bound(record, 2.0) == 1.0 + 2.0 * 2.0 + 3.0 * 4.0 + 4.0 * 8.0

@@ -35,7 +35,12 @@ and headings at most ``MAX_HEADING_RAD`` = 1e6 rad in magnitude (the maps we kno
 up to 9.5). A cubic record is bounded over the span it applies to by the sum of its
 coefficients' magnitudes times the powers of that span, so a coefficient of 1e308 or a
 width that reaches 1e9 m within its section is refused, while a large coefficient on a
-record that ends a few centimetres later is not.
+record that ends a few centimetres later is not. A border that lies t m from a reference
+line of curvature k is up to (1 + |t|·|k|) times as long as the road, so the bound of |t|
+(laneOffset plus the widths outwards, or a border record) times the largest arc or spiral
+curvature must keep that within ``MAX_ROAD_LENGTH_M``: a 1e7 m wide lane on a 20 m
+radius is refused; in the CARLA, esmini and bundled maps borders reach at most 53 m and
+that bound is at most 1.9 km.
 """
 
 from __future__ import annotations
@@ -48,14 +53,7 @@ from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.geometry import evaluate as evaluate_record
 from cold_maps.opendrive.geometry import param_poly3, poly3
 from cold_maps.opendrive.geometry.cubic_curve import arc_length_table
-from cold_maps.opendrive.model import (
-    CubicPoly,
-    Geometry,
-    Lane,
-    LaneSection,
-    OpenDriveMap,
-    Road,
-)
+from cold_maps.opendrive.model import CubicPoly, Geometry, LaneSection, OpenDriveMap, Road
 
 MAX_EXTENT_M: Final[float] = 1e8
 """Largest |x|, |y|, |z|, lateral offset, width or border (m) a map may describe."""
@@ -123,10 +121,34 @@ class _RoadCheck:
         self.coverage()
         self.jumps()
         self.profiles("elevation", road.elevation, road.length, "s")
-        self.profiles("laneOffset", road.lane_offsets, road.length, "s")
-        for section in road.lane_sections:
-            for lane in section.lanes:
-                self.lane(section, lane)
+        reach = self.profiles("laneOffset", road.lane_offsets, road.length, "s")
+        reach += max(self.section_reach(section) for section in road.lane_sections)
+        self.border_length(reach)
+
+    def section_reach(self, section: LaneSection) -> float:
+        """Bound (m) of |t| of any border of the section, measured from the centre lane."""
+        length = section.s_end - section.s
+        reach = 0.0
+        for side in (section.left, section.right):
+            inner = 0.0
+            for lane in side:
+                owner = f"(lane {lane.id} of the section at s={section.s:.6g}) "
+                width = self.profiles("width", lane.widths, length, "sOffset", owner)
+                border = self.profiles("border", lane.borders, length, "sOffset", owner)
+                inner = inner + width if lane.widths or not lane.borders else border
+                reach = max(reach, inner)
+        return reach
+
+    def border_length(self, reach: float) -> None:
+        """A border ``reach`` m from a reference line curving at k is up to (1 + reach·k)
+        times as long; it may be no longer than the longest road."""
+        road = self.road
+        curvature = max((max(abs(g.curvature), abs(g.curv_start), abs(g.curv_end)) for g in road.plan_view))
+        longest = (1.0 + reach * curvature) * road.length
+        if longest > MAX_ROAD_LENGTH_M:
+            raise self.refuse("lane", "width, border, laneOffset", f"put borders up to {reach:.6g} m from a "
+                              f"reference line curving at up to {curvature:.6g} 1/m: a border could be "
+                              f"{longest:.6g} m long, more than the {MAX_ROAD_LENGTH_M:g} m a road may be")
 
     def coverage(self) -> None:
         road = self.road
@@ -199,9 +221,11 @@ class _RoadCheck:
             raise self.refuse(element, names, f"{where} reach {bound:.6g} m over the record, more than "
                               f"{MAX_EXTENT_M:g} m")
 
-    def profiles(self, element: str, records: Sequence[CubicPoly], end: float, s_name: str, owner: str = "") -> None:
-        """Each record of a cubic profile applies from its s0 to the next record or ``end``
-        (in the profile's own s: road s, or s relative to the section for lanes)."""
+    def profiles(self, element: str, records: Sequence[CubicPoly], end: float, s_name: str, owner: str = "") -> float:
+        """The largest bound (m) of a cubic profile's records, each applying from its s0 to
+        the next record or ``end`` (in the profile's own s: road s, or s relative to the
+        section for lanes); refused beyond ``MAX_EXTENT_M``."""
+        largest = 0.0
         for index, record in enumerate(records):
             following = records[index + 1].s0 if index + 1 < len(records) else end
             span = max(min(following, end) - record.s0, 0.0)
@@ -209,9 +233,5 @@ class _RoadCheck:
             if not bound <= MAX_EXTENT_M:
                 raise self.refuse(element, "a, b, c, d", f"{owner}of the <{element}> at {s_name}={record.s0:.6g} "
                                   f"reach {bound:.6g} m over its {span:.6g} m, more than {MAX_EXTENT_M:g} m")
-
-    def lane(self, section: LaneSection, lane: Lane) -> None:
-        owner = f"(lane {lane.id} of the section at s={section.s:.6g}) "
-        length = section.s_end - section.s
-        self.profiles("width", lane.widths, length, "sOffset", owner)
-        self.profiles("border", lane.borders, length, "sOffset", owner)
+            largest = max(largest, bound)
+        return largest
