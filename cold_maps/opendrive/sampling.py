@@ -95,7 +95,10 @@ def _section_samples(
 
     ValueError naming road, section, lane and s where a border point is not finite."""
     section = section_of(road, section_index)
-    s = sample_s(section.s, section.s_end, step)
+    try:
+        s = sample_s(section.s, section.s_end, step)
+    except ValueError as exc:
+        raise ValueError(f"road {road.id}: lane section {section_index}: {exc}") from None
     x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
     outermost = max((abs(i) for i in lane_ids), default=0)
