@@ -65,6 +65,8 @@ REFUSED = [
      "width", "attributes a, b, c, d", "lane 1 of the section at s=0"),
     ("curve90", '<elevation s="0" a="0" b="0" c="0" d="0"/>', '<elevation s="0" a="0" b="0" c="1e308" d="0"/>',
      "elevation", "attributes a, b, c, d", "elevation"),
+    ("highway", '<width sOffset="0" a="4"', '<width sOffset="-1e7" a="4"', "width", "attribute 'sOffset'",
+     "requires it to be >= 0"),
     ("highway", '<laneOffset s="250" a="2" b="0" c="0" d="0"/>', '<laneOffset s="250" a="2" b="1e308" c="0" d="0"/>',
      "laneOffset", "attributes a, b, c, d", "s=250"),
 ]

@@ -15,7 +15,9 @@ than that before ``length``: max(``COVERAGE_TOLERANCE_M``, ``COVERAGE_TOLERANCE_
 · length), i.e. 1 m, or 1 % on roads longer than 100 m (the CARLA towns and the esmini
 maps agree to 2e-13 m; the tolerance leaves room for rounding writers, and gaps between
 records are reported elsewhere). Lane sections start inside the road (the parser checks
-that). The records of one reference line follow each other, so the end of one and the
+that), and the ``s``/``sOffset`` of ``<elevation>``, ``<laneOffset>``, ``<width>`` and
+``<border>`` records is >= 0 (the schema's t_grEqZero; a negative one made the Lanelet2
+converter loop over 1e7 m). The records of one reference line follow each other, so the end of one and the
 start of the next may be apart by rounding (real maps: up to 10 cm), not by
 kilometres: a jump of more than max(``MAX_JUMP_M``, the length the records draw), i.e.
 10 m or the whole drawn reference line, is refused. Such a jump (a record moved 1e7 m
@@ -54,6 +56,7 @@ from cold_maps.opendrive.geometry import evaluate as evaluate_record
 from cold_maps.opendrive.geometry import param_poly3, poly3
 from cold_maps.opendrive.geometry.cubic_curve import arc_length_table
 from cold_maps.opendrive.model import CubicPoly, Geometry, LaneSection, OpenDriveMap, Road
+from cold_maps.opendrive.reference_line import S_TOLERANCE_M
 
 MAX_EXTENT_M: Final[float] = 1e8
 """Largest |x|, |y|, |z|, lateral offset, width or border (m) a map may describe."""
@@ -227,6 +230,9 @@ class _RoadCheck:
         section for lanes); refused beyond ``MAX_EXTENT_M``."""
         largest = 0.0
         for index, record in enumerate(records):
+            if record.s0 < -S_TOLERANCE_M:
+                raise self.refuse(element, s_name, f"{owner}of a <{element}> is {record.s0:.6g} m: the specification "
+                                  "requires it to be >= 0")
             following = records[index + 1].s0 if index + 1 < len(records) else end
             span = max(min(following, end) - record.s0, 0.0)
             bound = cubic_bound(record, span)
