@@ -155,7 +155,7 @@ def test_sample_count_checked_before_allocation() -> None:
         sample_s(0.0, MAX_ROAD_LENGTH_M, MAX_ROAD_LENGTH_M / MAX_SAMPLES)
     assert len(sample_s(0.0, MAX_ROAD_LENGTH_M, 0.1)) == 1_000_001
     road = parse_opendrive(bundled_map("straight").read_bytes(), path=NAME).roads["1"]
-    with pytest.raises(ValueError, match=r"road 1: lane section 0: sampling \[0, 1000\] m every 1e-05 m"):
+    with pytest.raises(ValueError, match=r"sampling \[0, 1000\] m every 1e-05 m"):
         sample_road(road, step=1e-5)
 
 

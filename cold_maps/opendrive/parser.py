@@ -48,7 +48,7 @@ from cold_maps.opendrive.model import (
     Road,
     RoadLink,
 )
-from cold_maps.opendrive.validation import validate_map
+from cold_maps.opendrive.validation import validate_road
 from cold_maps.opendrive.xml_safety import parse_xml
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
@@ -90,12 +90,9 @@ def load_opendrive(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BY
 
 
 def parse_opendrive(data: bytes, *, path: str = "") -> OpenDriveMap:
-    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map.
-
-    The parsed map is checked by ``validation.validate_map`` (values that cannot describe
-    a road are refused)."""
+    """Parse OpenDRIVE XML ``data``; ``path`` only names the source in errors and the map."""
     root = parse_xml(data, path=path)
-    return validate_map(_Reader(path).read_map(root))
+    return _Reader(path).read_map(root)
 
 
 def _strip_namespaces(root: etree._Element) -> None:
@@ -216,6 +213,8 @@ class _Reader:
             raise self.error("no <header>", root)
         if not roads:
             raise self.error("the map has no <road>", root)
+        for road in roads.values():
+            validate_road(road, self.path)
         for element_type, element_id, element in links:
             known = roads if element_type == "road" else junctions
             if element_id not in known:

@@ -34,8 +34,7 @@ def reference_pose(
     Each s is evaluated on the last ``<geometry>`` record starting at or before it, among
     the records starting before ``before`` (m) when given: at a lane section's end this
     takes the record the section's interior uses, so a small gap the map has between
-    two records does not bend the section's closing border. ValueError naming the road,
-    the record and s where the pose is not finite.
+    two records does not bend the section's closing border.
     """
     s = check_s(road, s)
     if not road.plan_view:
@@ -50,13 +49,7 @@ def reference_pose(
         mask = index == i
         record = road.plan_view[i]
         try:
-            with np.errstate(over="ignore", invalid="ignore"):  # a non-finite pose is refused just below
-                x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
+            x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
         except ValueError as exc:
             raise ValueError(f"road {road.id}: {exc}") from None
-    bad = ~(np.isfinite(x) & np.isfinite(y) & np.isfinite(hdg))
-    if np.any(bad):
-        record = road.plan_view[int(index[bad][0])]
-        raise ValueError(f"road {road.id}: the reference line is not finite at s={float(s[bad][0]):.6g} m "
-                         f"(<geometry> {record.kind} at s={record.s:.6g})")
     return x, y, hdg

@@ -87,37 +87,34 @@ class LaneBorderSamples:
     inner: NDArrayFloat
     outer: NDArrayFloat
 
+    def __post_init__(self) -> None:
+        """ValueError naming road, section, lane and s where a border point is not finite."""
+        for side, points in (("inner", self.inner), ("outer", self.outer)):
+            bad = ~np.all(np.isfinite(points), axis=1)
+            if np.any(bad):
+                raise ValueError(f"road {self.road_id}: lane section {self.section}, lane {self.lane_id}: the {side} "
+                                 f"border is not finite at s={float(self.s[bad][0]):.6g} m")
+
 
 def _section_samples(
     road: Road, section_index: int, step: float, lane_ids: Sequence[int]
 ) -> list[LaneBorderSamples]:
-    """Samples of the listed lanes of one section; the reference line is evaluated once.
-
-    ValueError naming road, section, lane and s where a border point is not finite."""
+    """Samples of the listed lanes of one section; the reference line is evaluated once."""
     section = section_of(road, section_index)
-    try:
-        s = sample_s(section.s, section.s_end, step)
-    except ValueError as exc:
-        raise ValueError(f"road {road.id}: lane section {section_index}: {exc}") from None
+    s = sample_s(section.s, section.s_end, step)
     x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
+    z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
     outermost = max((abs(i) for i in lane_ids), default=0)
-    with np.errstate(over="ignore", invalid="ignore"):  # non-finite values are refused in points()
-        z = cubic_poly.evaluate(road.elevation, s, before=section.s_end)
-        borders = section_borders(road, section_index, s, outermost=outermost)
+    borders = section_borders(road, section_index, s, outermost=outermost)
 
-    def points(lane_id: int, which: int) -> NDArrayFloat:
-        t = borders[lane_id][which]
-        with np.errstate(over="ignore", invalid="ignore"):  # a non-finite border is refused just below
-            xyz = np.column_stack((x + t * normal_x, y + t * normal_y, z))
-        bad = ~np.all(np.isfinite(xyz), axis=1)
-        if np.any(bad):
-            side = ("inner", "outer")[which]
-            raise ValueError(f"road {road.id}: lane section {section_index} (s={section.s:.6g} m), lane {lane_id}: "
-                             f"the {side} border is not finite at s={float(s[bad][0]):.6g} m")
-        return xyz
+    def points(t: NDArrayFloat) -> NDArrayFloat:
+        return np.column_stack((x + t * normal_x, y + t * normal_y, z))
 
-    return [LaneBorderSamples(road.id, section_index, i, s, points(i, 0), points(i, 1)) for i in lane_ids]
+    return [
+        LaneBorderSamples(road.id, section_index, i, s, points(borders[i][0]), points(borders[i][1]))
+        for i in lane_ids
+    ]
 
 
 def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: float = 0.1) -> LaneBorderSamples:

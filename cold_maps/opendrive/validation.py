@@ -55,7 +55,7 @@ from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.geometry import evaluate as evaluate_record
 from cold_maps.opendrive.geometry import param_poly3, poly3
 from cold_maps.opendrive.geometry.cubic_curve import arc_length_table
-from cold_maps.opendrive.model import CubicPoly, Geometry, LaneSection, OpenDriveMap, Road
+from cold_maps.opendrive.model import CubicPoly, Geometry, LaneSection, Road
 from cold_maps.opendrive.reference_line import S_TOLERANCE_M
 
 MAX_EXTENT_M: Final[float] = 1e8
@@ -89,11 +89,10 @@ def coverage_tolerance_m(length: float) -> float:
     return max(COVERAGE_TOLERANCE_M, COVERAGE_TOLERANCE_FRACTION * length)
 
 
-def validate_map(odr_map: OpenDriveMap) -> OpenDriveMap:
-    """The map unchanged; ``OpenDriveError`` at the first value that cannot describe a road."""
-    for road in odr_map.roads.values():
-        _RoadCheck(odr_map.path, road).run()
-    return odr_map
+def validate_road(road: Road, path: str = "") -> None:
+    """``OpenDriveError`` (naming ``path``) at the first value of the road that cannot
+    describe a road; the parser calls it for every road."""
+    _RoadCheck(path, road).run()
 
 
 def cubic_bound(record: CubicPoly, span: float) -> float:
