@@ -120,6 +120,17 @@ def test_large_coefficient_on_a_short_record_is_accepted() -> None:
     assert cubic_bound(lane.widths[0], 0.001) == pytest.approx(4.0 + 1e9 * 1e-9)
 
 
+@pytest.mark.filterwarnings("error")
+def test_record_that_never_applies_is_not_evaluated() -> None:
+    """A width record starting at sOffset 1e308 never applies: the lane stays 4 m wide, and
+    its cubic is not evaluated at ds = -1e308 (an overflow warning)."""
+    width = '<width sOffset="0" a="4" b="0" c="0" d="0"/>'
+    data = variant(bundled_map("curve90"), width, width + '<width sOffset="1e308" a="0" b="0" c="0" d="-1"/>')
+    road = parse_opendrive(data, path=NAME).roads["1"]
+    for samples in sample_road(road, step=1.0):
+        np.testing.assert_allclose(np.hypot(*(samples.outer - samples.inner)[:, :2].T), 4.0, atol=1e-9)
+
+
 def test_coverage_tolerance() -> None:
     assert coverage_tolerance_m(50.0) == 1.0
     assert coverage_tolerance_m(1000.0) == pytest.approx(COVERAGE_TOLERANCE_FRACTION * 1000.0)
