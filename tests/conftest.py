@@ -2,13 +2,25 @@
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 BUNDLED_MAPS_DIR = PROJECT_ROOT / "maps"
 CARLA_MAPS_DIR = PROJECT_ROOT.parent / "shared" / "maps" / "carla"
+
+
+def load_tool(name: str) -> ModuleType:
+    """The script tools/<name>.py imported as module ``name``."""
+    spec = importlib.util.spec_from_file_location(name, PROJECT_ROOT / "tools" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def carla_map(name: str) -> Path:

@@ -277,6 +277,7 @@ def _configure_convert(parser: argparse.ArgumentParser) -> None:
 def _run_convert(args: argparse.Namespace) -> int:
     from converters.api import run_convert
 
+    _load(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
     return run_convert(args)
 
 

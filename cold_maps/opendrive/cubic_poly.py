@@ -36,7 +36,9 @@ def _coefficients(records: Sequence[CubicPoly]) -> tuple[NDArrayFloat, NDArrayFl
 def _locate(
     records: Sequence[CubicPoly], s: NDArrayFloat, s_offset: float, before: float | None
 ) -> tuple[NDArrayFloat, NDArrayFloat, npt.NDArray[np.bool_]]:
-    """Per point: the applying record's coefficients (N, 4), its ds (N,), and whether one applies."""
+    """Per point: the applying record's coefficients (N, 4), its ds (N,), and whether one
+    applies (ds 0 where none does: the first record's polynomial at a point before it could
+    overflow, e.g. for a record starting at s0 = 1e308)."""
     s = np.asarray(s, dtype=np.float64)
     if before is not None:
         records = [r for r in records if r.s0 + s_offset < before]
@@ -47,7 +49,7 @@ def _locate(
     index = np.searchsorted(starts, local, side="right") - 1
     applies = index >= 0
     index = np.maximum(index, 0)
-    return coeffs[index], local - starts[index], applies
+    return coeffs[index], np.where(applies, local - starts[index], 0.0), applies
 
 
 def evaluate(

@@ -59,6 +59,7 @@ from cold_maps.opendrive.model import (
     Road,
     RoadLink,
 )
+from cold_maps.opendrive.validation import validate_road
 from cold_maps.opendrive.xml_safety import parse_xml
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
@@ -254,6 +255,8 @@ class _Reader:
             raise self.error("no <header>", root)
         if not roads:
             raise self.error("the map has no <road>", root)
+        for road in roads.values():
+            validate_road(road, self.path)
         for element_type, element_id, element in links:
             known = roads if element_type == "road" else junctions
             if element_id not in known:

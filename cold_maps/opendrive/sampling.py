@@ -29,6 +29,9 @@ JOINED_M: Final[float] = 1e-6
 
 SLIVER_FRACTION: Final[float] = 1e-9
 """A grid point closer than this fraction of the step to the end point is merged into it."""
+MAX_SAMPLES: Final[int] = 10_000_000
+"""Most points ``sample_s`` returns (checked before allocating): 80 MB per float64 array,
+ten times a 100 km road (``validation.MAX_ROAD_LENGTH_M``) at the default 0.1 m step."""
 
 
 def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
@@ -37,7 +40,8 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
     Every interval is ``step`` except the last, which is in (0, step]; a sliver shorter
     than ``SLIVER_FRACTION``·step is merged into the last interval instead of creating a
     near-duplicate end point (unless it is the whole range). s_start == s_end gives the
-    single point s_start.
+    single point s_start. ValueError (before any allocation) when that is more than
+    ``MAX_SAMPLES`` points.
     """
     if not (np.isfinite(s_start) and np.isfinite(s_end)):
         raise ValueError(f"sample_s: s_start={s_start} and s_end={s_end} must be finite")
@@ -47,7 +51,11 @@ def sample_s(s_start: float, s_end: float, step: float) -> NDArrayFloat:
         raise ValueError(f"sample_s: s_end={s_end} is before s_start={s_start}")
     if s_end == s_start:
         return np.array([float(s_start)])
-    count = int(np.ceil((s_end - s_start) / step))
+    intervals = np.ceil((s_end - s_start) / step)
+    if not intervals < MAX_SAMPLES:
+        raise ValueError(f"sampling [{s_start:.6g}, {s_end:.6g}] m every {step:g} m takes {intervals:.3g} points, "
+                         f"more than {MAX_SAMPLES}: use a longer step")
+    count = int(intervals)
     grid = s_start + step * np.arange(count, dtype=np.float64)
     interior = grid[1:][grid[1:] < s_end - SLIVER_FRACTION * step]
     return np.concatenate(([float(s_start)], interior, [float(s_end)]))
@@ -89,6 +97,14 @@ class LaneBorderSamples:
     s: NDArrayFloat
     inner: NDArrayFloat
     outer: NDArrayFloat
+
+    def __post_init__(self) -> None:
+        """ValueError naming road, section, lane and s where a border point is not finite."""
+        for side, points in (("inner", self.inner), ("outer", self.outer)):
+            bad = ~np.all(np.isfinite(points), axis=1)
+            if np.any(bad):
+                raise ValueError(f"road {self.road_id}: lane section {self.section}, lane {self.lane_id}: the {side} "
+                                 f"border is not finite at s={float(self.s[bad][0]):.6g} m")
 
 
 def record_starts(road: Road, s_start: float, s_end: float) -> NDArrayFloat:

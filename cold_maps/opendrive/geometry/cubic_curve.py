@@ -93,8 +93,13 @@ class ArcLengthTable:
 
 @lru_cache(maxsize=8192)
 def arc_length_table(curve: CubicCurve) -> ArcLengthTable:
-    """Arc-length table of a curve over [0, p_end] (cached: curves are immutable)."""
+    """Arc-length table of a curve over [0, p_end] (cached: curves are immutable).
+
+    ValueError when the arc length is not finite."""
     approx = float(curve.integral(np.array(0.0), np.array(curve.p_end)))
+    if not np.isfinite(approx):
+        raise ValueError(f"cubic curve over p in [0, {curve.p_end:.6g}]: its arc length is not finite "
+                         "(coefficients too large)")
     intervals = int(np.clip(np.ceil(approx / TABLE_INTERVAL_M), 8, MAX_TABLE_INTERVALS))
     params = np.linspace(0.0, curve.p_end, intervals + 1)
     pieces = curve.integral(params[:-1], params[1:])

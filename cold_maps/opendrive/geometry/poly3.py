@@ -14,8 +14,13 @@ from cold_maps.opendrive.geometry.cubic_curve import CubicCurve, arc_length_tabl
 from cold_maps.opendrive.model import Geometry
 
 
+def curve_of(geom: Geometry) -> CubicCurve:
+    """The record's local cubic curve, u over [0, length]."""
+    return CubicCurve(u=(0.0, 1.0, 0.0, 0.0), v=(geom.a, geom.b, geom.c, geom.d), p_end=geom.length)
+
+
 def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """Inertial x, y (m) and heading (rad) at arc length ds (m) from the record start."""
-    curve = CubicCurve(u=(0.0, 1.0, 0.0, 0.0), v=(geom.a, geom.b, geom.c, geom.d), p_end=geom.length)
+    curve = curve_of(geom)
     u = arc_length_table(curve).parameter(np.asarray(ds, dtype=np.float64))
     return pose_at_parameter(geom, curve, u)

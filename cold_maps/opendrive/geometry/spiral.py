@@ -11,7 +11,9 @@ arguments shifted by k0/c) and overflows for c → 0. When that shift exceeds
 ``NEAR_ARC_TURN_RAD`` over the record (nearly constant curvature, including c = 0), the
 record is evaluated as its starting arc (chord form) plus the small clothoid correction
 ∫ e^{i(hdg + k0·u)}·(e^{i·c·u²/2} - 1) du, which Gauss–Legendre quadrature resolves to a
-tiny fraction of its already tiny size.
+tiny fraction of its already tiny size. A record so short that the rate overflows (a
+length below ~1e-300 m) is its starting arc: the curvature change turns its heading by at
+most |curvEnd - curvStart|·length/2, and that exactly (no more past the record's end).
 """
 
 from __future__ import annotations
@@ -62,7 +64,14 @@ def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFlo
     """Inertial x, y (m) and heading (rad) at arc length ds (m) from the record start."""
     ds = np.asarray(ds, dtype=np.float64)
     k0 = geom.curv_start
-    rate = (geom.curv_end - geom.curv_start) / geom.length
+    change = geom.curv_end - geom.curv_start
+    with np.errstate(over="ignore"):  # the rate of a record shorter than ~1e-300 m overflows: handled below
+        rate = change / np.float64(geom.length)
+    if not np.isfinite(rate):
+        x, y, _ = chord_pose(geom.x, geom.y, geom.hdg, k0, ds)
+        with np.errstate(over="ignore"):  # ds / length is capped at 1 (past the end of the record)
+            fraction = np.minimum(ds / geom.length, 1.0)
+        return x, y, geom.hdg + ds * k0 + 0.5 * change * geom.length * fraction * fraction
     heading = geom.hdg + ds * (k0 + 0.5 * rate * ds)
     if abs(k0) >= FRESNEL_MAX_SHIFT_M * abs(rate) or 0.5 * abs(rate) * geom.length**2 < NEAR_ARC_TURN_RAD:
         x, y, _ = chord_pose(geom.x, geom.y, geom.hdg, k0, ds)
