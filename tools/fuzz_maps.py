@@ -277,7 +277,8 @@ def run_commands(path: Path, work: Path, evaluate: bool, step_m: float, geojson:
     if geojson:
         verdicts.append(classify(
             "cold-maps export geojson",
-            lambda: maps.main(["export", str(path), "--step", str(step_m), "--format", "geojson", "-o", str(geojson_out)]),
+            lambda: maps.main(["export", str(path), "--step", str(step_m), "--format", "geojson", "--crs", "local",
+                               "-o", str(geojson_out)]),
             [geojson_out], lambda _, texts: all(_finite_json(t) for t in texts.values())))
     if evaluate and all(v.outcome == "ok" for v in verdicts):
         verdicts.append(classify("cold-maps check", lambda: maps.main(["check", str(path)]), [],

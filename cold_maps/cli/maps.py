@@ -275,9 +275,10 @@ def _configure_convert(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_convert(args: argparse.Namespace) -> int:
+    from cold_maps.opendrive.parser import load_opendrive
     from converters.api import run_convert
 
-    _load(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
+    load_opendrive(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
     return run_convert(args)
 
 

@@ -123,6 +123,7 @@ class _RoadCheck:
         self.coverage()
         self.jumps()
         self.profiles("elevation", road.elevation, road.length, "s")
+        self.profiles("superelevation", road.superelevation, road.length, "s")
         reach = self.profiles("laneOffset", road.lane_offsets, road.length, "s")
         reach += max(self.section_reach(section) for section in road.lane_sections)
         self.border_length(reach)
