@@ -10,11 +10,11 @@ vehicle = ISO 8855. See :func:`fuse`.
 from fusion import bezier
 from fusion.api import DEFAULT_PARAMS, fuse, is_fusible
 from fusion.errors import BezierDecodeError, FusionError, InvalidDetectionError, InvalidParameterError
-from fusion.types import (FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, NeighbourLane, Pose2D,
-                          RoadEdges, Source)
+from fusion.types import (FusionParams, FusionResult, LaneBranch, LaneDetection, NDArrayFloat, NDArrayInt8,
+                          NeighbourLane, Pose2D, RoadEdges, Source)
 
 __all__ = [
     "DEFAULT_PARAMS", "bezier", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
-    "InvalidParameterError", "LaneDetection", "NDArrayFloat", "NDArrayInt8", "NeighbourLane", "Pose2D", "RoadEdges",
+    "InvalidParameterError", "LaneBranch", "LaneDetection", "NDArrayFloat", "NDArrayInt8", "NeighbourLane", "Pose2D", "RoadEdges",
     "Source", "fuse", "is_fusible",
 ]

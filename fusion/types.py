@@ -129,6 +129,22 @@ class NeighbourLane:
 
 
 @dataclass(frozen=True)
+class LaneBranch:
+    """A lane that leaves the sender's lane at a fork inside the detection window.
+
+    Fields: ``left``, ``right`` its borders from the fork on, ``(N, 2)`` float64 in the
+    sender's *vehicle* frame [m], driving order (validated like :class:`LaneDetection`'s).
+    """
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "left", validated_border("LaneBranch left", self.left))
+        object.__setattr__(self, "right", validated_border("LaneBranch right", self.right))
+
+
+@dataclass(frozen=True)
 class RoadEdges:
     """Where the road edge lies: the lane whose outer border has no further driving lane of
     the same direction beyond it, at the detection's first (``start_*``) and last (``end_*``)
@@ -169,6 +185,8 @@ class LaneDetection:
         neighbours: lanes beside the sender's lane driven the same way (:class:`NeighbourLane`,
             distinct indices; empty = the sender's lane only, as a single-lane sensor).
         road_edges: where the road edges lie (:class:`RoadEdges`), or None when unknown.
+        branches: lanes leaving the sender's lane at a fork inside the window
+            (:class:`LaneBranch`; a multi-lane sensor reports them with the neighbours).
         points: both borders stacked, left then right, ``(N_left + N_right, 2)`` [m, vehicle
             frame]; ``left`` and ``right`` are read-only views of it (set on construction).
         arclength: ``(N_left + N_right,)`` arc length of every point of ``points`` along its
@@ -183,6 +201,7 @@ class LaneDetection:
     sender: str = ""
     neighbours: tuple[NeighbourLane, ...] = ()
     road_edges: RoadEdges | None = None
+    branches: tuple[LaneBranch, ...] = ()
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
@@ -205,6 +224,11 @@ class LaneDetection:
         if len({lane.index for lane in neighbours}) != len(neighbours):
             raise InvalidDetectionError("LaneDetection.neighbours: two lanes share an index")
         object.__setattr__(self, "neighbours", neighbours)
+        branches = tuple(self.branches)
+        for branch in branches:
+            if not isinstance(branch, LaneBranch):
+                raise InvalidDetectionError(f"LaneDetection.branches must hold LaneBranch, got {type(branch).__name__}")
+        object.__setattr__(self, "branches", branches)
         if self.road_edges is not None and not isinstance(self.road_edges, RoadEdges):
             raise InvalidDetectionError(f"LaneDetection.road_edges must be RoadEdges or None, "
                                         f"got {type(self.road_edges).__name__}")

@@ -27,12 +27,20 @@ PROG: Final[str] = "cold-eval"
 DEFAULT_OUT: Final[str] = "out/cold-eval"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
+MAX_LANES: Final[int] = 8
 
 
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text}")
+    return value
+
+
+def _lane_count(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= MAX_LANES:
+        raise argparse.ArgumentTypeError(f"expected an integer from 0 to {MAX_LANES}, got {text}")
     return value
 
 
@@ -68,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="spline interpolation (default both)")
     parser.add_argument("--gaps", type=_gaps, default=PAPER_GAPS_M,
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
+    parser.add_argument("--lanes", type=_lane_count, default=0,
+                        help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
+                             "at forks (default 0: the vehicle's own lane only)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
@@ -101,7 +112,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [replace(plan, errors=errors) for plan in plans]
+        return [replace(plan, errors=errors, lanes=args.lanes) for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -111,7 +122,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     params = params_for_gaps(args.gaps)
     scenarios = scenarios_for(args.gaps, interpolations)
     return [MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES, routes=args.routes, seed=args.seed,
-                    speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params)
+                    speed_mps=args.speed, distractors=not args.no_distractors, errors=errors, params=params,
+                    lanes=args.lanes)
             for path in args.map]
 
 

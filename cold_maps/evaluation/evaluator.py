@@ -38,9 +38,11 @@ from cold_maps.simulation.drive import (
     build_drive,
     covering_routes,
     lane_relation,
+    relation_kind,
     required_route_length,
     route_from_start,
 )
+from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
 
 if TYPE_CHECKING:
@@ -71,6 +73,7 @@ class MapEvaluator:
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
+        self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
 
     @property
@@ -159,7 +162,7 @@ class MapEvaluator:
     def _frame(self, collector: Collector, drive: Drive, frame: int, index: int, recorder: Recorder | None) -> None:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
-        sensed = {name: sense(state, self.sensor, plan.errors, self.rng, stamp_s=stamp)
+        sensed = {name: sense(state, self.sensor, plan.errors, self.rng, stamp_s=stamp, neighbours=self.neighbours)
                   for name, state in drive.states(frame).items()}
         ego = sensed["ego"]
         metrics: dict[str, float | None] = {}
@@ -223,13 +226,16 @@ class MapEvaluator:
         plan = self.plan
         keys = [scenario.key(plan.name, b) for b in ("left", "right")]
         truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m, self.sensor.range_m)
+        relation = relation_kind(ego.state, other.state, truth)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan) -> None:
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
+                   confidence: float = math.nan) -> None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
-                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth))
+                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
+                                               relation=relation, confidence=confidence))
 
         if ego.detection is None or other.detection is None:
             reject("ego_dropped" if ego.detection is None else "coop_dropped")
@@ -246,15 +252,15 @@ class MapEvaluator:
             collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
             collector.fuse_ms.setdefault(label, []).append(runtime)
         if result.kind == "none":
-            reject(reason_category(result.reason), False, runtime)
+            reject(reason_category(result.reason), False, runtime, 0.0)
             return None
         measured = self._measure(result.left, result.right, detection_pose(ego.detection),
                                  self.true_lane(ego.state, other.state))
         if isinstance(measured, str):
-            reject(measured, True, runtime)
+            reject(measured, True, runtime, result.confidence)
             return None
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
-                     truth, metrics if main else None)
+                     truth, metrics if main else None, relation=relation, confidence=result.confidence)
         if main:
             detections = {"ego": world_borders(ego.detection), other.state.name: world_borders(other.detection)}
             self._keep_overlay(collector, scenario, index, measured, detections,
@@ -272,11 +278,13 @@ class MapEvaluator:
 
     def _record(self, collector: Collector, scenario: Scenario, keys: list[ScenarioKey], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
-                truth: bool | None, metrics: dict[str, float | None] | None) -> None:
+                truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
+                confidence: float = math.nan) -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
         for key, (errors, length) in zip(keys, sides):
             collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
-                                           runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth))
+                                           runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
+                                           relation=relation, confidence=confidence))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))

@@ -106,6 +106,8 @@ class MapPlan:
         errors: sensor error models (all off by default).
         params: fusion parameters.
         road_type: the paper's road type of this map (for the side-by-side), or None.
+        lanes: neighbour lanes the sensor detects on each side besides the vehicle's own
+            (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
     """
 
     path: Path
@@ -119,6 +121,7 @@ class MapPlan:
     errors: SensorErrorModel = SensorErrorModel()
     params: fusion.FusionParams = fusion.DEFAULT_PARAMS
     road_type: str | None = None
+    lanes: int = 0
 
     @property
     def name(self) -> str:

@@ -16,7 +16,7 @@ import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.drive import VehicleState
 from cold_maps.simulation.neighbours import NeighbourSensor
-from cold_maps.simulation.sensor import LaneSensor, vehicle_to_world, world_to_vehicle
+from cold_maps.simulation.sensor import Detection, LaneSensor, vehicle_to_world, world_to_vehicle
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 DETECTION_DECIMALS: Final[int] = 6
@@ -52,20 +52,32 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
         return Sensed(state, None)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
     lanes: list[fusion.NeighbourLane] = []
+    branches: list[fusion.LaneBranch] = []
     edges = None
     if neighbours is not None:
         readings, ends = neighbours.detect(state.track, state.station, sensor.range_m, sensor.step_m)
         edges = fusion.RoadEdges(*ends)
         for reading in readings:
-            seen = errors.apply(world_to_vehicle(reading.left, raw.x, raw.y, raw.yaw),
-                                world_to_vehicle(reading.right, raw.x, raw.y, raw.yaw), rng)
+            seen = _seen(reading.left, reading.right, raw, errors, rng)
             if seen is not None:
-                left, right = (np.round(border, DETECTION_DECIMALS) for border in seen)
-                lanes.append(fusion.NeighbourLane(reading.index, left, right, reading.at_start, reading.at_end))
+                lanes.append(fusion.NeighbourLane(reading.index, *seen, reading.at_start, reading.at_end))
+        for left, right in neighbours.branches(state.track, state.station, sensor.range_m, sensor.step_m):
+            seen = _seen(left, right, raw, errors, rng)
+            if seen is not None:
+                branches.append(fusion.LaneBranch(*seen))
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
-                                              neighbours=tuple(lanes), road_edges=edges))
+                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)))
+
+
+def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: SensorErrorModel,
+          rng: np.random.Generator) -> tuple[NDArrayFloat, NDArrayFloat] | None:
+    """World borders of another lane seen by the sensor at ``raw``'s pose: in the vehicle
+    frame, through the error models, rounded to 1 µm; None when dropped."""
+    seen = errors.apply(world_to_vehicle(left, raw.x, raw.y, raw.yaw), world_to_vehicle(right, raw.x, raw.y, raw.yaw),
+                        rng)
+    return None if seen is None else (np.round(seen[0], DETECTION_DECIMALS), np.round(seen[1], DETECTION_DECIMALS))
 
 
 def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -4,7 +4,9 @@ The k-th lane to the left (``+k``) or right (``-k``, driving direction) of a tra
 the lane k positions over in the same lane section when it and every lane between are
 driving lanes of the lane graph driven the same way; the first lane that is not (a
 shoulder, a sidewalk, the opposite direction, nothing) ends the side, and the outer border
-of the last lane before it is the *road edge*. Neighbour borders are sampled on the same
+of the last lane before it is the *road edge*. A *branch* is a lane that leaves the track's
+lane at a fork inside the detection window (another successor than the track's), seen
+from the fork to the end of the window. Neighbour borders are sampled on the same
 s grid as the track's own lane (0.1 m of s), so every sample carries the track station of
 its cross-section; detections are resampled every ``step_m`` of their own arc length,
 world frame (OpenDRIVE inertial), m.
@@ -13,8 +15,6 @@ world frame (OpenDRIVE inertial), m.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
@@ -23,8 +23,7 @@ from cold_maps.network.route import borders_in_driving_direction
 from cold_maps.opendrive.sampling import sample_lane_borders
 from gt_matching.polyline import arc_lengths
 
-if TYPE_CHECKING:
-    from cold_maps.simulation.drive import Track
+from cold_maps.simulation.drive import Track
 
 
 def neighbour_key(graph: LaneGraph, lane: LaneKey, offset: int) -> LaneKey | None:
@@ -90,6 +89,7 @@ class NeighbourSensor:
             raise ValueError(f"neighbour lanes: expected at least 1 per side, got {count!r}")
         self.graph, self.count = graph, count
         self._cache: dict[tuple[LaneKey, ...], tuple[dict[int, tuple[LaneKey | None, ...]], dict[int, SideLane]]] = {}
+        self._branch_tracks: dict[LaneKey, Track] = {}
 
     def _sides(self, track: Track) -> tuple[dict[int, tuple[LaneKey | None, ...]], dict[int, SideLane]]:
         cached = self._cache.get(track.lanes)
@@ -136,6 +136,36 @@ class NeighbourSensor:
                 return None
         return sign * edge
 
+    def _branch_track(self, lane: LaneKey, length_m: float) -> Track:
+        """A track from ``lane`` on along first successors, at least ``length_m`` long where
+        the graph allows (cached per lane)."""
+        track = self._branch_tracks.get(lane)
+        if track is None:
+            lanes, total = [lane], self.graph.lengths[lane]
+            while total < length_m and self.graph.successors[lanes[-1]] and len(lanes) < len(self.graph.lengths):
+                lanes.append(self.graph.successors[lanes[-1]][0])
+                total += self.graph.lengths[lanes[-1]]
+            track = self._branch_tracks[lane] = Track.build(self.graph, lanes)
+        return track
+
+    def branches(self, track: Track, station: float, range_m: float, step_m: float) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+        """Left and right borders (world frame, m, every ``step_m``) of the lanes that leave
+        the track's lane at a fork between ``station`` and ``range_m`` ahead, from the fork to
+        the end of that window."""
+        end = min(station + range_m, track.length)
+        found = []
+        for index, (lane, following) in enumerate(zip(track.lanes, track.lanes[1:])):
+            fork = float(track.lane_starts[index + 1])
+            if not station < fork < end - step_m:
+                continue
+            for other in self.graph.successors[lane]:
+                if other == following:
+                    continue
+                branch = self._branch_track(other, range_m)
+                left, right = branch.borders_between(0.0, min(end - fork, branch.length))
+                found.append((_resampled(left, step_m), _resampled(right, step_m)))
+        return found
+
     def detect(self, track: Track, station: float, range_m: float,
                step_m: float) -> tuple[list[NeighbourReading], tuple[int | None, int | None, int | None, int | None]]:
         """The neighbour lanes seen from ``station`` (m) over ``range_m`` ahead of the track,
@@ -154,13 +184,16 @@ class NeighbourSensor:
             run = max(np.split(inside, breaks), key=len)
             if run.size < 2:
                 continue
-            borders = []
-            for points in (side.left[run], side.right[run]):
-                distance = arc_lengths(points)
-                borders.append(resample_polyline(points, distance, 0.0, float(distance[-1]), step_m))
+            borders = [_resampled(points, step_m) for points in (side.left[run], side.right[run])]
             lanes = set(side.lane_index[run].tolist())
             readings.append(NeighbourReading(k, borders[0], borders[1], first in lanes and keys[k][first] is not None,
                                              last in lanes and keys[k][last] is not None))
         edges = (self._edge(keys, first, 1), self._edge(keys, first, -1), self._edge(keys, last, 1),
                  self._edge(keys, last, -1))
         return readings, edges
+
+
+def _resampled(points: NDArrayFloat, step_m: float) -> NDArrayFloat:
+    """A polyline resampled every ``step_m`` of its own arc length (m), both ends kept."""
+    distance = arc_lengths(points)
+    return resample_polyline(points, distance, 0.0, float(distance[-1]), step_m)
