@@ -183,7 +183,7 @@ class MapEvaluator:
             for name, item in sensed.items():
                 if item.detection is not None:
                     recorder.write_detection(stamp, index, name, detection_pose(item.detection), item.detection.left,
-                                             item.detection.right, ego=name == "ego")
+                                             item.detection.right, ego=name == "ego", lanes=item.detection)
             if gt_lines:
                 recorder.write_gt(stamp, gt_lines)
             recorder.write_fused(stamp, fused_lines)
