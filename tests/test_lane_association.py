@@ -297,3 +297,68 @@ def test_sensor_reports_the_fork_branches(junction) -> None:
     for b_left, b_right in branches:
         assert np.hypot(*(b_left[0] - left[0])) < 0.05 and np.hypot(*(b_right[0] - right[0])) < 0.05
     assert sensor.branches(drive.ego, fork + 1.0, 30.0, 0.1) == []
+
+
+# --- the association metrics in the report ----------------------------------------------------
+
+def test_report_counts_kinds_and_confidence_curve() -> None:
+    """Six decisions: own (0.9) and branch (0.5) true fusions, an adjacent false fusion (0.4),
+    a rejected valid pair and two rejected invalid ones: precision 2/3, recall 2/3; at
+    threshold 0.5 precision 1 and recall 2/3; at 0.6 precision 1, recall 1/3; the metrics.json
+    record round-trips."""
+    from cold_maps.evaluation.report import CONFIDENCE_THRESHOLDS, FrameRecord, ScenarioAccumulator, ScenarioKey
+    from cold_maps.evaluation.report import ScenarioResult, association_markdown
+
+    acc = ScenarioAccumulator(ScenarioKey("m", "spline", "hermite", 20.0, "left"))
+    fused = np.array([0.1])
+    acc.add(FrameRecord(0, 0.0, "ego", "coop", fused, predicted_fusible=True, truly_fusible=True, relation="own",
+                        confidence=0.9))
+    acc.add(FrameRecord(1, 0.1, "ego", "turn", fused, predicted_fusible=True, truly_fusible=True, relation="branch",
+                        confidence=0.5))
+    acc.add(FrameRecord(2, 0.2, "ego", "adj", fused, predicted_fusible=True, truly_fusible=False,
+                        relation="adjacent", confidence=0.4))
+    acc.add(FrameRecord(3, 0.3, "ego", "coop", np.empty(0), rejected="other_lane", predicted_fusible=False,
+                        truly_fusible=True, relation="own", confidence=0.0))
+    for frame, kind in ((4, "opposite"), (5, "behind")):
+        acc.add(FrameRecord(frame, 0.4, "ego", kind, np.empty(0), rejected="other_lane", predicted_fusible=False,
+                            truly_fusible=False, relation=kind, confidence=0.0))
+    result = acc.result()
+    assert result.fusibility_precision == pytest.approx(2 / 3) and result.fusibility_recall == pytest.approx(2 / 3)
+    assert result.fused_by_relation == (("branch", 1), ("own", 1))
+    assert result.false_by_relation == (("adjacent", 1),)
+    curve = {t: (p, r) for t, p, r in result.by_confidence}
+    assert set(curve) == set(CONFIDENCE_THRESHOLDS)
+    assert curve[0.0] == pytest.approx((2 / 3, 2 / 3))
+    assert curve[0.5] == pytest.approx((1.0, 2 / 3))
+    assert curve[0.6] == pytest.approx((1.0, 1 / 3))
+    assert math.isnan(curve[1.0][0]) and curve[1.0][1] == 0.0
+    again = ScenarioResult.from_dict(result.to_dict())
+    assert again.fused_by_relation == result.fused_by_relation and again.false_by_relation == result.false_by_relation
+    assert [t for t, _, _ in again.by_confidence] == list(CONFIDENCE_THRESHOLDS)
+    text = association_markdown([result])
+    assert "adjacent: 1" in text and "| 0.667 | 0.667 | 1 | 1 |" in text and "1.000 / 0.667" in text
+
+
+def test_recording_round_trip_of_multi_lane_detections(tmp_path) -> None:
+    """Neighbour lanes, road edges and branches written to /cold/detections come back as the
+    fusion objects they were; a single-lane detection carries none of the optional keys."""
+    from cold_maps.recording.recorder import Recorder, read_detections
+
+    ego = lane_detection(S_BEND, 50.0, 1, 2, 1)
+    fork = fusion.LaneBranch(np.array([[10.0, 0.0], [20.0, -1.0]]), np.array([[10.0, -3.5], [20.0, -4.5]]))
+    multi = fusion.LaneDetection(ego.pose, ego.left, ego.right, neighbours=ego.neighbours, road_edges=ego.road_edges,
+                                 branches=(fork,))
+    path = tmp_path / "run.mcap"
+    with Recorder(path) as recorder:
+        for sender, detection in (("ego", multi), ("coop", ego), ("plain", lane_detection(S_BEND, 90.0, 1, 2))):
+            pose = (detection.pose.x, detection.pose.y, detection.pose.yaw)
+            recorder.write_detection(0.0, 0, sender, pose, detection.left, detection.right, lanes=detection)
+    (_, found), = list(read_detections(path))
+    by_sender = {d["sender"]: d for d in found}
+    got = by_sender["ego"]
+    assert got["road_edges"] == fusion.RoadEdges(0, -1, 0, -1)  # left lane of two
+    assert [n.index for n in got["neighbours"]] == [-1]
+    assert np.array_equal(got["neighbours"][0].left, multi.neighbours[0].left)
+    assert np.array_equal(got["branches"][0].right, fork.right)
+    assert by_sender["coop"]["branches"] == ()
+    assert by_sender["plain"]["neighbours"] == () and by_sender["plain"]["road_edges"] is None
