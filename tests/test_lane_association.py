@@ -362,3 +362,20 @@ def test_recording_round_trip_of_multi_lane_detections(tmp_path) -> None:
     assert np.array_equal(got["branches"][0].right, fork.right)
     assert by_sender["coop"]["branches"] == ()
     assert by_sender["plain"]["neighbours"] == () and by_sender["plain"]["road_edges"] is None
+
+
+def test_cold_eval_lanes_option(tmp_path, capsys) -> None:
+    """``cold-eval --lanes 1`` records the road edges with every detection and reports the
+    association; an out-of-range ``--lanes`` is refused by the parser."""
+    from cold_maps.cli import evaluate
+    from cold_maps.recording.recorder import read_detections
+
+    out = tmp_path / "out"
+    assert evaluate.main(["--map", str(bundled_map("junction")), "--frames", "3", "--routes", "1", "--gaps", "30",
+                          "--interpolation", "hermite", "--lanes", "1", "--no-plots", "--out", str(out)]) == 0
+    detections = [d for _, group in read_detections(out / "run.mcap") for d in group]
+    assert detections and all(isinstance(d["road_edges"], fusion.RoadEdges) for d in detections)
+    assert "## Lane association" in (out / "summary.md").read_text()
+    with pytest.raises(SystemExit) as exit_info:
+        evaluate.main(["--map", "x.xodr", "--lanes", "9"])
+    assert exit_info.value.code == 2 and "--lanes" in capsys.readouterr().err
