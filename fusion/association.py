@@ -50,6 +50,12 @@ CONFIDENCE_LANE_COUNT_CHANGE: Final[float] = 0.5
 """The lane index agrees on one side and not on the other (a lane opens or ends in the gap)."""
 
 
+FORK_TIE: Final[float] = 0.02
+"""Costs (:func:`_fit_cost`: m for a convoy, rad + lane widths across a gap) closer than
+this make a branch and the ego's own lane equally good continuations: the coop's lane is
+ambiguous (lanes that still overlap just past a fork)."""
+
+
 @dataclass(frozen=True)
 class Association:
     """The lane association of one pair.
@@ -141,14 +147,15 @@ def _fit_cost(ego_lane: Lane, coop_lane: Lane, convoy: bool) -> float:
 
 
 def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> str:
-    """Why the coop lane continues a lane leaving the ego's inside its detection better than
-    the ego's own lane (:func:`_fit_cost`), or ""."""
+    """Why the coop lane continues a lane leaving the ego's inside its detection as well as
+    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or ""."""
     main = _fit_cost(own[0], own[1], convoy)
     for branch in ego.branches:
         cost = _fit_cost((branch.left, branch.right), own[1], convoy)
-        if cost < main:
+        if cost <= main + FORK_TIE:
+            what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"
             return (f"coop lane continues the lane that leaves the ego's lane at a fork inside the ego detection "
-                    f"better ({cost:.2f} vs {main:.2f}): other branch, another lane")
+                    f"{what} ({cost:.2f} vs {main:.2f}), another lane")
     return ""
 
 
