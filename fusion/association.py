@@ -13,7 +13,8 @@ and no other shift explains the detections as well:
 - lane index from the road edge: on each side where both see the edge, the number of lanes
   between the lane and the edge must agree (a side where one sees the edge and the other
   more lanes than that beyond its lane contradicts too); a side that contradicts scores −1,
-  one that agrees +1, an unknown one 0;
+  one that agrees +1, an unknown one 0. A contradiction is only taken for a lane that opens
+  or ends in the gap when the other side agrees; otherwise the coop is in another lane;
 - forks: when a lane leaves the ego's lane inside its detection and the coop start is
   better explained by that branch (less turn, less lateral excess), the coop is on the other
   branch.
@@ -184,8 +185,10 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
 
     pairs = _Pairs(ego, coop, ego_lanes, coop_lanes, convoy, params)
     left0, right0 = sides(0)
-    if left0 < 0 and right0 < 0:
-        return Association("the lane index from the road edge differs on both sides: another lane", 0.0)
+    if min(left0, right0) < 0 and max(left0, right0) < 1:
+        sides_off = "both sides" if max(left0, right0) < 0 else ("the left" if left0 < 0 else "the right")
+        return Association(f"the lane index from the road edge differs on {sides_off} and agrees on neither: "
+                           "another lane", 0.0)
     reach = max(map(abs, (*ego_lanes, *coop_lanes))) + 1
     tested, alternatives = False, []
     for shift in (s for n in range(1, reach + 1) for s in (n, -n)):
