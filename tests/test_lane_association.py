@@ -379,3 +379,22 @@ def test_cold_eval_lanes_option(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit) as exit_info:
         evaluate.main(["--map", "x.xodr", "--lanes", "9"])
     assert exit_info.value.code == 2 and "--lanes" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("ego_left", "coop_left", "kind", "confidence"), [
+    (None, None, "none", 0.0),   # right side contradicts, left unknown: another lane
+    (1, 1, "spline", 0.5),       # left agrees: a lane opened on the right in the gap
+    (1, 0, "none", 0.0),         # both sides contradict
+])
+def test_road_edge_contradiction(ego_left, coop_left, kind, confidence) -> None:
+    """Same lane on a straight, so geometry passes; only the road edges differ: the ego sees
+    the right edge beside its lane, the coop one lane further right."""
+    road = ROADS["straight"]
+    ego, coop = lane_detection(road, 20.0, 0, 1), lane_detection(road, 80.0, 0, 1)
+    ego = fusion.LaneDetection(ego.pose, ego.left, ego.right, road_edges=fusion.RoadEdges(ego_left, 0, ego_left, 0))
+    coop = fusion.LaneDetection(coop.pose, coop.left, coop.right,
+                                road_edges=fusion.RoadEdges(coop_left, -1, coop_left, -1))
+    result = fusion.fuse(ego, coop, params=PARAMS)
+    assert (result.kind, result.confidence) == (kind, confidence)
+    if kind == "none":
+        assert "road edge differs" in result.reason
