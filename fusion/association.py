@@ -16,8 +16,12 @@ and no other shift explains the detections as well:
   one that agrees +1, an unknown one 0. A contradiction is only taken for a lane that opens
   or ends in the gap when the other side agrees; otherwise the coop is in another lane;
 - forks: when a lane leaves the ego's lane inside its detection and the coop start is
-  better explained by that branch (less turn, less lateral excess), the coop is on the other
-  branch.
+  explained by that branch as well or better (less turn, less lateral excess), the coop is on
+  the other branch (or ambiguous);
+- best continuation: when the road edges contradict on one side (a lane opens or ends in the
+  gap, so they alone are ambiguous), the ego's lane must continue into the coop's lane 0
+  better than into any other lane the coop holds, and the coop's lane 0 continue the ego's
+  lane 0 better than any other ego lane.
 """
 
 from __future__ import annotations
@@ -160,6 +164,21 @@ def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> 
     return ""
 
 
+def _better_neighbour(ego_lanes: Mapping[int, Lane], coop_lanes: Mapping[int, Lane], convoy: bool) -> str:
+    """Why the ego's lane continues into another of the coop's lanes, or the coop's lane
+    continues another of the ego's lanes, better than the two lanes 0 (:func:`_fit_cost`, by
+    more than :data:`FORK_TIE`), or "" (a lane that opens or ends in the gap leaves the road
+    edges ambiguous; the best continuation decides)."""
+    main = _fit_cost(ego_lanes[0], coop_lanes[0], convoy)
+    for index, lane in coop_lanes.items():
+        if index and _fit_cost(ego_lanes[0], lane, convoy) < main - FORK_TIE:
+            return f"the ego's lane continues into the coop's lane {index:+d} better: another lane"
+    for index, lane in ego_lanes.items():
+        if index and _fit_cost(lane, coop_lanes[0], convoy) < main - FORK_TIE:
+            return f"the coop's lane continues the ego's lane {index:+d} better: another lane"
+    return ""
+
+
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
               params: FusionParams) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
@@ -197,6 +216,10 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
         support = sides(shift)
         if plausible and min(support) >= 0:
             alternatives.append((sum(support), shift))
+    if min(left0, right0) < 0:
+        reason = _better_neighbour(ego_lanes, coop_lanes, convoy)
+        if reason:
+            return Association(reason, 0.0)
     score0 = left0 + right0
     if alternatives:
         best, shift = max(alternatives)

@@ -398,3 +398,32 @@ def test_road_edge_contradiction(ego_left, coop_left, kind, confidence) -> None:
     assert (result.kind, result.confidence) == (kind, confidence)
     if kind == "none":
         assert "road edge differs" in result.reason
+
+
+def _straight_lane(x0: float, centre_y: float, width: float = W) -> tuple[np.ndarray, np.ndarray]:
+    x = np.arange(x0, x0 + 30.0 + 1e-9, 0.1)
+    return (np.column_stack((x, np.full_like(x, centre_y + width / 2))),
+            np.column_stack((x, np.full_like(x, centre_y - width / 2))))
+
+
+@pytest.mark.parametrize("coop_in_new_lane", [True, False])
+def test_lane_opening_in_the_gap_takes_the_best_continuation(coop_in_new_lane: bool) -> None:
+    """A lane opens on the left inside the gap (its centre only 2 m left of the ego's lane at
+    the coop, so geometry alone passes both; both coops see one edge agree and one contradict):
+    the coop whose own lane is the new one is rejected because the ego's lane continues into
+    the coop's right neighbour better; the coop in the continued lane is fused (0.5)."""
+    from fusion.association import CONFIDENCE_LANE_COUNT_CHANGE, associate
+
+    pose = fusion.Pose2D(0.0, 0.0, 0.0)
+    ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0), road_edges=fusion.RoadEdges(0, 0, 0, 0))
+    new, old = _straight_lane(50.0, 2.0, 2.0), _straight_lane(50.0, 0.0)
+    if coop_in_new_lane:
+        own, neighbour, edges = new, fusion.NeighbourLane(-1, *old), fusion.RoadEdges(0, -1, 0, -1)
+    else:
+        own, neighbour, edges = old, fusion.NeighbourLane(1, *new), fusion.RoadEdges(1, 0, 1, 0)
+    coop = fusion.LaneDetection(pose, *own, neighbours=(neighbour,), road_edges=edges)
+    result = associate(ego, coop, ((ego.left, ego.right), (coop.left, coop.right)), False, "open", PARAMS)
+    if coop_in_new_lane:
+        assert result.confidence == 0.0 and "continues into the coop's lane -1 better" in result.reason
+    else:
+        assert (result.reason, result.confidence) == ("", CONFIDENCE_LANE_COUNT_CHANGE)
