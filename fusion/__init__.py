@@ -12,9 +12,12 @@ from fusion.api import DEFAULT_PARAMS, fuse, is_fusible
 from fusion.errors import BezierDecodeError, FusionError, InvalidDetectionError, InvalidParameterError
 from fusion.chain import ChainLink, ChainResult, fuse_chain
 from fusion.history import fuse_history
-from fusion.types import FusionParams, FusionResult, LaneDetection, LaneHistory, NDArrayFloat, NDArrayInt8, Pose2D, Source
+from fusion.types import (FusionParams, FusionResult, LaneBranch, LaneDetection, LaneHistory, NDArrayFloat,
+                          NDArrayInt8, NeighbourLane, Pose2D, RoadEdges, Source)
 
 __all__ = [
-    "DEFAULT_PARAMS", "bezier", "ChainLink", "ChainResult", "BezierDecodeError", "FusionError", "FusionParams", "FusionResult", "InvalidDetectionError",
-    "InvalidParameterError", "LaneDetection", "LaneHistory", "NDArrayFloat", "NDArrayInt8", "Pose2D", "Source", "fuse", "fuse_chain", "fuse_history", "is_fusible",
+    "DEFAULT_PARAMS", "bezier", "BezierDecodeError", "ChainLink", "ChainResult", "FusionError", "FusionParams",
+    "FusionResult", "InvalidDetectionError", "InvalidParameterError", "LaneBranch", "LaneDetection", "LaneHistory",
+    "NDArrayFloat", "NDArrayInt8", "NeighbourLane", "Pose2D", "RoadEdges", "Source", "fuse", "fuse_chain",
+    "fuse_history", "is_fusible",
 ]

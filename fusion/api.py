@@ -7,13 +7,15 @@ one transform, the result to the world frame in another); all checks are frame-i
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Final, Sequence
 
 import numpy as np
 
+from fusion.association import Association, associate
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
-from fusion.fusibility import LaneEnds, geometric_check, lane_ends, paper_check, relative_pose
+from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_check, relative_pose
 from fusion.geometry import EndFit, to_world, transform
 from fusion.spline import hermite_lane, lane_end_fits, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
@@ -67,23 +69,29 @@ def _convoy_reason(x_rel: float, starts: tuple[OverlapStart, OverlapStart], para
 
 
 def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams, borders: Borders,
-            x_rel: float, fits: _EndFits) -> tuple[FusionKind, str, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+            x_rel: float, fits: _EndFits) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
     if mode not in _MODES:
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
         raise InvalidParameterError(f"params must be a FusionParams, got {type(params).__name__}")
     ends = lane_ends(*borders)
     kind: FusionKind = ("convoy" if ends.gap_m <= 0.0 else "spline") if mode == "auto" else mode
+    el, er, cl, cr = borders
+    starts = None
     if kind == "spline":
         if params.fusibility == "paper":
-            return kind, paper_check(ego.pose, coop.pose, ends, params), ends, None
-        return kind, geometric_check(ego.pose, coop.pose, ends, params, fits), ends, None
-    if ends.gap_m > 0.0:
-        return kind, f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", ends, None
-    el, er, cl, cr = borders
-    n_left = el.shape[0]
-    starts = (overlap_start(el, cl, ego.arclength[:n_left]), overlap_start(er, cr, ego.arclength[n_left:]))
-    return kind, _convoy_reason(x_rel, starts, params), ends, starts
+            reason, evidence = paper_check(ego.pose, coop.pose, ends, params), "open"
+        else:
+            reason, evidence = geometric_assessment(ego.pose, coop.pose, ends, params, fits)
+    elif ends.gap_m > 0.0:
+        reason, evidence = f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", "cone"
+    else:
+        n_left = el.shape[0]
+        starts = (overlap_start(el, cl, ego.arclength[:n_left]), overlap_start(er, cr, ego.arclength[n_left:]))
+        reason, evidence = _convoy_reason(x_rel, starts, params), "cone"
+    if reason:
+        return kind, Association(reason, 0.0), ends, starts
+    return kind, associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params), ends, starts
 
 
 def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,
@@ -92,15 +100,24 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
 
     In ``mode="auto"`` an overlap of the two detections is checked for convoy fusion, a gap
     for spline fusion with ``params.fusibility`` (``"geometric"`` by default, see
-    :func:`fusion.fusibility.geometric_check`; ``"paper"`` for the paper's pose cases).
+    :func:`fusion.fusibility.geometric_check`; ``"paper"`` for the paper's pose cases); then
+    the lane association (:func:`fusion.association.associate`, which uses neighbour lanes,
+    road edges and forks when the detections carry them).
     """
+    association = assess(ego, coop, params, mode=mode)
+    return not association.reason, association.reason
+
+
+def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,
+           *, mode: str = "auto") -> Association:
+    """The fusibility decision of :func:`is_fusible` with its confidence in [0, 1] and the
+    neighbour lanes matched (:class:`fusion.association.Association`)."""
     borders, x_rel = _ego_frame_borders(ego, coop)
-    _, reason, _, _ = _decide(ego, coop, mode, params, borders, x_rel, _EndFits(borders, params))
-    return not reason, reason
+    return _decide(ego, coop, mode, params, borders, x_rel, _EndFits(borders, params))[1]
 
 
-def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind, gap_m: float,
-            reason: str = "") -> FusionResult:
+def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
+                     gap_m: float, reason: str = "") -> FusionResult:
     """Result from ego-frame ``parts``, the left border's then as many of the right border's, with
     one :class:`Source` per part: one concatenation and one transform to the world frame."""
     counts = [points.shape[0] for points in parts]
@@ -125,17 +142,26 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
     borders, x_rel = _ego_frame_borders(ego, coop)
     fits = _EndFits(borders, params)
-    kind, reason, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
+    kind, association, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
+    el, er, _, _ = borders
+    if association.reason:
+        return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, association.reason)
+    result = _fused(ego, coop, borders, fits, kind, starts, interpolation, params)
+    lanes = tuple(_matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
+    return replace(result, gap_m=ends.gap_m, confidence=association.confidence, lanes=lanes)
+
+
+def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: _EndFits, kind: FusionKind,
+           starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str, params: FusionParams) -> FusionResult:
+    """The fused lane of a pair found fusible (``kind``, the convoy overlap ``starts``)."""
     el, er, cl, cr = borders
-    if reason:
-        return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
     if kind == "convoy":
         assert starts is not None
         w, blend = params.coop_weight, params.convoy_blend_offset_m
         n_left = cl.shape[0]
         parts, sources = zip(*convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
                              *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend))
-        return ego_frame_result(ego, parts, np.array(sources, dtype=np.int8), "convoy", ends.gap_m)
+        return ego_frame_result(ego, parts, np.array(sources, dtype=np.int8), "convoy", 0.0)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(
@@ -143,4 +169,18 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
             params.spacing_m)
     else:
         gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
-    return ego_frame_result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", ends.gap_m)
+    return ego_frame_result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", 0.0)
+
+
+def _matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: FusionKind, interpolation: str,
+                  params: FusionParams) -> tuple[int, NDArrayFloat, NDArrayFloat]:
+    """Neighbour lane ``index`` of both detections fused like their own lanes (world frame)."""
+    pair = [next(lane for lane in detection.neighbours if lane.index == index) for detection in (ego, coop)]
+    lanes = [LaneDetection(detection.pose, lane.left, lane.right) for detection, lane in zip((ego, coop), pair)]
+    borders, _ = _ego_frame_borders(*lanes)
+    starts = None
+    if kind == "convoy":
+        (el, er, cl, cr), n_left = borders, borders[0].shape[0]
+        starts = (overlap_start(el, cl, lanes[0].arclength[:n_left]), overlap_start(er, cr, lanes[0].arclength[n_left:]))
+    fused = _fused(lanes[0], lanes[1], borders, _EndFits(borders, params), kind, starts, interpolation, params)
+    return index, fused.left, fused.right

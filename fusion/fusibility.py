@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Final, Sequence
+from typing import Callable, Final, Literal, Sequence
 
 
 from fusion.geometry import EndFit, end_direction, wrap_angle
@@ -24,6 +24,11 @@ _CURVATURE_SLACK: Final[float] = 0.02
 _CURVED_SIGMAS: Final[float] = 4.0
 _ARC_TOLERANCE_LANES: Final[float] = 0.5
 _CONE_DECIDES_LANES: Final[float] = 0.4
+_TANGENT_SLACK_M: Final[float] = 2.0
+"""How far [m] an end's arc may meet the other end's heading beyond that end (the arc
+radius ± 2 % + 3σ, clothoid transitions) before the prediction counts as missed."""
+
+Evidence = Literal["cone", "arc", "open", "s_bend"]
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,20 @@ def paper_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionParams)
 
 def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionParams,
                     end_fits: Callable[[], Sequence[EndFit]] | None = None) -> str:
-    """Curve-aware fusibility of a gap; returns the rejection reason or ``""``.
+    """Curve-aware fusibility of a gap; returns the rejection reason or ``""`` (the reason
+    of :func:`geometric_assessment`)."""
+    return geometric_assessment(ego, coop, ends, params, end_fits)[0]
+
+
+def geometric_assessment(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionParams,
+                         end_fits: Callable[[], Sequence[EndFit]] | None = None) -> tuple[str, Evidence]:
+    """Curve-aware fusibility of a gap: ``(reason, evidence)``, reason ``""`` when fusible.
+
+    ``evidence`` says which rule decided (see :data:`Evidence`): ``"cone"`` when the cone of
+    rule 3 is narrower than 0.4 lane widths (a straight or one arc across the gap: the
+    neighbour lane lies a lane width outside it), ``"arc"`` when rule 4 applied, ``"open"``
+    when neither (the radius inside the gap is open), ``"s_bend"`` when the coop start passed
+    only with the S-bend shift.
 
     The rule compares the *detections*, not the vehicle poses, so a coop vehicle on the same
     lane in the middle of a curve passes. With the ego end P0 (heading ψ0), the coop start
@@ -136,31 +154,46 @@ def geometric_check(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: FusionPar
     """
     x_rel, _, _ = relative_pose(ego, coop)
     if x_rel <= 0.0:
-        return f"coop vehicle is not ahead of the ego (x_rel = {x_rel:.2f} m)"
+        return f"coop vehicle is not ahead of the ego (x_rel = {x_rel:.2f} m)", "cone"
     reason = _gap_reason(ends, params)
     if reason:
-        return reason
-    t0, t1 = ends.t_end, ends.t_start
-    turn = math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
+        return reason, "cone"
+    turn, excess = cone_excess(ends)
     if abs(turn) > math.pi / 2 + params.t_psi_rad:
-        return f"coop lane heading differs by {math.degrees(turn):.1f} deg (more than 90 deg + t_psi): not the same direction"
-    d = (ends.p_start[0] - ends.p_end[0], ends.p_start[1] - ends.p_end[1])
-    phi = math.atan2(t0[0] * d[1] - t0[1] * d[0], t0[0] * d[0] + t0[1] * d[1])
-    lo, hi = min(0.0, turn), max(0.0, turn)
-    outside = max(lo - phi, phi - hi, 0.0)
-    excess = ends.gap_m * math.sin(min(outside, math.pi / 2))
+        return (f"coop lane heading differs by {math.degrees(turn):.1f} deg (more than 90 deg + t_psi): "
+                "not the same direction"), "cone"
+    evidence: Evidence = "cone"
     if excess > 0.5 * ends.width_m:
         shift = s_bend_shift(ends.gap_m, end_fits()) if end_fits is not None else 0.0
         if excess > 0.5 * ends.width_m + shift:
             return (f"coop lane start lies {excess:.2f} m laterally outside the turn between the two end headings "
-                    f"(more than half the lane width {ends.width_m:.2f} m + S-bend shift {shift:.2f} m): another lane")
+                    f"(more than half the lane width {ends.width_m:.2f} m + S-bend shift {shift:.2f} m): another lane",
+                    "cone")
+        evidence = "s_bend"
     cone_width = ends.gap_m * math.sin(min(abs(turn), math.pi / 2))
-    if end_fits is not None and cone_width > _CONE_DECIDES_LANES * ends.width_m:
-        mismatch = arc_mismatch(ends, end_fits())
-        if mismatch > _ARC_TOLERANCE_LANES * ends.width_m:
-            return (f"a detection end lies on an arc that puts the coop start {mismatch:.2f} m off "
-                    f"(more than {_ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m): another lane")
-    return ""
+    if cone_width > _CONE_DECIDES_LANES * ends.width_m and evidence == "cone":
+        evidence = "open"
+        predictions = arc_predictions(ends, end_fits()) if end_fits is not None else []
+        if predictions:
+            evidence = "arc"
+            mismatch = min(predictions)
+            if mismatch > _ARC_TOLERANCE_LANES * ends.width_m:
+                return (f"a detection end lies on an arc that puts the coop start {mismatch:.2f} m off "
+                        f"(more than {_ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m, or the "
+                        "arc meets the other end's heading beyond that end): another lane", "arc")
+    return "", evidence
+
+
+def cone_excess(ends: LaneEnds) -> tuple[float, float]:
+    """``(turn, excess)``: the heading change Δψ from the ego end to the coop start [rad] and
+    how far [m] the coop start lies laterally outside the cone of the two end headings (rule 3
+    of :func:`geometric_assessment`; 0 inside)."""
+    t0, t1 = ends.t_end, ends.t_start
+    turn = math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
+    d = (ends.p_start[0] - ends.p_end[0], ends.p_start[1] - ends.p_end[1])
+    phi = math.atan2(t0[0] * d[1] - t0[1] * d[0], t0[0] * d[0] + t0[1] * d[1])
+    outside = max(min(0.0, turn) - phi, phi - max(0.0, turn), 0.0)
+    return turn, abs(ends.gap_m) * math.sin(min(outside, math.pi / 2))
 
 
 def _mean_heading(a: EndFit, b: EndFit) -> float:
@@ -193,15 +226,23 @@ def s_bend_shift(gap_m: float, fits: Sequence[EndFit]) -> float:
 
 def _arc_line_mismatch(p_from: tuple[float, float], psi_from: float, p_to: tuple[float, float], psi_to: float,
                        turn: float, radii: tuple[float, float]) -> float:
-    """Smallest lateral offset of ``p_to`` from the straight (heading ``psi_to``) that follows an
+    """Smallest mismatch [m] of ``p_to`` with the straight (heading ``psi_to``) that follows an
     arc leaving ``p_from`` at ``psi_from`` and turning by ``turn``, over the radii in ``radii``
-    [m]. The offset is affine in the radius, so the minimum is taken in closed form."""
+    [m]: its lateral offset from that straight, or, when ``p_to`` lies behind the arc's end
+    along ``psi_to`` by more than :data:`_TANGENT_SLACK_M` (the lane would have to leave the
+    arc before reaching ``p_to``'s heading: the curve of ``p_to``'s lane began before
+    ``p_from``), that shortfall beyond the slack if larger. Both are affine in the radius, so
+    the minimum is taken over the interval ends."""
     vx, vy = math.sin(psi_from + turn) - math.sin(psi_from), math.cos(psi_from) - math.cos(psi_from + turn)
     dx, dy = p_to[0] - p_from[0], p_to[1] - p_from[1]
     c, s = math.cos(psi_to), math.sin(psi_to)
-    base, slope = c * dy - s * dx, (c * vy - s * vx) * math.copysign(1.0, turn)
+    sign = math.copysign(1.0, turn)
+    base, slope = c * dy - s * dx, (c * vy - s * vx) * sign
     lo, hi = base - slope * radii[0], base - slope * radii[1]
-    return 0.0 if lo * hi <= 0.0 else min(abs(lo), abs(hi))
+    lateral = 0.0 if lo * hi <= 0.0 else min(abs(lo), abs(hi))
+    along_base, along_slope = c * dx + s * dy, (c * vx + s * vy) * sign
+    along = max(along_base - along_slope * radii[0], along_base - along_slope * radii[1])
+    return max(lateral, -along - _TANGENT_SLACK_M)
 
 
 def _end_arc_radii(k: float, sd: float, turn: float, gap_m: float) -> tuple[float, float] | None:
@@ -219,27 +260,34 @@ def _end_arc_radii(k: float, sd: float, turn: float, gap_m: float) -> tuple[floa
 
 
 def arc_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
-    """Lateral mismatch [m] of the two detection ends with the arc a curved end lies on.
+    """Lateral mismatch [m] of the two detection ends with the arc a curved end lies on: the
+    smallest of :func:`arc_predictions`, 0 when there is none."""
+    return min(arc_predictions(ends, fits), default=0.0)
+
+
+def arc_predictions(ends: LaneEnds, fits: Sequence[EndFit]) -> list[float]:
+    """Mismatches [m] of the two detection ends with the arcs the curved ends lie on.
 
     A detection end that is clearly curved the way the lane turns (see
     :func:`_end_arc_radii`; curvature from the least-squares ``fits`` of (ego left, ego right,
     coop left, coop right), ± 2 % + 3σ) predicts the gap: the lane goes on along that arc
     until it reaches the other end's heading, then straight. From a curved ego end the coop
     start must lie on that straight; from a curved coop start (followed backwards) the ego
-    end must. This covers a curve that starts or ends inside the gap (one end straight) and
-    both ends in one curve; the adjacent lane lies a lane width off either way, the same
-    lane within a clothoid shift (L²/24R). Two curved ends whose radius intervals overlap lie
-    on one arc (its radii: the intersection); otherwise (a compound curve) the smaller of the
-    two mismatches counts. 0 when no end applies, when the ends curve opposite ways (an
-    S-bend in the gap) or when there is no gap.
+    end must (:func:`_arc_line_mismatch`, which also misses an end lying behind where the arc
+    reaches its heading). This covers a curve that starts or ends inside the gap (one end
+    straight) and both ends in one curve; the adjacent lane lies a lane width off either way,
+    the same lane within a clothoid shift (L²/24R). Two curved ends whose radius intervals
+    overlap lie on one arc (its radii: the intersection; one prediction); otherwise (a
+    compound curve) one per curved end. Empty when no end applies, when the ends curve
+    opposite ways (an S-bend in the gap) or when there is no gap.
     """
     if ends.gap_m <= 0.0:
-        return 0.0
+        return []
     psi0, psi1 = _mean_heading(fits[0], fits[1]), _mean_heading(fits[2], fits[3])
     turn = wrap_angle(psi1 - psi0)
     (k0, s0), (k1, s1) = _curvature(fits[0], fits[1]), _curvature(fits[2], fits[3])
     if _opposite_curves(k0, s0, k1, s1):
-        return 0.0
+        return []
     ego_radii, coop_radii = _end_arc_radii(k0, s0, turn, ends.gap_m), _end_arc_radii(k1, s1, turn, ends.gap_m)
     if ego_radii is not None and coop_radii is not None:
         common = (max(ego_radii[0], coop_radii[0]), min(ego_radii[1], coop_radii[1]))
@@ -251,4 +299,4 @@ def arc_mismatch(ends: LaneEnds, fits: Sequence[EndFit]) -> float:
     if coop_radii is not None:
         mismatches.append(_arc_line_mismatch(ends.p_start, psi1 + math.pi, ends.p_end, psi0 + math.pi, -turn,
                                              coop_radii))
-    return min(mismatches, default=0.0)
+    return mismatches

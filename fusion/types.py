@@ -103,6 +103,49 @@ def stacked_arclength(points: NDArrayFloat, n_first: int) -> NDArrayFloat:
 
 
 @dataclass(frozen=True)
+class NeighbourLane:
+    """A lane beside the sender's lane, driven the same way, detected with it.
+
+    Fields:
+        index: where it lies: ``+k`` is the k-th lane to the left, ``-k`` the k-th to the
+            right of the sender's lane (k >= 1, driving direction).
+        left, right: its borders, ``(N, 2)`` float64 in the sender's *vehicle* frame [m],
+            driving order, only where the lane exists in the detection window (validated like
+            :class:`LaneDetection`'s).
+        at_start, at_end: whether the lane exists at the detection's first / last
+            cross-section (at the sender, and one sensor range ahead).
+    """
+
+    index: int
+    left: NDArrayFloat
+    right: NDArrayFloat
+    at_start: bool = True
+    at_end: bool = True
+
+    def __post_init__(self) -> None:
+        if isinstance(self.index, bool) or not isinstance(self.index, (int, np.integer)) or self.index == 0:
+            raise InvalidDetectionError(f"NeighbourLane.index must be a non-zero integer, got {self.index!r}")
+        object.__setattr__(self, "left", validated_border(f"NeighbourLane {self.index} left", self.left))
+        object.__setattr__(self, "right", validated_border(f"NeighbourLane {self.index} right", self.right))
+
+
+@dataclass(frozen=True)
+class LaneBranch:
+    """A lane that leaves the sender's lane at a fork inside the detection window.
+
+    Fields: ``left``, ``right`` its borders from the fork on, ``(N, 2)`` float64 in the
+    sender's *vehicle* frame [m], driving order (validated like :class:`LaneDetection`'s).
+    """
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "left", validated_border("LaneBranch left", self.left))
+        object.__setattr__(self, "right", validated_border("LaneBranch right", self.right))
+
+
+@dataclass(frozen=True)
 class LaneHistory:
     """The lane a vehicle perceived over its last metres of travel, registered with its own
     odometry.
@@ -123,6 +166,31 @@ class LaneHistory:
 
 
 @dataclass(frozen=True)
+class RoadEdges:
+    """Where the road edge lies: the lane whose outer border has no further driving lane of
+    the same direction beyond it, at the detection's first (``start_*``) and last (``end_*``)
+    cross-section, on the ``left`` and ``right`` (driving direction).
+
+    Fields: ``start_left``, ``start_right``, ``end_left``, ``end_right``: that lane's index
+    (0 = the sender's lane, ``±k`` = :attr:`NeighbourLane.index`; >= 0 on the left, <= 0 on
+    the right), or None when the edge was not seen (further lanes than the sensor detects).
+    """
+
+    start_left: int | None = None
+    start_right: int | None = None
+    end_left: int | None = None
+    end_right: int | None = None
+
+    def __post_init__(self) -> None:
+        for name, sign in (("start_left", 1), ("start_right", -1), ("end_left", 1), ("end_right", -1)):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                      or value * sign < 0):
+                raise InvalidDetectionError(f"RoadEdges.{name} must be None or an integer "
+                                            f"{'>= 0' if sign > 0 else '<= 0'}, got {value!r}")
+
+
+@dataclass(frozen=True)
 class LaneDetection:
     """One vehicle's detection of one lane.
 
@@ -137,6 +205,11 @@ class LaneDetection:
         sender: identifier of the sending vehicle (informative).
         history: the lane the sender perceived behind it (:class:`LaneHistory`, same frame),
             or None (default); :func:`fusion.fuse_history` bridges a gap with it.
+        neighbours: lanes beside the sender's lane driven the same way (:class:`NeighbourLane`,
+            distinct indices; empty = the sender's lane only, as a single-lane sensor).
+        road_edges: where the road edges lie (:class:`RoadEdges`), or None when unknown.
+        branches: lanes leaving the sender's lane at a fork inside the window
+            (:class:`LaneBranch`; a multi-lane sensor reports them with the neighbours).
         points: both borders stacked, left then right, ``(N_left + N_right, 2)`` [m, vehicle
             frame]; ``left`` and ``right`` are read-only views of it (set on construction).
         arclength: ``(N_left + N_right,)`` arc length of every point of ``points`` along its
@@ -150,6 +223,9 @@ class LaneDetection:
     stamp: float = 0.0
     sender: str = ""
     history: LaneHistory | None = field(default=None, repr=False, compare=False)
+    neighbours: tuple[NeighbourLane, ...] = ()
+    road_edges: RoadEdges | None = None
+    branches: tuple[LaneBranch, ...] = ()
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
@@ -168,6 +244,21 @@ class LaneDetection:
         if self.history is not None and not isinstance(self.history, LaneHistory):
             raise InvalidDetectionError(
                 f"LaneDetection.history must be a LaneHistory or None, got {type(self.history).__name__}")
+        neighbours = tuple(self.neighbours)
+        for lane in neighbours:
+            if not isinstance(lane, NeighbourLane):
+                raise InvalidDetectionError(f"LaneDetection.neighbours must hold NeighbourLane, got {type(lane).__name__}")
+        if len({lane.index for lane in neighbours}) != len(neighbours):
+            raise InvalidDetectionError("LaneDetection.neighbours: two lanes share an index")
+        object.__setattr__(self, "neighbours", neighbours)
+        branches = tuple(self.branches)
+        for branch in branches:
+            if not isinstance(branch, LaneBranch):
+                raise InvalidDetectionError(f"LaneDetection.branches must hold LaneBranch, got {type(branch).__name__}")
+        object.__setattr__(self, "branches", branches)
+        if self.road_edges is not None and not isinstance(self.road_edges, RoadEdges):
+            raise InvalidDetectionError(f"LaneDetection.road_edges must be RoadEdges or None, "
+                                        f"got {type(self.road_edges).__name__}")
 
 
 @dataclass(frozen=True)
@@ -261,6 +352,11 @@ class FusionResult:
         gap_m: signed gap d_s between the ego end and the coop start on the centre line [m]
             (its length, negative along the ego end heading for an overlap).
         reason: why nothing was fused (empty when something was).
+        confidence: how sure the lane association is, in [0, 1] (see
+            :func:`fusion.association.associate`; 0 when nothing was fused).
+        lanes: the neighbour lanes fused as well (both detections carry them and they
+            match), ``(index, left, right)`` world frame [m], index as
+            :attr:`NeighbourLane.index`; empty without neighbours.
     """
 
     left: NDArrayFloat
@@ -270,6 +366,8 @@ class FusionResult:
     kind: FusionKind
     gap_m: float
     reason: str = ""
+    confidence: float = 0.0
+    lanes: tuple[tuple[int, NDArrayFloat, NDArrayFloat], ...] = ()
 
     def __post_init__(self) -> None:
         for array in (self.left, self.right, self.left_source, self.right_source):

@@ -187,10 +187,11 @@ def test_points_past_the_gt_ends_are_counted_beyond_the_tolerance() -> None:
 
 
 SECTION_BEYOND_RECORD = (
-    '<laneSection s="27"><center><lane id="0" type="none"/></center><right><lane id="-1" type="driving">'
+    '<laneSection s="29.5"><center><lane id="0" type="none"/></center><right><lane id="-1" type="driving">'
     '<width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane></right></laneSection>'
 )
-"""A second lane section starting past a 25 m record's end (crdesigner: "Tried to calculate
+"""A second lane section starting past a 29.2 m record's end, within the 1 m our reader allows
+between the last record and the road length (crdesigner: "Tried to calculate
 a position outside of the borders of the reference path")."""
 
 
@@ -229,7 +230,7 @@ def test_crdesigner_copy_rewrites_what_crdesigner_rejects() -> None:
         ("<line/>", 30.0, '<signals><signal s="10" t="-4" id="1" dynamic="no" orientation="+" '
          'country="se" type="c" subtype="31" value="5"/></signals>', ""),
         ('<spiral curvStart="0.01" curvEnd="0.0100000001"/>', 30.0, "", ""),
-        ('<arc curvature="0.01"/>', 25.0, "", SECTION_BEYOND_RECORD),
+        ('<arc curvature="0.01"/>', 29.2, "", SECTION_BEYOND_RECORD),
     ],
     ids=["swedish-signal", "nearly-constant-spiral", "record-short-of-road"],
 )

@@ -35,6 +35,7 @@ PROG: Final[str] = "cold-eval"
 DEFAULT_OUT: Final[str] = "out/cold-eval"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
+MAX_LANES: Final[int] = 8
 
 
 def _routes(text: str) -> int | None:
@@ -48,6 +49,13 @@ def _non_negative(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not 0 <= value < 1e6:
         raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return value
+
+
+def _lane_count(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= MAX_LANES:
+        raise argparse.ArgumentTypeError(f"expected an integer from 0 to {MAX_LANES}, got {text}")
     return value
 
 
@@ -110,6 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
                         help="also evaluate this fusion method across the gaps: a name registered in the "
                              "cold_maps.fusion_methods entry points or package.module:function (repeatable)")
+    parser.add_argument("--lanes", type=_lane_count, default=0,
+                        help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
+                             "at forks (default 0: the vehicle's own lane only)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
@@ -169,7 +180,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors), args) for plan in plans]
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes), args) for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -181,7 +192,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params), args)
+                                 params=params, lanes=args.lanes), args)
             for path in args.map]
 
 

@@ -91,10 +91,12 @@ class Refuser:
 
         stamp = detections[0]["stamp_s"]
         lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
-                                                   sender=d["sender"]) for d in detections}
+                                                   sender=d["sender"], neighbours=d["neighbours"],
+                                                   road_edges=d["road_edges"], branches=d["branches"])
+                 for d in detections}
         for d in detections:
             recorder.write_detection(stamp, frame, d["sender"], tuple(d["pose"].values()), d["left"], d["right"],
-                                     ego=d["sender"] == self.ego)
+                                     ego=d["sender"] == self.ego, lanes=lanes[d["sender"]])
         ego = lanes.get(self.ego)
         if ego is None:
             self.frames_without_ego += 1

@@ -43,8 +43,10 @@ from cold_maps.simulation.drive import (
     build_drive,
     covering_routes,
     lane_relation,
+    relation_kind,
     route_from_start,
 )
+from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
 
 if TYPE_CHECKING:
@@ -82,6 +84,7 @@ class MapEvaluator:
         self.meter: GroundTruthMeter | None = None
         self.gt_warning: str | None = None
         self.sensor = LaneSensor()
+        self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
                          if plan.history_m > 0 or plan.messages.enabled else None)
@@ -202,7 +205,7 @@ class MapEvaluator:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
-        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp)
+        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours)
                   for name, state in drive.states(frame).items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:
@@ -232,7 +235,7 @@ class MapEvaluator:
             for name, item in sensed.items():
                 if item.detection is not None:
                     recorder.write_detection(stamp, index, name, detection_pose(item.detection), item.detection.left,
-                                             item.detection.right, ego=name == "ego")
+                                             item.detection.right, ego=name == "ego", lanes=item.detection)
             if gt_lines:
                 recorder.write_gt(stamp, gt_lines)
             recorder.write_fused(stamp, fused_lines)
@@ -277,14 +280,16 @@ class MapEvaluator:
         plan = self.plan
         keys = [scenario.key(plan.name, b) for b in ("left", "right")]
         truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m, self.sensor.range_m)
+        relation = relation_kind(ego.state, other.state, truth)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan, why: str = "") -> None:
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
+                   confidence: float = math.nan, why: str = "") -> None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               gt_unmatched=why))
+                                               gt_unmatched=why, relation=relation, confidence=confidence))
 
         if ego.detection is None or other.detection is None:
             reject("ego_dropped" if ego.detection is None else "coop_dropped")
@@ -307,16 +312,16 @@ class MapEvaluator:
             collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
             collector.fuse_ms.setdefault(label, []).append(runtime)
         if result.kind == "none":
-            reject(reason_category(result.reason), False, runtime)
+            reject(reason_category(result.reason), False, runtime, 0.0)
             return None
         measured = self._measure(result.left, result.right, detection_pose(ego.detection),
                                  self.true_lane(ego.state, other.state))
         if isinstance(measured, str) or measured.gt_unmatched:
             rejected, why = _rejection(measured)
-            reject(rejected, True, runtime, why)
+            reject(rejected, True, runtime, result.confidence, why)
             return None
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
-                     truth, metrics if main else None)
+                     truth, metrics if main else None, relation=relation, confidence=result.confidence)
         if main:
             detections = {"ego": world_borders(ego.detection), other.state.name: world_borders(other.detection)}
             self._keep_overlay(collector, scenario, index, measured, detections,
@@ -381,11 +386,13 @@ class MapEvaluator:
 
     def _record(self, collector: Collector, scenario: Scenario, keys: list[ScenarioKey], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
-                truth: bool | None, metrics: dict[str, float | None] | None) -> None:
+                truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
+                confidence: float = math.nan) -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
         for key, (errors, length) in zip(keys, sides):
             collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
-                                           runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth))
+                                           runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
+                                           relation=relation, confidence=confidence))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))

@@ -24,7 +24,10 @@
           "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
           "gt_unmatched": {"past_gt_end": 3},  # only when any: why the GT did not cover a lane
           "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
-          "fusibility": {"precision": 0.98, "recall": 1.0},    # fusibility check vs GT
+          "fusibility": {"precision": 0.98, "recall": 1.0,     # fusibility check vs GT
+                         "fused": {"own": 250, "branch": 12},   # true fusions: ego's route / a branch
+                         "false": {"adjacent": 2},              # false fusions by kind of pair
+                         "by_confidence": [{"threshold": 0.5, "precision": 0.99, "recall": 0.97}]}
           # only in runs with --coops > 1, --history or --exchange (absent otherwise):
           "vehicles": 3,             # vehicles fused: 1 local, 2 a pair, more a chain
           "history_m": 100.0,        # lane history the coops send (m)
@@ -37,7 +40,9 @@
       ]
     }
 
-Errors are pooled point distances (not averages of per-frame averages). A value that does
+The kinds of pairs are ``cold_maps.simulation.drive.RELATION_KINDS``; ``by_confidence`` counts
+a decision as fusible only when its association confidence reaches the threshold
+(:data:`CONFIDENCE_THRESHOLDS`). Errors are pooled point distances (not averages of per-frame averages). A value that does
 not exist (no fused frame, no runtime measured, no fusibility decision) is ``null``.
 Every file is written to a temporary name and renamed, so none is ever half-written.
 """
@@ -66,6 +71,8 @@ FUSIONS: Final[tuple[str, ...]] = ("local", "convoy", "spline")
 BOUNDARIES: Final[tuple[str, ...]] = ("left", "right")
 METRICS_SCHEMA_VERSION: Final[int] = 1
 P95_PERCENT: Final[float] = 95.0
+CONFIDENCE_THRESHOLDS: Final[tuple[float, ...]] = (0.0, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.0)
+"""Association confidences at which summary.md and metrics.json give a precision-recall point."""
 
 # The paper's results (cold-fusion-paper.tex, sec. IV "Results"). Table II: per road type and
 # method, (mean error m, max error m) for the left and right border. The paper's "MSE" is
@@ -98,7 +105,7 @@ PAPER_TABLE_I_MS: Final[Mapping[str, tuple[float, float, float]]] = {
 FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
     "map", "fusion", "interpolation", "d_s", "boundary", "frame", "stamp_s", "ego", "coop", "fused",
     "rejected", "points", "mean_error_m", "max_error_m", "perception_range_m", "runtime_ms",
-    "predicted_fusible", "truly_fusible")
+    "predicted_fusible", "truly_fusible", "relation", "confidence")
 
 
 class ReportError(ValueError):
@@ -169,6 +176,9 @@ class FrameRecord:
         truly_fusible: whether the pair is fusible by the ground truth, None when unknown.
         gt_unmatched: why the GT did not cover the lane when ``rejected`` is "gt_unmatched"
             ("off_lane", "past_gt_end"; see ``groundtruth.meter``), else "".
+        relation: kind of pair (``cold_maps.simulation.drive.RELATION_KINDS``), "" when unknown.
+        confidence: the association confidence in [0, 1] of a fused pair (0 rejected), NaN
+            when not applicable.
     """
 
     frame: int
@@ -182,6 +192,8 @@ class FrameRecord:
     predicted_fusible: bool | None = None
     truly_fusible: bool | None = None
     gt_unmatched: str = ""
+    relation: str = ""
+    confidence: float = math.nan
 
     def __post_init__(self) -> None:
         errors = np.asarray(self.errors_m, dtype=np.float64)
@@ -229,6 +241,11 @@ class ScenarioResult:
         bytes_per_message: mean bytes on air per lane message of the scenario's coops.
         bytes_per_second: their bytes on air per vehicle-second.
         gt_unmatched: (reason, count) of the evaluations rejected as "gt_unmatched".
+        fused_by_relation: (kind, count) of the true fusions (``own``, ``branch``).
+        false_by_relation: (kind, count) of the false fusions (``adjacent``, ``opposite``,
+            ``other_branch``, ``behind``, ``other``).
+        by_confidence: (threshold, precision, recall) per :data:`CONFIDENCE_THRESHOLDS`
+            (NaN when undefined); empty when no decision carries a confidence.
     """
 
     key: ScenarioKey
@@ -251,6 +268,9 @@ class ScenarioResult:
     bytes_per_message: float = math.nan
     bytes_per_second: float = math.nan
     gt_unmatched: tuple[tuple[str, int], ...] = ()
+    fused_by_relation: tuple[tuple[str, int], ...] = ()
+    false_by_relation: tuple[tuple[str, int], ...] = ()
+    by_confidence: tuple[tuple[float, float, float], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
@@ -270,7 +290,10 @@ class ScenarioResult:
             "fused_frames": self.fused_frames, "rejected": dict(self.rejected),
             "runtime_ms": {"mean": f(self.runtime_ms.mean), "std": f(self.runtime_ms.std),
                            "max": f(self.runtime_ms.max)},
-            "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall)},
+            "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall),
+                           "fused": dict(self.fused_by_relation), "false": dict(self.false_by_relation),
+                           "by_confidence": [{"threshold": t, "precision": f(p), "recall": f(r)}
+                                             for t, p, r in self.by_confidence]},
         } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {})
 
     @classmethod
@@ -297,11 +320,19 @@ class ScenarioResult:
             for name in ("bytes_per_message", "bytes_per_second"):
                 num[name] = _none_to_nan(record.get(name), f"{where}.{name}")
             gt_unmatched = tuple(sorted((str(k), int(v)) for k, v in record.get("gt_unmatched", {}).items()))
+            fusibility = record["fusibility"]
+            counts = {name: tuple(sorted((str(k), int(v)) for k, v in fusibility.get(name, {}).items()))
+                      for name in ("fused", "false")}
+            points = tuple((float(point["threshold"]),
+                            _none_to_nan(point["precision"], f"{where}.fusibility.by_confidence"),
+                            _none_to_nan(point["recall"], f"{where}.fusibility.by_confidence"))
+                           for point in fusibility.get("by_confidence", []))
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
+                       fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
                        **num)
         except ReportError:
             raise
@@ -356,6 +387,14 @@ class ScenarioAccumulator:
         true_positive = sum(p and t for p, t in decided)
         correct = [r.errors_m for r in fused if r.truly_fusible] if self.key.vehicles > 0 else []
         right = np.concatenate(correct) if correct else np.empty(0)
+        fused_pairs = [r for r in self.records if r.predicted_fusible and r.truly_fusible is not None and r.relation]
+        scored = [(r.confidence if r.predicted_fusible else -math.inf, bool(r.truly_fusible)) for r in self.records
+                  if r.predicted_fusible is not None and r.truly_fusible is not None
+                  and (not r.predicted_fusible or math.isfinite(r.confidence))]
+        by_confidence = tuple(
+            (t, _ratio(sum(c >= t and truth for c, truth in scored), sum(c >= t for c, _ in scored)),
+             _ratio(sum(c >= t and truth for c, truth in scored), sum(truth for _, truth in scored)))
+            for t in CONFIDENCE_THRESHOLDS) if any(math.isfinite(r.confidence) for r in self.records) else ()
         return ScenarioResult(
             key=self.key,
             points=int(errors.size),
@@ -380,6 +419,9 @@ class ScenarioAccumulator:
             bytes_per_message=self.message_bytes / self.messages if self.messages else nan,
             bytes_per_second=self.message_bytes * 1e9 / self.sender_ns if self.sender_ns > 0 else nan,
             gt_unmatched=tuple(sorted(Counter(r.gt_unmatched for r in self.records if r.gt_unmatched).items())),
+            fused_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if r.truly_fusible).items())),
+            false_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if not r.truly_fusible).items())),
+            by_confidence=by_confidence,
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
@@ -399,6 +441,7 @@ class ScenarioAccumulator:
             "max_error_m": number(float(np.max(r.errors_m))) if r.fused else "",
             "perception_range_m": number(r.perception_range_m), "runtime_ms": number(r.runtime_ms),
             "predicted_fusible": flag(r.predicted_fusible), "truly_fusible": flag(r.truly_fusible),
+            "relation": r.relation, "confidence": number(r.confidence),
         } for r in self.records]
 
 
@@ -499,6 +542,9 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     parts += ["\n## Results per scenario\n\n", _table(header, rows)]
     if any(r.key.vehicles > 0 for r in results):
         parts += ["\n## Chains, history and exchange\n\n", extended_markdown(results)]
+    association = association_markdown(results)
+    if association:
+        parts += ["\n## Lane association\n\n", association]
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
     return "".join(parts)
@@ -522,6 +568,32 @@ def extended_markdown(results: Sequence[ScenarioResult]) -> str:
         parts.append(f"### {vehicles} vehicle(s), history {history:g} m, exchange {exchange or 'none'}\n\n"
                      + _table(header, rows) + "\n")
     return "".join(parts)
+def association_markdown(results: Sequence[ScenarioResult]) -> str:
+    """The fusibility decisions per scenario (left-border records; both borders share them):
+    precision, recall, true fusions on the ego's route / a branch, false fusions by kind,
+    then one precision / recall point per confidence threshold. "" when no scenario decided."""
+    rows, curve = [], []
+    for r in sorted(results, key=_sort_key):
+        k = r.key
+        if k.boundary != "left" or not (r.fused_by_relation or r.false_by_relation or r.by_confidence):
+            continue
+        name = [k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1)]
+        fused = dict(r.fused_by_relation)
+        rows.append([*name, _fmt(r.fusibility_precision), _fmt(r.fusibility_recall), str(fused.get("own", 0)),
+                     str(fused.get("branch", 0)),
+                     ", ".join(f"{kind}: {count}" for kind, count in r.false_by_relation) or "–"])
+        if r.by_confidence:
+            curve.append([*name, *(f"{_fmt(p)} / {_fmt(q)}" for _, p, q in r.by_confidence)])
+    if not rows:
+        return ""
+    text = ("Pairs valid by the paper's rule (`lane_relation`); false fusions by kind of pair.\n\n"
+            + _table(["map", "fusion", "interp.", "d_s [m]", "precision", "recall", "fused own route",
+                      "fused branch", "false fusions"], rows))
+    if curve:
+        text += ("\nPrecision / recall when only decisions of at least this association confidence count "
+                 "as fusible:\n\n" + _table(["map", "fusion", "interp.", "d_s [m]",
+                                               *(f"≥ {t:g}" for t in CONFIDENCE_THRESHOLDS)], curve))
+    return text
 
 
 def _paper_errors(road: str, key: ScenarioKey) -> tuple[float, float]:

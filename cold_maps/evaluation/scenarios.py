@@ -153,6 +153,8 @@ class MapPlan:
         history_m: lane history every vehicle keeps and sends (m; 0 = none, as the paper).
         odometry: dead-reckoning errors of the history (off by default).
         messages: how lanes are exchanged (default: detections fused directly).
+        lanes: neighbour lanes the sensor detects on each side besides the vehicle's own
+            (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
     """
 
     path: Path
@@ -170,6 +172,7 @@ class MapPlan:
     history_m: float = 0.0
     odometry: OdometryModel = field(default_factory=OdometryModel)
     messages: MessageModel = field(default_factory=MessageModel)
+    lanes: int = 0
 
     @property
     def name(self) -> str:

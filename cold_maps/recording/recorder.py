@@ -45,6 +45,7 @@ from typing import Any, Final, Iterator, Mapping
 
 import numpy as np
 
+import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
@@ -90,6 +91,10 @@ def _number(description: str) -> dict[str, str]:
     return {"type": "number", "description": description}
 
 
+def _array(items: dict[str, Any], description: str) -> dict[str, Any]:
+    return {"type": "array", "items": items, "description": description}
+
+
 _STAMP_SCHEMA: Final[dict[str, Any]] = {
     "type": "object",
     "title": "time",
@@ -105,6 +110,8 @@ _POLYLINE_SCHEMA: Final = {
     "minItems": 2,
 }
 
+_EDGE_NAMES: Final[tuple[str, ...]] = ("start_left", "start_right", "end_left", "end_right")
+
 LANE_DETECTION_SCHEMA: Final[dict[str, Any]] = _object(
     "cold.LaneDetection",
     "One vehicle's lane detection in one frame, as sent to the fusion (cold-maps recording version 2).",
@@ -119,8 +126,23 @@ LANE_DETECTION_SCHEMA: Final[dict[str, Any]] = _object(
         "left": {**_POLYLINE_SCHEMA, "description": "Left border [[x, y], ...] in m, vehicle frame "
                  "(ISO 8855: x forward, y left), in driving order."},
         "right": {**_POLYLINE_SCHEMA, "description": "Right border, like `left`."},
+        "neighbours": _array(_object("cold.NeighbourLane", "A lane beside the sender's, same direction.", {
+            "index": {"type": "integer", "description": "+k: k-th lane to the left, -k: to the right."},
+            "left": {**_POLYLINE_SCHEMA, "description": "Left border like the detection's, where the lane exists."},
+            "right": {**_POLYLINE_SCHEMA, "description": "Right border, like `left`."},
+            "at_start": {"type": "boolean", "description": "The lane exists at the sender."},
+            "at_end": {"type": "boolean", "description": "The lane exists one sensor range ahead."}}),
+            "Optional (multi-lane sensor): the lanes beside the sender's."),
+        "road_edges": {"type": ["object", "null"], "description": "Optional: index of the lane whose outer border is "
+                       "the road edge, at the detection's start and end, left and right (null: not seen).",
+                       "properties": {name: {"type": ["integer", "null"]} for name in _EDGE_NAMES}},
+        "branches": _array(_object("cold.LaneBranch", "A lane leaving the sender's at a fork inside the detection.", {
+            "left": {**_POLYLINE_SCHEMA, "description": "Left border from the fork on, vehicle frame."},
+            "right": {**_POLYLINE_SCHEMA, "description": "Right border, like `left`."}}),
+            "Optional (multi-lane sensor): lanes leaving the sender's lane at forks."),
     },
 )
+LANE_DETECTION_SCHEMA["required"] = ["stamp", "frame", "sender", "pose", "left", "right"]
 
 FRAME_METRICS_SCHEMA: Final[dict[str, Any]] = {
     "title": "cold.FrameMetrics",
@@ -355,12 +377,15 @@ class Recorder:
         self._channel(TOPIC_FUSED, "scene").log(scene_update(ns, lines, COLOR_FUSED), log_time=ns)
 
     def write_detection(self, stamp_s: float, frame: int, sender: str, pose: tuple[float, float, float],
-                        left: NDArrayFloat, right: NDArrayFloat, *, ego: bool = False) -> None:
+                        left: NDArrayFloat, right: NDArrayFloat, *, ego: bool = False,
+                        lanes: fusion.LaneDetection | None = None) -> None:
         """One detection: raw on ``/cold/detections``, drawn on ``/detections/<sender>`` and
         the sender's frame on ``/tf``.
 
         ``pose`` is the sender's reported (x m, y m, yaw rad) in the world frame; ``left``
-        and ``right`` are ``(N, 2)`` borders in its vehicle frame (ISO 8855, m).
+        and ``right`` are ``(N, 2)`` borders in its vehicle frame (ISO 8855, m). ``lanes``:
+        the detection whose neighbour lanes, road edges and branches are recorded with it
+        (keys left out when it has none, so a single-lane recording is unchanged).
         """
         if not isinstance(sender, str) or not _SENDER_PATTERN.fullmatch(sender):
             raise ValueError(f"sender: expected letters, digits, '_' or '-', got {sender!r}")
@@ -372,6 +397,8 @@ class Recorder:
         ns = self._ns(stamp_s)
         raw = {"stamp": _time_msg(ns), "frame": _check_frame(frame), "sender": sender,
                "pose": {"x": x, "y": y, "yaw": yaw}, "left": left, "right": right}
+        if lanes is not None:
+            raw.update(_multi_lane(lanes))
         self._write_json(TOPIC_RAW_DETECTIONS, ns, raw)
         self._channel(TOPIC_TF, "transform").log(frame_transform(ns, sender, x, y, yaw), log_time=ns)
         world = {"left": vehicle_to_world(left, x, y, yaw), "right": vehicle_to_world(right, x, y, yaw)}
@@ -441,6 +468,31 @@ def _open_file(path: Path) -> Any:
         raise RecordingError(f"{path}: cannot open recording: {exc.strerror}") from exc
 
 
+def _multi_lane(detection: fusion.LaneDetection) -> dict[str, Any]:
+    """The optional ``cold.LaneDetection`` keys of a multi-lane detection (none without)."""
+    extra: dict[str, Any] = {}
+    if detection.neighbours:
+        extra["neighbours"] = [{"index": int(lane.index), "left": lane.left.tolist(), "right": lane.right.tolist(),
+                                "at_start": bool(lane.at_start), "at_end": bool(lane.at_end)}
+                               for lane in detection.neighbours]
+    if detection.road_edges is not None:
+        extra["road_edges"] = {name: getattr(detection.road_edges, name) for name in _EDGE_NAMES}
+    if detection.branches:
+        extra["branches"] = [{"left": b.left.tolist(), "right": b.right.tolist()} for b in detection.branches]
+    return extra
+
+
+def _decode_multi_lane(message: Mapping[str, Any]) -> dict[str, Any]:
+    """``neighbours``, ``road_edges``, ``branches`` of a decoded message as fusion objects."""
+    edges = message.get("road_edges")
+    return {
+        "neighbours": tuple(fusion.NeighbourLane(int(n["index"]), n["left"], n["right"], bool(n["at_start"]),
+                                                 bool(n["at_end"])) for n in message.get("neighbours", ())),
+        "road_edges": None if edges is None else fusion.RoadEdges(**{name: edges.get(name) for name in _EDGE_NAMES}),
+        "branches": tuple(fusion.LaneBranch(b["left"], b["right"]) for b in message.get("branches", ())),
+    }
+
+
 def _decode_detection(path: Path, index: int, data: bytes, stamp_base_ns: int) -> dict[str, Any]:
     import orjson
 
@@ -457,8 +509,9 @@ def _decode_detection(path: Path, index: int, data: bytes, stamp_base_ns: int) -
             "pose": {"x": float(pose["x"]), "y": float(pose["y"]), "yaw": float(pose["yaw"])},
             "left": check_polyline("left", message["left"]),
             "right": check_polyline("right", message["right"]),
+            **_decode_multi_lane(message),
         }
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, fusion.FusionError) as exc:
         raise RecordingError(f"{where}: invalid cold.LaneDetection: {exc}") from exc
     return detection
 
@@ -480,10 +533,12 @@ def read_detections(path: str | os.PathLike[str]) -> Iterator[tuple[int, list[di
     """The raw detections of a recording (version 1 or 2), grouped by frame in recording order.
 
     Yields ``(frame, detections)``; each detection is a dict with the keys ``stamp_s`` (s
-    since the recording's stamp base, ns resolution), ``frame``, ``sender``, ``pose`` and
-    ``left`` and ``right`` as ``(N, 2)`` float64 arrays. Raises :class:`RecordingError` at
-    once for a file that is not a finalised MCAP, has no ``/cold/detections`` channel or
-    carries a foreign schema, and while iterating for a malformed message.
+    since the recording's stamp base, ns resolution), ``frame``, ``sender``, ``pose``,
+    ``left`` and ``right`` as ``(N, 2)`` float64 arrays, ``neighbours`` and ``branches`` as
+    tuples of ``fusion.NeighbourLane`` / ``LaneBranch`` (empty when not recorded) and
+    ``road_edges`` as ``fusion.RoadEdges`` or None. Raises :class:`RecordingError` at once
+    for a file that is not a finalised MCAP, has no ``/cold/detections`` channel or carries
+    a foreign schema, and while iterating for a malformed message.
     """
     path = Path(path)
     stream = _open_file(path)

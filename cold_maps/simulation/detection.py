@@ -15,7 +15,8 @@ import numpy as np
 import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.drive import VehicleState
-from cold_maps.simulation.sensor import LaneSensor, vehicle_to_world
+from cold_maps.simulation.neighbours import NeighbourSensor
+from cold_maps.simulation.sensor import Detection, LaneSensor, vehicle_to_world, world_to_vehicle
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 DETECTION_DECIMALS: Final[int] = 6
@@ -38,9 +39,11 @@ class Sensed:
 
 
 def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
-          stamp_s: float = 0.0) -> Sensed:
+          stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None) -> Sensed:
     """The detection of a vehicle: the sensor on its track, then the error models, points
-    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference)."""
+    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference).
+    With ``neighbours`` the lanes beside its own (same range and sampling, each through the
+    same error models, a dropped one left out) and the road edges come with it."""
     raw = sensor.detect(state.track.strip, state.station)
     if raw is None:
         return Sensed(state, None)
@@ -48,9 +51,33 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
     if borders is None:
         return Sensed(state, None)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
+    lanes: list[fusion.NeighbourLane] = []
+    branches: list[fusion.LaneBranch] = []
+    edges = None
+    if neighbours is not None:
+        readings, ends = neighbours.detect(state.track, state.station, sensor.range_m, sensor.step_m)
+        edges = fusion.RoadEdges(*ends)
+        for reading in readings:
+            seen = _seen(reading.left, reading.right, raw, errors, rng)
+            if seen is not None:
+                lanes.append(fusion.NeighbourLane(reading.index, *seen, reading.at_start, reading.at_end))
+        for left, right in neighbours.branches(state.track, state.station, sensor.range_m, sensor.step_m):
+            seen = _seen(left, right, raw, errors, rng)
+            if seen is not None:
+                branches.append(fusion.LaneBranch(*seen))
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
-    return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name))
+    return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
+                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)))
+
+
+def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: SensorErrorModel,
+          rng: np.random.Generator) -> tuple[NDArrayFloat, NDArrayFloat] | None:
+    """World borders of another lane seen by the sensor at ``raw``'s pose: in the vehicle
+    frame, through the error models, rounded to 1 µm; None when dropped."""
+    seen = errors.apply(world_to_vehicle(left, raw.x, raw.y, raw.yaw), world_to_vehicle(right, raw.x, raw.y, raw.yaw),
+                        rng)
+    return None if seen is None else (np.round(seen[0], DETECTION_DECIMALS), np.round(seen[1], DETECTION_DECIMALS))
 
 
 def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -420,15 +420,17 @@ def ahead_in_ego_frame(ego: VehicleState, other: VehicleState) -> bool:
 
 def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_distance_m: float,
                   detection_m: float = 0.0) -> bool:
-    """True when ``coop`` drives on the lane the ego detected: ahead of the ego in the
-    ego's vehicle frame; ahead of it along the lane graph by at most ``max_distance_m``
-    (m) of lane, on the drive itself for a vehicle sharing the ego's stations (``coop``,
-    ``turn``, ``behind``: ``0 < lead_m`` relative to ``ego``, itself a chain's coop or the
-    ego), so that on a loop a vehicle behind does not
-    count as reachable ahead around it; and either on the stretch of the ego's track its
+    """True when ``coop`` is on a possible trajectory of the ego (the paper's validity rule,
+    sec. III-B): ahead of the ego in the ego's vehicle frame and along the lane graph by at
+    most ``max_distance_m`` (m) of lane, and either on the stretch of the ego's track its
     detection covers (``detection_m`` ahead) or on a lane reachable from where that
-    detection ends. Adjacent and opposite lanes, vehicles behind, and a coop on another
-    branch of a fork the ego's detection has already passed are not."""
+    detection ends, along successors on any branch, by at most ``max_distance_m -
+    detection_m`` of lane (the length of lane between the two detections matches a gap the
+    fusion may bridge). A vehicle sharing the ego's stations (``coop``, ``turn``,
+    ``behind``) must also be ahead on the drive itself (``0 < lead_m`` relative to ``ego``,
+    itself a chain's coop or the ego), so that on a loop a vehicle behind does not count as
+    reachable ahead around it. Adjacent and opposite lanes, vehicles behind, and a coop on
+    another branch of a fork the ego's detection has already passed are not."""
     if coop.role in SHARED_STATION_ROLES and not 0.0 < coop.lead_m - ego.lead_m <= max_distance_m:
         return False
     if not ahead_in_ego_frame(ego, coop) or not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
@@ -438,4 +440,23 @@ def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_d
     last, last_offset_m = track.lane_at(min(ego.station + detection_m, track.length))
     if coop.lane in track.lanes[first: last + 1]:
         return True
-    return _reachable(graph, track.lanes[last], last_offset_m, coop, max_distance_m)
+    return _reachable(graph, track.lanes[last], last_offset_m, coop, max_distance_m - detection_m)
+
+
+RELATION_KINDS: Final[tuple[str, ...]] = ("own", "branch", "adjacent", "opposite", "other_branch", "behind", "other")
+"""Kinds of a pair: ``own`` (valid, the coop's lane is on the ego's route), ``branch`` (valid,
+on another branch of a fork inside the gap), and the kinds of invalid pairs: ``adjacent``
+lane, ``opposite`` direction, ``other_branch`` (a fork the ego's detection has passed),
+``behind``, ``other`` (valid by role but farther along the graph than a gap allows)."""
+
+_FALSE_KINDS: Final[Mapping[str, str]] = {"adjacent": "adjacent", "opposite": "opposite", "turn": "other_branch",
+                                          "behind": "behind"}
+
+
+def relation_kind(ego: VehicleState, coop: VehicleState, valid: bool) -> str:
+    """The :data:`RELATION_KINDS` entry of a pair whose validity (:func:`lane_relation`) is
+    ``valid``: for a valid pair whether the coop's lane is on the ego's route, for an invalid
+    one what the coop is (from its role)."""
+    if valid:
+        return "own" if coop.lane in ego.track.lanes else "branch"
+    return _FALSE_KINDS.get(coop.role, "other")

@@ -1,0 +1,241 @@
+"""Lane association: whether the coop's lane is the ego's, with a confidence and a reason.
+
+Everything in the ego vehicle frame (ISO 8855), m, rad. Without neighbour lanes the
+geometric check decides alone (:func:`fusion.fusibility.geometric_assessment` for a gap,
+the overlap offsets for a convoy) and the confidence says how much its rule can tell lanes
+apart. With a multi-lane sensor (:class:`fusion.NeighbourLane`, :class:`fusion.RoadEdges`,
+:class:`fusion.LaneBranch`) the lanes are matched as a whole: under a lateral *shift* δ the
+coop's lane i continues the ego's lane i + δ. The coop is the ego's lane when δ = 0 passes
+and no other shift explains the detections as well:
+
+- geometry: a shift is plausible when the lane pairs it puts together that both detections
+  hold at the gap — (coop 0, ego δ) and (coop −δ, ego 0) — all pass the geometric check;
+- lane index from the road edge: on each side where both see the edge, the number of lanes
+  between the lane and the edge must agree (a side where one sees the edge and the other
+  more lanes than that beyond its lane contradicts too); a side that contradicts scores −1,
+  one that agrees +1, an unknown one 0. A contradiction is only taken for a lane that opens
+  or ends in the gap when the other side agrees; otherwise the coop is in another lane;
+- forks: when a lane leaves the ego's lane inside its detection and the coop start is
+  explained by that branch as well or better (less turn, less lateral excess), the coop is on
+  the other branch (or ambiguous);
+- best continuation: when the road edges contradict on one side (a lane opens or ends in the
+  gap, so they alone are ambiguous), the ego's lane must continue into the coop's lane 0
+  better than into any other lane the coop holds, and the coop's lane 0 continue the ego's
+  lane 0 better than any other ego lane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Final, Mapping, Sequence
+
+from fusion.convoy import overlap_start
+from fusion.fusibility import Evidence, cone_excess, geometric_assessment, lane_ends, relative_pose
+from fusion.geometry import EndFit, transform
+from fusion.spline import lane_end_fits
+from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
+
+Lane = tuple[NDArrayFloat, NDArrayFloat]
+
+GEOMETRY_CONFIDENCE: Final[Mapping[Evidence, float]] = {"cone": 0.8, "arc": 0.7, "open": 0.4, "s_bend": 0.3}
+"""Confidence of a geometric decision by the rule that made it: the cone alone (a straight
+or one arc across the gap: the neighbour lane lies a lane width outside it) and an arc
+prediction tell lanes apart; an open radius (whole curve inside the gap) and an S-bend
+shift do not."""
+CONFIDENCE_EDGES_BOTH: Final[float] = 1.0
+"""Lane index from the road edge agrees on both sides, no other shift plausible."""
+CONFIDENCE_EDGES_ONE: Final[float] = 0.95
+"""Agrees on one side, the other unknown."""
+CONFIDENCE_NEIGHBOURS: Final[float] = 0.9
+"""No edge seen on either side, but the neighbour lanes rule every other shift out."""
+CONFIDENCE_WEAKER_ALTERNATIVE: Final[float] = 0.6
+"""Another shift is plausible by geometry but has less road-edge support."""
+CONFIDENCE_LANE_COUNT_CHANGE: Final[float] = 0.5
+"""The lane index agrees on one side and not on the other (a lane opens or ends in the gap)."""
+
+
+FORK_TIE: Final[float] = 0.02
+"""Costs (:func:`_fit_cost`: m for a convoy, rad + lane widths across a gap) closer than
+this make a branch and the ego's own lane equally good continuations: the coop's lane is
+ambiguous (lanes that still overlap just past a fork)."""
+
+
+@dataclass(frozen=True)
+class Association:
+    """The lane association of one pair.
+
+    Fields: ``reason`` why the coop's lane is not the ego's ("" when it is); ``confidence``
+    in [0, 1] (0 when rejected); ``matched`` the neighbour indices both detections hold at
+    the gap and that are fused too (empty without neighbours).
+    """
+
+    reason: str
+    confidence: float
+    matched: tuple[int, ...] = ()
+
+
+def _lanes(detection: LaneDetection, own: Lane, at_end: bool, move: Callable[[NDArrayFloat], NDArrayFloat]) -> dict[int, Lane]:
+    """Lane index → borders (ego frame) of the lanes a detection holds at its end (ego) or
+    start (coop); ``own`` is its lane 0 already in the ego frame."""
+    lanes = {0: own}
+    for lane in detection.neighbours:
+        if lane.at_end if at_end else lane.at_start:
+            lanes[lane.index] = (move(lane.left), move(lane.right))
+    return lanes
+
+
+def _seen(lanes: Mapping[int, Lane], sign: int) -> int:
+    """Consecutive lanes beside lane 0 on side ``sign`` (+1 left, −1 right)."""
+    count = 0
+    while sign * (count + 1) in lanes:
+        count += 1
+    return count
+
+
+def _side(ego_edge: int | None, coop_edge: int | None, ego_seen: int, coop_seen: int, shift: int, sign: int) -> int:
+    """+1 / −1 / 0: whether the lanes beyond the coop's lane 0 and beyond the ego's lane
+    ``shift`` up to the road edge on side ``sign`` agree / contradict / cannot be compared."""
+    beyond_ego = None if ego_edge is None else sign * (ego_edge - shift)
+    beyond_coop = None if coop_edge is None else sign * coop_edge
+    if beyond_ego is not None and beyond_coop is not None:
+        return 1 if beyond_ego == beyond_coop else -1
+    if beyond_ego is not None:
+        return -1 if beyond_ego <= coop_seen else 0
+    if beyond_coop is not None:
+        return -1 if beyond_coop <= ego_seen - sign * shift else 0
+    return 0
+
+
+class _Pairs:
+    """Geometric pass/fail of (ego lane, coop lane) pairs, computed on demand."""
+
+    def __init__(self, ego: LaneDetection, coop: LaneDetection, ego_lanes: Mapping[int, Lane],
+                 coop_lanes: Mapping[int, Lane], convoy: bool, params: FusionParams) -> None:
+        self.ego, self.coop, self.ego_lanes, self.coop_lanes = ego, coop, ego_lanes, coop_lanes
+        self.convoy, self.params = convoy, params
+
+    def passes(self, ego_index: int, coop_index: int) -> bool:
+        (el, er), (cl, cr) = self.ego_lanes[ego_index], self.coop_lanes[coop_index]
+        if self.convoy:
+            limit = self.params.convoy_max_offset_m
+            return all(overlap_start(e, c, stacked_arclength(e, e.shape[0])).offset_m <= limit
+                       for e, c in ((el, cl), (er, cr)))
+        ends = lane_ends(el, er, cl, cr)
+        fits: list[Sequence[EndFit]] = []
+
+        def end_fits() -> Sequence[EndFit]:
+            if not fits:
+                fits.append(lane_end_fits((el, er), (cl, cr), self.params.heading_window_m))
+            return fits[0]
+
+        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, end_fits)[0]
+
+    def plausible(self, shift: int) -> bool | None:
+        """Whether shift δ passes on every pair it forms with lane 0; None without a pair."""
+        pairs = [(shift, 0)] if shift in self.ego_lanes else []
+        pairs += [(0, -shift)] if -shift in self.coop_lanes else []
+        return all(self.passes(e, c) for e, c in pairs) if pairs else None
+
+
+def _fit_cost(ego_lane: Lane, coop_lane: Lane, convoy: bool) -> float:
+    """How badly the coop lane continues an ego lane (ego frame): for a convoy overlap the
+    larger distance [m] of the coop border starts from the ego borders; across a gap the turn
+    between the two ends [rad] plus the coop start's lateral excess outside their cone in
+    lane widths (:func:`fusion.fusibility.cone_excess`)."""
+    (el, er), (cl, cr) = ego_lane, coop_lane
+    if convoy:
+        return max(overlap_start(e, c, stacked_arclength(e, e.shape[0])).offset_m for e, c in ((el, cl), (er, cr)))
+    ends = lane_ends(el, er, cl, cr)
+    turn, excess = cone_excess(ends)
+    return abs(turn) + excess / max(ends.width_m, 1e-9)
+
+
+def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> str:
+    """Why the coop lane continues a lane leaving the ego's inside its detection as well as
+    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or ""."""
+    main = _fit_cost(own[0], own[1], convoy)
+    for branch in ego.branches:
+        cost = _fit_cost((branch.left, branch.right), own[1], convoy)
+        if cost <= main + FORK_TIE:
+            what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"
+            return (f"coop lane continues the lane that leaves the ego's lane at a fork inside the ego detection "
+                    f"{what} ({cost:.2f} vs {main:.2f}), another lane")
+    return ""
+
+
+def _better_neighbour(ego_lanes: Mapping[int, Lane], coop_lanes: Mapping[int, Lane], convoy: bool) -> str:
+    """Why the ego's lane continues into another of the coop's lanes, or the coop's lane
+    continues another of the ego's lanes, better than the two lanes 0 (:func:`_fit_cost`, by
+    more than :data:`FORK_TIE`), or "" (a lane that opens or ends in the gap leaves the road
+    edges ambiguous; the best continuation decides)."""
+    main = _fit_cost(ego_lanes[0], coop_lanes[0], convoy)
+    for index, lane in coop_lanes.items():
+        if index and _fit_cost(ego_lanes[0], lane, convoy) < main - FORK_TIE:
+            return f"the ego's lane continues into the coop's lane {index:+d} better: another lane"
+    for index, lane in ego_lanes.items():
+        if index and _fit_cost(lane, coop_lanes[0], convoy) < main - FORK_TIE:
+            return f"the coop's lane continues the ego's lane {index:+d} better: another lane"
+    return ""
+
+
+def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
+              params: FusionParams) -> Association:
+    """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
+    rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
+    lane) borders in the ego frame. See the module docstring."""
+    multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
+    if not multi:
+        return Association("", GEOMETRY_CONFIDENCE[evidence])
+    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
+    ego_lanes = _lanes(ego, own[0], True, lambda points: points)
+    coop_lanes = _lanes(coop, own[1], False, lambda points: transform(points, x_rel, y_rel, psi_rel))
+    reason = _branch_reason(ego, own, convoy)
+    if reason:
+        return Association(reason, 0.0)
+    ego_edges, coop_edges = ego.road_edges, coop.road_edges
+    edges = ((ego_edges.end_left if ego_edges else None, coop_edges.start_left if coop_edges else None, 1),
+             (ego_edges.end_right if ego_edges else None, coop_edges.start_right if coop_edges else None, -1))
+
+    def sides(shift: int) -> tuple[int, int]:
+        left, right = (_side(e, c, _seen(ego_lanes, sign), _seen(coop_lanes, sign), shift, sign)
+                       for e, c, sign in edges)
+        return left, right
+
+    pairs = _Pairs(ego, coop, ego_lanes, coop_lanes, convoy, params)
+    left0, right0 = sides(0)
+    if min(left0, right0) < 0 and max(left0, right0) < 1:
+        sides_off = "both sides" if max(left0, right0) < 0 else ("the left" if left0 < 0 else "the right")
+        return Association(f"the lane index from the road edge differs on {sides_off} and agrees on neither: "
+                           "another lane", 0.0)
+    reach = max(map(abs, (*ego_lanes, *coop_lanes))) + 1
+    tested, alternatives = False, []
+    for shift in (s for n in range(1, reach + 1) for s in (n, -n)):
+        plausible = pairs.plausible(shift)
+        tested |= plausible is not None
+        support = sides(shift)
+        if plausible and min(support) >= 0:
+            alternatives.append((sum(support), shift))
+    if min(left0, right0) < 0:
+        reason = _better_neighbour(ego_lanes, coop_lanes, convoy)
+        if reason:
+            return Association(reason, 0.0)
+    score0 = left0 + right0
+    if alternatives:
+        best, shift = max(alternatives)
+        if best > score0:
+            return Association(f"coop lane matches the ego's lane {shift:+d} better (road edges): another lane", 0.0)
+        if best == score0:
+            return Association(f"coop lane also matches the ego's lane {shift:+d}: ambiguous, another lane", 0.0)
+    if min(left0, right0) < 0:
+        confidence = CONFIDENCE_LANE_COUNT_CHANGE
+    elif alternatives:
+        confidence = CONFIDENCE_WEAKER_ALTERNATIVE
+    elif score0 == 2:
+        confidence = CONFIDENCE_EDGES_BOTH
+    elif score0 == 1:
+        confidence = CONFIDENCE_EDGES_ONE
+    else:
+        confidence = CONFIDENCE_NEIGHBOURS if tested else GEOMETRY_CONFIDENCE[evidence]
+    matched = tuple(sorted(k for k in ego_lanes if k != 0 and k in coop_lanes))
+    return Association("", confidence, matched)
+
