@@ -161,13 +161,15 @@ def _local_map(cell: Cell) -> Path:
 
 def flat_record(record: dict[str, Any]) -> dict[str, Any]:
     """A ``metrics.json`` record as one flat row: nested numbers as ``<key>_<name>``,
-    the rejection counts as JSON text."""
+    the rejection counts and any deeper structure (counts by kind, precision-recall
+    points) as JSON text, so every column is a scalar."""
     row = {}
     for name, value in record.items():
         if name == "rejected":
             row[name] = json.dumps(value, sort_keys=True)
         elif isinstance(value, dict):
-            row.update({f"{name}_{part}": number for part, number in value.items()})
+            row.update({f"{name}_{part}": json.dumps(item, sort_keys=True) if isinstance(item, (dict, list)) else item
+                        for part, item in value.items()})
         else:
             row[name] = value
     return row

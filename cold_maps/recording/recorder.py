@@ -282,7 +282,6 @@ class Recorder:
         self._requested_base_ns = _check_stamp_base(stamp_base_ns)
         self.stamp_base_ns = 0
         self._writer: Any = None
-        self._stream: Any = None
         self._context: Any = None
         self._channels: dict[str, Any] = {}
 
@@ -292,21 +291,22 @@ class Recorder:
 
         if self._writer is not None:
             raise RecordingError(f"{self.path}: recording is already open")
-        try:
-            self._stream = open(self.partial_path, "wb")
-        except OSError as exc:
-            raise RecordingError(f"{self.partial_path}: cannot create recording: {exc.strerror}") from exc
+        if not self.partial_path.parent.is_dir():
+            raise RecordingError(f"{self.partial_path}: cannot create recording: no folder {self.partial_path.parent}")
         self.stamp_base_ns = time.time_ns() if self._requested_base_ns is None else self._requested_base_ns
         self._context = foxglove.Context()
         try:
-            self._writer = foxglove.open_mcap(self._stream, context=self._context, writer_options=MCAPWriteOptions(
-                compression=MCAPCompression.Zstd, profile=""))
+            # a path, not a Python file object: the SDK then writes without calling back into
+            # Python, so a Ctrl-C or SIGTERM can never land inside one of its writes (which
+            # would leave the writer failed and the file unfinished)
+            self._writer = foxglove.open_mcap(self.partial_path, allow_overwrite=True, context=self._context,
+                                              writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
+                                                                              profile=""))
             self._writer.write_metadata(METADATA_RUN, {
                 "map": self._map_path, "params": self._params, "recording_version": str(RECORDING_VERSION),
                 "stamp_base_ns": str(self.stamp_base_ns)})
         except Exception as exc:
             self._writer = None
-            self._stream.close()
             self.partial_path.unlink(missing_ok=True)
             raise RecordingError(f"{self.partial_path}: cannot start recording: {exc}") from exc
         return self
@@ -321,18 +321,15 @@ class Recorder:
     def _finish(self, status: dict[str, str]) -> None:
         if self._writer is None:
             raise RecordingError(f"{self.path}: recording is not open")
-        writer, stream, channels = self._writer, self._stream, self._channels
-        self._writer = self._stream = self._context = None
+        writer, channels = self._writer, self._channels
+        self._writer = self._context = None
         self._channels = {}
-        try:
-            writer.write_metadata(METADATA_STATUS, status)
-            writer.close()
-            for channel in channels.values():
-                channel.close()
-            stream.flush()
-            os.fsync(stream.fileno())
-        finally:
-            stream.close()
+        writer.write_metadata(METADATA_STATUS, status)
+        writer.close()
+        for channel in channels.values():
+            channel.close()
+        with open(self.partial_path, "rb") as written:
+            os.fsync(written.fileno())
         os.replace(self.partial_path, self.path)
 
     def _ns(self, stamp_s: float) -> int:
