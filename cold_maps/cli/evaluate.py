@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry
+from cold_maps.cli.common import cli_entry, make_parser
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -54,7 +54,7 @@ def _gaps(text: str) -> tuple[float, ...]:
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval`` argument parser."""
     description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
-    parser = argparse.ArgumentParser(prog=PROG, description=description)
+    parser = make_parser(PROG, description, progress=True)
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--map", action="append", type=Path, metavar="MAP.xodr", help="OpenDRIVE map (repeatable)")
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
@@ -82,7 +82,6 @@ def build_parser() -> argparse.ArgumentParser:
         errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
 
@@ -138,28 +137,25 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import configure_logging, interruption, startup_failure
+    from cold_maps.cli.common import configure_logging, fail, interruption, progress_stream, result_line, startup_failure
     from cold_maps.evaluation.run import RunOptions, run_evaluation
 
-    configure_logging(args.verbose)
+    configure_logging(args.verbose, args.quiet)
     try:
         plans = _plans(args)
-        options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
+        options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=progress_stream(args),
                              run_params={k: str(v) for k, v in sorted(vars(args).items())})
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     if isinstance(run.error, KeyboardInterrupt):
         what, status = interruption(run.error)
-        print(f"{PROG}: {what}; partial report in {args.out}", file=sys.stderr)
-        return status
+        return fail(PROG, f"{what}; partial report in {args.out}", status)
     if run.error is not None:
-        print(f"{PROG}: run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}",
-              file=sys.stderr)
-        return 1
+        return fail(PROG, f"run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}")
     reduced = run.collector.reduced_maps
     fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
-    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}")
+    result_line(args, PROG, f"{len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}")
     return 0
 
 

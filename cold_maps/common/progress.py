@@ -49,7 +49,7 @@ class ProgressBar:
         eta = f"ETA {elapsed * (self.total - self.done) / self.done:.0f} s" if self.done else "ETA ?"
         prefix = f"{self.label} " if self.label else ""
         self.stream.write(f"\r{prefix}[{'#' * filled}{'.' * (self.width - filled)}] "
-                          f"{self.done}/{self.total}  {eta}")
+                          f"{self.done}/{self.total}  {eta}\x1b[K")  # erase what a longer line left
         self.stream.flush()
         self._last_draw = now
         self._drawn = True
@@ -62,6 +62,58 @@ class ProgressBar:
             self._drawn = False
 
     def __enter__(self) -> ProgressBar:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+SPINNER_DELAY_S: Final[float] = 1.0
+"""A step that ends sooner draws nothing."""
+SPINNER_INTERVAL_S: Final[float] = 0.5
+
+
+class Spinner:
+    """``label  00:12`` (elapsed time) on one line of ``stream`` (stderr by default) while a
+    step of unknown length runs (a map conversion), redrawn every ``interval_s`` seconds by
+    a background thread after ``delay_s``. Silent when the stream is not a TTY; the line is
+    cleared when it ends. Drawn by ``tqdm``, so log records written through ``tqdm.write``
+    (see :func:`cold_maps.cli.common.configure_logging`) pass above it. A context manager.
+    """
+
+    def __init__(self, label: str, stream: TextIO | None = None, delay_s: float = SPINNER_DELAY_S,
+                 interval_s: float = SPINNER_INTERVAL_S):
+        import threading
+
+        from tqdm import tqdm
+
+        self.stream = sys.stderr if stream is None else stream
+        self.delay_s, self.interval_s = delay_s, interval_s
+        enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._bar = tqdm(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
+                         bar_format="{desc}  {elapsed}", delay=delay_s, dynamic_ncols=False)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._redraw, name="spinner", daemon=True)
+        if enabled:
+            self._thread.start()
+
+    def _redraw(self) -> None:
+        if self._stop.wait(self.delay_s):
+            return
+        while True:
+            self._bar.refresh()
+            if self._stop.wait(self.interval_s):
+                return
+
+    def close(self) -> None:
+        """Stops redrawing and clears the line."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._bar.close()
+
+    def __enter__(self) -> Spinner:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
