@@ -300,12 +300,19 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_check(args: argparse.Namespace) -> int:
+    """The report, printed once the elapsed-time line of the (maybe cold) conversion is gone."""
+    from contextlib import redirect_stdout
+
     from cold_maps.cli.common import progress_stream
     from cold_maps.common.progress import Spinner
     from cold_maps.groundtruth.check import run_check
 
-    with Spinner(f"{PROG} check: converting and comparing {Path(args.map).name}", stream=progress_stream(args)):
-        return run_check(args)
+    report = io.StringIO()
+    with Spinner(f"{PROG} check: converting and comparing {Path(args.map).name}", stream=progress_stream(args)), \
+            redirect_stdout(report):
+        status = run_check(args)
+    sys.stdout.write(report.getvalue())
+    return status
 
 
 def _configure_cache(parser: argparse.ArgumentParser) -> None:

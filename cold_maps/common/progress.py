@@ -77,7 +77,7 @@ SPINNER_INTERVAL_S: Final[float] = 0.5
 class Spinner:
     """``label  00:12`` (elapsed time) on one line of ``stream`` (stderr by default) while a
     step of unknown length runs (a map conversion), redrawn every ``interval_s`` seconds by
-    a background thread after ``delay_s``. Silent when the stream is not a TTY; the line is
+    a background thread once ``delay_s`` seconds have passed. Silent when the stream is not a TTY; the line is
     cleared when it ends. Drawn by ``tqdm``, so log records written through ``tqdm.write``
     (see :func:`cold_maps.cli.common.configure_logging`) pass above it. A context manager.
     """
@@ -89,22 +89,19 @@ class Spinner:
         from tqdm import tqdm
 
         self.stream = sys.stderr if stream is None else stream
-        self.delay_s, self.interval_s = delay_s, interval_s
+        self.interval_s = interval_s
         enabled = bool(getattr(self.stream, "isatty", lambda: False)())
         self._bar = tqdm(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
-                         bar_format="{desc}  {elapsed}", delay=delay_s, dynamic_ncols=False)
+                         bar_format="{desc}  {elapsed}", delay=delay_s, mininterval=0.0, miniters=0,
+                         dynamic_ncols=False)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._redraw, name="spinner", daemon=True)
         if enabled:
             self._thread.start()
 
     def _redraw(self) -> None:
-        if self._stop.wait(self.delay_s):
-            return
-        while True:
-            self._bar.refresh()
-            if self._stop.wait(self.interval_s):
-                return
+        while not self._stop.wait(self.interval_s):
+            self._bar.update(0)  # draws once ``delay_s`` has passed; close() then clears the line
 
     def close(self) -> None:
         """Stops redrawing and clears the line."""
