@@ -11,9 +11,9 @@ import logging
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import pytest
 from conftest import PROJECT_ROOT, bundled_map
@@ -76,7 +76,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _run(cli: Cli, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", cli.module, *args], capture_output=True, text=True,
-                          cwd=PROJECT_ROOT, timeout=120)
+                          cwd=PROJECT_ROOT, timeout=120, check=False)
 
 
 def _one_error_line(result: subprocess.CompletedProcess[str], prog: str) -> str:

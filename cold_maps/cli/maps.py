@@ -26,8 +26,14 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
-from cold_maps.cli.common import (DefaultsHelpFormatter, add_output_options, cli_entry, make_parser, one_line,
-                                  result_line)
+from cold_maps.cli.common import (
+    DefaultsHelpFormatter,
+    add_output_options,
+    cli_entry,
+    make_parser,
+    one_line,
+    result_line,
+)
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import OpenDriveMap
 
@@ -390,7 +396,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         what, status = interruption(exc)
         return fail(PROG, f"{what}; nothing written", status)
-    except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
+    except Exception as exc:  # every failure is reported as one line
         logging.getLogger(PROG).debug("failed", exc_info=exc)
         return fail(PROG, one_line(exc))
 
