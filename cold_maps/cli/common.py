@@ -129,17 +129,18 @@ def result_line(args: argparse.Namespace, prog: str, message: str) -> None:
         print(f"{prog}: {message}")
 
 
-class _BarAwareHandler(logging.StreamHandler):  # type: ignore[type-arg]
-    """Writes each record through ``tqdm.write``, which clears the progress bars on the
-    stream and draws them again below the line; on a terminal the line is cleared first
-    too, so a record never glues onto a bar drawn by other means."""
+class _BarAwareHandler(logging.Handler):
+    """Writes each record to the current ``sys.stderr`` through ``tqdm.write``, which
+    clears the progress bars on it and draws them again below the line; on a terminal the
+    line is cleared first too, so a record never glues onto a bar drawn by other means."""
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
             from tqdm import tqdm
 
-            clear = "\r\x1b[K" if getattr(self.stream, "isatty", lambda: False)() else ""
-            tqdm.write(clear + self.format(record), file=self.stream)
+            stream = sys.stderr
+            clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
+            tqdm.write(clear + self.format(record), file=stream)
         except Exception:  # noqa: BLE001 - logging's own convention for a failing handler
             self.handleError(record)
 
@@ -148,7 +149,7 @@ def configure_logging(verbose: int, quiet: bool = False) -> None:
     """Logging to stderr, around progress bars: warnings, ``-v`` info, ``-vv`` debug,
     ``-q`` errors only. Replaces the handlers a previous call installed."""
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    handler = _BarAwareHandler(sys.stderr)
+    handler = _BarAwareHandler()
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     for old in [h for h in root.handlers if isinstance(h, _BarAwareHandler)]:
