@@ -137,14 +137,8 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import (
-        configure_logging,
-        fail,
-        interruption,
-        progress_stream,
-        result_line,
-        startup_failure,
-    )
+    from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
+                                      startup_failure)
     from cold_maps.evaluation.run import RunOptions, run_evaluation
 
     configure_logging(args.verbose, args.quiet)

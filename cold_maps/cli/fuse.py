@@ -190,14 +190,8 @@ def _detection_count(path: Path) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import (
-        configure_logging,
-        fail,
-        interruption,
-        progress_stream,
-        result_line,
-        startup_failure,
-    )
+    from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
+                                      startup_failure)
     from cold_maps.common.progress import ProgressBar
     from cold_maps.recording.recorder import Recorder, read_detections
 
