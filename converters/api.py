@@ -1,10 +1,9 @@
-"""Public entry points: load a converted map, write one, and the ``convert`` CLI."""
+"""Public entry points: load a converted map, write one, and the ``convert`` arguments."""
 
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -134,28 +133,8 @@ def _load_osm(
 
 
 def configure_convert(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``cold-maps convert``: MAP.xodr -o MAP.osm [--no-cache] [--verbose]."""
+    """Arguments of ``cold-maps convert``: MAP.xodr -o MAP.osm [--no-cache] (the command
+    itself, with its output conventions, is ``cold_maps.cli.maps``)."""
     parser.add_argument("xodr", metavar="MAP.xodr", help="OpenDRIVE map")
     parser.add_argument("-o", "--output", metavar="MAP.osm", required=True, help="Lanelet2 OSM file to write")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
-    parser.add_argument("--verbose", action="store_true", help="show crdesigner's warnings and logs")
-
-
-def run_convert(args: argparse.Namespace) -> int:
-    """Write the OSM file and print its load recipe; 0. Raises ConversionError."""
-    recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose)
-    print(recipe.describe())
-    return 0
-
-
-def cli_convert(argv: list[str] | None = None) -> int:
-    """Stand-alone ``cold-maps convert``: exit 0, or 1 with one line on stderr."""
-    parser = argparse.ArgumentParser(
-        prog="cold-maps convert", description="Convert OpenDRIVE to a Lanelet2 OSM file in the inertial frame."
-    )
-    configure_convert(parser)
-    try:
-        return run_convert(parser.parse_args(argv))
-    except ConversionError as exc:
-        print(f"cold-maps convert: {exc}", file=sys.stderr)
-        return 1

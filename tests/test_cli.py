@@ -238,7 +238,7 @@ def test_convert_writes_an_osm_that_plain_lanelet2_loads_in_the_opendrive_frame(
 
     xodr = bundled_map("curve90")
     osm = tmp_path / "curve90.osm"
-    assert main(["convert", str(xodr), "-o", str(osm), "--no-cache"]) == 0
+    assert main(["convert", str(xodr), "-o", str(osm), "--no-cache", "-v"]) == 0
     printed = capsys.readouterr().out
     assert "MercatorProjector" in printed and "Origin(0.0, 0.0)" in printed
     lanelet_map = lanelet2.io.load(str(osm), MercatorProjector(Origin(0.0, 0.0)))

@@ -363,16 +363,23 @@ def test_foreign_osm_and_unknown_suffix_are_refused(tmp_path) -> None:
         converters.load_lanelet2(tmp_path / "map.txt")
 
 
-def test_cli_convert_prints_the_recipe_and_loads_back(straight_map, tmp_path, capsys) -> None:
+def test_cli_convert_reports_one_line_and_loads_back(straight_map, tmp_path, capsys) -> None:
+    from cold_maps.cli.maps import main
+
     out = tmp_path / "straight.osm"
-    assert converters.cli_convert([str(straight_map), "-o", str(out), "--no-cache"]) == 0
-    printed = capsys.readouterr().out
-    assert f"wrote {out}: 6 lanelets" in printed and "MercatorProjector" in printed
+    assert main(["convert", str(straight_map), "-o", str(out), "--no-cache"]) == 0
+    assert capsys.readouterr().out == f"cold-maps convert: 6 lanelets in the OpenDRIVE inertial frame -> {out}\n"
     lanelet_map, _ = converters.load_lanelet2(out)
     assert len(lanelet_map.laneletLayer) == 6
-    assert converters.cli_convert([str(tmp_path / "missing.xodr"), "-o", str(out), "--no-cache"]) == 1
+    assert main(["convert", str(straight_map), "-o", str(out), "-v"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].endswith("6 lanelets in the OpenDRIVE inertial frame -> " + str(out))
+    assert f"wrote {out}: 6 lanelets" in printed[1] and any("MercatorProjector" in line for line in printed)
+    assert main(["convert", str(straight_map), "-o", str(out), "-q"]) == 0
+    assert capsys.readouterr().out == ""
+    assert main(["convert", str(tmp_path / "missing.xodr"), "-o", str(out), "--no-cache"]) == 1
     error = capsys.readouterr().err
-    assert error.count("\n") == 1 and "missing.xodr: cannot read the map" in error
+    assert error.count("\n") == 1 and error.startswith("cold-maps: error: ") and "missing.xodr: cannot read file" in error
 
 
 def test_importing_converters_does_not_import_crdesigner_or_lanelet2() -> None:

@@ -164,7 +164,7 @@ def test_signal_finalises_the_recording(tmp_path, signal_name, status, word):
     os.kill(process.pid, getattr(signal, signal_name))
     _, err = process.communicate(timeout=60)
     assert process.returncode == status, err
-    assert err.strip().startswith(f"cold-eval: {word}") and len(err.strip().splitlines()) == 1, err
+    assert err.strip().startswith(f"cold-eval: error: {word}") and len(err.strip().splitlines()) == 1, err
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "partial"
     document, _ = _records(out)
     assert document["partial"] is True

@@ -83,8 +83,13 @@ def test_cli_strict_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     source = tmp_path / "rr.xodr"
     source.write_bytes(ROADRUNNER)
     assert main(["info", str(source)]) == 0
+    warned = capsys.readouterr().err.splitlines()
+    assert len(warned) == 5 and all(line.startswith("WARNING cold_maps.opendrive.parser: ") for line in warned)
+    assert main(["info", "-q", str(source)]) == 0
+    assert capsys.readouterr().err == ""
     assert main(["info", "--strict", str(source)]) == 1
-    assert capsys.readouterr().err.count("\n") == 1
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and error.startswith("cold-maps: error: ")
 
 
 def test_superelevation_raises_the_left_side_and_level_lanes_stay_flat() -> None:

@@ -1,19 +1,25 @@
-"""Conventions shared by the command-line tools: logging to stderr, exit statuses, the
-one-line report of a failure before any output was written, SIGTERM handled like Ctrl-C,
-and a reader that closes the pipe early ending the command quietly."""
+"""Conventions shared by the command-line tools ``cold-maps``, ``cold-eval`` (and ``cold-eval
+sweep``) and ``cold-fuse``: one parser factory (``--version``, ``-v/-vv``, ``-q``,
+``--no-progress``, defaults in the help, usage errors as one line with exit 2), logging to
+stderr around progress bars, one error prefix ``PROG: error: [SUBCOMMAND: ]message``, exit
+statuses, SIGTERM handled like Ctrl-C, and a reader that closes the pipe early ending the
+command quietly."""
 
 from __future__ import annotations
 
 import argparse
 import functools
+import io
 import logging
 import os
 import signal
 import sys
 from types import FrameType
-from typing import Callable, Final, Sequence
+from typing import Callable, Final, Sequence, TextIO
 
 EXIT_FAILURE: Final[int] = 1
+EXIT_USAGE: Final[int] = 2
+"""A bad command line (argparse's convention)."""
 EXIT_INTERRUPTED: Final[int] = 130
 """Ctrl-C (SIGINT): 128 + 2."""
 EXIT_BROKEN_PIPE: Final[int] = 141
@@ -60,21 +66,118 @@ def cli_entry(body: Callable[[Sequence[str] | None], int]) -> Callable[[Sequence
     return main
 
 
-def configure_logging(verbose: int) -> None:
-    """Logging to stderr: warnings, ``-v`` info, ``-vv`` debug."""
-    logging.basicConfig(level=(logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)],
-                        format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+class CliParser(argparse.ArgumentParser):
+    """ArgumentParser that reports a usage error as ONE line on stderr,
+    ``PROG: error: [SUBCOMMAND: ]message (see PROG [SUBCOMMAND] --help)``, and exits 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.exit(fail(self.prog, f"{message} (see {self.prog} --help)", EXIT_USAGE))
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Appends ``(default: X)`` to an option's help unless the help already names its
+    default or there is nothing to show (no default, a flag that is off by default)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help
+        if (not text or "default" in text or not action.option_strings
+                or action.default in (None, False, argparse.SUPPRESS)):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def make_parser(prog: str, description: str, *, progress: bool) -> CliParser:
+    """The parser every command starts from: ``--version``, ``-v/--verbose`` (count),
+    ``-q/--quiet`` and, when the command draws progress bars, ``--no-progress``."""
+    from cold_maps import __version__
+
+    parser = CliParser(prog=prog, description=description, formatter_class=DefaultsHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"{prog} {__version__}")
+    add_output_options(parser, progress=progress)
+    return parser
+
+
+def add_output_options(parser: argparse.ArgumentParser, *, progress: bool, inherited: bool = False) -> None:
+    """``-v/--verbose``, ``-q/--quiet`` (mutually exclusive) and optionally ``--no-progress``.
+    ``inherited``: on a subcommand whose parent parser has them too; not given there, they
+    keep the parent's value."""
+
+    def default(value: object) -> object:
+        return argparse.SUPPRESS if inherited else value
+
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="count", default=default(0),
+                          help="log what happens to stderr (-vv: debug)")
+    loudness.add_argument("-q", "--quiet", action="store_true", default=default(False),
+                          help="no result line, no progress bar, no warnings; errors still on stderr")
+    if progress:
+        parser.add_argument("--no-progress", action="store_true", default=default(False),
+                            help="no progress bar (drawn only when stderr is a terminal anyway)")
+
+
+def progress_stream(args: argparse.Namespace) -> TextIO:
+    """Where the progress bars of a run draw: stderr, or under ``--quiet``/``--no-progress``
+    a stream that is no terminal (bars draw only on a terminal, so none is drawn)."""
+    return io.StringIO() if args.quiet or getattr(args, "no_progress", False) else sys.stderr
+
+
+def result_line(args: argparse.Namespace, prog: str, message: str) -> None:
+    """The one line on stdout that reports a command's success, ``PROG: message``, unless ``--quiet``."""
+    if not args.quiet:
+        print(f"{prog}: {message}")
+
+
+class _BarAwareHandler(logging.Handler):
+    """Writes each record to the current ``sys.stderr`` through ``tqdm.write``, which
+    clears the progress bars on it and draws them again below the line; on a terminal the
+    line is cleared first too, so a record never glues onto a bar drawn by other means."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            from tqdm import tqdm
+
+            stream = sys.stderr
+            clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
+            tqdm.write(clear + self.format(record), file=stream)
+        except Exception:  # noqa: BLE001 - logging's own convention for a failing handler
+            self.handleError(record)
+
+
+def configure_logging(verbose: int, quiet: bool = False) -> None:
+    """Logging to stderr, around progress bars: warnings, ``-v`` info, ``-vv`` debug,
+    ``-q`` errors only. Replaces the handlers a previous call installed."""
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    handler = _BarAwareHandler()
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    for old in [h for h in root.handlers if isinstance(h, _BarAwareHandler)]:
+        root.removeHandler(old)
+    root.addHandler(handler)
+    root.setLevel(level)
+
+
+def one_line(exc: BaseException | str) -> str:
+    """An exception's (or a text's) message on one line; the exception's type when it has none."""
+    text = " ".join(str(exc).split())
+    return text or (type(exc).__name__ if isinstance(exc, BaseException) else "")
+
+
+def fail(prog: str, message: str, status: int = EXIT_FAILURE) -> int:
+    """``PROG: error: message`` as one line on stderr (``PROG SUBCOMMAND`` as
+    ``PROG: error: SUBCOMMAND: message``); returns ``status``."""
+    program, _, command = prog.partition(" ")
+    where = f"{command}: " if command else ""
+    print(f"{program}: error: {where}{one_line(message)}", file=sys.stderr)
+    return status
 
 
 def startup_failure(prog: str, exc: BaseException) -> int:
     """One line on stderr for a failure before any output was written; the exit status."""
     if isinstance(exc, KeyboardInterrupt):
         what, status = interruption(exc)
-        print(f"{prog}: {what} before the run started; nothing written", file=sys.stderr)
-        return status
+        return fail(prog, f"{what} before the run started; nothing written", status)
     logging.getLogger(prog).debug("failed", exc_info=exc)
-    print(f"{prog}: {exc}", file=sys.stderr)
-    return EXIT_FAILURE
+    return fail(prog, one_line(exc))
 
 
 def positive_int(text: str) -> int:

@@ -7,8 +7,9 @@ Lanelet2 ground truth. ``cold-eval --paper`` runs the paper's experiments on the
 straight, curve90 and rural maps. The drives run in ``--workers`` processes (default: the
 cores) with the same outputs for any number; ``--method`` adds your own fusion method.
 Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
-1 with one line on stderr for bad input or a crash (partial outputs marked as such); 130
-when interrupted. ``cold-eval sweep ...``: a grid of evaluations (:mod:`cold_maps.cli.sweep`).
+1 with one line on stderr for bad input or a crash (partial outputs marked as such); 2 for
+a bad command line; 130 when interrupted, 143 on SIGTERM. ``cold-eval sweep ...``: a grid
+of evaluations (:mod:`cold_maps.cli.sweep`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry, gap_list, positive_int
+from cold_maps.cli.common import cli_entry, gap_list, make_parser, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -36,6 +37,8 @@ DEFAULT_OUT: Final[str] = "out/cold-eval"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
 MAX_LANES: Final[int] = 8
+UNRECORDED: Final[frozenset[str]] = frozenset({"workers", "verbose", "quiet", "no_progress"})
+"""Options that change no result, left out of the recording's ``cold.run`` parameters."""
 
 
 def _routes(text: str) -> int | None:
@@ -99,7 +102,7 @@ def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval`` argument parser."""
     description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
-    parser = argparse.ArgumentParser(prog=PROG, description=description)
+    parser = make_parser(PROG, description, progress=True)
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--map", action="append", type=Path, metavar="MAP.xodr", help="OpenDRIVE map (repeatable)")
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
@@ -117,7 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
                         help="also evaluate this fusion method across the gaps: a name registered in the "
-                             "cold_maps.fusion_methods entry points or package.module:function (repeatable)")
+                             "cold_maps.fusion_methods entry points or package.module:function "
+                             "(repeatable; default: none)")
     parser.add_argument("--lanes", type=_lane_count, default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
@@ -158,7 +162,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("--stamp-base", type=_stamp_base, default=None, metavar="UNIX_S",
                         help="MCAP log time of frame 0 in s since the Unix epoch (default: the run's start)")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
 
@@ -223,34 +226,33 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return sweep.main(argv[1:])
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import configure_logging, interruption, startup_failure
+    from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
+                                      startup_failure)
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
     from cold_maps.evaluation.trust import run_warnings
 
-    configure_logging(args.verbose)
+    configure_logging(args.verbose, args.quiet)
     try:
         plans = _plans(args)
-        options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots, progress=sys.stderr,
-                             run_params={k: str(v) for k, v in sorted(vars(args).items()) if k != "workers"},
+        options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots,
+                             progress=progress_stream(args),
+                             run_params={k: str(v) for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
                              workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     if isinstance(run.error, KeyboardInterrupt):
         what, status = interruption(run.error)
-        print(f"{PROG}: {what}; partial report in {args.out}", file=sys.stderr)
-        return status
+        return fail(PROG, f"{what}; partial report in {args.out}", status)
     if run.error is not None:
-        print(f"{PROG}: run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}",
-              file=sys.stderr)
-        return 1
+        return fail(PROG, f"run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}")
     reduced = run.collector.reduced_maps
     fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
     warnings = run_warnings(run.collector)
     verdict = f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
-    print(f"{PROG}: {len(run.results)} scenario records, {run.collector.frames_done} frames -> {args.out}{fitted}"
-          f"{verdict}")
+    result_line(args, PROG, f"{len(run.results)} scenario records, {run.collector.frames_done} frames -> "
+                f"{args.out}{fitted}{verdict}")
     return 0
 
 

@@ -24,14 +24,14 @@ from typing import Any, Final, Sequence
 
 import numpy as np
 
-from cold_maps.cli.common import cli_entry
+from cold_maps.cli.common import cli_entry, make_parser
 
 PROG: Final[str] = "cold-fuse"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-fuse`` argument parser."""
-    parser = argparse.ArgumentParser(prog=PROG, description="Fuse recorded lane detections (cold.LaneDetection) again.")
+    parser = make_parser(PROG, "Fuse recorded lane detections (cold.LaneDetection) again.", progress=True)
     parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap", help="recording to read")
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.mcap", help="recording to write")
     parser.add_argument("--ego", default="ego", help="sender id of the ego vehicle (default ego)")
@@ -43,7 +43,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "recording's cold.run map when it names one readable file)")
     parser.add_argument("--no-gt", action="store_true", help="do not measure against ground truth")
     parser.add_argument("--report", type=Path, default=None, help="folder for summary.md, metrics.json, frames.csv")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
 
@@ -176,19 +175,36 @@ def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
     return world_borders(detection)
 
 
+def _detection_count(path: Path) -> int:
+    """Number of ``/cold/detections`` messages in the recording's summary statistics (0 if none)."""
+    from mcap.reader import make_reader
+
+    from cold_maps.recording.recorder import TOPIC_RAW_DETECTIONS
+
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    if summary is None or summary.statistics is None:
+        return 0
+    counts = summary.statistics.channel_message_counts
+    return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic == TOPIC_RAW_DETECTIONS)
+
+
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import configure_logging, interruption, startup_failure
+    from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
+                                      startup_failure)
+    from cold_maps.common.progress import ProgressBar
     from cold_maps.recording.recorder import Recorder, read_detections, read_stamp_base
 
-    configure_logging(args.verbose)
+    configure_logging(args.verbose, args.quiet)
     error: BaseException | None = None
     try:
         if args.input.resolve() == args.output.resolve():
             raise ValueError(f"{args.output}: output would overwrite the input recording")
         frames = read_detections(args.input)
+        detections_total = _detection_count(args.input)
         map_path = _map_path(args)
         import fusion
 
@@ -208,9 +224,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return startup_failure(PROG, exc)
     count = 0
     try:
-        for frame, detections in frames:
-            refuser.frame(frame, detections, recorder)
-            count += 1
+        with ProgressBar(max(detections_total, 1), PROG, stream=progress_stream(args)) as bar:
+            for frame, detections in frames:
+                refuser.frame(frame, detections, recorder)
+                count += 1
+                bar.update(len(detections))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - outputs are finalised as partial
         error = exc
         logging.getLogger(PROG).debug("run ended early", exc_info=True)
@@ -221,13 +239,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False)
     if isinstance(error, KeyboardInterrupt):
         what, status = interruption(error)
-        print(f"{PROG}: {what} after {count} frames; {args.output} finalised as partial", file=sys.stderr)
-        return status
+        return fail(PROG, f"{what} after {count} frames; {args.output} finalised as partial", status)
     if error is not None:
-        print(f"{PROG}: {error}; {args.output} finalised as partial", file=sys.stderr)
-        return 1
-    print(f"{PROG}: {count} frames fused -> {args.output}"
-          + (f" ({refuser.frames_without_ego} without ego '{args.ego}')" if refuser.frames_without_ego else ""))
+        return fail(PROG, f"{error}; {args.output} finalised as partial")
+    result_line(args, PROG, f"{count} frames fused -> {args.output}"
+                + (f" ({refuser.frames_without_ego} without ego '{args.ego}')" if refuser.frames_without_ego else ""))
     return 0
 
 

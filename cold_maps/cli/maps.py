@@ -2,9 +2,11 @@
 
 Subcommands live in ``COMMANDS``, a table of (name, help, configure, run); a new
 subcommand is one more entry. Every failure (unreadable or invalid map, I/O error, bad
-argument) ends with exit status 1 (2 for usage errors) and ONE line on stderr, never a
-traceback. Output files are written to a temporary file in the target folder and renamed
-into place, so a failure leaves no partial file.
+argument) ends with exit status 1 (2 for usage errors) and ONE line on stderr,
+``cold-maps: error: ...``, never a traceback. ``export`` and ``convert`` report success in
+one line on stdout (none under ``-q``, none for ``export -o -``). Output files are
+written to a temporary file in the target folder and renamed into place, so a failure
+leaves no partial file.
 
 ``info`` and ``export`` import only numpy and the map engine (no converter, no plotting).
 """
@@ -15,6 +17,7 @@ import argparse
 import csv
 import io
 import json
+import logging
 import math
 import sys
 from collections import Counter
@@ -24,9 +27,15 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
-from cold_maps.cli.common import cli_entry
+from cold_maps.cli.common import (
+    DefaultsHelpFormatter,
+    add_output_options,
+    cli_entry,
+    make_parser,
+    one_line,
+    result_line,
+)
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
-from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.model import OpenDriveMap
 
 PROG: Final[str] = "cold-maps"
@@ -42,17 +51,6 @@ PROJ string or null}``."""
 EXPORT_LANE_TYPES: Final[tuple[str, ...]] = ("driving",)
 
 
-class UsageError(Exception):
-    """A bad command line (reported as one line, exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are exceptions, so main() prints them as one line."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
-
-
 @dataclass(frozen=True)
 class Command:
     """One subcommand.
@@ -62,12 +60,14 @@ class Command:
         help: one-line description.
         configure: adds the subcommand's arguments to its parser.
         run: executes it and returns the exit status.
+        progress: it may take long and draws progress (``--no-progress``).
     """
 
     name: str
     help: str
     configure: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
+    progress: bool = False
 
 
 def _load(args: argparse.Namespace) -> OpenDriveMap:
@@ -148,7 +148,7 @@ def _positive_step(text: str) -> float:
 def _configure_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
     parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
-    parser.add_argument("--format", choices=("csv", "geojson"), default="csv")
+    parser.add_argument("--format", choices=("csv", "geojson"), default="csv", help="file format")
     parser.add_argument(
         "--crs", choices=("wgs84", "local"), default="wgs84",
         help="geojson coordinates: WGS84 lon/lat through the map's geoReference (RFC 7946, default) or the "
@@ -249,7 +249,14 @@ def _write_geojson(
 
 def _run_export(args: argparse.Namespace) -> int:
     odr_map = _load(args)
-    borders = lane_border_polylines(odr_map, args.step)
+    written = Counter[str]()
+
+    def counted(borders: Iterator[BorderPolyline]) -> Iterator[BorderPolyline]:
+        for border in borders:
+            written.update(borders=1, points=len(border.s))
+            yield border
+
+    borders = counted(lane_border_polylines(odr_map, args.step))
     crs = _geojson_crs(odr_map, args.crs) if args.format == "geojson" else None
 
     def write(out: TextIO) -> None:
@@ -265,6 +272,9 @@ def _run_export(args: argparse.Namespace) -> int:
 
         with atomic_output(Path(args.output), "w") as out:
             write(out)
+        frame = "inertial frame" if args.format == "csv" or args.crs == "local" else "WGS84"
+        result_line(args, f"{PROG} export", f"{written['borders']} lane borders, {written['points']} points "
+                    f"({args.format}, {frame}) -> {args.output}")
     return 0
 
 
@@ -275,11 +285,21 @@ def _configure_convert(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_convert(args: argparse.Namespace) -> int:
+    """One result line (``-v``: and the recipe to load the file in the same frame); a
+    cold conversion shows its elapsed time on a terminal. ``-vv`` shows crdesigner's own
+    warnings and prints."""
+    from cold_maps.cli.common import progress_stream
+    from cold_maps.common.progress import Spinner
     from cold_maps.opendrive.parser import load_opendrive
-    from converters.api import run_convert
+    from converters import convert
 
     load_opendrive(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
-    return run_convert(args)
+    with Spinner(f"{PROG} convert: converting {Path(args.xodr).name}", stream=progress_stream(args)):
+        recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose >= 2)
+    result_line(args, f"{PROG} convert", f"{recipe.lanelets} lanelets in the OpenDRIVE inertial frame -> {args.output}")
+    if args.verbose and not args.quiet:
+        print(recipe.describe())
+    return 0
 
 
 def _configure_check(parser: argparse.ArgumentParser) -> None:
@@ -289,9 +309,19 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_check(args: argparse.Namespace) -> int:
+    """The report, printed once the elapsed-time line of the (maybe cold) conversion is gone."""
+    from contextlib import redirect_stdout
+
+    from cold_maps.cli.common import progress_stream
+    from cold_maps.common.progress import Spinner
     from cold_maps.groundtruth.check import run_check
 
-    return run_check(args)
+    report = io.StringIO()
+    with Spinner(f"{PROG} check: converting and comparing {Path(args.map).name}", stream=progress_stream(args)), \
+            redirect_stdout(report):
+        status = run_check(args)
+    sys.stdout.write(report.getvalue())
+    return status
 
 
 def _configure_cache(parser: argparse.ArgumentParser) -> None:
@@ -321,15 +351,17 @@ COMMANDS: Final[tuple[Command, ...]] = (
     ),
     Command(
         "convert",
-        "convert to a Lanelet2 OSM file in the OpenDRIVE frame and print how to load it",
+        "convert to a Lanelet2 OSM file in the OpenDRIVE frame (-v: print how to load it)",
         _configure_convert,
         _run_convert,
+        progress=True,
     ),
     Command(
         "check",
         "compare the converted Lanelet2 ground truth with our borders per lane (exit 3: not trustworthy)",
         _configure_check,
         _run_check,
+        progress=True,
     ),
     Command("cache", "show the Lanelet2 conversion cache, or --clear it", _configure_cache, _run_cache),
 )
@@ -338,37 +370,38 @@ COMMANDS: Final[tuple[Command, ...]] = (
 def build_parser(commands: Sequence[Command] = COMMANDS, selected: str | None = None) -> argparse.ArgumentParser:
     """The argument parser with one subparser per command. When ``selected`` names a
     command, only that one is configured, so a command never imports another's modules."""
-    parser = _Parser(prog=PROG, description="Tools on OpenDRIVE maps for collective lane detection.")
+    parser = make_parser(PROG, "Tools on OpenDRIVE maps for collective lane detection.", progress=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     names = {command.name for command in commands}
     for command in commands:
-        configure = sub.add_parser(command.name, help=command.help, description=command.help)
+        configure = sub.add_parser(command.name, help=command.help, description=command.help,
+                                   formatter_class=DefaultsHelpFormatter)
         if selected not in names or command.name == selected:
             command.configure(configure)
+            add_output_options(configure, progress=command.progress, inherited=True)
         configure.set_defaults(run=command.run)
     return parser
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 @cli_entry
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-maps``; returns the exit status."""
+    from cold_maps.cli.common import configure_logging, fail, interruption
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    selected = next((arg for arg in argv if not arg.startswith("-")), None)
+    args = build_parser(selected=selected).parse_args(argv)
+    configure_logging(args.verbose, args.quiet)
     try:
-        argv = list(sys.argv[1:] if argv is None else argv)
-        selected = next((arg for arg in argv if not arg.startswith("-")), None)
-        args = build_parser(selected=selected).parse_args(argv)
         return int(args.run(args))
-    except UsageError as exc:
-        print(_one_line(exc), file=sys.stderr)
-        return 2
     except BrokenPipeError:
         raise
-    except (OpenDriveError, OSError, ValueError) as exc:
-        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
+    except KeyboardInterrupt as exc:
+        what, status = interruption(exc)
+        return fail(PROG, f"{what}; nothing written", status)
+    except Exception as exc:  # every failure is reported as one line
+        logging.getLogger(PROG).debug("failed", exc_info=exc)
+        return fail(PROG, one_line(exc))
 
 
 if __name__ == "__main__":

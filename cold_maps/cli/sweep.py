@@ -6,17 +6,17 @@ in ``--workers`` processes (default: the cores) or, with ``--scheduler tcp://HOS
 on a Dask cluster (maps shipped to the workers). Outputs in DIR: results.parquet,
 results.csv, summary.md, plots/*.png, cells/*.json (one per finished cell: run the same
 command again after an interrupt and only the missing cells are computed). Exit 0; 1 with
-one line on stderr for bad input or a failed cell; 130 when interrupted.
+one line on stderr for bad input or a failed cell; 2 for a bad command line; 130 when
+interrupted, 143 on SIGTERM.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence, TypeVar
 
-from cold_maps.cli.common import gap_list, positive_int
+from cold_maps.cli.common import gap_list, make_parser, positive_int
 from cold_maps.simulation.drive import PAPER_GAPS_M
 
 PROG: Final[str] = "cold-eval sweep"
@@ -49,7 +49,7 @@ def _sigmas(text: str) -> tuple[float, ...]:
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval sweep`` argument parser."""
     description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
-    parser = argparse.ArgumentParser(prog=PROG, description=description)
+    parser = make_parser(PROG, description, progress=True)
     parser.add_argument("--map", action="append", type=Path, required=True, metavar="MAP.xodr",
                         help="OpenDRIVE map (repeatable)")
     parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
@@ -57,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--interpolation", type=_list(str, "method names"), default=("paper", "hermite"),
                         help="spline methods: paper, hermite, registered names (default paper,hermite)")
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
-                        help="another fusion method: registered name or package.module:function (repeatable)")
+                        help="another fusion method: registered name or package.module:function "
+                             "(repeatable; default: none)")
     parser.add_argument("--noise", type=_sigmas, default=(0.0,), help="sensor noise σ levels in m (default 0)")
     parser.add_argument("--pose-xy", type=_sigmas, default=(0.0,), help="coop pose σ levels in m (default 0)")
     parser.add_argument("--seeds", type=_list(int, "integers"), default=(0,), help="seeds (default 0)")
@@ -71,21 +72,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
                         help="run the cells on this Dask scheduler's workers")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval sweep``; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from cold_maps.cli.common import configure_logging, interruption, startup_failure
+    from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
+                                      startup_failure)
     from cold_maps.common.progress import ProgressBar
     from cold_maps.evaluation.parallel import default_workers, process_pool
     from cold_maps.evaluation.run import prepare_out_dir
     from cold_maps.evaluation.sweep import SweepSpec, dask_executor, run_sweep, write_tables
     from cold_maps.evaluation.sweep_report import write_report
 
-    configure_logging(args.verbose)
+    configure_logging(args.verbose, args.quiet)
     spec = SweepSpec(tuple(args.map), args.gaps, tuple(dict.fromkeys((*args.interpolation, *args.method))),
                      args.noise, args.pose_xy, args.seeds, args.frames, args.routes)
     try:
@@ -94,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         workers = min(args.workers or default_workers(), len(cells))
         executor = (dask_executor(args.scheduler) if args.scheduler
                     else process_pool(workers) if workers > 1 else None)
-        with ProgressBar(len(cells), "cold-eval sweep", stream=sys.stderr) as bar:
+        with ProgressBar(len(cells), PROG, stream=progress_stream(args)) as bar:
             result = run_sweep(spec, out, executor=executor, ship_maps=args.scheduler is not None,
                                on_cells=bar.update)
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
@@ -106,11 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     counts = f"{result.computed} cells computed, {result.reused} finished before, {len(result.cells)} in the grid"
     if isinstance(result.error, KeyboardInterrupt):
         what, status = interruption(result.error)
-        print(f"{PROG}: {what} ({counts}); run the same command again to finish -> {args.out}", file=sys.stderr)
-        return status
+        return fail(PROG, f"{what} ({counts}); run the same command again to finish -> {args.out}", status)
     if result.error is not None:
-        print(f"{PROG}: a cell failed ({type(result.error).__name__}: {result.error}; {counts}); partial results "
-              f"in {args.out}", file=sys.stderr)
-        return 1
-    print(f"{PROG}: {counts}, {len(result.rows)} rows -> {args.out}")
+        return fail(PROG, f"a cell failed ({type(result.error).__name__}: {result.error}; {counts}); partial results "
+                    f"in {args.out}")
+    result_line(args, PROG, f"{counts}, {len(result.rows)} rows -> {args.out}")
     return 0

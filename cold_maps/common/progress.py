@@ -8,6 +8,9 @@ from typing import Final, TextIO
 
 BAR_WIDTH_CHARS: Final[int] = 30
 REDRAW_INTERVAL_S: Final[float] = 0.1
+ERASE_LINE_END: Final[str] = "\x1b[K"
+"""ANSI erase to the end of the line: a bar never shows what a longer line left (tqdm
+counts no width for it)."""
 
 
 class ProgressBar:
@@ -33,7 +36,8 @@ class ProgressBar:
         enabled = bool(getattr(self.stream, "isatty", lambda: False)())
         prefix = "{desc} " if label else ""
         self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not enabled, ascii=".#",
-                         bar_format=prefix + "[{bar:%d}] {n_fmt}/{total_fmt}  ETA {remaining}" % width,
+                         bar_format=prefix + "[{bar:%d}] {n_fmt}/{total_fmt}  ETA {remaining}%s"
+                         % (width, ERASE_LINE_END),
                          mininterval=min_interval_s, miniters=1, dynamic_ncols=False)
 
     def update(self, steps: int = 1) -> None:
@@ -49,6 +53,55 @@ class ProgressBar:
         self._bar.close()
 
     def __enter__(self) -> ProgressBar:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+SPINNER_DELAY_S: Final[float] = 1.0
+"""A step that ends sooner draws nothing."""
+SPINNER_INTERVAL_S: Final[float] = 0.5
+
+
+class Spinner:
+    """``label  00:12`` (elapsed time) on one line of ``stream`` (stderr by default) while a
+    step of unknown length runs (a map conversion), redrawn every ``interval_s`` seconds by
+    a background thread once ``delay_s`` seconds have passed. Silent when the stream is not a TTY; the line is
+    cleared when it ends. Drawn by ``tqdm``, so log records written through ``tqdm.write``
+    (see :func:`cold_maps.cli.common.configure_logging`) pass above it. A context manager.
+    """
+
+    def __init__(self, label: str, stream: TextIO | None = None, delay_s: float = SPINNER_DELAY_S,
+                 interval_s: float = SPINNER_INTERVAL_S):
+        import threading
+
+        from tqdm import tqdm
+
+        self.stream = sys.stderr if stream is None else stream
+        self.interval_s = interval_s
+        enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._bar = tqdm(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
+                         bar_format="{desc}  {elapsed}", delay=delay_s, mininterval=0.0, miniters=0,
+                         dynamic_ncols=False)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._redraw, name="spinner", daemon=True)
+        if enabled:
+            self._thread.start()
+
+    def _redraw(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            self._bar.update(0)  # draws once ``delay_s`` has passed; close() then clears the line
+
+    def close(self) -> None:
+        """Stops redrawing and clears the line."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._bar.close()
+
+    def __enter__(self) -> Spinner:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

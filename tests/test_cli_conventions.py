@@ -1,0 +1,243 @@
+"""One command-line convention for ``cold-maps``, ``cold-eval``, ``cold-eval sweep`` and
+``cold-fuse``: ``--version``, ``-v/-vv`` and ``-q``, defaults in the help, usage errors and
+runtime errors as ONE line ``PROG: error: [SUBCOMMAND: ]...`` (exit 2 and 1), and progress that never garbles the
+terminal: no stale characters, log records never glued onto a bar, ``--no-progress``."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import logging
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from conftest import PROJECT_ROOT, bundled_map
+
+import cold_maps
+from cold_maps.cli import evaluate, fuse, maps, sweep
+from cold_maps.cli.common import DefaultsHelpFormatter, configure_logging
+from cold_maps.common.progress import ProgressBar, Spinner
+
+
+@dataclass(frozen=True)
+class Cli:
+    """One command under test.
+
+    Fields:
+        prog: its name.
+        module: ``python -m`` module.
+        ok: arguments of a quick successful run, given a tmp folder and a recording.
+        broken: arguments of a run that fails at run time (a missing input), given a tmp folder.
+        parsers: its argument parsers (every subcommand's too).
+        command: arguments before every other (a subcommand with its own options).
+    """
+
+    prog: str
+    module: str
+    ok: Callable[[Path, Path], list[str]]
+    broken: Callable[[Path], list[str]]
+    parsers: Callable[[], list[argparse.ArgumentParser]]
+    command: tuple[str, ...] = ()
+
+
+def _maps_parsers() -> list[argparse.ArgumentParser]:
+    found = [maps.build_parser()]
+    for command in maps.COMMANDS:
+        parser = maps.build_parser(selected=command.name)
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        found.append(sub.choices[command.name])
+    return found
+
+
+STRAIGHT = str(bundled_map("straight"))
+CLIS = (
+    Cli("cold-maps", "cold_maps.cli.maps", lambda tmp, rec: ["export", STRAIGHT, "-o", str(tmp / "b.csv")],
+        lambda tmp: ["info", str(tmp / "none.xodr")], _maps_parsers),
+    Cli("cold-eval", "cold_maps.cli.evaluate",
+        lambda tmp, rec: ["--map", STRAIGHT, "--frames", "2", "--routes", "1", "--gaps", "30", "--no-distractors",
+                          "--no-plots", "--no-mcap", "--out", str(tmp / "out")],
+        lambda tmp: ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "out")], lambda: [evaluate.build_parser()]),
+    Cli("cold-fuse", "cold_maps.cli.fuse", lambda tmp, rec: ["--input", str(rec), "-o", str(tmp / "re.mcap"), "--no-gt"],
+        lambda tmp: ["--input", str(tmp / "none.mcap"), "-o", str(tmp / "re.mcap")], lambda: [fuse.build_parser()]),
+    Cli("cold-eval sweep", "cold_maps.cli.evaluate",
+        lambda tmp, rec: ["--map", STRAIGHT, "--gaps", "30", "--interpolation", "paper", "--frames", "2", "--routes",
+                          "1", "--workers", "1", "--no-plots", "--out", str(tmp / "sweep")],
+        lambda tmp: ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "sweep")], lambda: [sweep.build_parser()],
+        command=("sweep",)),
+)
+IDS = [cli.prog for cli in CLIS]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("rec")
+    assert evaluate.main(["--map", STRAIGHT, "--frames", "3", "--routes", "1", "--gaps", "30", "--no-distractors",
+                          "--no-plots", "-q", "--out", str(out)]) == 0
+    return out / "run.mcap"
+
+
+def _run(cli: Cli, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", cli.module, *cli.command, *args], capture_output=True, text=True,
+                          cwd=PROJECT_ROOT, timeout=120, check=False)
+
+
+def _one_error_line(result: subprocess.CompletedProcess[str], prog: str) -> str:
+    program, _, command = prog.partition(" ")
+    prefix = f"{program}: error: " + (f"{command}: " if command else "")
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(prefix), result.stderr
+    assert "Traceback" not in result.stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("cli", CLIS, ids=IDS)
+def test_version(cli: Cli) -> None:
+    result = _run(cli, "--version")
+    assert (result.returncode, result.stdout, result.stderr) == (0, f"{cli.prog} {cold_maps.__version__}\n", "")
+
+
+@pytest.mark.parametrize("cli", CLIS, ids=IDS)
+def test_usage_errors_are_one_line_with_exit_2(cli: Cli, tmp_path: Path, recording: Path) -> None:
+    for args in ([*cli.ok(tmp_path, recording), "--no-such-option"], ["-v", "-q", *cli.ok(tmp_path, recording)]):
+        result = _run(cli, *args)
+        assert result.returncode == 2 and result.stdout == ""
+        line = _one_error_line(result, cli.prog)
+        assert line.endswith("--help)") and ("--no-such-option" in line or "not allowed with" in line), line
+
+
+@pytest.mark.parametrize("cli", CLIS, ids=IDS)
+def test_runtime_errors_are_one_line_with_exit_1(cli: Cli, tmp_path: Path) -> None:
+    result = _run(cli, *cli.broken(tmp_path))
+    assert result.returncode == 1 and result.stdout == ""
+    assert "none." in _one_error_line(result, cli.prog)
+
+
+@pytest.mark.parametrize("cli", CLIS, ids=IDS)
+def test_quiet_prints_nothing_and_verbose_logs_to_stderr(cli: Cli, tmp_path: Path, recording: Path) -> None:
+    quiet = _run(cli, "-q", *cli.ok(tmp_path, recording))
+    assert (quiet.returncode, quiet.stdout, quiet.stderr) == (0, "", "")
+    for flags in (["-v"], ["-vv"]):
+        loud = _run(cli, *flags, *cli.ok(tmp_path, recording))
+        assert loud.returncode == 0, loud.stderr
+        result = loud.stdout.splitlines()
+        assert len(result) == 1 and result[0].startswith(f"{cli.prog}") and " -> " in result[0], loud.stdout
+        assert all(line.split(" ", 1)[0] in ("DEBUG", "INFO", "WARNING") for line in loud.stderr.splitlines())
+
+
+@pytest.mark.parametrize("cli", CLIS, ids=IDS)
+def test_help_shows_every_default(cli: Cli) -> None:
+    """Every option whose default is not "absent" or "off" names it in its help."""
+    checked, example = 0, None
+    for parser in cli.parsers():
+        assert parser.formatter_class is DefaultsHelpFormatter
+        formatter = DefaultsHelpFormatter(parser.prog)
+        for action in parser._actions:
+            if action.option_strings and action.default not in (None, False, argparse.SUPPRESS) \
+                    and action.help != argparse.SUPPRESS and not isinstance(action, argparse._HelpAction):
+                text = formatter._get_help_string(action) or ""
+                assert "default" in text, (parser.prog, action.option_strings, text)
+                checked += 1
+                if example is None and isinstance(action.default, (str, int, float, Path)):
+                    example = (parser.prog, action.default)  # shown as itself (a tuple is shown as written)
+    assert example is not None
+    shown = " ".join(_run(cli, *example[0].removeprefix(cli.prog).split(), "--help").stdout.split())
+    assert f"default: {example[1]})" in shown or f"default {example[1]}" in shown, shown
+
+
+def visible(output: str) -> list[str]:
+    """The lines a terminal shows after ``output``: ``\\r`` returns to column 0, ``ESC [K``
+    erases to the end of the line, other characters overwrite."""
+    lines, line, column, i = [], [], 0, 0
+    while i < len(output):
+        if output.startswith("\x1b[K", i):
+            del line[column:]
+            i += 3
+            continue
+        char = output[i]
+        if char == "\n":
+            lines.append("".join(line))
+            line, column = [], 0
+        elif char == "\r":
+            column = 0
+        else:
+            line[column:column + 1] = [char]
+            column += 1
+        i += 1
+    return [*lines, "".join(line)]
+
+
+class Terminal(io.StringIO):
+    """A stream that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_visible_follows_carriage_returns_and_erasure() -> None:
+    assert visible("ETA 10 s\rETA 9 s") == ["ETA 9 ss"]
+    assert visible("ETA 10 s\rETA 9 s\x1b[K\nnext") == ["ETA 9 s", "next"]
+
+
+def test_bar_leaves_no_stale_characters() -> None:
+    terminal = Terminal()
+    with ProgressBar(3, "run", stream=terminal, min_interval_s=0.0) as bar:
+        bar.update()
+        terminal.write("\r" + "x" * 120)  # what a longer earlier draw left on the line
+        bar.update(2)
+    shown = visible(terminal.getvalue())
+    assert shown[0].startswith("run [") and shown[0].endswith("3/3  ETA 00:00"), shown
+
+
+@pytest.fixture
+def root_logging():
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    yield
+    root.handlers[:] = handlers
+    root.setLevel(level)
+
+
+def test_log_records_never_glue_onto_a_bar(monkeypatch: pytest.MonkeyPatch, root_logging: None) -> None:
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    configure_logging(1)
+    with ProgressBar(4, "run", stream=terminal, min_interval_s=0.0) as bar:
+        bar.update()
+        logging.getLogger("cold-test").info("halfway there")
+        bar.update(3)
+    shown = visible(terminal.getvalue())
+    assert "INFO cold-test: halfway there" in shown, shown
+    assert shown[-2].startswith("run [") and "4/4" in shown[-2]
+
+
+def test_spinner_shows_elapsed_time_and_clears_its_line(monkeypatch: pytest.MonkeyPatch,
+                                                       root_logging: None) -> None:
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    configure_logging(1)
+    with Spinner("converting", stream=terminal, delay_s=0.0, interval_s=0.01):
+        time.sleep(0.1)
+        logging.getLogger("cold-test").info("crdesigner done")
+        time.sleep(0.05)
+    assert "converting  00:00" in terminal.getvalue()
+    shown = visible(terminal.getvalue())
+    assert "INFO cold-test: crdesigner done" in shown and shown[-1].strip() == "", shown
+    silent = io.StringIO()
+    with Spinner("converting", stream=silent, delay_s=0.0, interval_s=0.01):
+        time.sleep(0.05)
+    assert silent.getvalue() == ""
+
+
+@pytest.mark.parametrize("flags, drawn", [([], True), (["--no-progress"], False), (["-q"], False)])
+def test_refusion_shows_progress_unless_switched_off(flags: list[str], drawn: bool, recording: Path, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch, root_logging: None) -> None:
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert fuse.main(["--input", str(recording), "-o", str(tmp_path / "re.mcap"), "--no-gt", *flags]) == 0
+    shown = visible(terminal.getvalue())
+    assert any(line.startswith("cold-fuse [") and "/" in line for line in shown) is drawn, shown
