@@ -130,23 +130,29 @@ class NeighbourLane:
 
 
 @dataclass(frozen=True)
-class LaneBranch:
+class _BorderPair:
+    """Two lane borders validated like :class:`LaneDetection`'s (errors name the class)."""
+
+    left: NDArrayFloat
+    right: NDArrayFloat
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        object.__setattr__(self, "left", validated_border(f"{name}.left", self.left))
+        object.__setattr__(self, "right", validated_border(f"{name}.right", self.right))
+
+
+@dataclass(frozen=True)
+class LaneBranch(_BorderPair):
     """A lane that leaves the sender's lane at a fork inside the detection window.
 
     Fields: ``left``, ``right`` its borders from the fork on, ``(N, 2)`` float64 in the
     sender's *vehicle* frame [m], driving order (validated like :class:`LaneDetection`'s).
     """
 
-    left: NDArrayFloat
-    right: NDArrayFloat
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "left", validated_border("LaneBranch left", self.left))
-        object.__setattr__(self, "right", validated_border("LaneBranch right", self.right))
-
 
 @dataclass(frozen=True)
-class LaneHistory:
+class LaneHistory(_BorderPair):
     """The lane a vehicle perceived over its last metres of travel, registered with its own
     odometry.
 
@@ -156,13 +162,6 @@ class LaneHistory:
             where the current detection starts (at the vehicle); validated like the
             detection's borders.
     """
-
-    left: NDArrayFloat
-    right: NDArrayFloat
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "left", validated_border("LaneHistory.left", self.left))
-        object.__setattr__(self, "right", validated_border("LaneHistory.right", self.right))
 
 
 @dataclass(frozen=True)
