@@ -136,8 +136,10 @@ class _BarAwareHandler(logging.Handler):
         try:
             from tqdm import tqdm
 
+            from cold_maps.common.progress import ERASE_LINE_END, is_terminal
+
             stream = sys.stderr
-            clear = "\r\x1b[K" if getattr(stream, "isatty", lambda: False)() else ""
+            clear = "\r" + ERASE_LINE_END if is_terminal(stream) else ""
             tqdm.write(clear + self.format(record), file=stream)
         except Exception:  # noqa: BLE001 - logging's own convention for a failing handler
             self.handleError(record)

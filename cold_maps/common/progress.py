@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from types import TracebackType
-from typing import Final, TextIO
+from typing import Final, Self, TextIO
 
 BAR_WIDTH_CHARS: Final[int] = 30
 REDRAW_INTERVAL_S: Final[float] = 0.1
@@ -13,7 +13,26 @@ ERASE_LINE_END: Final[str] = "\x1b[K"
 counts no width for it)."""
 
 
-class ProgressBar:
+def is_terminal(stream: TextIO) -> bool:
+    """Whether ``stream`` is a TTY (progress is drawn only there)."""
+    return bool(getattr(stream, "isatty", lambda: False)())
+
+
+class _ClosedOnExit:
+    """A context manager whose exit calls :meth:`close`."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+class ProgressBar(_ClosedOnExit):
     """``label [#####.....] 12/100  ETA 00:03`` on one line of ``stream`` (stderr by default).
 
     Silent when the stream is not a TTY (logs, CI, pipes). Use as a context manager or
@@ -33,7 +52,7 @@ class ProgressBar:
         self.label = label
         self.stream = sys.stderr if stream is None else stream
         self.done = 0
-        enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        enabled = is_terminal(self.stream)
         prefix = "{desc} " if label else ""
         self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not enabled, ascii=".#",
                          bar_format=prefix + "[{bar:%d}] {n_fmt}/{total_fmt}  ETA {remaining}%s"
@@ -52,20 +71,13 @@ class ProgressBar:
         """Ends the bar's line (only if something was drawn)."""
         self._bar.close()
 
-    def __enter__(self) -> ProgressBar:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
-
 
 SPINNER_DELAY_S: Final[float] = 1.0
 """A step that ends sooner draws nothing."""
 SPINNER_INTERVAL_S: Final[float] = 0.5
 
 
-class Spinner:
+class Spinner(_ClosedOnExit):
     """``label  00:12`` (elapsed time) on one line of ``stream`` (stderr by default) while a
     step of unknown length runs (a map conversion), redrawn every ``interval_s`` seconds by
     a background thread once ``delay_s`` seconds have passed. Silent when the stream is not a TTY; the line is
@@ -81,7 +93,7 @@ class Spinner:
 
         self.stream = sys.stderr if stream is None else stream
         self.interval_s = interval_s
-        enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        enabled = is_terminal(self.stream)
         self._bar = tqdm(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
                          bar_format="{desc}  {elapsed}", delay=delay_s, mininterval=0.0, miniters=0,
                          dynamic_ncols=False)
@@ -100,10 +112,3 @@ class Spinner:
         if self._thread.is_alive():
             self._thread.join()
         self._bar.close()
-
-    def __enter__(self) -> Spinner:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.close()
