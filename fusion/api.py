@@ -16,43 +16,37 @@ from fusion.association import Association, associate
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_check, relative_pose
-from fusion.geometry import EndFit, to_world, transform
-from fusion.spline import hermite_lane, lane_end_fits, paper_pieces, sample_pieces
+from fusion.geometry import to_world, transform
+from fusion.spline import EndFits, hermite_lane, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
 _INTERPOLATIONS = ("paper", "hermite")
 
-_EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
+EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
 _SPLINE_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.INTERPOLATED, Source.COOP] * 2, dtype=np.int8)
 
 Borders = tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]
 
 
-def _ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, float]:
-    """(ego left, ego right, coop left, coop right) in the ego vehicle frame, and x_rel [m]."""
+def ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders, tuple[float, float, float]]:
+    """(ego left, ego right, coop left, coop right) in the ego vehicle frame, and the coop's
+    pose relative to the ego (x_rel m, y_rel m, psi_rel rad)."""
     for name, det in (("ego", ego), ("coop", coop)):
         if not isinstance(det, LaneDetection):
             raise InvalidDetectionError(f"{name} must be a LaneDetection, got {type(det).__name__}")
-    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
-    coop_points = transform(coop.points, x_rel, y_rel, psi_rel)
+    relative = relative_pose(ego.pose, coop.pose)
+    coop_points = transform(coop.points, *relative)
     n_left = coop.left.shape[0]
-    return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), x_rel
+    return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), relative
 
 
-class _EndFits:
-    """Least-squares end fits of the four borders, computed once on first use."""
-
-    def __init__(self, borders: Borders, params: FusionParams):
-        self._borders, self._params = borders, params
-        self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
-
-    def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
-        if self._fits is None:
-            el, er, cl, cr = self._borders
-            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
-        return self._fits
+def _overlap_starts(borders: Borders, ego_arclength: NDArrayFloat) -> tuple[OverlapStart, OverlapStart]:
+    """Where the coop borders start against the ego borders (convoy overlap)."""
+    el, er, cl, cr = borders
+    n_left = el.shape[0]
+    return overlap_start(el, cl, ego_arclength[:n_left]), overlap_start(er, cr, ego_arclength[n_left:])
 
 
 def _convoy_reason(x_rel: float, starts: tuple[OverlapStart, OverlapStart], params: FusionParams) -> str:
@@ -69,7 +63,7 @@ def _convoy_reason(x_rel: float, starts: tuple[OverlapStart, OverlapStart], para
 
 
 def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams, borders: Borders,
-            x_rel: float, fits: _EndFits) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+            x_rel: float, fits: EndFits) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
     if mode not in _MODES:
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
@@ -86,8 +80,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     elif ends.gap_m > 0.0:
         reason, evidence = f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", "cone"
     else:
-        n_left = el.shape[0]
-        starts = (overlap_start(el, cl, ego.arclength[:n_left]), overlap_start(er, cr, ego.arclength[n_left:]))
+        starts = _overlap_starts(borders, ego.arclength)
         reason, evidence = _convoy_reason(x_rel, starts, params), "cone"
     if reason:
         return kind, Association(reason, 0.0), ends, starts
@@ -112,8 +105,8 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
            *, mode: str = "auto") -> Association:
     """The fusibility decision of :func:`is_fusible` with its confidence in [0, 1] and the
     neighbour lanes matched (:class:`fusion.association.Association`)."""
-    borders, x_rel = _ego_frame_borders(ego, coop)
-    return _decide(ego, coop, mode, params, borders, x_rel, _EndFits(borders, params))[1]
+    borders, (x_rel, _, _) = ego_frame_borders(ego, coop)
+    return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params))[1]
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
@@ -140,18 +133,18 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     """
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    borders, x_rel = _ego_frame_borders(ego, coop)
-    fits = _EndFits(borders, params)
+    borders, (x_rel, _, _) = ego_frame_borders(ego, coop)
+    fits = EndFits(borders, params)
     kind, association, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, _, _ = borders
     if association.reason:
-        return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, association.reason)
+        return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
     result = _fused(ego, coop, borders, fits, kind, starts, interpolation, params)
     lanes = tuple(_matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
     return replace(result, gap_m=ends.gap_m, confidence=association.confidence, lanes=lanes)
 
 
-def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: _EndFits, kind: FusionKind,
+def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKind,
            starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str, params: FusionParams) -> FusionResult:
     """The fused lane of a pair found fusible (``kind``, the convoy overlap ``starts``)."""
     el, er, cl, cr = borders
@@ -177,10 +170,9 @@ def _matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: Fus
     """Neighbour lane ``index`` of both detections fused like their own lanes (world frame)."""
     pair = [next(lane for lane in detection.neighbours if lane.index == index) for detection in (ego, coop)]
     lanes = [LaneDetection(detection.pose, lane.left, lane.right) for detection, lane in zip((ego, coop), pair)]
-    borders, _ = _ego_frame_borders(*lanes)
+    borders, _ = ego_frame_borders(*lanes)
     starts = None
     if kind == "convoy":
-        (el, er, cl, cr), n_left = borders, borders[0].shape[0]
-        starts = (overlap_start(el, cl, lanes[0].arclength[:n_left]), overlap_start(er, cr, lanes[0].arclength[n_left:]))
-    fused = _fused(lanes[0], lanes[1], borders, _EndFits(borders, params), kind, starts, interpolation, params)
+        starts = _overlap_starts(borders, lanes[0].arclength)
+    fused = _fused(lanes[0], lanes[1], borders, EndFits(borders, params), kind, starts, interpolation, params)
     return index, fused.left, fused.right

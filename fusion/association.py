@@ -27,12 +27,12 @@ and no other shift explains the detections as well:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Final, Mapping, Sequence
+from typing import Callable, Final, Mapping
 
 from fusion.convoy import overlap_start
 from fusion.fusibility import Evidence, cone_excess, geometric_assessment, lane_ends, relative_pose
-from fusion.geometry import EndFit, transform
-from fusion.spline import lane_end_fits
+from fusion.geometry import transform
+from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
@@ -115,20 +115,13 @@ class _Pairs:
         self.convoy, self.params = convoy, params
 
     def passes(self, ego_index: int, coop_index: int) -> bool:
-        (el, er), (cl, cr) = self.ego_lanes[ego_index], self.coop_lanes[coop_index]
+        ego_lane, coop_lane = self.ego_lanes[ego_index], self.coop_lanes[coop_index]
         if self.convoy:
-            limit = self.params.convoy_max_offset_m
-            return all(overlap_start(e, c, stacked_arclength(e, e.shape[0])).offset_m <= limit
-                       for e, c in ((el, cl), (er, cr)))
+            return _fit_cost(ego_lane, coop_lane, True) <= self.params.convoy_max_offset_m
+        (el, er), (cl, cr) = ego_lane, coop_lane
         ends = lane_ends(el, er, cl, cr)
-        fits: list[Sequence[EndFit]] = []
-
-        def end_fits() -> Sequence[EndFit]:
-            if not fits:
-                fits.append(lane_end_fits((el, er), (cl, cr), self.params.heading_window_m))
-            return fits[0]
-
-        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, end_fits)[0]
+        fits = EndFits((el, er, cl, cr), self.params)
+        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, fits)[0]
 
     def plausible(self, shift: int) -> bool | None:
         """Whether shift δ passes on every pair it forms with lane 0; None without a pair."""

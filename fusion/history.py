@@ -37,8 +37,7 @@ from typing import Final
 
 import numpy as np
 
-from fusion.api import DEFAULT_PARAMS, ego_frame_result, fuse
-from fusion.errors import InvalidDetectionError
+from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, ego_frame_borders, ego_frame_result, fuse
 from fusion.fusibility import lane_ends, relative_pose
 from fusion.geometry import cumulative_length, end_direction, norms, project_point, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
@@ -47,7 +46,6 @@ _HEADING_WINDOW_M: Final[float] = 2.0
 _HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex for its heading
 _MIN_COVER_M: Final[float] = 1e-6
 _HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
-_EGO_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO] * 2, dtype=np.int8)
 
 
 def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
@@ -133,13 +131,7 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     history = coop.history
     if history is None or mode == "convoy":
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-    if not isinstance(ego, LaneDetection):
-        raise InvalidDetectionError(f"ego must be a LaneDetection, got {type(ego).__name__}")
-    x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
-    n_left = coop.left.shape[0]
-    moved = transform(coop.points, x_rel, y_rel, psi_rel)
-    cl, cr = moved[:n_left], moved[n_left:]
-    el, er = ego.left, ego.right
+    (el, er, cl, cr), (x_rel, y_rel, psi_rel) = ego_frame_borders(ego, coop)
     ends = lane_ends(el, er, cl, cr)
     if x_rel <= 0.0 or ends.gap_m <= 0.0:
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
@@ -155,7 +147,7 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     for side, cover in zip(("left", "right"), covers):
         reason = _reason(side, cover[3], cover[4], params)
         if reason:
-            return ego_frame_result(ego, (el, er), _EGO_SOURCES, "none", ends.gap_m, reason)
+            return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, reason)
     gaps = [seam_blend(rest, s_rest, s_e, e - foot, _coop_offset(rest, c))
             for (rest, s_rest, s_e, _, _, foot), e, c in zip(covers, ego_ends, (coop.left, coop.right))]
     n_gap = gaps[0].shape[0]

@@ -16,7 +16,7 @@ from typing import Final, Sequence
 import numpy as np
 
 from fusion.geometry import EndFit, fit_ends
-from fusion.types import NDArrayFloat
+from fusion.types import FusionParams, NDArrayFloat
 
 _MIN_ARC_TURN_RAD: Final[float] = 1e-3
 _MIN_KNOT_STEP_M: Final[float] = 1e-9
@@ -250,6 +250,22 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
     windows = _WINDOWS_M if window_m is None else (window_m,)
     fits = fit_ends((ego[0], ego[1], coop[0], coop[1]), (True, True, False, False), windows, _NOISE_SAMPLE_M)
     return fits[0], fits[1], fits[2], fits[3]
+
+
+class EndFits:
+    """:func:`lane_end_fits` of four ego-frame borders (ego left, ego right, coop left, coop
+    right) with ``params.heading_window_m``, computed once on the first call."""
+
+    def __init__(self, borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
+                 params: FusionParams):
+        self._borders, self._params = borders, params
+        self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
+
+    def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+        if self._fits is None:
+            el, er, cl, cr = self._borders
+            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
+        return self._fits
 
 
 def transition_tangent(turn_rad: float, share: float) -> float:

@@ -100,10 +100,6 @@ class MessageModel:
         return self.exchange != "none"
 
 
-def _float32(points: fusion.NDArrayFloat) -> fusion.NDArrayFloat:
-    return points.astype(np.float32).astype(np.float64)
-
-
 def encode(detection: fusion.LaneDetection, model: MessageModel) -> tuple[bytes, ...]:
     """The payloads of a detection's message: lane, then history when it has one."""
     lanes = [(detection.left, detection.right)]
