@@ -97,7 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     else process_pool(workers) if workers > 1 else None)
         with ProgressBar(len(cells), PROG, stream=progress_stream(args)) as bar:
             result = run_sweep(spec, out, executor=executor, ship_maps=args.scheduler is not None,
-                               on_cells=bar.update)
+                               on_cells=bar.update, cells=cells)
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     finished = result.computed + result.reused

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from functools import cached_property
 from typing import TYPE_CHECKING, Callable, Final
 
 import numpy as np
@@ -82,7 +83,6 @@ class MapEvaluator:
         self.drive_rngs = self.rng.spawn(len(self.drives))
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
-        self.gt_warning: str | None = None
         self.sensor = LaneSensor()
         self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
@@ -133,8 +133,16 @@ class MapEvaluator:
             lanelet_map, routing = load_lanelet2(self.plan.path)
             self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
-        self.gt_warning = check_driven(self.plan.name, self.graph, self._ground_truth.lanelet_map,
-                                       self._ground_truth.routing_graph, driven_lanes(self.drives))
+
+    @cached_property
+    def gt_warning(self) -> str | None:
+        """Why the ground truth of the driven lanes is not trustworthy (``cold-maps check``
+        on them), or None; computed once, where the run's notes are written (never in the
+        worker processes, which only evaluate drives)."""
+        self.prepare()
+        assert self._ground_truth is not None
+        return check_driven(self.plan.name, self.graph, self._ground_truth.lanelet_map,
+                            self._ground_truth.routing_graph, driven_lanes(self.drives))
 
     def run(self, collector: Collector, *, recorder: Recorder | None = None, frame_offset: int = 0,
             on_frame: Callable[[], None] | None = None) -> int:

@@ -90,14 +90,12 @@ _MAPS: dict[tuple[Path, int, int], tuple[LaneGraph, GroundTruth]] = {}
 def cached_evaluator(plan: MapPlan) -> MapEvaluator:
     """An evaluator of ``plan`` with its map's lane graph and ground truth loaded once per
     worker process (keyed by path, size and modification time)."""
-    from cold_maps.network.lane_graph import load_graph
-
     stat = plan.path.stat()
     key = (plan.path.resolve(), stat.st_size, stat.st_mtime_ns)
     if key not in _MAPS:
         while len(_MAPS) >= CACHED_MAPS:
             del _MAPS[next(iter(_MAPS))]
-        evaluator = MapEvaluator(plan, graph=load_graph(plan.path))
+        evaluator = MapEvaluator(plan)
         evaluator.prepare()
         assert evaluator.meter is not None
         _MAPS[key] = (evaluator.graph, evaluator.meter.ground_truth)

@@ -124,6 +124,13 @@ def _none_to_nan(value: Any, where: str) -> float:
     return float(value)
 
 
+def scenario_label(fusion: str, interpolation: str, d_s: float, vehicles: int) -> str:
+    """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``, ``-v<vehicles>`` for a chain
+    (the name of a scenario in plots, overlays and metrics channels)."""
+    base = fusion if fusion != "spline" else f"spline-{interpolation}-d{d_s:g}"
+    return base if vehicles <= 2 else f"{base}-v{vehicles}"
+
+
 @dataclass(frozen=True, slots=True)
 class ScenarioKey:
     """What a scenario evaluates.
@@ -149,6 +156,11 @@ class ScenarioKey:
     vehicles: int = 0
     history_m: float = 0.0
     exchange: str = ""
+
+    @property
+    def label(self) -> str:
+        """The scenario's name (:func:`scenario_label`)."""
+        return scenario_label(self.fusion, self.interpolation, self.d_s, self.vehicles)
 
     def __post_init__(self) -> None:
         if self.fusion not in FUSIONS:

@@ -79,10 +79,8 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
     written = []
     groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
-        label = key.fusion if key.fusion != "spline" else f"spline-{key.interpolation}-d{key.d_s:g}"
-        label += f"-v{key.vehicles}" if key.vehicles > 2 else ""
         own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
-        groups.setdefault((key.map, label), []).append(ScenarioAccumulator(key, own))
+        groups.setdefault((key.map, key.label), []).append(ScenarioAccumulator(key, own))
     for (map_name, label), accumulators in groups.items():
         if not any(r.fused for a in accumulators for r in a.records):
             continue
@@ -126,11 +124,12 @@ def false_fusion_markdown(collector: Collector) -> str:
 
 
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
-                  plots: bool = True) -> list[ScenarioResult]:
+                  plots: bool = True, results: Sequence[ScenarioResult] | None = None) -> list[ScenarioResult]:
     """``frames.csv``, ``summary.md`` (the per-scenario table, notes, then ``sections``:
-    (title, markdown)), ``metrics.json`` and the plots; returns the scenario results."""
+    (title, markdown)), ``metrics.json`` and the plots; returns the scenario results
+    (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
-    results = [a.result() for a in accumulators]
+    results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector))
     if collector.notes:
@@ -202,6 +201,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         for evaluator in evaluators:
             LOG.info("%s: preparing ground truth", evaluator.plan.path)
             evaluator.prepare()
+            LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
     except BaseException:
         for folder in created:
             if any(folder.iterdir()):
@@ -227,7 +227,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     partial = error is not None
     results = [a.result() for a in collector.accumulators.values()]
     sections = list(extra_sections(collector, results)) if extra_sections is not None else []
-    results = write_outputs(out, collector, partial=partial, sections=sections, plots=options.plots)
+    results = write_outputs(out, collector, partial=partial, sections=sections, plots=options.plots, results=results)
     return RunResult(results, collector, partial, error)
 
 

@@ -14,7 +14,7 @@ from typing import Final, Literal, Sequence
 
 import fusion
 from cold_maps.evaluation.methods import MethodError, resolve_method
-from cold_maps.evaluation.report import ScenarioKey
+from cold_maps.evaluation.report import ScenarioKey, scenario_label
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
 from cold_maps.simulation.messages import MessageModel
@@ -75,8 +75,7 @@ class Scenario:
     @property
     def label(self) -> str:
         """``local``, ``convoy`` or ``spline-<interpolation>-d<d_s>``, ``-v<vehicles>`` for a chain."""
-        base = self.fusion if self.fusion != "spline" else f"spline-{self.interpolation}-d{self.d_s:g}"
-        return base if self.vehicles <= 2 else f"{base}-v{self.vehicles}"
+        return scenario_label(self.fusion, self.interpolation, self.d_s, self.vehicles)
 
     @property
     def chain_leads_m(self) -> tuple[float, ...]:

@@ -260,8 +260,11 @@ class SweepResult:
 def check_cells(cells: Sequence[Cell]) -> None:
     """Before any cell runs: every method resolves, every map parses, its drives fit the
     longest gap and its ground truth converts (cached for the workers)."""
-    from cold_maps.evaluation.evaluator import MapEvaluator
+    from cold_maps.evaluation.methods import resolve_method
+    from cold_maps.evaluation.parallel import cached_evaluator
 
+    for name in dict.fromkeys(cell.interpolation for cell in cells):
+        resolve_method(name)
     longest: dict[str, Cell] = {}
     for cell in cells:
         if cell.map_name not in longest or cell.d_s_m > longest[cell.map_name].d_s_m:
@@ -269,17 +272,19 @@ def check_cells(cells: Sequence[Cell]) -> None:
     for cell in longest.values():
         path = Path(cell.map_path)
         LOG.info("%s: checking the drives and preparing ground truth", path)
-        MapEvaluator(cell_plan(cell, path)).prepare()
+        cached_evaluator(cell_plan(cell, path))
 
 
 def run_sweep(spec: SweepSpec, out: Path, *, executor: AbstractContextManager[Executor] | None = None,
-              ship_maps: bool = False, on_cells: Callable[[int], None] | None = None) -> SweepResult:
+              ship_maps: bool = False, on_cells: Callable[[int], None] | None = None,
+              cells: Sequence[Cell] | None = None) -> SweepResult:
     """Runs the missing cells of ``spec`` (in this process without ``executor``), stores
     each as it finishes and returns the rows of all finished cells in grid order.
     ``ship_maps``: send each map's bytes with its cells (workers without the maps' path).
     Bad input raises before any cell runs; an exception during the run (Ctrl-C included)
-    ends it, returned in the result with the cells finished so far."""
-    cells = spec.cells()
+    ends it, returned in the result with the cells finished so far. ``cells``: ``spec.cells()``
+    when the caller has them already (each reads and hashes every map)."""
+    cells = spec.cells() if cells is None else list(cells)
     done = {cell.key: rows for cell in cells if (rows := load_cell(out, cell)) is not None}
     todo = [cell for cell in cells if cell.key not in done]
     reused = len(done)
