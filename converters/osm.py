@@ -39,7 +39,7 @@ from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
 from converters.joins import join_ends, successor_gaps
 from converters.regulatory import LaneletExit, append_regulatory_elements
-from gt_matching.polyline import simplify
+from gt_matching.polyline import arc_lengths, simplify
 
 NDArrayInt = npt.NDArray[np.int64]
 
@@ -310,7 +310,7 @@ def _kept_vertices(points: NDArrayFloat) -> npt.NDArray[np.bool_]:
     keep = simplify(points[:, :2], SIMPLIFY_TOLERANCE_M)
     heights = points[:, 2]
     if np.all(np.isfinite(heights)):
-        along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points[:, :2], axis=0).T))))
+        along = arc_lengths(points[:, :2])
         keep |= simplify(np.column_stack((along, heights)), SIMPLIFY_TOLERANCE_M)
     return keep
 

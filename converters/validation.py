@@ -137,8 +137,6 @@ def _attributes(primitive: Any) -> dict[str, str]:
 def validate_osm(path: str | Path) -> list[Issue]:
     """All findings on an OSM file this converter wrote (loaded in our frame)."""
     import lanelet2.io
-    import lanelet2.routing
-    import lanelet2.traffic_rules
 
     lanelet_map, errors = lanelet2.io.loadRobust(str(path), frame.projector())
     issues = [Issue("error", "map", 0, "io", str(error)) for error in errors]
@@ -152,9 +150,8 @@ def validate_osm(path: str | Path) -> list[Issue]:
     for primitive, layer in layers:
         for element in layer:
             issues.extend(_tag_issues(primitive, int(element.id), _attributes(element)))
-    rules = lanelet2.traffic_rules.create(
-        lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
-    )
-    graph = lanelet2.routing.RoutingGraph(lanelet_map, rules)
+    from converters.api import routing_graph
+
+    graph = routing_graph(lanelet_map)
     issues.extend(Issue("error", "routing_graph", 0, "routing_graph.is_valid", str(e)) for e in graph.checkValidity(False))
     return issues

@@ -1,7 +1,8 @@
 """Polyline primitives in the world frame: validation, arc length, resampling,
-simplification (Douglas-Peucker) and vectorised closest-point distances to polyline
-segments. The one home of these helpers: the converter, the recording and the lane strips
-use them too."""
+simplification (Douglas-Peucker: :func:`simplify` keeps vertex indices, for the converter's
+shared nodes; :func:`simplify_lines` many display lines at once through shapely, for the
+recording) and vectorised closest-point distances to polyline segments. The one home of
+these helpers: the converter, the recording and the lane strips use them too."""
 
 from __future__ import annotations
 
@@ -163,3 +164,19 @@ def simplify(points: NDArrayFloat, tolerance: float) -> NDArrayBool:
             keep[split] = True
             pending.extend(((first, split), (split, last)))
     return keep
+
+
+def simplify_lines(lines: list[NDArrayFloat], tolerance_m: float) -> list[NDArrayFloat]:
+    """Douglas-Peucker (shapely/GEOS, all lines in one call): each ``(N >= 2, 2)`` polyline's
+    vertices such that no dropped one is farther than ``tolerance_m`` from the kept line;
+    the ends are kept."""
+    import shapely
+
+    if not lines:
+        return []
+    counts = [len(line) for line in lines]
+    geometries = shapely.linestrings(np.vstack(lines), indices=np.repeat(np.arange(len(lines)), counts))
+    with np.errstate(divide="ignore", invalid="ignore"):  # GEOS on a zero-length line: kept as is
+        simple = shapely.simplify(geometries, tolerance_m, preserve_topology=False)
+    coordinates, owner = shapely.get_coordinates(simple, return_index=True)
+    return np.split(coordinates, np.cumsum(np.bincount(owner, minlength=len(lines)))[:-1])

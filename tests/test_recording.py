@@ -28,8 +28,8 @@ from cold_maps.recording.recorder import (
     read_detections,
     read_metadata,
     read_stamp_base,
-    simplify_lines,
 )
+from gt_matching.polyline import simplify_lines
 
 FRAMES = 3
 DT_S = 0.1

@@ -77,10 +77,12 @@ def _load(args: argparse.Namespace) -> OpenDriveMap:
 
 
 def add_strict_option(parser: argparse.ArgumentParser) -> None:
-    """``--strict``: refuse records that omit coefficients (read as 0 with a warning otherwise)."""
+    """``--strict``: refuse records that omit coefficients and links whose ``contactPoint``
+    contradicts the geometry (read as 0 / repaired, with a warning, otherwise)."""
     parser.add_argument(
         "--strict", action="store_true",
-        help="refuse geometry and profile records that omit coefficients (default: 0, with a warning)",
+        help="refuse geometry and profile records that omit coefficients and links whose contactPoint contradicts "
+             "the geometry (default: 0 / repaired, with a warning)",
     )
 
 

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
+from cold_maps.opendrive.model import OpenDriveMap
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
@@ -333,15 +334,18 @@ def check_map(
     cache: bool = True,
     cache_dir: str | os.PathLike[str] | None = None,
     strict: bool = False,
+    odr_map: OpenDriveMap | None = None,
 ) -> CheckReport:
     """Convert (or load from the cache) the map's ground truth and cross-check it.
 
     Raises ``OpenDriveError`` when our parser rejects the file (``strict``: see
     ``load_opendrive``) and ``converters.ConversionError`` when the converter does.
+    ``odr_map``: the file already read by our parser (it is not read again).
     """
     from converters import load_lanelet2
 
-    odr_map = load_opendrive(xodr_path, strict=strict)
+    if odr_map is None:
+        odr_map = load_opendrive(xodr_path, strict=strict)
     lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
     return check_lanelet_map(
         odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types,
@@ -406,7 +410,9 @@ def configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
     parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
-    parser.add_argument("--strict", action="store_true", help="refuse records that omit coefficients")
+    parser.add_argument("--strict", action="store_true",
+                        help="refuse records that omit coefficients and links whose contactPoint contradicts the "
+                             "geometry (default: 0 / repaired, with a warning)")
 
 
 def run_check(args: argparse.Namespace) -> int:
@@ -415,15 +421,15 @@ def run_check(args: argparse.Namespace) -> int:
     from cold_maps.network.continuity import continuity_report
     from cold_maps.network.lane_graph import build_lane_graph
 
+    odr_map = load_opendrive(args.map, strict=args.strict)
     report = check_map(
         args.map,
         threshold_m=args.threshold,
         step_m=args.step,
         lane_types=None if args.all_lanes else ("driving",),
         cache=not args.no_cache,
-        strict=args.strict,
+        odr_map=odr_map,
     )
     print(format_report(report))
-    odr_map = load_opendrive(args.map, strict=args.strict)
     print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
     return report.exit_code

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
 
@@ -86,7 +86,11 @@ def reference_line_defects(
     odr_map: OpenDriveMap, gap_m: float = GAP_TOLERANCE_M, kink_rad: float = KINK_TOLERANCE_RAD
 ) -> list[RecordJoint]:
     """Record joints with a gap above ``gap_m`` (m) or a kink above ``kink_rad`` (rad)."""
-    return [joint for joint in record_joints(odr_map) if joint.gap_m > gap_m or joint.kink_rad > kink_rad]
+    return _defects(record_joints(odr_map), gap_m, kink_rad)
+
+
+def _defects(joints: Sequence[RecordJoint], gap_m: float, kink_rad: float) -> list[RecordJoint]:
+    return [joint for joint in joints if joint.gap_m > gap_m or joint.kink_rad > kink_rad]
 
 
 def _lane_ends(graph: LaneGraph, lane: LaneKey) -> tuple[NDArrayFloat, NDArrayFloat]:
@@ -123,10 +127,11 @@ def _lane(lane: LaneKey) -> str:
 def continuity_report(odr_map: OpenDriveMap, graph: LaneGraph) -> list[str]:
     """Report lines: reference-line gaps and kinks, then lane links whose borders do not
     meet, each a count line followed by the ``LISTED_MAX`` largest, indented."""
-    joints = reference_line_defects(odr_map)
+    every = record_joints(odr_map)
+    joints = _defects(every, GAP_TOLERANCE_M, KINK_TOLERANCE_RAD)
     lines = [
         f"reference-line joints over {GAP_TOLERANCE_M * 1e3:g} mm or {math.degrees(KINK_TOLERANCE_RAD):g} deg: "
-        f"{len(joints)} of {len(record_joints(odr_map))}"
+        f"{len(joints)} of {len(every)}"
     ]
     for joint in sorted(joints, key=lambda j: (-j.gap_m, -j.kink_rad))[:LISTED_MAX]:
         lines.append(

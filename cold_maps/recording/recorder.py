@@ -49,6 +49,7 @@ import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
+from gt_matching.polyline import simplify_lines
 
 RECORDING_VERSION: Final[int] = 2
 TOPIC_GT: Final[str] = "/gt"
@@ -190,22 +191,6 @@ def _check_stamp_base(stamp_base_ns: int | None) -> int | None:
         raise ValueError(f"stamp_base_ns: expected an integer 0 ... {MAX_STAMP_BASE_NS} (ns since the Unix epoch), "
                          f"got {stamp_base_ns!r}")
     return stamp_base_ns
-
-
-def simplify_lines(lines: list[NDArrayFloat], tolerance_m: float) -> list[NDArrayFloat]:
-    """Douglas-Peucker (shapely/GEOS, all lines in one call): each ``(N >= 2, 2)`` polyline's
-    vertices such that no dropped one is farther than ``tolerance_m`` from the kept line;
-    the ends are kept."""
-    import shapely
-
-    if not lines:
-        return []
-    counts = [len(line) for line in lines]
-    geometries = shapely.linestrings(np.vstack(lines), indices=np.repeat(np.arange(len(lines)), counts))
-    with np.errstate(divide="ignore", invalid="ignore"):  # GEOS on a zero-length line: kept as is
-        simple = shapely.simplify(geometries, tolerance_m, preserve_topology=False)
-    coordinates, owner = shapely.get_coordinates(simple, return_index=True)
-    return np.split(coordinates, np.cumsum(np.bincount(owner, minlength=len(lines)))[:-1])
 
 
 def display_lines(lines: Mapping[str, NDArrayFloat]) -> list[NDArrayFloat]:
