@@ -17,6 +17,7 @@ from cold_maps.network.lane_graph import LaneKey, build_lane_graph
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.parser import parse_opendrive
 from cold_maps.opendrive.sampling import sample_road
+from cold_maps.simulation.neighbours import neighbour_key
 
 LANES = """
     <lanes><laneSection s="0">
@@ -117,6 +118,9 @@ def test_reversed_lane_direction_turns_the_lane_graph_edge() -> None:
     assert graph.successors[LaneKey("1", 0, -1)] == (LaneKey("2", 0, -1),)
     assert graph.successors[LaneKey("2", 0, -2)] == (LaneKey("1", 0, -2),)
     assert graph.successors[LaneKey("1", 0, -2)] == ()
+    # the neighbour sensor follows the same direction: a reversed lane beside is no neighbour
+    assert neighbour_key(graph, LaneKey("1", 0, -1), -1) is None
+    assert neighbour_key(graph, LaneKey("1", 0, -2), +1) is None
 
 
 GAP_M = 0.04  # the second record starts 4 cm left of where the first ends, and 0.5 deg turned

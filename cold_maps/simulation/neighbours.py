@@ -31,7 +31,7 @@ def neighbour_key(graph: LaneGraph, lane: LaneKey, offset: int) -> LaneKey | Non
     section, driving direction, or None when a lane on the way (or that one) is not a
     driving lane of ``graph`` driven the same way."""
     road = graph.odr_map.roads[lane.road_id]
-    own = road.drives_along_s(lane.lane_id)
+    own = road.drives_along_s(lane.lane_id, lane.section)
     step = (1 if own else -1) * (1 if offset > 0 else -1)
     lane_id = lane.lane_id
     for _ in range(abs(offset)):
@@ -39,7 +39,7 @@ def neighbour_key(graph: LaneGraph, lane: LaneKey, offset: int) -> LaneKey | Non
         if lane_id == 0:
             lane_id += step
         key = LaneKey(lane.road_id, lane.section, lane_id)
-        if key not in graph.lengths or road.drives_along_s(lane_id) != own:
+        if key not in graph.lengths or road.drives_along_s(lane_id, lane.section) != own:
             return None
     return key
 
