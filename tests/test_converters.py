@@ -517,16 +517,12 @@ def test_check_reports_lanes_without_any_lanelet(synthetic_maps) -> None:
 
 
 def test_check_subcommand_exit_codes(straight_map, tmp_path, monkeypatch, capsys) -> None:
-    import argparse
-
-    from cold_maps.groundtruth.check import configure_check, run_check
+    from cold_maps.cli.maps import main
 
     monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
-    parser = argparse.ArgumentParser()
-    configure_check(parser)
-    assert run_check(parser.parse_args([str(straight_map)])) == 0
+    assert main(["check", "--no-progress", str(straight_map)]) == 0
     assert "ground truth: TRUSTWORTHY (0 of 6 lanes" in capsys.readouterr().out
-    assert run_check(parser.parse_args([str(straight_map), "--threshold", "1e-6"])) == 3
+    assert main(["check", "--no-progress", str(straight_map), "--threshold", "1e-6"]) == 3
     assert "NOT TRUSTWORTHY" in capsys.readouterr().out
 
 

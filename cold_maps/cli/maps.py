@@ -305,9 +305,36 @@ def _run_convert(args: argparse.Namespace) -> int:
 
 
 def _configure_check(parser: argparse.ArgumentParser) -> None:
-    from cold_maps.groundtruth.check import configure_check
+    """Arguments of ``cold-maps check``: MAP.xodr [--threshold M] [--step M] [--all-lanes] [--no-cache] [--strict]."""
+    from cold_maps.groundtruth.check import STEP_M, THRESHOLD_M
 
-    configure_check(parser)
+    parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE map")
+    parser.add_argument("--threshold", type=float, default=THRESHOLD_M, help="largest allowed disagreement (m)")
+    parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
+    parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
+    parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
+    add_strict_option(parser)
+
+
+def _check(args: argparse.Namespace) -> int:
+    """Print the check report, then the map's geometry gaps (``network.continuity``); return
+    the report's exit code. Raises OpenDriveError or ConversionError."""
+    from cold_maps.groundtruth.check import check_map, format_report
+    from cold_maps.network.continuity import continuity_report
+    from cold_maps.network.lane_graph import build_lane_graph
+
+    odr_map = _load(args)
+    report = check_map(
+        args.map,
+        threshold_m=args.threshold,
+        step_m=args.step,
+        lane_types=None if args.all_lanes else ("driving",),
+        cache=not args.no_cache,
+        odr_map=odr_map,
+    )
+    print(format_report(report))
+    print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
+    return report.exit_code
 
 
 def _run_check(args: argparse.Namespace) -> int:
@@ -316,12 +343,10 @@ def _run_check(args: argparse.Namespace) -> int:
 
     from cold_maps.cli.common import progress_stream
     from cold_maps.common.progress import Spinner
-    from cold_maps.groundtruth.check import run_check
-
     report = io.StringIO()
     with Spinner(f"{PROG} check: converting and comparing {Path(args.map).name}", stream=progress_stream(args)), \
             redirect_stdout(report):
-        status = run_check(args)
+        status = _check(args)
     sys.stdout.write(report.getvalue())
     return status
 

@@ -20,7 +20,6 @@ makes the ground truth untrustworthy (``gt_matching`` extends the GT only throug
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections import Counter
 from collections.abc import Collection, Sequence
@@ -401,35 +400,3 @@ def format_report(report: CheckReport) -> str:
             lines.append(f"{':'.join(map(str, edge.source)):>16} {':'.join(map(str, edge.target)):>16} "
                          f"{lanelets:>17} {_mm(edge.gap_m):>10}")
     return "\n".join(lines)
-
-
-def configure_check(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``cold-maps check``: MAP.xodr [--threshold M] [--step M] [--all-lanes] [--no-cache]."""
-    parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE map")
-    parser.add_argument("--threshold", type=float, default=THRESHOLD_M, help="largest allowed disagreement (m)")
-    parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
-    parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
-    parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
-    parser.add_argument("--strict", action="store_true",
-                        help="refuse records that omit coefficients and links whose contactPoint contradicts the "
-                             "geometry (default: 0 / repaired, with a warning)")
-
-
-def run_check(args: argparse.Namespace) -> int:
-    """Print the report, then the map's geometry gaps (``network.continuity``); return
-    the report's exit code. Raises OpenDriveError or ConversionError."""
-    from cold_maps.network.continuity import continuity_report
-    from cold_maps.network.lane_graph import build_lane_graph
-
-    odr_map = load_opendrive(args.map, strict=args.strict)
-    report = check_map(
-        args.map,
-        threshold_m=args.threshold,
-        step_m=args.step,
-        lane_types=None if args.all_lanes else ("driving",),
-        cache=not args.no_cache,
-        odr_map=odr_map,
-    )
-    print(format_report(report))
-    print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
-    return report.exit_code
