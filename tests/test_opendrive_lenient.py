@@ -142,6 +142,27 @@ def test_record_joints_size_gaps_and_kinks() -> None:
     assert reference_line_defects(odr_map, gap_m=0.05, kink_rad=math.radians(1.0)) == []
 
 
+OFFSET_U_M, OFFSET_V_M = 0.03, 0.04  # a paramPoly3 that starts off its own x, y
+
+
+def test_record_joints_measure_from_where_a_param_poly3_starts() -> None:
+    """The record's x, y lie exactly where the line ends, but u(0), v(0) = (aU, aV) move its
+    first point: the joint's gap is hypot(aU, aV) and the exported border draws that jump."""
+    odr_map = parse_opendrive(xodr(road(
+        "8",
+        '<geometry s="0" x="0" y="0" hdg="0" length="10"><line/></geometry>'
+        f'<geometry s="10" x="10" y="0" hdg="0" length="10"><paramPoly3 aU="{OFFSET_U_M}" bU="1" '
+        f'aV="{OFFSET_V_M}" pRange="arcLength"/></geometry>',
+    )))
+    (joint,) = record_joints(odr_map)
+    assert joint.gap_m == pytest.approx(math.hypot(OFFSET_U_M, OFFSET_V_M), abs=1e-12)
+    assert joint.kink_rad == pytest.approx(0.0, abs=1e-12)
+    centre = next(b for b in sample_road(odr_map.roads["8"], step=3.0, record_ends=True) if b.lane_id == -1)
+    at = np.flatnonzero(centre.s == 10.0)
+    assert len(at) == 2
+    np.testing.assert_allclose(centre.inner[at[1], :2] - centre.inner[at[0], :2], (OFFSET_U_M, OFFSET_V_M), atol=1e-12)
+
+
 def test_export_draws_the_jump_between_records_exactly(tmp_path: Path) -> None:
     source, out = tmp_path / "gap.xodr", tmp_path / "gap.geojson"
     source.write_bytes(GAPPED)

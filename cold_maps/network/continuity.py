@@ -19,7 +19,7 @@ from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.network.route import borders_in_driving_direction
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import OpenDriveMap
-from cold_maps.opendrive.reference_line import reference_pose
+from cold_maps.opendrive.reference_line import record_joint
 from cold_maps.opendrive.sampling import sample_lane_borders
 
 GAP_TOLERANCE_M: Final[float] = 1e-3
@@ -73,12 +73,11 @@ def record_joints(odr_map: OpenDriveMap) -> list[RecordJoint]:
     """Every joint between consecutive ``<geometry>`` records of every road, in map order."""
     joints = []
     for road in odr_map.roads.values():
-        for record in road.plan_view[1:]:
-            s = np.array([record.s])
-            x, y, hdg = reference_pose(road, s, before=record.s)
-            turn = (record.hdg - float(hdg[0]) + math.pi) % (2.0 * math.pi) - math.pi
-            gap = math.hypot(record.x - float(x[0]), record.y - float(y[0]))
-            joints.append(RecordJoint(road.id, record.s, gap, abs(turn)))
+        for index in range(1, len(road.plan_view)):
+            end, start = record_joint(road, index)
+            turn = (float(start[2] - end[2]) + math.pi) % (2.0 * math.pi) - math.pi
+            gap = math.hypot(*(start[:2] - end[:2]))
+            joints.append(RecordJoint(road.id, road.plan_view[index].s, gap, abs(turn)))
     return joints
 
 

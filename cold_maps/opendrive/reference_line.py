@@ -53,3 +53,14 @@ def reference_pose(
         except ValueError as exc:
             raise ValueError(f"road {road.id}: {exc}") from None
     return x, y, hdg
+
+
+def record_joint(road: Road, index: int) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Poses (x, y in m, heading in rad; arrays of 3) at the joint in front of record ``index``
+    (≥ 1): where the record before it is when it reaches this record's s (the reference line
+    the lanes are drawn on), and where this record starts (its parametric curve at 0, so a
+    paramPoly3 with aU, aV ≠ 0 starts off its x, y)."""
+    s = road.plan_view[index].s
+    end = np.concatenate(reference_pose(road, np.array([s]), before=s))
+    start = np.concatenate(reference_pose(road, np.array([s]), before=np.nextafter(s, np.inf)))
+    return end, start

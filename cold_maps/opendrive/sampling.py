@@ -22,7 +22,7 @@ from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
 from cold_maps.opendrive.model import LaneSection, Road
-from cold_maps.opendrive.reference_line import check_s, reference_pose
+from cold_maps.opendrive.reference_line import check_s, record_joint, reference_pose
 
 JOINED_M: Final[float] = 1e-6
 """Geometry records whose end and next start are closer than this (m) join: one sample."""
@@ -107,10 +107,9 @@ class LaneBorderSamples:
                                  f"border is not finite at s={float(self.s[bad][0]):.6g} m")
 
 
-def record_starts(road: Road, s_start: float, s_end: float) -> NDArrayFloat:
-    """Starts (m) of the road's ``<geometry>`` records strictly inside (s_start, s_end)."""
-    starts = np.array([g.s for g in road.plan_view], dtype=np.float64)
-    return starts[(starts > s_start) & (starts < s_end)]
+def record_indices(road: Road, s_start: float, s_end: float) -> list[int]:
+    """Indices of the road's ``<geometry>`` records that start strictly inside (s_start, s_end) m."""
+    return [i for i, record in enumerate(road.plan_view) if s_start < record.s < s_end]
 
 
 def _reference_with_record_ends(
@@ -119,15 +118,16 @@ def _reference_with_record_ends(
     """s with each interior record start added, and doubled where the records do not join
     (end and start farther apart than ``JOINED_M``), with the reference pose there: the
     first of a pair on the record that ends at it, the second on the record that starts."""
-    boundaries = record_starts(road, section.s, section.s_end)
-    ends = [reference_pose(road, np.array([b]), before=b) for b in boundaries]
-    starts = [reference_pose(road, np.array([b]), before=section.s_end) for b in boundaries]
-    jumps = np.array([np.hypot(e[0][0] - t[0][0], e[1][0] - t[1][0]) > JOINED_M for e, t in zip(ends, starts)], dtype=bool)
+    indices = record_indices(road, section.s, section.s_end)
+    boundaries = np.array([road.plan_view[i].s for i in indices], dtype=np.float64)
+    joints = [record_joint(road, i) for i in indices]
+    ends = [end for end, _ in joints]
+    jumps = np.array([np.hypot(*(end[:2] - start[:2])) > JOINED_M for end, start in joints], dtype=bool)
     s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries[jumps])))
     x, y, hdg = reference_pose(road, s, before=section.s_end)
     for boundary, end in zip(boundaries[jumps], (e for e, jump in zip(ends, jumps) if jump)):
         first = int(np.searchsorted(s, boundary, side="left"))
-        x[first], y[first], hdg[first] = (value[0] for value in end)
+        x[first], y[first], hdg[first] = end
     return s, x, y, hdg
 
 

@@ -180,10 +180,11 @@ class _RoadCheck:
         for before, after in zip(road.plan_view, road.plan_view[1:]):
             try:
                 with np.errstate(all="ignore"):  # a non-finite end is refused just below
-                    x, y, _ = evaluate_record(before, np.array([before.length]))
+                    end_x, end_y, _ = evaluate_record(before, np.array([before.length]))
+                    start_x, start_y, _ = evaluate_record(after, np.array([0.0]))
             except ValueError as exc:
                 raise self.refuse(before.kind, "length", f"of the <geometry> at s={before.s:.6g}: {exc}") from None
-            jump = float(np.hypot(x[0] - after.x, y[0] - after.y))
+            jump = float(np.hypot(end_x[0] - start_x[0], end_y[0] - start_y[0]))
             if not jump <= limit:
                 raise self.refuse("geometry", "x, y", f"of the <geometry> at s={after.s:.6g} are {jump:.6g} m from "
                                   f"the end of the record before it, more than the {limit:g} m a reference line "
