@@ -16,8 +16,8 @@ from typing import Final, Sequence
 import numpy as np
 
 from fusion.errors import InvalidParameterError
-from fusion.geometry import cumulative_length, distance_to_polyline, transform
 from fusion.fusibility import relative_pose
+from fusion.geometry import cumulative_length, distance_to_polyline, transform
 from fusion.types import LaneDetection, LaneHistory, NDArrayFloat, NeighbourLane, Pose2D, RoadEdges
 
 TABLE_STEP_M: Final[float] = 0.005

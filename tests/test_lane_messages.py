@@ -12,8 +12,18 @@ import pytest
 import fusion
 from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.simulation.drive import Track
-from cold_maps.simulation.messages import (LAYOUT_BYTES, NEIGHBOUR_BYTES, POSE_BYTES, ROAD_EDGES_BYTES, LaneChannel,
-                                           LaneMessage, MessageModel, decode, encode, message_bytes)
+from cold_maps.simulation.messages import (
+    LAYOUT_BYTES,
+    NEIGHBOUR_BYTES,
+    POSE_BYTES,
+    ROAD_EDGES_BYTES,
+    LaneChannel,
+    LaneMessage,
+    MessageModel,
+    decode,
+    encode,
+    message_bytes,
+)
 from cold_maps.simulation.odometry import OdometryModel, dead_reckoned, lane_history
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 from fusion.analytic import AnalyticRoad, Segment, detect, detect_lanes, with_history
