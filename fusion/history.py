@@ -22,12 +22,19 @@ Seams (both borders, each on its own):
   drift that grows linearly along the gap too), and its direction changes at a seam by
   |Δ_e − Δ_c| / (s_c − s_e) at most.
 
-Checks: the history must pass within ``convoy_max_offset_m`` of the ego border end, with a
-heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps* the ego's
-detection, so the convoy tolerances apply: a neighbour lane lies a lane width away). A
-history that does not reach back to the ego's end is joined to the coop detection (same
-seam offset faded along the history) and the remaining gap goes to :func:`fusion.fuse`,
-whose fusibility check then sees the history's start.
+Checks: first the pair's own (:func:`fusion.api.assess`: the fusibility check across the gap
+and the lane association), with its reasons, so a history never admits a coop the pair
+fusion rejects. Then the history must pass within ``convoy_max_offset_m`` of the ego border
+end, with a heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps*
+the ego's detection, so the convoy tolerances apply: a neighbour lane lies a lane width
+away), and along the overlap the ego border's offset from the history may change from its
+value at the end by at most half the lane width (:func:`_overlap_departure`): the end offset
+is the coop's position error, which the seam removes; heading error, odometry drift and
+noise change it by decimetres (up to 1.6 m measured with 0.5° yaw error, σ 5 cm and typical
+drift at d_s 50 m), while a history more than half a lane off lies nearer the neighbouring
+lane's border than this lane's. A history that does not reach back to the ego's end is
+joined to the coop detection (same seam offset faded along the history) and the remaining
+gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
 """
 
 from __future__ import annotations
@@ -90,9 +97,9 @@ class _Cover(NamedTuple):
     Fields: ``rest`` the history from the vertex before the one nearest the end on;
     ``s_rest`` its arc lengths [m]; ``s_e`` the foot's arc length on ``rest`` [m]; ``foot``
     the end's foot point; ``offset_m`` the end's distance from it [m]; ``heading_rad`` the
-    angle between the history and the ego border there [rad]; ``drift_m`` how far [m] the
+    angle between the history and the ego border there [rad]; ``departure_m`` how far [m] the
     lateral offset of the ego border from the history changes where the two overlap
-    (:func:`_overlap_drift`).
+    (:func:`_overlap_departure`).
     """
 
     rest: NDArrayFloat
@@ -101,10 +108,10 @@ class _Cover(NamedTuple):
     foot: NDArrayFloat
     offset_m: float
     heading_rad: float
-    drift_m: float
+    departure_m: float
 
 
-def _overlap_drift(ego: NDArrayFloat, s_ego: NDArrayFloat, history: NDArrayFloat, s_history: NDArrayFloat,
+def _overlap_departure(ego: NDArrayFloat, s_ego: NDArrayFloat, history: NDArrayFloat, s_history: NDArrayFloat,
                    s_e: float) -> float:
     """Largest change [m] of the signed lateral offset of the ego border from the history along
     their overlap, from its value at the ego's end: the ego border (points ``ego`` at arc lengths
@@ -143,8 +150,8 @@ def _cover(ego: NDArrayFloat, s_ego: NDArrayFloat, direction: complex, history: 
     heading = complex(*_heading(rest, 1)) / direction
     t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
     foot = rest[i] + t * (rest[i + 1] - rest[i])
-    drift = _overlap_drift(ego, s_ego, history, s_history, s_history[k - 1] + s_e)
-    return _Cover(rest, s_rest, s_e, foot, offset, abs(math.atan2(heading.imag, heading.real)), drift)
+    departure = _overlap_departure(ego, s_ego, history, s_history, s_history[k - 1] + s_e)
+    return _Cover(rest, s_rest, s_e, foot, offset, abs(math.atan2(heading.imag, heading.real)), departure)
 
 
 def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> str:
@@ -156,8 +163,8 @@ def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> s
     if cover.heading_rad > params.convoy_max_heading_rad:
         return (f"coop history heads {math.degrees(cover.heading_rad):.1f} deg away from the ego {side} border at "
                 f"its end (> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
-    if cover.drift_m > 0.5 * width_m:
-        return (f"coop history leaves the ego {side} border by {cover.drift_m:.2f} m where they overlap "
+    if cover.departure_m > 0.5 * width_m:
+        return (f"coop history leaves the ego {side} border by {cover.departure_m:.2f} m where they overlap "
                 f"(> half the lane width, {0.5 * width_m:.2f} m): another lane")
     return ""
 
