@@ -55,6 +55,7 @@ _HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex 
 _MIN_COVER_M: Final[float] = 1e-6
 _PROBE_STEP_M: Final[float] = 1.0  # ego border probes along the overlap with the history
 _PROBE_MARGIN_M: Final[float] = 5.0  # history searched this much beyond the ego's length
+_VERTEX_STEP_M: Final[float] = 0.5  # history vertices about this far apart for the probes (sagitta < 1 cm at R 4 m)
 _HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
 
 
@@ -111,26 +112,27 @@ class _Cover(NamedTuple):
     departure_m: float
 
 
-def _overlap_departure(ego: NDArrayFloat, s_ego: NDArrayFloat, history: NDArrayFloat, s_history: NDArrayFloat,
-                   s_e: float) -> float:
+def _overlap_departure(ego: NDArrayFloat, s_ego: NDArrayFloat, behind: NDArrayFloat, spacing_m: float) -> float:
     """Largest change [m] of the signed lateral offset of the ego border from the history along
     their overlap, from its value at the ego's end: the ego border (points ``ego`` at arc lengths
-    ``s_ego``, frame of ``history``) is probed every :data:`_PROBE_STEP_M` and each probe is
-    offset across the history segment at its nearest history vertex, among the vertices up to
-    the ego end's foot (arc length ``s_e``) and one ego length plus :data:`_PROBE_MARGIN_M`
-    before it; probes behind the history's start are left out."""
-    picks = np.unique(np.searchsorted(s_ego, np.arange(0.0, s_ego[-1], _PROBE_STEP_M)))
-    probes = np.ascontiguousarray(ego[np.append(picks[picks < s_ego.shape[0] - 1], s_ego.shape[0] - 1)])
-    lo = int(np.searchsorted(s_history, s_e - s_ego[-1] - _PROBE_MARGIN_M))
-    hi = min(int(np.searchsorted(s_history, s_e)) + 1, history.shape[0] - 1)
-    h = np.ascontiguousarray(history[lo: hi + 1]).view(np.complex128)[:, 0]
+    ``s_ego``, frame of the history) is probed about every :data:`_PROBE_STEP_M` back from its
+    end and each probe is offset across the history segment at its nearest history vertex,
+    among the last vertices of ``behind`` (the history up to the vertex nearest the ego's end,
+    ``spacing_m`` apart on average) over one ego length plus :data:`_PROBE_MARGIN_M`, thinned
+    to about :data:`_VERTEX_STEP_M` apart; probes behind the history's start are left out."""
+    probes = np.ascontiguousarray(ego[::-max(1, int(_PROBE_STEP_M * (ego.shape[0] - 1) / s_ego[-1]))])
+    window = behind[::-1][: math.ceil((s_ego[-1] + _PROBE_MARGIN_M) / spacing_m) + 1]
+    whole = window.shape[0] == behind.shape[0]
+    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), window.shape[0] - 1))
+    h = np.ascontiguousarray(window[::stride]).view(np.complex128)[:, 0]
     p = probes.view(np.complex128)[:, 0]
-    nearest = np.abs(p[:, None] - h[None, :]).argmin(axis=1)
-    covered = (nearest > 0) | (lo > 0)
+    d = p[:, None] - h[None, :]
+    nearest = (d.real * d.real + d.imag * d.imag).argmin(axis=1)
     j = np.minimum(nearest, h.shape[0] - 2)
-    direction = h[j + 1] - h[j]
-    offset = ((p - h[j]) * direction.conjugate()).imag / np.abs(direction)
-    return float(np.abs(offset[covered] - offset[-1]).max())
+    backwards = h[j + 1] - h[j]
+    offset = ((p - h[j]) * backwards.conjugate()).imag / np.abs(backwards)
+    covered = (nearest < h.shape[0] - 1) | (not whole)
+    return float(np.abs(offset[covered] - offset[0]).max())
 
 
 def _cover(ego: NDArrayFloat, s_ego: NDArrayFloat, direction: complex, history: NDArrayFloat) -> _Cover | None:
@@ -141,16 +143,15 @@ def _cover(ego: NDArrayFloat, s_ego: NDArrayFloat, direction: complex, history: 
     k = int(norms(history - end).argmin())
     if k == 0 or k == history.shape[0] - 1:
         return None
-    s_history = cumulative_length(history)
     rest = history[k - 1:]
-    s_rest = s_history[k - 1:] - s_history[k - 1]
+    s_rest = cumulative_length(rest)
     s_e, offset, i = project_point(end, rest[:3], s_rest[:3])
     if s_e <= _MIN_COVER_M and k == 1:
         return None
     heading = complex(*_heading(rest, 1)) / direction
     t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
     foot = rest[i] + t * (rest[i + 1] - rest[i])
-    departure = _overlap_departure(ego, s_ego, history, s_history, s_history[k - 1] + s_e)
+    departure = _overlap_departure(ego, s_ego, history[: k + 1], s_rest[-1] / (rest.shape[0] - 1))
     return _Cover(rest, s_rest, s_e, foot, offset, abs(math.atan2(heading.imag, heading.real)), departure)
 
 
