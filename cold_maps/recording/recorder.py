@@ -530,9 +530,10 @@ def read_detections(path: str | os.PathLike[str]) -> Iterator[tuple[int, list[di
     ``left`` and ``right`` as ``(N, 2)`` float64 arrays, ``neighbours`` and ``branches`` as
     tuples of ``fusion.NeighbourLane`` / ``LaneBranch`` (empty when not recorded),
     ``road_edges`` as ``fusion.RoadEdges`` or None and ``history`` as ``fusion.LaneHistory`` or
-    None (not recorded: versions 1 and 2, or no history sent). Raises :class:`RecordingError` at once
-    for a file that is not a finalised MCAP, has no ``/cold/detections`` channel or carries
-    a foreign schema, and while iterating for a malformed message.
+    None (not recorded: versions 1 and 2, or no history sent). Raises
+    :class:`RecordingError` at once for a file that is not a finalised MCAP, has no
+    ``/cold/detections`` channel or carries a foreign schema, and while iterating for a
+    malformed message.
     """
     path = Path(path)
     stream = _open_file(path)

@@ -1,15 +1,17 @@
 """Lane messages in the loop: encoding, generation rule, loss and latency (all seeded).
 
 A cooperative vehicle broadcasts its lane (with its lane history, neighbour lanes, road
-edges and branches, when it has them) as a message (:class:`LaneMessage`); the ego fuses the *last message it received*, with the sender's pose at send
-time — never the sender's current detection.
+edges and branches, when it has them) as a message (:class:`LaneMessage`); the ego fuses
+the *last message it received*, with the sender's pose at send time — never the sender's
+current detection.
 
 **Encoding** (``exchange``): ``sampled`` — every border point as 3 float32 (x, y, z = 0;
 :data:`fusion.bezier.SAMPLED_POINT_BYTES`), so the receiver sees the points rounded to
 float32; ``bezier`` — :func:`fusion.bezier.encode` per lane, history, neighbour lane and branch
 (tolerance ``bezier_tolerance_m``), decoded by :func:`fusion.bezier.decode` every 0.10 m.
 Every message also carries :data:`POSE_BYTES` of header: the sender's pose (x, y, yaw) and
-its time stamp as float32; a multi-lane one its layout (:func:`message_bytes`). A message that does not decode (:class:`fusion.BezierDecodeError`) is lost.
+its time stamp as float32; a multi-lane one its layout (:func:`message_bytes`). A message
+that does not decode (:class:`fusion.BezierDecodeError`) is lost.
 
 **Generation rule** (checked every frame, :meth:`LaneChannel.step`): a vehicle sends when
 at least ``min_interval_s`` passed since its last message and (a) ``max_interval_s`` passed,
