@@ -30,7 +30,7 @@ the ego's detection, so the convoy tolerances apply: a neighbour lane lies a lan
 away), and along the overlap the ego border's offset from the history may change from its
 value at the end by at most half the lane width (:func:`_overlap_departure`): the end offset
 is the coop's position error, which the seam removes; heading error, odometry drift and
-noise change it by decimetres (up to 1.6 m measured with 0.5° yaw error, σ 5 cm and typical
+noise change it by decimetres (up to 1.44 m measured with 0.5° yaw error, σ 5 cm and typical
 drift at d_s 50 m), while a history more than half a lane off lies nearer the neighbouring
 lane's border than this lane's. A history that does not reach back to the ego's end is
 joined to the coop detection (same seam offset faded along the history) and the remaining
