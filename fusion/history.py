@@ -31,7 +31,7 @@ away), and along the overlap the ego border's offset from the history may change
 value at the end by at most half the lane width (:func:`_overlap_departure`): the end offset
 is the coop's position error, which the seam removes; heading error, odometry drift and
 noise change it by decimetres (up to 1.44 m measured with 0.5° yaw error, σ 5 cm and typical
-drift at d_s 50 m), while a history more than half a lane off lies nearer the neighbouring
+drift, d_s 20–50 m), while a history more than half a lane off lies nearer the neighbouring
 lane's border than this lane's. A history that does not reach back to the ego's end is
 joined to the coop detection (same seam offset faded along the history) and the remaining
 gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
