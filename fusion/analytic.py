@@ -2,21 +2,23 @@
 
 A road is a reference line given by a piecewise-linear curvature profile (straight lines,
 circular arcs, clothoids) in the world frame; lane borders are lateral offsets of it
-(positive to the left). :func:`detect` plays the paper's generic lane sensor;
+(positive to the left). :func:`detect` plays the paper's generic lane sensor
+(:func:`detect_lanes` a multi-lane one);
 :func:`distance_to_polyline` measures errors against the dense true borders.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, Sequence
 
 import numpy as np
 
 from fusion.errors import InvalidParameterError
+from fusion.fusibility import relative_pose
 from fusion.geometry import cumulative_length, distance_to_polyline, transform
-from fusion.types import LaneDetection, LaneHistory, NDArrayFloat, Pose2D
+from fusion.types import LaneDetection, LaneHistory, NDArrayFloat, NeighbourLane, Pose2D, RoadEdges
 
 TABLE_STEP_M: Final[float] = 0.005
 
@@ -111,7 +113,24 @@ def with_history(road: AnalyticRoad, detection: LaneDetection, s_vehicle: float,
                for b in (behind.left, behind.right)]
     shift = transform(np.array([[detection.pose.x, detection.pose.y]]), 0.0, 0.0, -detection.pose.yaw)[0]
     history = LaneHistory(*(b - shift for b in borders))
-    return LaneDetection(detection.pose, detection.left, detection.right, detection.stamp, detection.sender, history)
+    return replace(detection, history=history)
+
+
+def detect_lanes(road: AnalyticRoad, s_from: float, length_m: float, position: int, lanes: int, width_m: float,
+                 count: int = 1, sender: str = "") -> LaneDetection:
+    """:func:`detect` of lane ``position`` (0 = rightmost) of a road of ``lanes`` lanes ``width_m``
+    wide whose reference line is its right edge, with the lanes up to ``count`` either side
+    (:class:`NeighbourLane`, the sender's frame) and the road edges where they are within
+    ``count`` lanes, as a multi-lane sensor reports them."""
+    own = detect(road, s_from, length_m, (position + 1) * width_m, position * width_m, sender=sender)
+    neighbours = []
+    for k in [k for n in range(1, count + 1) for k in (n, -n) if 0 <= position + k < lanes]:
+        other = detect(road, s_from, length_m, (position + k + 1) * width_m, (position + k) * width_m)
+        relative = relative_pose(own.pose, other.pose)
+        neighbours.append(NeighbourLane(k, transform(other.left, *relative), transform(other.right, *relative)))
+    left = lanes - 1 - position if lanes - 1 - position <= count else None
+    right = -position if position <= count else None
+    return replace(own, neighbours=tuple(neighbours), road_edges=RoadEdges(left, right, left, right))
 
 
 FAMILIES: Final[tuple[str, ...]] = ("corner", "clothoid corner", "arc", "s-bend")

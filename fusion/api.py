@@ -102,10 +102,11 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
 
 
 def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,
-           *, mode: str = "auto") -> Association:
+           *, mode: str = "auto", framed: tuple[Borders, tuple[float, float, float]] | None = None) -> Association:
     """The fusibility decision of :func:`is_fusible` with its confidence in [0, 1] and the
-    neighbour lanes matched (:class:`fusion.association.Association`)."""
-    borders, (x_rel, _, _) = ego_frame_borders(ego, coop)
+    neighbour lanes matched (:class:`fusion.association.Association`); ``framed`` is
+    :func:`ego_frame_borders` of the pair when the caller has it already."""
+    borders, (x_rel, _, _) = framed or ego_frame_borders(ego, coop)
     return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params))[1]
 
 
@@ -140,7 +141,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
     result = _fused(ego, coop, borders, fits, kind, starts, interpolation, params)
-    lanes = tuple(_matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
+    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
     return replace(result, gap_m=ends.gap_m, confidence=association.confidence, lanes=lanes)
 
 
@@ -165,7 +166,7 @@ def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: EndF
     return ego_frame_result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", 0.0)
 
 
-def _matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: FusionKind, interpolation: str,
+def matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: FusionKind, interpolation: str,
                   params: FusionParams) -> tuple[int, NDArrayFloat, NDArrayFloat]:
     """Neighbour lane ``index`` of both detections fused like their own lanes (world frame)."""
     pair = [next(lane for lane in detection.neighbours if lane.index == index) for detection in (ego, coop)]

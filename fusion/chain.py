@@ -15,7 +15,7 @@ costs its links' fusions and one concatenation per link.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, Sequence
 
 import numpy as np
@@ -124,9 +124,9 @@ def _trailing(source: NDArrayInt8) -> tuple[int, int]:
 
 
 def _last_points(detection: LaneDetection, n_left: int, n_right: int) -> LaneDetection:
-    """``detection`` restricted to its last ``n_left``/``n_right`` border points (at least 2)."""
+    """``detection`` restricted to its last ``n_left``/``n_right`` border points (at least 2),
+    with its neighbour lanes, road edges and branches (the end they describe is unchanged)."""
     n_left, n_right = max(n_left, 2), max(n_right, 2)
     if n_left >= detection.left.shape[0] and n_right >= detection.right.shape[0]:
         return detection
-    return LaneDetection(detection.pose, detection.left[-n_left:], detection.right[-n_right:], detection.stamp,
-                         detection.sender)
+    return replace(detection, left=detection.left[-n_left:], right=detection.right[-n_right:])

@@ -22,22 +22,30 @@ Seams (both borders, each on its own):
   drift that grows linearly along the gap too), and its direction changes at a seam by
   |Δ_e − Δ_c| / (s_c − s_e) at most.
 
-Checks: the history must pass within ``convoy_max_offset_m`` of the ego border end, with a
-heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps* the ego's
-detection, so the convoy tolerances apply: a neighbour lane lies a lane width away). A
-history that does not reach back to the ego's end is joined to the coop detection (same
-seam offset faded along the history) and the remaining gap goes to :func:`fusion.fuse`,
-whose fusibility check then sees the history's start.
+Checks: first the pair's own (:func:`fusion.api.assess`: the fusibility check across the gap
+and the lane association), with its reasons, so a history never admits a coop the pair
+fusion rejects. Then the history must pass within ``convoy_max_offset_m`` of the ego border
+end, with a heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps*
+the ego's detection, so the convoy tolerances apply: a neighbour lane lies a lane width
+away), and along the overlap the ego border's offset from the history may change from its
+value at the end by at most half the lane width (:func:`_overlap_departure`): the end offset
+is the coop's position error, which the seam removes; heading error, odometry drift and
+noise change it by decimetres (up to 1.44 m measured with 0.5° yaw error, σ 5 cm and typical
+drift, d_s 20–50 m), while a history more than half a lane off lies nearer the neighbouring
+lane's border than this lane's. A history that does not reach back to the ego's end is
+joined to the coop detection (same seam offset faded along the history) and the remaining
+gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Final
+from dataclasses import replace
+from typing import Final, NamedTuple
 
 import numpy as np
 
-from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, ego_frame_borders, ego_frame_result, fuse
+from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, assess, ego_frame_borders, ego_frame_result, fuse, matched_lane
 from fusion.fusibility import lane_ends, relative_pose
 from fusion.geometry import cumulative_length, end_direction, norms, project_point, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
@@ -45,6 +53,9 @@ from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat
 _HEADING_WINDOW_M: Final[float] = 2.0
 _HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex for its heading
 _MIN_COVER_M: Final[float] = 1e-6
+_PROBE_STEP_M: Final[float] = 1.0  # ego border probes along the overlap with the history
+_PROBE_MARGIN_M: Final[float] = 5.0  # history searched this much beyond the ego's length
+_VERTEX_STEP_M: Final[float] = 0.5  # history vertices about this far apart for the probes (sagitta < 1 cm at R 4 m)
 _HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
 
 
@@ -81,13 +92,54 @@ def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
     return np.array([-ty * across, tx * across])
 
 
-def _cover(end: NDArrayFloat, direction: complex,
-           history: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, float, float, float, NDArrayFloat] | None:
-    """Where an ego border end (point ``end``, unit direction ``direction`` as x + iy, in the
-    history's frame) meets the history: ``(rest, s_rest, s_e, offset m, heading difference
-    rad, foot)``, ``rest`` the history from the vertex before the nearest one on, ``s_rest``
-    its arc lengths [m] and ``s_e`` the foot's; None when the history does not reach back
-    past the end."""
+class _Cover(NamedTuple):
+    """Where an ego border end meets the history (frame of the history).
+
+    Fields: ``rest`` the history from the vertex before the one nearest the end on;
+    ``s_rest`` its arc lengths [m]; ``s_e`` the foot's arc length on ``rest`` [m]; ``foot``
+    the end's foot point; ``offset_m`` the end's distance from it [m]; ``heading_rad`` the
+    angle between the history and the ego border there [rad]; ``departure_m`` how far [m] the
+    lateral offset of the ego border from the history changes where the two overlap
+    (:func:`_overlap_departure`).
+    """
+
+    rest: NDArrayFloat
+    s_rest: NDArrayFloat
+    s_e: float
+    foot: NDArrayFloat
+    offset_m: float
+    heading_rad: float
+    departure_m: float
+
+
+def _overlap_departure(ego: NDArrayFloat, s_ego: NDArrayFloat, behind: NDArrayFloat, spacing_m: float) -> float:
+    """Largest change [m] of the signed lateral offset of the ego border from the history along
+    their overlap, from its value at the ego's end: the ego border (points ``ego`` at arc lengths
+    ``s_ego``, frame of the history) is probed about every :data:`_PROBE_STEP_M` back from its
+    end and each probe is offset across the history segment at its nearest history vertex,
+    among the last vertices of ``behind`` (the history up to the vertex nearest the ego's end,
+    ``spacing_m`` apart on average) over one ego length plus :data:`_PROBE_MARGIN_M`, thinned
+    to about :data:`_VERTEX_STEP_M` apart; probes behind the history's start are left out."""
+    probes = np.ascontiguousarray(ego[::-max(1, int(_PROBE_STEP_M * (ego.shape[0] - 1) / s_ego[-1]))])
+    window = behind[::-1][: math.ceil((s_ego[-1] + _PROBE_MARGIN_M) / spacing_m) + 1]
+    whole = window.shape[0] == behind.shape[0]
+    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), window.shape[0] - 1))
+    h = np.ascontiguousarray(window[::stride]).view(np.complex128)[:, 0]
+    p = probes.view(np.complex128)[:, 0]
+    d = p[:, None] - h[None, :]
+    nearest = (d.real * d.real + d.imag * d.imag).argmin(axis=1)
+    j = np.minimum(nearest, h.shape[0] - 2)
+    backwards = h[j + 1] - h[j]
+    offset = ((p - h[j]) * backwards.conjugate()).imag / np.abs(backwards)
+    covered = (nearest < h.shape[0] - 1) | (not whole)
+    return float(np.abs(offset[covered] - offset[0]).max())
+
+
+def _cover(ego: NDArrayFloat, s_ego: NDArrayFloat, direction: complex, history: NDArrayFloat) -> _Cover | None:
+    """Where the end of an ego border (points ``ego`` at arc lengths ``s_ego``, unit end
+    direction ``direction`` as x + iy, all in the history's frame) meets the history; None
+    when the history does not reach back past the end."""
+    end = ego[-1]
     k = int(norms(history - end).argmin())
     if k == 0 or k == history.shape[0] - 1:
         return None
@@ -99,16 +151,22 @@ def _cover(end: NDArrayFloat, direction: complex,
     heading = complex(*_heading(rest, 1)) / direction
     t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
     foot = rest[i] + t * (rest[i + 1] - rest[i])
-    return rest, s_rest, s_e, offset, abs(math.atan2(heading.imag, heading.real)), foot
+    departure = _overlap_departure(ego, s_ego, history[: k + 1], s_rest[-1] / (rest.shape[0] - 1))
+    return _Cover(rest, s_rest, s_e, foot, offset, abs(math.atan2(heading.imag, heading.real)), departure)
 
 
-def _reason(side: str, offset: float, heading: float, params: FusionParams) -> str:
-    if offset > params.convoy_max_offset_m:
-        return (f"coop history passes {offset:.2f} m from the ego {side} border end "
+def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> str:
+    """Why a history does not join the ego border ``side`` (``width_m``: the ego lane's width
+    at its end, m), or ""."""
+    if cover.offset_m > params.convoy_max_offset_m:
+        return (f"coop history passes {cover.offset_m:.2f} m from the ego {side} border end "
                 f"(> {params.convoy_max_offset_m:.2f} m): another lane")
-    if heading > params.convoy_max_heading_rad:
-        return (f"coop history heads {math.degrees(heading):.1f} deg away from the ego {side} border at its end "
-                f"(> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
+    if cover.heading_rad > params.convoy_max_heading_rad:
+        return (f"coop history heads {math.degrees(cover.heading_rad):.1f} deg away from the ego {side} border at "
+                f"its end (> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
+    if cover.departure_m > 0.5 * width_m:
+        return (f"coop history leaves the ego {side} border by {cover.departure_m:.2f} m where they overlap "
+                f"(> half the lane width, {0.5 * width_m:.2f} m): another lane")
     return ""
 
 
@@ -131,29 +189,39 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     history = coop.history
     if history is None or mode == "convoy":
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-    (el, er, cl, cr), (x_rel, y_rel, psi_rel) = ego_frame_borders(ego, coop)
+    framed = ego_frame_borders(ego, coop)
+    (el, er, cl, cr), (x_rel, y_rel, psi_rel) = framed
     ends = lane_ends(el, er, cl, cr)
     if x_rel <= 0.0 or ends.gap_m <= 0.0:
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-    # the history stays in the coop frame; the ego's border ends (points, directions) go there
+    association = assess(ego, coop, params, mode=mode, framed=framed)
+    if association.reason:
+        return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
+    # the history stays in the coop frame; the ego's borders go there
     to_coop = relative_pose(coop.pose, ego.pose)
     rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
-    ego_ends = transform(np.array([el[-1], er[-1], ends.p_end]), *to_coop)
-    ego_dirs = [complex(*end_direction(e, True, _HEADING_WINDOW_M)) * rotation for e in (el, er)]
-    covers = (_cover(ego_ends[0], ego_dirs[0], history.left), _cover(ego_ends[1], ego_dirs[1], history.right))
+    ego_points = transform(ego.points, *to_coop)
+    n_left = el.shape[0]
+    ego_borders = (ego_points[:n_left], ego_points[n_left:])
+    arclengths = (ego.arclength[:n_left], ego.arclength[n_left:])
+    covers = [_cover(points, s, complex(*end_direction(own, True, _HEADING_WINDOW_M)) * rotation, side)
+              for points, s, own, side in zip(ego_borders, arclengths, (el, er), (history.left, history.right))]
     if covers[0] is None or covers[1] is None:
         t_end = complex(*ends.t_end) * rotation
-        return _partial(ego, coop, ego_ends[2], (t_end.real, t_end.imag), mode, interpolation, params)
+        p_end = transform(np.array([ends.p_end]), *to_coop)[0]
+        return _partial(ego, coop, p_end, (t_end.real, t_end.imag), mode, interpolation, params)
     for side, cover in zip(("left", "right"), covers):
-        reason = _reason(side, cover[3], cover[4], params)
+        reason = _reason(side, cover, ends.width_m, params)
         if reason:
             return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, reason)
-    gaps = [seam_blend(rest, s_rest, s_e, e - foot, _coop_offset(rest, c))
-            for (rest, s_rest, s_e, _, _, foot), e, c in zip(covers, ego_ends, (coop.left, coop.right))]
+    gaps = [seam_blend(cover.rest, cover.s_rest, cover.s_e, e[-1] - cover.foot, _coop_offset(cover.rest, c))
+            for cover, e, c in zip(covers, ego_borders, (coop.left, coop.right))]
     n_gap = gaps[0].shape[0]
     gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
-    return ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
-                            ends.gap_m)
+    result = ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
+                              ends.gap_m)
+    lanes = tuple(matched_lane(ego, coop, index, "spline", interpolation, params) for index in association.matched)
+    return replace(result, confidence=association.confidence, lanes=lanes)
 
 
 def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
@@ -171,7 +239,7 @@ def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end
         joined = seam_blend(ahead, cumulative_length(ahead), 0.0, np.zeros(2), _coop_offset(ahead, first),
                             keep_first=True)
         extended.append(np.concatenate((joined, first)))
-    longer = LaneDetection(coop.pose, extended[0], extended[1], stamp=coop.stamp, sender=coop.sender)
+    longer = replace(coop, left=extended[0], right=extended[1], history=None)
     result = fuse(ego, longer, mode=mode, interpolation=interpolation, params=params)
     if result.kind == "none":
         return result
@@ -183,4 +251,4 @@ def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end
         first_coop = source.shape[0] - n_coop
         relabelled[first_coop: first_coop + min(n_coop, border.shape[0] - own.shape[0])] = Source.COOP_HISTORY
         labels.append(relabelled)
-    return FusionResult(result.left, result.right, labels[0], labels[1], result.kind, result.gap_m, result.reason)
+    return replace(result, left_source=labels[0], right_source=labels[1])

@@ -43,6 +43,33 @@ def test_refusion_reproduces_cold_eval(recording, tmp_path):
     assert read_metadata(tmp_path / "re.mcap")[METADATA_STATUS]["status"] == "complete"
 
 
+def _history_run(out, *history):
+    assert evaluate.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "1", "--gaps", "30",
+                          "--interpolation", "paper", "--no-distractors", "--no-plots", "--noise", "0.05",
+                          *history, "--out", str(out)]) == 0
+    return out
+
+
+def test_refusion_reproduces_the_history_fusion_of_the_run(tmp_path):
+    """cold-eval --history 100 records each coop's lane history in run.mcap; cold-fuse fuses
+    with it and reproduces the run's errors and ranges exactly (with 5 cm noise and drift, so
+    a fusion without the histories would differ: the run without --history, same detections,
+    shows it)."""
+    run = _history_run(tmp_path / "run", "--history", "100", "--drift")
+    report = tmp_path / "report"
+    assert fuse.main(["--input", str(run / "run.mcap"), "-o", str(tmp_path / "re.mcap"), "--report", str(report)]) == 0
+    before, after, plain = _scenarios(run), _scenarios(report), _scenarios(_history_run(tmp_path / "plain"))
+    for key in (("local", "left"), ("convoy", "right"), ("spline", "left"), ("spline", "right")):
+        for metric in ("mean_error_m", "max_error_m", "perception_range_m"):
+            assert after[key][metric] == pytest.approx(before[key][metric], abs=1e-9)
+        assert after[key]["fused_frames"] == before[key]["fused_frames"] == 4
+    assert abs(plain[("spline", "left")]["max_error_m"] - before[("spline", "left")]["max_error_m"]) > 1e-3
+    (_, detections), *_ = read_detections(run / "run.mcap")
+    histories = {d["sender"]: d["history"] for d in detections}
+    assert histories["ego"] is None and all(histories[c] is not None for c in ("coop25", "coop60"))
+    assert histories["coop60"].left[-1] == pytest.approx((0.0, 2.0), abs=0.3)  # ends at the coop, lane 4 m wide
+
+
 def test_fuses_detections_from_another_source(tmp_path):
     """Two straight detections written by hand: 'car0' at x = 0 and 'car1' at x = 20 m,
     lane borders at y = ±2 m; convoy fusion spans x = 0 ... 50 m."""

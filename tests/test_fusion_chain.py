@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import fusion
-from fusion.analytic import AnalyticRoad, Segment, detect, with_history
+from fusion.analytic import AnalyticRoad, Segment, detect, detect_lanes, with_history
 from fusion.geometry import distance_to_polyline
 
 LANE = (0.0, -3.5)
@@ -82,3 +83,29 @@ def test_convoy_chain_and_bad_input():
     with pytest.raises(fusion.InvalidDetectionError, match=r"coops\[1\]"):
         fusion.fuse_chain(ego, [_coop(25.0), "lane"])
     assert math.isfinite(chain.links[0].gap_m)
+
+
+S_BEND = AnalyticRoad([Segment(100.0), Segment(20.0, 1 / 50.0), Segment(20.0, -1 / 50.0), Segment(100.0)])
+
+
+@pytest.mark.parametrize("d_s", [20.0, 30.0])
+def test_chain_links_keep_neighbour_lanes_and_road_edges(d_s):
+    """Multi-lane detections on a two-lane road with an S-bend (R 50 m) between the first coop
+    (a convoy link: 25 m ahead of the ego) and the second: the second link's ego, the part of
+    the first coop's detection past the overlap, keeps its neighbour lanes and road edges, so
+    it decides like the pair of the two coops: the same lane is fused (both edges agree), the
+    right neighbour lane, which the geometry alone passes across the S-bend, is rejected by
+    the road edges."""
+    width, end = 3.5, 111.0
+    ego = detect_lanes(S_BEND, end - 55.0, 30.0, 1, 2, width)
+    first = detect_lanes(S_BEND, end - 30.0, 30.0, 1, 2, width, sender="first")
+    same = detect_lanes(S_BEND, end + d_s, 30.0, 1, 2, width, sender="same")
+    beside = detect_lanes(S_BEND, end + d_s, 30.0, 0, 2, width, sender="beside")
+    chain = fusion.fuse_chain(ego, [first, same])
+    assert chain.vehicles == 3 and [link.kind for link in chain.links] == ["convoy", "spline"]
+    assert fusion.fuse(first, same).confidence == 1.0
+    rejected = fusion.fuse_chain(ego, [first, beside])
+    assert rejected.vehicles == 2 and rejected.reason == fusion.fuse(first, beside).reason
+    assert "road edge" in rejected.reason
+    single = [replace(d, neighbours=(), road_edges=None) for d in (first, beside)]
+    assert fusion.fuse(*single).kind == "spline"  # the S-bend weakness without the edges

@@ -4,14 +4,16 @@ seams without a jump, the checks, and a history short of the gap."""
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import fusion
-from fusion.analytic import AnalyticRoad, Segment, bend_segments, detect, with_history
-from fusion.geometry import distance_to_polyline
+from fusion.analytic import AnalyticRoad, Segment, bend_segments, detect, detect_lanes, with_history
+from fusion.fusibility import relative_pose
+from fusion.geometry import distance_to_polyline, transform
 
 LANE = (0.0, -3.5)
 CORNER = AnalyticRoad([Segment(80.0), *bend_segments(-1.0 / 12.0, math.pi / 2), Segment(200.0)])
@@ -81,10 +83,78 @@ def test_seams_have_no_jump_under_a_coop_pose_error():
         np.testing.assert_allclose(gap[:, 1] - offset, shift * (gap[:, 0] - 100.0) / 30.0, atol=1e-6)
 
 
-def test_adjacent_lane_history_is_rejected():
+def test_adjacent_lane_history_is_rejected_like_the_pair():
     ego, coop = _pair(STRAIGHT, 100.0, 30.0, 100.0, lane=(3.5, 0.0))
     result = fusion.fuse_history(ego, coop)
-    assert result.kind == "none" and "another lane" in result.reason
+    pair = fusion.fuse(ego, replace(coop, history=None))
+    assert result.kind == pair.kind == "none" and "another lane" in result.reason
+    assert result.reason == pair.reason  # the pair's own check decides, not the history's
+    np.testing.assert_array_equal(result.left, pair.left)
+
+
+def _fork(d_s):
+    """Ego on a straight main road whose 30 m detection passes a fork 15 m ahead (right turn,
+    R 25 m, reported as a branch); coops ``d_s`` after the ego's end, each with 100 m of history."""
+    main = AnalyticRoad([Segment(200.0)])
+    branch = AnalyticRoad([Segment(15.0), Segment(25.0 * math.pi / 2, -1 / 25.0), Segment(100.0)])
+    ego = detect(main, 0.0, 30.0, *LANE)
+    seen = detect(branch, 15.0, 15.0, *LANE)
+    fork = fusion.LaneBranch(*(transform(b, *relative_pose(ego.pose, seen.pose)) for b in (seen.left, seen.right)))
+    ego = replace(ego, branches=(fork,))
+    turning, straight = (with_history(road, detect(road, 30.0 + d_s, 30.0, *LANE), 30.0 + d_s, 100.0, *LANE)
+                         for road in (branch, main))
+    return ego, turning, straight
+
+
+@pytest.mark.parametrize("d_s", [20.0, 30.0])
+def test_a_coop_on_the_other_branch_is_rejected_like_the_pair(d_s):
+    ego, turning, straight = _fork(d_s)
+    result = fusion.fuse_history(ego, turning)
+    pair = fusion.fuse(ego, replace(turning, history=None))
+    assert result.kind == "none" and "other branch" in result.reason and result.reason == pair.reason
+    fused = fusion.fuse_history(ego, straight)
+    assert fused.kind == "history" and fused.confidence == fusion.fuse(ego, straight).confidence > 0.0
+
+
+@pytest.mark.parametrize("k", [1e-4, 2e-3])
+def test_a_history_bent_away_from_the_ego_lane_is_rejected(k):
+    """Heading drift k (rad/m) bends the history sideways by k·u²/2 at u metres behind the coop
+    (closed form on a straight). With d_s 20 m the ego's detection spans u = 20 … 50 m, so its
+    offset from the history changes by k·(50² − 20²)/2 along their overlap: 0.105 m for a
+    typical drift (fused), 2.1 m for k = 2·10⁻³ (more than half the 3.5 m lane: rejected,
+    although the history joins the ego's end within 0.4 m)."""
+    ego, coop = _pair(STRAIGHT, 100.0, 20.0, 100.0)
+    bent = fusion.LaneHistory(*(b + np.column_stack((np.zeros(len(b)), k * b[:, 0] ** 2 / 2.0))
+                                for b in (coop.history.left, coop.history.right)))
+    result = fusion.fuse_history(ego, replace(coop, history=bent))
+    change = k * (50.0**2 - 20.0**2) / 2.0
+    if change < 1.75:
+        assert result.kind == "history"
+        return
+    assert result.kind == "none" and "another lane" in result.reason and "half the lane width" in result.reason
+    measured = float(re.search(r"by (\d+\.\d+) m", result.reason).group(1))
+    # measured across the bent history, whose slope at the ego's start is k·50 m
+    assert measured == pytest.approx(change * math.cos(math.atan(k * 50.0)), abs=0.006)
+
+
+def test_neighbour_lanes_and_road_edges_survive_history_fusion():
+    """Multi-lane detections (left lane of two, right neighbour and both road edges seen):
+    the history bridges the gap, the association is the pair's (both edges agree: confidence
+    1) and the matched neighbour lane is fused as well."""
+    road = AnalyticRoad([Segment(300.0, 1 / 200.0)])
+    ego = detect_lanes(road, 70.0, 30.0, 1, 2, 3.5)
+    coop = detect_lanes(road, 130.0, 30.0, 1, 2, 3.5)
+    coop = with_history(road, coop, 130.0, 100.0, 7.0, 3.5)
+    assert coop.neighbours and coop.road_edges is not None  # with_history keeps them
+    result = fusion.fuse_history(ego, coop, interpolation="hermite")
+    pair = fusion.fuse(ego, coop, interpolation="hermite")
+    assert result.kind == "history" and result.confidence == pair.confidence == 1.0
+    (index, left, right), = result.lanes
+    (_, pair_left, pair_right), = pair.lanes
+    assert index == -1
+    np.testing.assert_array_equal(left, pair_left)
+    np.testing.assert_array_equal(right, pair_right)
+    assert distance_to_polyline(left, road.border(3.5)).max() < 0.01
 
 
 def test_history_short_of_the_gap_is_interpolated_only_where_missing():

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,10 +12,21 @@ import pytest
 import fusion
 from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.simulation.drive import Track
-from cold_maps.simulation.messages import POSE_BYTES, LaneChannel, MessageModel, decode, encode, message_bytes
+from cold_maps.simulation.messages import (
+    LAYOUT_BYTES,
+    NEIGHBOUR_BYTES,
+    POSE_BYTES,
+    ROAD_EDGES_BYTES,
+    LaneChannel,
+    LaneMessage,
+    MessageModel,
+    decode,
+    encode,
+    message_bytes,
+)
 from cold_maps.simulation.odometry import OdometryModel, dead_reckoned, lane_history
 from cold_maps.simulation.sensor_errors import SensorErrorModel
-from fusion.analytic import AnalyticRoad, Segment, detect, with_history
+from fusion.analytic import AnalyticRoad, Segment, detect, detect_lanes, with_history
 
 
 def _straight_track(length_m=300.0):
@@ -69,17 +81,41 @@ def _detection(s, history_m=0.0):
 def test_exchange_round_trip_error_and_size(exchange):
     det = _detection(110.0, history_m=50.0)
     model = MessageModel(exchange)
-    payloads = encode(det, model)
-    back = decode(payloads, det.pose, 1.5, "coop", model)
+    message = encode(det, model)
+    back = decode(message, det.pose, 1.5, "coop", model)
     assert back.stamp == 1.5 and back.history is not None
     for sent, got in ((det.left, back.left), (det.right, back.right), (det.history.left, back.history.left)):
         error = fusion.geometry.distance_to_polyline(sent, got).max()
         assert error <= (model.bezier_tolerance_m + 0.005 if exchange == "bezier" else 1e-4)
-    size = message_bytes(payloads, model)
+    size = message_bytes(message, model)
     if exchange == "sampled":
         assert size == POSE_BYTES + 12 * (det.points.shape[0] + det.history.left.shape[0] + det.history.right.shape[0])
     else:
-        assert size == POSE_BYTES + sum(len(p) for p in payloads) and size < 1000
+        assert size == POSE_BYTES + len(message.lane) + len(message.history) and size < 1000
+
+
+@pytest.mark.parametrize("exchange", ["sampled", "bezier"])
+def test_neighbour_lanes_road_edges_and_branches_survive_the_exchange(exchange):
+    """A multi-lane detection (middle lane of three, both neighbours, both road edges, a branch)
+    with its history comes back with every part, each lane within the format's error, and its
+    layout counted on air: 3 bytes, 2 per neighbour lane, 4 for the road edges."""
+    lanes = detect_lanes(ROAD, 110.0, 30.0, 1, 3, 3.5, sender="coop")
+    branch = fusion.LaneBranch(lanes.right[100:] + (0.0, -0.5), lanes.right[100:] + (0.0, -4.0))
+    det = with_history(ROAD, replace(lanes, branches=(branch,)), 110.0, 50.0, 7.0, 3.5)
+    model = MessageModel(exchange)
+    message = encode(det, model)
+    back = decode(message, det.pose, 1.5, "coop", model)
+    tolerance = model.bezier_tolerance_m + 0.005 if exchange == "bezier" else 1e-4
+    assert back.road_edges == det.road_edges == fusion.RoadEdges(1, -1, 1, -1)
+    assert [(n.index, n.at_start, n.at_end) for n in back.neighbours] == [(1, True, True), (-1, True, True)]
+    pairs = [(det.history.left, back.history.left), (det.branches[0].left, back.branches[0].left)]
+    pairs += [(sent.right, got.right) for sent, got in zip(det.neighbours, back.neighbours)]
+    for sent, got in pairs:
+        assert fusion.geometry.distance_to_polyline(sent, got).max() <= tolerance
+    single = message_bytes(encode(replace(det, neighbours=(), road_edges=None, branches=()), model), model)
+    lane_bytes = sum(message_bytes(LaneMessage(p), model) - POSE_BYTES for p in (*(n[3] for n in message.neighbours),
+                                                                                  *message.branches))
+    assert message_bytes(message, model) == single + lane_bytes + LAYOUT_BYTES + 2 * NEIGHBOUR_BYTES + ROAD_EDGES_BYTES
 
 
 def _drive(channel, seconds=3.0, speed=10.0, start=100.0, seed=0):
@@ -129,11 +165,11 @@ def test_a_message_that_does_not_decode_is_dropped_and_the_last_one_kept():
     kept = channel.received
     assert kept is not None
     good = encode(_detection(120.0), channel.model)
-    channel.in_flight.append((1.0, (good[0][:-5],), kept.pose, 1.0, "coop"))  # truncated on the way
+    channel.in_flight.append((1.0, replace(good, lane=good.lane[:-5]), kept.pose, 1.0, "coop"))  # truncated
     channel.deliver(1.0)
     assert channel.decode_errors == 1 and channel.received is kept
     sampled = LaneChannel(MessageModel("sampled"))
-    sampled.in_flight.append((0.0, (b"\x00" * 7,), kept.pose, 0.0, "coop"))
+    sampled.in_flight.append((0.0, LaneMessage(b"\x00" * 7), kept.pose, 0.0, "coop"))
     sampled.deliver(0.0)
     assert sampled.decode_errors == 1 and sampled.received is None
 

@@ -85,7 +85,7 @@ def test_recording_has_the_channels_schemas_counts_and_summary(recording):
     assert summary.statistics.message_end_time == BASE_NS + round((FRAMES - 1) * DT_S * 1e9)
     assert metadata["cold.status"] == {"status": "complete"}
     assert metadata["cold.run"]["map"] == "maps/straight.xodr"
-    assert metadata["cold.run"]["recording_version"] == str(RECORDING_VERSION) == "2"
+    assert metadata["cold.run"]["recording_version"] == str(RECORDING_VERSION) == "3"
     assert int(metadata["cold.run"]["stamp_base_ns"]) == BASE_NS == read_stamp_base(recording)
     assert json.loads(metadata["cold.run"]["params"]) == {"d_s": 20.0, "fusion": "spline"}
     assert not recording.with_name("run.mcap.partial").exists()

@@ -2,11 +2,12 @@
 
 Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
 :mod:`cold_maps.recording.recorder`) of an MCAP file written by ``cold-eval`` or by any other source
-in that format (recording version 1 or 2), fuses the ego's detection (sender ``--ego``)
-with every other sender's of the same frame, and writes a new MCAP (version 2, on the
-input's stamp base): the detections again, the fused lanes on ``/fused`` and per-frame
-metrics on ``/metrics``. With ``--map`` (or the map named in the
-recording's ``cold.run`` metadata) the local and fused lanes are measured against Lanelet2
+in that format (recording version 1, 2 or 3), fuses the ego's detection (sender ``--ego``)
+with every other sender's of the same frame (with the sender's lane history when the
+recording carries one, :func:`fusion.fuse_history`, as ``cold-eval --history`` fused it), and
+writes a new MCAP (version 3, on the input's stamp base): the detections again, the fused
+lanes on ``/fused`` and per-frame metrics on ``/metrics``. With ``--map`` (or the map named in
+the recording's ``cold.run`` metadata) the local and fused lanes are measured against Lanelet2
 ground truth; ``--report DIR`` writes summary.md, metrics.json and frames.csv there
 (fusion ``convoy`` when the detections overlap, else ``spline``; d_s 0 = all gaps pooled).
 Exit 0; 1 with one line on stderr for bad input or a crash; 130 when interrupted.
@@ -91,7 +92,8 @@ class Refuser:
         stamp = detections[0]["stamp_s"]
         lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
                                                    sender=d["sender"], neighbours=d["neighbours"],
-                                                   road_edges=d["road_edges"], branches=d["branches"])
+                                                   road_edges=d["road_edges"], branches=d["branches"],
+                                                   history=d["history"])
                  for d in detections}
         for d in detections:
             recorder.write_detection(stamp, frame, d["sender"], tuple(d["pose"].values()), d["left"], d["right"],
@@ -110,7 +112,8 @@ class Refuser:
             if sender == self.ego:
                 continue
             start = time.perf_counter()
-            result = fusion.fuse(ego, coop, mode=self.mode, interpolation=self.interpolation, params=self.params)
+            result = fusion.fuse_history(ego, coop, mode=self.mode, interpolation=self.interpolation,
+                                         params=self.params)
             runtime = (time.perf_counter() - start) * 1e3
             kind = "convoy" if result.gap_m <= 0.0 else "spline"
             metrics[f"{sender}_gap_m"] = result.gap_m

@@ -1,6 +1,6 @@
 """MCAP recording of an evaluation run, viewable in Foxglove and re-readable for re-fusion.
 
-Recording version 2 (:data:`RECORDING_VERSION`), written with the ``foxglove-sdk`` MCAP
+Recording version 3 (:data:`RECORDING_VERSION`), written with the ``foxglove-sdk`` MCAP
 writer (zstd chunks). Channels:
 
 - ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the official
@@ -12,7 +12,7 @@ writer (zstd chunks). Channels:
 - ``/tf``: ``foxglove.FrameTransform`` (protobuf) ``map`` -> ``<sender>`` per detection,
   the sender's reported pose (so Foxglove can follow a vehicle).
 - ``/cold/detections``: ``cold.LaneDetection`` (:data:`LANE_DETECTION_SCHEMA`, JSON), the raw
-  detections for re-fusion.
+  detections for re-fusion, with the sender's lane history when it sent one.
 - ``/metrics``: ``cold.FrameMetrics`` (:data:`FRAME_METRICS_SCHEMA`, JSON), a flat object
   of numbers per frame, for Foxglove's plot panel.
 
@@ -24,9 +24,10 @@ run parameters as a JSON object string, ``recording_version``, ``stamp_base_ns``
 ``cold.status`` (``status``: ``complete`` or ``partial``; ``reason``: the exception that
 ended a partial run).
 
-Version 1 (before foxglove-sdk; no ``recording_version``): display channels as JSON
+Version 2: no ``history`` key in ``cold.LaneDetection`` (otherwise as version 3). Version 1
+(before foxglove-sdk; no ``recording_version``): display channels as JSON
 ``foxglove.SceneUpdate``, no ``/tf``, log times from 0, ``cold.*`` stamps as float seconds
-``stamp_s``. :func:`read_detections` reads both versions.
+``stamp_s``. :func:`read_detections` reads all three versions.
 
 The file is written as ``<path>.partial`` and renamed when finalised; a run ended by an
 exception (Ctrl-C included) is still finalised under the final name, marked ``partial``.
@@ -51,7 +52,7 @@ from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
 from gt_matching.polyline import simplify_lines
 
-RECORDING_VERSION: Final[int] = 2
+RECORDING_VERSION: Final[int] = 3
 TOPIC_GT: Final[str] = "/gt"
 TOPIC_FUSED: Final[str] = "/fused"
 TOPIC_DETECTIONS_PREFIX: Final[str] = "/detections/"
@@ -115,7 +116,7 @@ _EDGE_NAMES: Final[tuple[str, ...]] = ("start_left", "start_right", "end_left", 
 
 LANE_DETECTION_SCHEMA: Final[dict[str, Any]] = _object(
     "cold.LaneDetection",
-    "One vehicle's lane detection in one frame, as sent to the fusion (cold-maps recording version 2).",
+    "One vehicle's lane detection in one frame, as sent to the fusion (cold-maps recording version 3).",
     {
         "stamp": _STAMP_SCHEMA,
         "frame": {"type": "integer", "minimum": 0, "description": "Frame index."},
@@ -141,6 +142,10 @@ LANE_DETECTION_SCHEMA: Final[dict[str, Any]] = _object(
             "left": {**_POLYLINE_SCHEMA, "description": "Left border from the fork on, vehicle frame."},
             "right": {**_POLYLINE_SCHEMA, "description": "Right border, like `left`."}}),
             "Optional (multi-lane sensor): lanes leaving the sender's lane at forks."),
+        "history": _object("cold.LaneHistory", "Optional (version 3): the lane the sender perceived over its last "
+                           "metres of travel, registered with its odometry, ending where `left`/`right` start.", {
+                               "left": {**_POLYLINE_SCHEMA, "description": "Left border, vehicle frame like `left`."},
+                               "right": {**_POLYLINE_SCHEMA, "description": "Right border, like `left`."}}),
     },
 )
 LANE_DETECTION_SCHEMA["required"] = ["stamp", "frame", "sender", "pose", "left", "right"]
@@ -366,8 +371,9 @@ class Recorder:
 
         ``pose`` is the sender's reported (x m, y m, yaw rad) in the world frame; ``left``
         and ``right`` are ``(N, 2)`` borders in its vehicle frame (ISO 8855, m). ``lanes``:
-        the detection whose neighbour lanes, road edges and branches are recorded with it
-        (keys left out when it has none, so a single-lane recording is unchanged).
+        the detection whose neighbour lanes, road edges, branches and lane history are
+        recorded with it (keys left out when it has none, so a single-lane recording is
+        unchanged).
         """
         if not isinstance(sender, str) or not _SENDER_PATTERN.fullmatch(sender):
             raise ValueError(f"sender: expected letters, digits, '_' or '-', got {sender!r}")
@@ -451,8 +457,11 @@ def _open_file(path: Path) -> Any:
 
 
 def _multi_lane(detection: fusion.LaneDetection) -> dict[str, Any]:
-    """The optional ``cold.LaneDetection`` keys of a multi-lane detection (none without)."""
+    """The optional ``cold.LaneDetection`` keys of a multi-lane detection and of a lane history
+    (none without)."""
     extra: dict[str, Any] = {}
+    if detection.history is not None:
+        extra["history"] = {"left": detection.history.left, "right": detection.history.right}
     if detection.neighbours:
         extra["neighbours"] = [{"index": int(lane.index), "left": lane.left.tolist(), "right": lane.right.tolist(),
                                 "at_start": bool(lane.at_start), "at_end": bool(lane.at_end)}
@@ -465,9 +474,11 @@ def _multi_lane(detection: fusion.LaneDetection) -> dict[str, Any]:
 
 
 def _decode_multi_lane(message: Mapping[str, Any]) -> dict[str, Any]:
-    """``neighbours``, ``road_edges``, ``branches`` of a decoded message as fusion objects."""
-    edges = message.get("road_edges")
+    """``neighbours``, ``road_edges``, ``branches``, ``history`` of a decoded message as fusion
+    objects."""
+    edges, history = message.get("road_edges"), message.get("history")
     return {
+        "history": None if history is None else fusion.LaneHistory(history["left"], history["right"]),
         "neighbours": tuple(fusion.NeighbourLane(int(n["index"]), n["left"], n["right"], bool(n["at_start"]),
                                                  bool(n["at_end"])) for n in message.get("neighbours", ())),
         "road_edges": None if edges is None else fusion.RoadEdges(**{name: edges.get(name) for name in _EDGE_NAMES}),
@@ -512,15 +523,17 @@ def _check_detection_channel(path: Path, summary: Any) -> None:
 
 
 def read_detections(path: str | os.PathLike[str]) -> Iterator[tuple[int, list[dict[str, Any]]]]:
-    """The raw detections of a recording (version 1 or 2), grouped by frame in recording order.
+    """The raw detections of a recording (version 1, 2 or 3), grouped by frame in recording order.
 
     Yields ``(frame, detections)``; each detection is a dict with the keys ``stamp_s`` (s
     since the recording's stamp base, ns resolution), ``frame``, ``sender``, ``pose``,
     ``left`` and ``right`` as ``(N, 2)`` float64 arrays, ``neighbours`` and ``branches`` as
-    tuples of ``fusion.NeighbourLane`` / ``LaneBranch`` (empty when not recorded) and
-    ``road_edges`` as ``fusion.RoadEdges`` or None. Raises :class:`RecordingError` at once
-    for a file that is not a finalised MCAP, has no ``/cold/detections`` channel or carries
-    a foreign schema, and while iterating for a malformed message.
+    tuples of ``fusion.NeighbourLane`` / ``LaneBranch`` (empty when not recorded),
+    ``road_edges`` as ``fusion.RoadEdges`` or None and ``history`` as ``fusion.LaneHistory`` or
+    None (not recorded: versions 1 and 2, or no history sent). Raises
+    :class:`RecordingError` at once for a file that is not a finalised MCAP, has no
+    ``/cold/detections`` channel or carries a foreign schema, and while iterating for a
+    malformed message.
     """
     path = Path(path)
     stream = _open_file(path)

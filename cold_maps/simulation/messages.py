@@ -1,15 +1,17 @@
 """Lane messages in the loop: encoding, generation rule, loss and latency (all seeded).
 
-A cooperative vehicle broadcasts its lane (and its lane history, when it keeps one) as a
-message; the ego fuses the *last message it received*, with the sender's pose at send
-time — never the sender's current detection.
+A cooperative vehicle broadcasts its lane (with its lane history, neighbour lanes, road
+edges and branches, when it has them) as a message (:class:`LaneMessage`); the ego fuses
+the *last message it received*, with the sender's pose at send time — never the sender's
+current detection.
 
 **Encoding** (``exchange``): ``sampled`` — every border point as 3 float32 (x, y, z = 0;
 :data:`fusion.bezier.SAMPLED_POINT_BYTES`), so the receiver sees the points rounded to
-float32; ``bezier`` — :func:`fusion.bezier.encode` per lane and per history (tolerance
-``bezier_tolerance_m``), decoded by :func:`fusion.bezier.decode` every 0.10 m. Every message
-also carries :data:`POSE_BYTES` of header: the sender's pose (x, y, yaw) and its time stamp
-as float32. A message that does not decode (:class:`fusion.BezierDecodeError`) is lost.
+float32; ``bezier`` — :func:`fusion.bezier.encode` per lane, history, neighbour lane and branch
+(tolerance ``bezier_tolerance_m``), decoded by :func:`fusion.bezier.decode` every 0.10 m.
+Every message also carries :data:`POSE_BYTES` of header: the sender's pose (x, y, yaw) and
+its time stamp as float32; a multi-lane one its layout (:func:`message_bytes`). A message
+that does not decode (:class:`fusion.BezierDecodeError`) is lost.
 
 **Generation rule** (checked every frame, :meth:`LaneChannel.step`): a vehicle sends when
 at least ``min_interval_s`` passed since its last message and (a) ``max_interval_s`` passed,
@@ -47,6 +49,13 @@ EXCHANGES: Final[tuple[str, ...]] = ("none", "sampled", "bezier")
 POSE_BYTES: Final[int] = 4 * 4
 """Message header: sender x, y (m), yaw (rad) and stamp (s) as float32 (the receiver sees the
 pose rounded to float32: 3·10⁻⁵ m at 500 m from the map origin)."""
+LAYOUT_BYTES: Final[int] = 3
+"""Layout of a multi-lane message: neighbour lane count, branch count, flags (history, road
+edges) as uint8."""
+NEIGHBOUR_BYTES: Final[int] = 2
+"""Per neighbour lane: its index (int8) and its at_start / at_end flags (one byte)."""
+ROAD_EDGES_BYTES: Final[int] = 4
+"""Road edges: four int8 lane indices (−128 = not seen)."""
 DEFAULT_MAX_INTERVAL_S: Final[float] = 1.0
 """Longest time (s) between two messages (ETSI's T_GenCpmMax)."""
 DEFAULT_CHANGE_TOLERANCE_M: Final[float] = 0.10
@@ -100,43 +109,94 @@ class MessageModel:
         return self.exchange != "none"
 
 
-def encode(detection: fusion.LaneDetection, model: MessageModel) -> tuple[bytes, ...]:
-    """The payloads of a detection's message: lane, then history when it has one."""
-    lanes = [(detection.left, detection.right)]
-    if detection.history is not None:
-        lanes.append((detection.history.left, detection.history.right))
+@dataclass(frozen=True, slots=True)
+class LaneMessage:
+    """The payloads of one lane message, each lane encoded on its own (:func:`encode`).
+
+    Fields:
+        lane: the sender's lane.
+        history: its lane history, or None.
+        neighbours: ``(index, at_start, at_end, lane)`` of each neighbour lane
+            (:class:`fusion.NeighbourLane`).
+        road_edges: the road edges (:class:`fusion.RoadEdges`), or None.
+        branches: each lane leaving the sender's at a fork (:class:`fusion.LaneBranch`).
+    """
+
+    lane: bytes
+    history: bytes | None = None
+    neighbours: tuple[tuple[int, bool, bool, bytes], ...] = ()
+    road_edges: fusion.RoadEdges | None = None
+    branches: tuple[bytes, ...] = ()
+
+    @property
+    def multi_lane(self) -> bool:
+        """Whether the message carries neighbour lanes, road edges or branches."""
+        return bool(self.neighbours or self.branches) or self.road_edges is not None
+
+    def payloads(self) -> tuple[bytes, ...]:
+        """Every encoded lane: lane, history, neighbours, branches."""
+        return (self.lane, *(() if self.history is None else (self.history,)),
+                *(payload for *_, payload in self.neighbours), *self.branches)
+
+
+def _encode_lane(left: fusion.NDArrayFloat, right: fusion.NDArrayFloat, model: MessageModel) -> bytes:
     if model.exchange == "bezier":
-        return tuple(fusion.bezier.encode(l, r, tolerance_m=model.bezier_tolerance_m) for l, r in lanes)
-    return tuple(np.concatenate((l, r)).astype("<f4").tobytes() + np.uint32(l.shape[0]).tobytes() for l, r in lanes)
+        return fusion.bezier.encode(left, right, tolerance_m=model.bezier_tolerance_m)
+    return np.concatenate((left, right)).astype("<f4").tobytes() + np.uint32(left.shape[0]).tobytes()
 
 
-def decode(payloads: tuple[bytes, ...], pose: fusion.Pose2D, stamp: float, sender: str,
+def _decode_lane(payload: bytes, model: MessageModel) -> tuple[fusion.NDArrayFloat, fusion.NDArrayFloat]:
+    if model.exchange == "bezier":
+        return fusion.bezier.decode(payload, spacing_m=DECODE_SPACING_M)
+    if len(payload) < 4 or (len(payload) - 4) % 8:
+        raise fusion.BezierDecodeError(f"sampled lane payload of {len(payload)} bytes is malformed")
+    points = np.frombuffer(payload[:-4], dtype="<f4").astype(np.float64).reshape(-1, 2)
+    n_left = int(np.frombuffer(payload[-4:], dtype="<u4")[0])
+    if not 0 < n_left < points.shape[0]:
+        raise fusion.BezierDecodeError(f"sampled lane payload announces {n_left} of {points.shape[0]} points")
+    return points[:n_left], points[n_left:]
+
+
+def encode(detection: fusion.LaneDetection, model: MessageModel) -> LaneMessage:
+    """The message of a detection: its lane, history, neighbour lanes and branches encoded
+    each on its own, the road edges as they are."""
+    history = detection.history
+    return LaneMessage(
+        _encode_lane(detection.left, detection.right, model),
+        None if history is None else _encode_lane(history.left, history.right, model),
+        tuple((int(lane.index), bool(lane.at_start), bool(lane.at_end), _encode_lane(lane.left, lane.right, model))
+              for lane in detection.neighbours),
+        detection.road_edges,
+        tuple(_encode_lane(branch.left, branch.right, model) for branch in detection.branches))
+
+
+def decode(message: LaneMessage, pose: fusion.Pose2D, stamp: float, sender: str,
            model: MessageModel) -> fusion.LaneDetection:
-    """The detection the receiver rebuilds from :func:`encode`'s payloads (raises
+    """The detection the receiver rebuilds from :func:`encode`'s message (raises
     :class:`fusion.BezierDecodeError` or :class:`fusion.InvalidDetectionError` on a bad one)."""
-    lanes = []
-    for payload in payloads:
-        if model.exchange == "bezier":
-            lanes.append(fusion.bezier.decode(payload, spacing_m=DECODE_SPACING_M))
-            continue
-        if len(payload) < 4 or (len(payload) - 4) % 8:
-            raise fusion.BezierDecodeError(f"sampled lane payload of {len(payload)} bytes is malformed")
-        points = np.frombuffer(payload[:-4], dtype="<f4").astype(np.float64).reshape(-1, 2)
-        n_left = int(np.frombuffer(payload[-4:], dtype="<u4")[0])
-        if not 0 < n_left < points.shape[0]:
-            raise fusion.BezierDecodeError(f"sampled lane payload announces {n_left} of {points.shape[0]} points")
-        lanes.append((points[:n_left], points[n_left:]))
-    history = fusion.LaneHistory(*lanes[1]) if len(lanes) > 1 else None
+    left, right = _decode_lane(message.lane, model)
+    history = None if message.history is None else fusion.LaneHistory(*_decode_lane(message.history, model))
+    neighbours = tuple(fusion.NeighbourLane(index, *_decode_lane(payload, model), at_start, at_end)
+                       for index, at_start, at_end, payload in message.neighbours)
+    branches = tuple(fusion.LaneBranch(*_decode_lane(payload, model)) for payload in message.branches)
     x, y, yaw = np.array([pose.x, pose.y, pose.yaw], dtype=np.float32).tolist()
-    return fusion.LaneDetection(fusion.Pose2D(x, y, yaw), lanes[0][0], lanes[0][1], stamp=stamp, sender=sender,
-                                history=history)
+    return fusion.LaneDetection(fusion.Pose2D(x, y, yaw), left, right, stamp=stamp, sender=sender, history=history,
+                                neighbours=neighbours, road_edges=message.road_edges, branches=branches)
 
 
-def message_bytes(payloads: tuple[bytes, ...], model: MessageModel) -> int:
-    """Bytes on air of one message: header plus payloads (sampled: 12 bytes per point)."""
+def message_bytes(message: LaneMessage, model: MessageModel) -> int:
+    """Bytes on air of one message: header, encoded lanes (sampled: 12 bytes per point) and,
+    for a multi-lane message, its layout (:data:`LAYOUT_BYTES`, :data:`NEIGHBOUR_BYTES` per
+    neighbour lane, :data:`ROAD_EDGES_BYTES` with road edges)."""
+    payloads = message.payloads()
     if model.exchange == "bezier":
-        return POSE_BYTES + sum(len(p) for p in payloads)
-    return POSE_BYTES + sum((len(p) - 4) // 8 * SAMPLED_POINT_BYTES for p in payloads)
+        size = POSE_BYTES + sum(len(p) for p in payloads)
+    else:
+        size = POSE_BYTES + sum((len(p) - 4) // 8 * SAMPLED_POINT_BYTES for p in payloads)
+    if message.multi_lane:
+        size += (LAYOUT_BYTES + NEIGHBOUR_BYTES * len(message.neighbours)
+                 + (ROAD_EDGES_BYTES if message.road_edges is not None else 0))
+    return size
 
 
 @dataclass
@@ -147,7 +207,7 @@ class LaneChannel:
         model: the exchange set-up.
         sent_at: stamp (s) and world position (m) of the last message sent, or None.
         sent_lane: the last sent lane's world borders (for the change rule).
-        in_flight: (arrival stamp s, payloads, pose, stamp, sender) of messages on the way.
+        in_flight: (arrival stamp s, message, pose, stamp, sender) of messages on the way.
         received: the last detection received, or None.
         messages, bytes_sent: messages sent and their bytes on air so far.
         lost, decode_errors: messages lost on the channel and messages that did not decode.
@@ -156,7 +216,7 @@ class LaneChannel:
     model: MessageModel
     sent_at: tuple[float, complex] | None = None
     sent_lane: tuple[fusion.NDArrayFloat, fusion.NDArrayFloat] | None = None
-    in_flight: list[tuple[float, tuple[bytes, ...], fusion.Pose2D, float, str]] = field(default_factory=list)
+    in_flight: list[tuple[float, LaneMessage, fusion.Pose2D, float, str]] = field(default_factory=list)
     received: fusion.LaneDetection | None = None
     messages: int = 0
     bytes_sent: int = 0
@@ -188,8 +248,8 @@ class LaneChannel:
         has arrived by then; returns the bytes sent this step (0 when nothing was sent)."""
         sent = 0
         if detection is not None and self.due(detection, stamp):
-            payloads = encode(detection, self.model)
-            sent = message_bytes(payloads, self.model)
+            message = encode(detection, self.model)
+            sent = message_bytes(message, self.model)
             self.messages += 1
             self.bytes_sent += sent
             self.sent_at = (stamp, complex(detection.pose.x, detection.pose.y))
@@ -197,7 +257,7 @@ class LaneChannel:
             if self.model.loss_probability > 0 and rng.random() < self.model.loss_probability:
                 self.lost += 1
             else:
-                self.in_flight.append((stamp + self.model.latency_s, payloads, detection.pose, detection.stamp,
+                self.in_flight.append((stamp + self.model.latency_s, message, detection.pose, detection.stamp,
                                        detection.sender))
         self.deliver(stamp)
         return sent
@@ -207,9 +267,9 @@ class LaneChannel:
         decode is counted and dropped (the previous one stays the last received)."""
         arrived = [m for m in self.in_flight if m[0] <= stamp + 1e-9]
         self.in_flight = [m for m in self.in_flight if m[0] > stamp + 1e-9]
-        for _, payloads, pose, sent_stamp, sender in arrived:
+        for _, message, pose, sent_stamp, sender in arrived:
             try:
-                self.received = decode(payloads, pose, sent_stamp, sender, self.model)
+                self.received = decode(message, pose, sent_stamp, sender, self.model)
             except fusion.FusionError:
                 self.decode_errors += 1
 
