@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
+from gt_matching.polyline import arc_lengths
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch
@@ -33,15 +34,29 @@ points lie within this distance (m) of the GT: the paper (sec. IV) calls interpo
 distances whose maximum error exceeds 1 m not reliable."""
 
 
+RANGE_CHORD_M: Final[float] = 0.5
+"""Chord (m) along which ``covered_length_m`` measures a border: detection noise of σ on
+points 0.1 m apart lengthens a polyline by about σ²/step² (5 cm: +25 %), along 0.5 m
+chords by σ²/chord² (1 %); a chord shortens an arc of radius R by chord²/(24 R²) (R 6 m: 0.03 %)."""
+
+
 def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
                      threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> float:
-    """Perception range of a detected border: the arc length (m) along the border
-    (``(N, 2)``, world frame, driving order) of the segments whose two end points both
-    lie within ``threshold_m`` of the GT (``errors_m``, per point). Never negative; the
-    whole length of a border that is everywhere within the threshold."""
-    segments = np.hypot(*np.diff(border, axis=0).T)
-    within = errors_m <= threshold_m
-    return float(np.sum(segments[within[:-1] & within[1:]]))
+    """Perception range of a detected border (``(N, 2)``, world frame, driving order): the
+    length (m) of its runs of consecutive points within ``threshold_m`` of the GT
+    (``errors_m``, per point), each measured along chords of about ``RANGE_CHORD_M`` so
+    that detection noise does not lengthen it. Never negative; the whole length of a
+    border that is everywhere within the threshold."""
+    within = np.concatenate(([False], errors_m <= threshold_m, [False]))
+    edges = np.flatnonzero(np.diff(within.astype(np.int8)))
+    arc = arc_lengths(border)
+    total = 0.0
+    for first, end in zip(edges[::2], edges[1::2]):
+        stations = (arc[first:end] - arc[first]) // RANGE_CHORD_M
+        chord_ends = np.concatenate(([first], first + 1 + np.flatnonzero(np.diff(stations)), [end - 1]))
+        total += float(np.sum(np.hypot(*np.diff(border[np.unique(chord_ends)], axis=0).T)))
+    return total
+
 
 GT_END_TOLERANCE_M: Final[float] = 0.1
 """A detected point more than this (m) past an end of its GT border, along the border's
