@@ -84,7 +84,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
         reason, evidence = _convoy_reason(x_rel, starts, params), "cone"
     if reason:
         return kind, Association(reason, 0.0), ends, starts
-    return kind, associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params), ends, starts
+    return kind, associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits), ends, starts
 
 
 def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,

@@ -26,12 +26,15 @@ and no other shift explains the detections as well:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Callable, Final, Mapping
 
+import numpy as np
+
 from fusion.convoy import overlap_start
-from fusion.fusibility import Evidence, cone_excess, geometric_assessment, lane_ends, relative_pose
-from fusion.geometry import transform
+from fusion.fusibility import Evidence, LaneEnds, cone_excess, geometric_assessment, lane_ends, relative_pose, s_bend_shift
+from fusion.geometry import project_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
@@ -143,12 +146,45 @@ def _fit_cost(ego_lane: Lane, coop_lane: Lane, convoy: bool) -> float:
     return abs(turn) + excess / max(ends.width_m, 1e-9)
 
 
+def _foot(point: NDArrayFloat, border: NDArrayFloat) -> NDArrayFloat:
+    """The point of ``border`` nearest ``point`` (same frame, m)."""
+    arclength = stacked_arclength(border, border.shape[0])
+    s, _, k = project_point(point, border, arclength)
+    k = min(k, border.shape[0] - 2)
+    t = (s - arclength[k]) / max(arclength[k + 1] - arclength[k], 1e-12)
+    return border[k] + min(max(t, 0.0), 1.0) * (border[k + 1] - border[k])
+
+
+def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
+    """(distance [m] of the ego lane's end centre from the other lane's centre at that
+    cross-section, half the other lane's width there [m]) of an ego lane and a lane that
+    overlaps its end (the coop's in a convoy, a branch; ego frame): the feet of the end centre
+    on the two other borders span the cross-section."""
+    (el, er), (cl, cr) = own
+    end = 0.5 * (el[-1] + er[-1])
+    left, right = _foot(end, cl), _foot(end, cr)
+    return float(np.hypot(*(end - 0.5 * (left + right)))), 0.5 * float(np.hypot(*(left - right)))
+
+
+def _end_inside(ego_lane: Lane, other: Lane) -> bool:
+    """Whether the ego lane's end centre lies inside ``other`` (:func:`overlap_end_offset`)."""
+    offset, half_width = overlap_end_offset((ego_lane, other))
+    return offset <= half_width
+
+
 def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> str:
     """Why the coop lane continues a lane leaving the ego's inside its detection as well as
-    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or ""."""
-    main = _fit_cost(own[0], own[1], convoy)
-    for branch in ego.branches:
-        cost = _fit_cost((branch.left, branch.right), own[1], convoy)
+    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or "". A
+    branch that has not yet drifted away from the ego's detection end (the end lies inside
+    it, :func:`overlap_end_offset`) is a lane the detection lies on as well: the coop may
+    continue it or the ego's own lane, whichever is better."""
+    lanes = [(branch.left, branch.right) for branch in ego.branches]
+    inside = [lane for lane in lanes if _end_inside(own[0], lane)]
+    main = min(_fit_cost(lane, own[1], convoy) for lane in (own[0], *inside))
+    for lane in lanes:
+        if any(lane is other for other in inside):
+            continue
+        cost = _fit_cost(lane, own[1], convoy)
         if cost <= main + FORK_TIE:
             what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"
             return (f"coop lane continues the lane that leaves the ego's lane at a fork inside the ego detection "
@@ -171,11 +207,64 @@ def _better_neighbour(ego_lanes: Mapping[int, Lane], coop_lanes: Mapping[int, La
     return ""
 
 
+def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
+    """The larger lateral excess [m] of the two coop border starts outside the cone of the two
+    end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
+    on each border instead of the centre line)."""
+    (el, er), (cl, cr) = own
+    excess = 0.0
+    for ego_border, coop_border in ((el, cl), (er, cr)):
+        p_end, p_start = (float(ego_border[-1, 0]), float(ego_border[-1, 1])), (float(coop_border[0, 0]),
+                                                                                 float(coop_border[0, 1]))
+        chord = math.hypot(p_start[0] - p_end[0], p_start[1] - p_end[1])
+        excess = max(excess, cone_excess(replace(ends, p_end=p_end, p_start=p_start, gap_m=chord))[1])
+    return excess
+
+
+def geometry_reason(own: tuple[Lane, Lane], convoy: bool, fits: EndFits | None = None) -> str:
+    """Why the coop's lane is not the ego's by the two tightened geometric rules, or "":
+
+    - convoy: the ego's detection end must lie inside the coop's lane (no farther from its
+      centre than half its width), the counterpart at the overlap's end of the offset limit
+      at its start: two lanes that part at a fork inside the overlap (the coop already on
+      the other branch) have drifted apart there. The same half width draws the line between
+      a fork the ego's detection has passed and one it still lies on in the true relation
+      (:func:`cold_maps.simulation.drive.lane_relation`);
+    - gap: not only the centre but each border of the coop's lane must start within half the
+      ego lane width (+ the S-bend shift when the ends curve opposite ways,
+      :func:`fusion.fusibility.s_bend_shift` of ``fits``) of the cone of the two end headings
+      drawn from the matching ego border. A lane border is a marking that does not jump
+      sideways; a lane that opens beside the ego's lane (its outer border a lane width off)
+      fails while its centre may still pass, the same lane changing its width by up to a
+      lane width does not.
+    """
+    (el, er), (cl, cr) = own
+    if convoy:
+        offset, half_width = overlap_end_offset(own)
+        if offset > half_width:
+            return (f"the ego's detection ends {offset:.2f} m from the centre of the coop's lane (outside its half "
+                    f"width {half_width:.2f} m): the lanes part inside the overlap, another lane")
+        return ""
+    ends = lane_ends(el, er, cl, cr)
+    excess, limit = border_excess(own, ends), 0.5 * ends.width_m
+    if excess > limit and fits is not None:
+        limit += s_bend_shift(ends.gap_m, fits())
+    if excess > limit:
+        return (f"a coop lane border starts {excess:.2f} m laterally outside the turn between the two end headings "
+                f"(more than {limit:.2f} m: half the lane width {ends.width_m:.2f} m and the S-bend shift): "
+                "another lane")
+    return ""
+
+
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
-              params: FusionParams) -> Association:
+              params: FusionParams, fits: EndFits | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame. See the module docstring."""
+    lane) borders in the ego frame; ``fits`` their end fits (the S-bend allowance of
+    :func:`geometry_reason`). See the module docstring."""
+    reason = geometry_reason(own, convoy, fits)
+    if reason:
+        return Association(reason, 0.0)
     multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
     if not multi:
         return Association("", GEOMETRY_CONFIDENCE[evidence])
