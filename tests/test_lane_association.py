@@ -434,3 +434,101 @@ def test_lane_opening_in_the_gap_takes_the_best_continuation(coop_in_new_lane: b
         assert result.confidence == 0.0 and "continues into the coop's lane -1 better" in result.reason
     else:
         assert (result.reason, result.confidence) == ("", CONFIDENCE_LANE_COUNT_CHANGE)
+
+
+# --- tightened geometric rules without neighbours (--lanes 0) ----------------------------------
+
+FORK_RADIUS_M = 25.0
+FORK_REACH_M = math.sqrt((FORK_RADIUS_M + W / 2) ** 2 - FORK_RADIUS_M**2)
+"""How far past a fork into a right turn of radius R a straight lane's centre still lies inside the
+turning lane: √(R² + d²) − R = W/2 at d = √((R + W/2)² − R²) ≈ 9.52 m."""
+
+
+@pytest.mark.parametrize("past_fork_m", [FORK_REACH_M - 1.0, FORK_REACH_M + 1.0])
+def test_convoy_overlap_must_end_inside_the_coop_lane(past_fork_m: float) -> None:
+    """Ego on a straight [0, 30 m], coop 25 m ahead on a branch that turned right (R 25 m) at
+    30 − d: its start is within 1 m and 30° of the ego's lane (the start rule passes either
+    way); the ego's end lies √(R² + d²) − R from the coop's centre, inside its lane (fused)
+    while d < 9.52 m, outside (another lane) beyond."""
+    from fusion.association import overlap_end_offset
+
+    main, branch = _fork(FORK_RADIUS_M, 30.0 - past_fork_m)
+    ego, coop = detect(main, 0.0, 30.0, W / 2, -W / 2), detect(branch, 25.0, 30.0, W / 2, -W / 2)
+    borders, _ = fusion.api.ego_frame_borders(ego, coop)
+    offset, half_width = overlap_end_offset(((borders[0], borders[1]), (borders[2], borders[3])))
+    assert offset == pytest.approx(math.hypot(FORK_RADIUS_M, past_fork_m) - FORK_RADIUS_M, abs=0.02)
+    assert half_width == pytest.approx(W / 2, abs=0.01)
+    result = fusion.fuse(ego, coop, params=PARAMS)
+    if past_fork_m < FORK_REACH_M:
+        assert result.kind == "convoy", result.reason
+    else:
+        assert result.kind == "none" and "outside its half width" in result.reason
+
+
+@pytest.mark.parametrize("width", [0.5, 1.5, 2.0, 3.0])
+def test_lane_opening_inside_the_ego_lane_line_needs_both_borders(width: float) -> None:
+    """A lane of ``width`` opening along the ego's left border line on a straight (borders at
+    W/2 and W/2 − width, 30 m ahead): its centre lies W/2 − width/2 < W/2 off, so the centre rule
+    passes; its right border lies W − width off, so it is another lane exactly when that exceeds
+    W/2 (width < W/2). The ego's own lane narrowing by 1 m on each side is fused."""
+    from fusion.association import border_excess
+
+    pose, ahead = fusion.Pose2D(0.0, 0.0, 0.0), fusion.Pose2D(60.0, 0.0, 0.0)
+    ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0))
+    coop = fusion.LaneDetection(ahead, *_straight_lane(0.0, W / 2 - width / 2, width))
+    left, right = (border + (ahead.x, 0.0) for border in (coop.left, coop.right))
+    ends = lane_ends(ego.left, ego.right, left, right)
+    assert geometric_check(pose, ahead, ends, PARAMS) == ""
+    assert border_excess(((ego.left, ego.right), (left, right)), ends) == pytest.approx(W - width, abs=1e-9)
+    result = fusion.fuse(ego, coop, params=PARAMS)
+    assert (result.kind == "spline") == (width > W / 2), result.reason
+    narrower = fusion.LaneDetection(ahead, *_straight_lane(0.0, 0.0, W - 2.0))
+    assert fusion.fuse(ego, narrower, params=PARAMS).kind == "spline"
+
+
+def test_fork_branch_the_ego_end_still_lies_in_is_its_lane() -> None:
+    """With the fork reported (``--lanes 1``): a branch the ego's detection end still lies
+    inside (fork d = 4 m before it, R 25 m: 0.32 m off) is a lane the detection lies on, so a
+    coop continuing it is fused; one it has left (d = 15 m: 4.15 m off) is the other branch."""
+    for past_fork_m, fused in ((4.0, True), (15.0, False)):
+        main, branch = _fork(FORK_RADIUS_M, 30.0 - past_fork_m)
+        ego = detect(main, 0.0, 30.0, W / 2, -W / 2)
+        seen = detect(branch, 30.0 - past_fork_m, past_fork_m, W / 2, -W / 2)
+        fork = fusion.LaneBranch(*(_to_frame(_world(b, seen.pose), ego.pose) for b in (seen.left, seen.right)))
+        ego = fusion.LaneDetection(ego.pose, ego.left, ego.right, branches=(fork,))
+        result = fusion.fuse(ego, detect(branch, 50.0, 30.0, W / 2, -W / 2), params=PARAMS)
+        assert (result.kind == "spline") == fused, result.reason
+        assert fusion.fuse(ego, detect(main, 50.0, 30.0, W / 2, -W / 2), params=PARAMS).kind == "spline"
+
+
+def test_report_errors_by_route() -> None:
+    """True fusions pooled by route: own [0.1, 0.3] and [0.2] (mean 0.2, max 0.3, p95 0.29),
+    branch [1, 2] (mean 1.5, p95 1.95); a false fusion and a true one without a scored lane
+    are in neither; the record round-trips and summary.md shows the table; a scenario whose
+    records carry no kind of pair has no ``by_route``."""
+    from cold_maps.evaluation.report import FrameRecord, ScenarioAccumulator, ScenarioKey, ScenarioResult
+    from cold_maps.evaluation.report import association_markdown
+
+    acc = ScenarioAccumulator(ScenarioKey("m", "spline", "hermite", 20.0, "left"))
+    for frame, (errors, truth, relation) in enumerate(((np.array([0.1, 0.3]), True, "own"), (np.array([0.2]), True, "own"),
+                                                       (np.array([1.0, 2.0]), True, "branch"),
+                                                       (np.array([5.0]), False, "adjacent"))):
+        acc.add(FrameRecord(frame, 0.0, "ego", "c", errors, predicted_fusible=True, truly_fusible=truth,
+                            relation=relation, confidence=0.8))
+    acc.add(FrameRecord(9, 0.0, "ego", "c", np.empty(0), rejected="gt_unmatched", predicted_fusible=True,
+                        truly_fusible=True, relation="own", confidence=0.8))
+    result = acc.result()
+    routes = dict(result.by_route)
+    assert (routes["own_route"].fused, routes["branch"].fused) == (2, 1)
+    assert (routes["own_route"].mean_error_m, routes["own_route"].max_error_m) == pytest.approx((0.2, 0.3))
+    assert routes["own_route"].p95_error_m == pytest.approx(0.29)
+    assert (routes["branch"].mean_error_m, routes["branch"].p95_error_m) == pytest.approx((1.5, 1.95))
+    record = result.to_dict()
+    assert record["by_route"]["branch"] == {"fused": 1, "mean_error_m": 1.5, "max_error_m": 2.0,
+                                            "p95_error_m": pytest.approx(1.95)}
+    assert ScenarioResult.from_dict(record).by_route == result.by_route
+    assert "| m | spline | hermite | 20.0 | left | 2 / 0.200 / 0.300 / 0.290 | 1 / 1.500 / 2.000 / 1.950 |" in (
+        association_markdown([result]))
+    local = ScenarioAccumulator(ScenarioKey("m", "local", "", 0.0, "left"))
+    local.add(FrameRecord(0, 0.0, "ego", "", np.array([0.1])))
+    assert local.result().by_route == () and "by_route" not in local.result().to_dict()
