@@ -33,7 +33,17 @@ from typing import Callable, Final, Mapping
 import numpy as np
 
 from fusion.convoy import overlap_start
-from fusion.fusibility import Evidence, LaneEnds, cone_excess, geometric_assessment, lane_ends, relative_pose, s_bend_shift
+from fusion.fusibility import (
+    ARC_TOLERANCE_LANES,
+    Evidence,
+    LaneEnds,
+    arc_mismatch,
+    cone_excess,
+    geometric_assessment,
+    lane_ends,
+    relative_pose,
+    s_bend_shift,
+)
 from fusion.geometry import project_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
@@ -41,10 +51,14 @@ from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arcl
 Lane = tuple[NDArrayFloat, NDArrayFloat]
 
 GEOMETRY_CONFIDENCE: Final[Mapping[Evidence, float]] = {"cone": 0.8, "arc": 0.7, "open": 0.4, "s_bend": 0.3}
-"""Confidence of a geometric decision by the rule that made it: the cone alone (a straight
-or one arc across the gap: the neighbour lane lies a lane width outside it) and an arc
-prediction tell lanes apart; an open radius (whole curve inside the gap) and an S-bend
+"""Confidence level of a geometric decision by the rule that made it: the cone alone (a
+straight or one arc across the gap: the neighbour lane lies a lane width outside it) and an
+arc prediction tell lanes apart; an open radius (whole curve inside the gap) and an S-bend
 shift do not."""
+CONFIDENCE_AT_LIMIT: Final[float] = 0.5
+"""Share of its confidence level a fused pair keeps when it uses a lateral limit of the
+geometric rules fully (:func:`geometry_check`); the confidence falls linearly from the level
+(no lateral deviation) to this share of it (on the limit)."""
 CONFIDENCE_EDGES_BOTH: Final[float] = 1.0
 """Lane index from the road edge agrees on both sides, no other shift plausible."""
 CONFIDENCE_EDGES_ONE: Final[float] = 0.95
@@ -221,8 +235,14 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
     return excess
 
 
-def geometry_reason(own: tuple[Lane, Lane], convoy: bool, fits: EndFits | None = None) -> str:
-    """Why the coop's lane is not the ego's by the two tightened geometric rules, or "":
+def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
+                   fits: EndFits | None = None) -> tuple[str, float]:
+    """``(reason, used)``: why the coop's lane is not the ego's by the two tightened geometric
+    rules ("" when it may be), and the largest share in [0, 1] of a lateral limit the pair
+    uses (its margin: convoy start offset / ``params.convoy_max_offset_m``, end offset / half
+    the coop lane width; across a gap the larger border excess / its limit and, with
+    ``evidence`` ``"arc"``, the arc prediction's mismatch / its limit; 1 when rejected).
+    The rules:
 
     - convoy: the ego's detection end must lie inside the coop's lane (no farther from its
       centre than half its width), the counterpart at the overlap's end of the offset limit
@@ -243,28 +263,45 @@ def geometry_reason(own: tuple[Lane, Lane], convoy: bool, fits: EndFits | None =
         offset, half_width = overlap_end_offset(own)
         if offset > half_width:
             return (f"the ego's detection ends {offset:.2f} m from the centre of the coop's lane (outside its half "
-                    f"width {half_width:.2f} m): the lanes part inside the overlap, another lane")
-        return ""
+                    f"width {half_width:.2f} m): the lanes part inside the overlap, another lane"), 1.0
+        start = _fit_cost(own[0], own[1], True)
+        return "", min(1.0, max(start / params.convoy_max_offset_m, offset / max(half_width, 1e-9)))
     ends = lane_ends(el, er, cl, cr)
     excess, limit = border_excess(own, ends), 0.5 * ends.width_m
-    if excess > limit and fits is not None:
+    if (excess > limit or evidence == "s_bend") and fits is not None:
         limit += s_bend_shift(ends.gap_m, fits())
     if excess > limit:
         return (f"a coop lane border starts {excess:.2f} m laterally outside the turn between the two end headings "
                 f"(more than {limit:.2f} m: half the lane width {ends.width_m:.2f} m and the S-bend shift): "
-                "another lane")
-    return ""
+                "another lane"), 1.0
+    used = excess / max(limit, 1e-9)
+    if evidence == "arc" and fits is not None:
+        used = max(used, arc_mismatch(ends, fits()) / (ARC_TOLERANCE_LANES * max(ends.width_m, 1e-9)))
+    return "", min(used, 1.0)
 
 
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
               params: FusionParams, fits: EndFits | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame; ``fits`` their end fits (the S-bend allowance of
-    :func:`geometry_reason`). See the module docstring."""
-    reason = geometry_reason(own, convoy, fits)
+    lane) borders in the ego frame; ``fits`` their end fits (the S-bend allowance and arc
+    margin of :func:`geometry_check`). The confidence of a fused pair is its level (the rule
+    or the road-edge evidence that decided) times 1 − (1 − :data:`CONFIDENCE_AT_LIMIT`)·used,
+    ``used`` the share of a lateral limit the pair uses: monotone in the margin. See the
+    module docstring."""
+    reason, used = geometry_check(own, convoy, evidence, params, fits)
     if reason:
         return Association(reason, 0.0)
+    graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
+    association = _associate_lanes(ego, coop, own, convoy, evidence, params)
+    if association.reason:
+        return association
+    return replace(association, confidence=association.confidence * graded)
+
+
+def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
+                     evidence: Evidence, params: FusionParams) -> Association:
+    """The association by lane evidence alone, confidence at its level (see :func:`associate`)."""
     multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
     if not multi:
         return Association("", GEOMETRY_CONFIDENCE[evidence])

@@ -26,7 +26,7 @@ from cold_maps.simulation.neighbours import NeighbourSensor, neighbour_key
 from cold_maps.simulation.sensor import LaneSensor
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 from fusion.analytic import AnalyticRoad, Segment, detect
-from fusion.association import CONFIDENCE_EDGES_BOTH, CONFIDENCE_EDGES_ONE, GEOMETRY_CONFIDENCE
+from fusion.association import CONFIDENCE_AT_LIMIT, CONFIDENCE_EDGES_BOTH, CONFIDENCE_EDGES_ONE, GEOMETRY_CONFIDENCE
 from fusion.fusibility import geometric_check, lane_ends
 from fusion.spline import lane_end_fits
 
@@ -111,7 +111,9 @@ def test_s_bend_weakness_and_road_edges() -> None:
     alone = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0)
     assert alone[0].kind == "spline" and alone[-1].kind == "spline"
     with_edges = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 1)
-    assert with_edges[0].kind == "spline" and with_edges[0].confidence == CONFIDENCE_EDGES_BOTH
+    assert with_edges[0].kind == "spline"
+    # the S-bend puts the coop start off the cone: some of the lateral margin is used
+    assert CONFIDENCE_EDGES_BOTH * CONFIDENCE_AT_LIMIT < with_edges[0].confidence < CONFIDENCE_EDGES_BOTH
     assert with_edges[-1].kind == "none" and "another lane" in with_edges[-1].reason
     # the neighbour lanes are fused as well: the ego's right neighbour with the coop's, from the ego's part on
     (index, left, right), = with_edges[0].lanes
@@ -532,3 +534,22 @@ def test_report_errors_by_route() -> None:
     local = ScenarioAccumulator(ScenarioKey("m", "local", "", 0.0, "left"))
     local.add(FrameRecord(0, 0.0, "ego", "", np.array([0.1])))
     assert local.result().by_route == () and "by_route" not in local.result().to_dict()
+
+
+@pytest.mark.parametrize("shift_m", [0.0, 0.3, 0.6, 1.2])
+def test_confidence_falls_with_the_used_lateral_margin(shift_m: float) -> None:
+    """Coop lanes shifted sideways by δ on a straight: in a convoy the start offset δ uses δ/1 m
+    of its limit (the end offset δ only δ/(W/2)), across a 30 m gap each border lies δ outside
+    the cone, δ/(W/2) of its limit; the confidence is the level 0.8 (cone) times
+    1 − (1 − 0.5)·used: 0.8, lower the larger δ, never below half the level while fused."""
+    pose = fusion.Pose2D(0.0, 0.0, 0.0)
+    ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0))
+    level = GEOMETRY_CONFIDENCE["cone"]
+    for ahead_m, used in ((25.0, min(shift_m / PARAMS.convoy_max_offset_m, 1.0)), (60.0, shift_m / (W / 2))):
+        coop = fusion.LaneDetection(fusion.Pose2D(ahead_m, 0.0, 0.0), *_straight_lane(0.0, shift_m))
+        result = fusion.fuse(ego, coop, params=PARAMS)
+        if used < 1.0:
+            assert result.kind != "none", result.reason
+            assert result.confidence == pytest.approx(level * (1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used), abs=1e-6)
+        else:
+            assert result.kind == "none"
