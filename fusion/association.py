@@ -1,9 +1,13 @@
 """Lane association: whether the coop's lane is the ego's, with a confidence and a reason.
 
-Everything in the ego vehicle frame (ISO 8855), m, rad. Without neighbour lanes the
-geometric check decides alone (:func:`fusion.fusibility.geometric_assessment` for a gap,
-the overlap offsets for a convoy) and the confidence says how much its rule can tell lanes
-apart. With a multi-lane sensor (:class:`fusion.NeighbourLane`, :class:`fusion.RoadEdges`,
+Everything in the ego vehicle frame (ISO 8855), m, rad. Every pair first meets two
+tightened geometric rules (:func:`geometry_check`: each coop border, not only the centre,
+within the cone's half-lane-width limit across a gap; the ego's end inside the coop's lane
+in a convoy). Without neighbour lanes the geometric check then decides alone
+(:func:`fusion.fusibility.geometric_assessment` for a gap, the overlap offsets for a convoy)
+and the confidence level says how much its rule can tell lanes apart; every confidence is
+graded by the lateral margin the pair leaves (:data:`CONFIDENCE_AT_LIMIT`). With a
+multi-lane sensor (:class:`fusion.NeighbourLane`, :class:`fusion.RoadEdges`,
 :class:`fusion.LaneBranch`) the lanes are matched as a whole: under a lateral *shift* δ the
 coop's lane i continues the ego's lane i + δ. The coop is the ego's lane when δ = 0 passes
 and no other shift explains the detections as well:
