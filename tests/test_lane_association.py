@@ -553,3 +553,23 @@ def test_confidence_falls_with_the_used_lateral_margin(shift_m: float) -> None:
             assert result.confidence == pytest.approx(level * (1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used), abs=1e-6)
         else:
             assert result.kind == "none"
+
+
+@pytest.mark.parametrize("lateral_m, inside", [(0.0, True), (1.6, True), (-1.6, True), (1.9, False), (-1.9, False)])
+def test_offset_inside_a_curved_lane(lateral_m: float, inside: bool) -> None:
+    """Lane -1 (3.5 m) right of a reference arc of radius 50 m turning left: its centre runs
+    on radius 51.75 m about (0, 50). A point ``lateral_m`` off that centre line at angle θ
+    lies inside the lane exactly when |lateral| ≤ 1.75 m, at θ·51.75 m along it."""
+    from graph_maps import lane as make_lane
+    from graph_maps import odr_map, road, section
+
+    from cold_maps.network.lane_area import offset_inside
+
+    graph = build_lane_graph(odr_map([road("1", 60.0, [section(0.0, 60.0, right=[make_lane(-1)])],
+                                           curvature=1 / 50.0)]))
+    theta, radius = 0.6, 51.75 + lateral_m
+    point = (radius * math.sin(theta), 50.0 - radius * math.cos(theta))
+    offset = offset_inside(graph, LaneKey("1", 0, -1), point)
+    assert (offset is not None) == inside
+    if inside:
+        assert offset == pytest.approx(theta * 51.75, abs=0.02)
