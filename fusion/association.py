@@ -48,7 +48,7 @@ from fusion.fusibility import (
     relative_pose,
     s_bend_shift,
 )
-from fusion.geometry import project_point, transform
+from fusion.geometry import foot_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
@@ -164,15 +164,6 @@ def _fit_cost(ego_lane: Lane, coop_lane: Lane, convoy: bool) -> float:
     return abs(turn) + excess / max(ends.width_m, 1e-9)
 
 
-def _foot(point: NDArrayFloat, border: NDArrayFloat) -> NDArrayFloat:
-    """The point of ``border`` nearest ``point`` (same frame, m)."""
-    arclength = stacked_arclength(border, border.shape[0])
-    s, _, k = project_point(point, border, arclength)
-    k = min(k, border.shape[0] - 2)
-    t = (s - arclength[k]) / max(arclength[k + 1] - arclength[k], 1e-12)
-    return border[k] + min(max(t, 0.0), 1.0) * (border[k + 1] - border[k])
-
-
 def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
     """(distance [m] of the ego lane's end centre from the other lane's centre at that
     cross-section, half the other lane's width there [m]) of an ego lane and a lane that
@@ -180,7 +171,7 @@ def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
     on the two other borders span the cross-section."""
     (el, er), (cl, cr) = own
     end = 0.5 * (el[-1] + er[-1])
-    left, right = _foot(end, cl), _foot(end, cr)
+    left, right = foot_point(end, cl), foot_point(end, cr)
     return float(np.hypot(*(end - 0.5 * (left + right)))), 0.5 * float(np.hypot(*(left - right)))
 
 
@@ -240,13 +231,15 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
 
 
 def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
-                   fits: EndFits | None = None) -> tuple[str, float]:
+                   fits: EndFits | None = None, start_offset_m: float | None = None,
+                   ends: LaneEnds | None = None) -> tuple[str, float]:
     """``(reason, used)``: why the coop's lane is not the ego's by the two tightened geometric
     rules ("" when it may be), and the largest share in [0, 1] of a lateral limit the pair
     uses (its margin: convoy start offset / ``params.convoy_max_offset_m``, end offset / half
     the coop lane width; across a gap the larger border excess / its limit and, with
-    ``evidence`` ``"arc"``, the arc prediction's mismatch / its limit; 1 when rejected).
-    The rules:
+    ``evidence`` ``"arc"``, the arc prediction's mismatch / its limit; 1 when rejected;
+    ``start_offset_m``, ``ends``: the convoy start offset [m] and the lane ends of ``own``
+    when known). The rules:
 
     - convoy: the ego's detection end must lie inside the coop's lane (no farther from its
       centre than half its width), the counterpart at the overlap's end of the offset limit
@@ -268,9 +261,9 @@ def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, par
         if offset > half_width:
             return (f"the ego's detection ends {offset:.2f} m from the centre of the coop's lane (outside its half "
                     f"width {half_width:.2f} m): the lanes part inside the overlap, another lane"), 1.0
-        start = _fit_cost(own[0], own[1], True)
+        start = _fit_cost(own[0], own[1], True) if start_offset_m is None else start_offset_m
         return "", min(1.0, max(start / params.convoy_max_offset_m, offset / max(half_width, 1e-9)))
-    ends = lane_ends(el, er, cl, cr)
+    ends = lane_ends(el, er, cl, cr) if ends is None else ends
     excess, limit = border_excess(own, ends), 0.5 * ends.width_m
     if (excess > limit or evidence == "s_bend") and fits is not None:
         limit += s_bend_shift(ends.gap_m, fits())
@@ -285,15 +278,16 @@ def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, par
 
 
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
-              params: FusionParams, fits: EndFits | None = None) -> Association:
+              params: FusionParams, fits: EndFits | None = None, start_offset_m: float | None = None,
+              ends: LaneEnds | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame; ``fits`` their end fits (the S-bend allowance and arc
-    margin of :func:`geometry_check`). The confidence of a fused pair is its level (the rule
+    lane) borders in the ego frame; ``fits`` their end fits, ``start_offset_m`` a convoy's
+    start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
     or the road-edge evidence that decided) times 1 − (1 − :data:`CONFIDENCE_AT_LIMIT`)·used,
     ``used`` the share of a lateral limit the pair uses: monotone in the margin. See the
     module docstring."""
-    reason, used = geometry_check(own, convoy, evidence, params, fits)
+    reason, used = geometry_check(own, convoy, evidence, params, fits, start_offset_m, ends)
     if reason:
         return Association(reason, 0.0)
     graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
