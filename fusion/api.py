@@ -84,7 +84,10 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
         reason, evidence = _convoy_reason(x_rel, starts, params), "cone"
     if reason:
         return kind, Association(reason, 0.0), ends, starts
-    return kind, associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params), ends, starts
+    start_offset_m = None if starts is None else max(start.offset_m for start in starts)
+    association = associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits, start_offset_m,
+                            ends)
+    return kind, association, ends, starts
 
 
 def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,

@@ -1,9 +1,13 @@
 """Lane association: whether the coop's lane is the ego's, with a confidence and a reason.
 
-Everything in the ego vehicle frame (ISO 8855), m, rad. Without neighbour lanes the
-geometric check decides alone (:func:`fusion.fusibility.geometric_assessment` for a gap,
-the overlap offsets for a convoy) and the confidence says how much its rule can tell lanes
-apart. With a multi-lane sensor (:class:`fusion.NeighbourLane`, :class:`fusion.RoadEdges`,
+Everything in the ego vehicle frame (ISO 8855), m, rad. Every pair first meets two
+tightened geometric rules (:func:`geometry_check`: each coop border, not only the centre,
+within the cone's half-lane-width limit across a gap; the ego's end inside the coop's lane
+in a convoy). Without neighbour lanes the geometric check then decides alone
+(:func:`fusion.fusibility.geometric_assessment` for a gap, the overlap offsets for a convoy)
+and the confidence level says how much its rule can tell lanes apart; every confidence is
+graded by the lateral margin the pair leaves (:data:`CONFIDENCE_AT_LIMIT`). With a
+multi-lane sensor (:class:`fusion.NeighbourLane`, :class:`fusion.RoadEdges`,
 :class:`fusion.LaneBranch`) the lanes are matched as a whole: under a lateral *shift* δ the
 coop's lane i continues the ego's lane i + δ. The coop is the ego's lane when δ = 0 passes
 and no other shift explains the detections as well:
@@ -26,22 +30,39 @@ and no other shift explains the detections as well:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Callable, Final, Mapping
 
+import numpy as np
+
 from fusion.convoy import overlap_start
-from fusion.fusibility import Evidence, cone_excess, geometric_assessment, lane_ends, relative_pose
-from fusion.geometry import transform
+from fusion.fusibility import (
+    ARC_TOLERANCE_LANES,
+    Evidence,
+    LaneEnds,
+    arc_mismatch,
+    cone_excess,
+    geometric_assessment,
+    lane_ends,
+    relative_pose,
+    s_bend_shift,
+)
+from fusion.geometry import foot_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
 
 GEOMETRY_CONFIDENCE: Final[Mapping[Evidence, float]] = {"cone": 0.8, "arc": 0.7, "open": 0.4, "s_bend": 0.3}
-"""Confidence of a geometric decision by the rule that made it: the cone alone (a straight
-or one arc across the gap: the neighbour lane lies a lane width outside it) and an arc
-prediction tell lanes apart; an open radius (whole curve inside the gap) and an S-bend
+"""Confidence level of a geometric decision by the rule that made it: the cone alone (a
+straight or one arc across the gap: the neighbour lane lies a lane width outside it) and an
+arc prediction tell lanes apart; an open radius (whole curve inside the gap) and an S-bend
 shift do not."""
+CONFIDENCE_AT_LIMIT: Final[float] = 0.5
+"""Share of its confidence level a fused pair keeps when it uses a lateral limit of the
+geometric rules fully (:func:`geometry_check`); the confidence falls linearly from the level
+(no lateral deviation) to this share of it (on the limit)."""
 CONFIDENCE_EDGES_BOTH: Final[float] = 1.0
 """Lane index from the road edge agrees on both sides, no other shift plausible."""
 CONFIDENCE_EDGES_ONE: Final[float] = 0.95
@@ -143,12 +164,36 @@ def _fit_cost(ego_lane: Lane, coop_lane: Lane, convoy: bool) -> float:
     return abs(turn) + excess / max(ends.width_m, 1e-9)
 
 
+def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
+    """(distance [m] of the ego lane's end centre from the other lane's centre at that
+    cross-section, half the other lane's width there [m]) of an ego lane and a lane that
+    overlaps its end (the coop's in a convoy, a branch; ego frame): the feet of the end centre
+    on the two other borders span the cross-section."""
+    (el, er), (cl, cr) = own
+    end = 0.5 * (el[-1] + er[-1])
+    left, right = foot_point(end, cl), foot_point(end, cr)
+    return float(np.hypot(*(end - 0.5 * (left + right)))), 0.5 * float(np.hypot(*(left - right)))
+
+
+def _end_inside(ego_lane: Lane, other: Lane) -> bool:
+    """Whether the ego lane's end centre lies inside ``other`` (:func:`overlap_end_offset`)."""
+    offset, half_width = overlap_end_offset((ego_lane, other))
+    return offset <= half_width
+
+
 def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> str:
     """Why the coop lane continues a lane leaving the ego's inside its detection as well as
-    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or ""."""
-    main = _fit_cost(own[0], own[1], convoy)
-    for branch in ego.branches:
-        cost = _fit_cost((branch.left, branch.right), own[1], convoy)
+    or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or "". A
+    branch that has not yet drifted away from the ego's detection end (the end lies inside
+    it, :func:`overlap_end_offset`) is a lane the detection lies on as well: the coop may
+    continue it or the ego's own lane, whichever is better."""
+    lanes = [(branch.left, branch.right) for branch in ego.branches]
+    inside = [lane for lane in lanes if _end_inside(own[0], lane)]
+    main = min(_fit_cost(lane, own[1], convoy) for lane in (own[0], *inside))
+    for lane in lanes:
+        if any(lane is other for other in inside):
+            continue
+        cost = _fit_cost(lane, own[1], convoy)
         if cost <= main + FORK_TIE:
             what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"
             return (f"coop lane continues the lane that leaves the ego's lane at a fork inside the ego detection "
@@ -171,11 +216,90 @@ def _better_neighbour(ego_lanes: Mapping[int, Lane], coop_lanes: Mapping[int, La
     return ""
 
 
+def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
+    """The larger lateral excess [m] of the two coop border starts outside the cone of the two
+    end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
+    on each border instead of the centre line)."""
+    (el, er), (cl, cr) = own
+    excess = 0.0
+    for ego_border, coop_border in ((el, cl), (er, cr)):
+        p_end, p_start = (float(ego_border[-1, 0]), float(ego_border[-1, 1])), (float(coop_border[0, 0]),
+                                                                                 float(coop_border[0, 1]))
+        chord = math.hypot(p_start[0] - p_end[0], p_start[1] - p_end[1])
+        excess = max(excess, cone_excess(replace(ends, p_end=p_end, p_start=p_start, gap_m=chord))[1])
+    return excess
+
+
+def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
+                   fits: EndFits | None = None, start_offset_m: float | None = None,
+                   ends: LaneEnds | None = None) -> tuple[str, float]:
+    """``(reason, used)``: why the coop's lane is not the ego's by the two tightened geometric
+    rules ("" when it may be), and the largest share in [0, 1] of a lateral limit the pair
+    uses (its margin: convoy start offset / ``params.convoy_max_offset_m``, end offset / half
+    the coop lane width; across a gap the larger border excess / its limit and, with
+    ``evidence`` ``"arc"``, the arc prediction's mismatch / its limit; 1 when rejected;
+    ``start_offset_m``, ``ends``: the convoy start offset [m] and the lane ends of ``own``
+    when known). The rules:
+
+    - convoy: the ego's detection end must lie inside the coop's lane (no farther from its
+      centre than half its width), the counterpart at the overlap's end of the offset limit
+      at its start: two lanes that part at a fork inside the overlap (the coop already on
+      the other branch) have drifted apart there. The same half width draws the line between
+      a fork the ego's detection has passed and one it still lies on in the true relation
+      (:func:`cold_maps.simulation.drive.lane_relation`);
+    - gap: not only the centre but each border of the coop's lane must start within half the
+      ego lane width (+ the S-bend shift when the ends curve opposite ways,
+      :func:`fusion.fusibility.s_bend_shift` of ``fits``) of the cone of the two end headings
+      drawn from the matching ego border. A lane border is a marking that does not jump
+      sideways; a lane that opens beside the ego's lane (its outer border a lane width off)
+      fails while its centre may still pass, the same lane changing its width by up to a
+      lane width does not.
+    """
+    (el, er), (cl, cr) = own
+    if convoy:
+        offset, half_width = overlap_end_offset(own)
+        if offset > half_width:
+            return (f"the ego's detection ends {offset:.2f} m from the centre of the coop's lane (outside its half "
+                    f"width {half_width:.2f} m): the lanes part inside the overlap, another lane"), 1.0
+        start = _fit_cost(own[0], own[1], True) if start_offset_m is None else start_offset_m
+        return "", min(1.0, max(start / params.convoy_max_offset_m, offset / max(half_width, 1e-9)))
+    ends = lane_ends(el, er, cl, cr) if ends is None else ends
+    excess, limit = border_excess(own, ends), 0.5 * ends.width_m
+    if (excess > limit or evidence == "s_bend") and fits is not None:
+        limit += s_bend_shift(ends.gap_m, fits())
+    if excess > limit:
+        return (f"a coop lane border starts {excess:.2f} m laterally outside the turn between the two end headings "
+                f"(more than {limit:.2f} m: half the lane width {ends.width_m:.2f} m and the S-bend shift): "
+                "another lane"), 1.0
+    used = excess / max(limit, 1e-9)
+    if evidence == "arc" and fits is not None:
+        used = max(used, arc_mismatch(ends, fits()) / (ARC_TOLERANCE_LANES * max(ends.width_m, 1e-9)))
+    return "", min(used, 1.0)
+
+
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
-              params: FusionParams) -> Association:
+              params: FusionParams, fits: EndFits | None = None, start_offset_m: float | None = None,
+              ends: LaneEnds | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame. See the module docstring."""
+    lane) borders in the ego frame; ``fits`` their end fits, ``start_offset_m`` a convoy's
+    start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
+    or the road-edge evidence that decided) times 1 − (1 − :data:`CONFIDENCE_AT_LIMIT`)·used,
+    ``used`` the share of a lateral limit the pair uses: monotone in the margin. See the
+    module docstring."""
+    reason, used = geometry_check(own, convoy, evidence, params, fits, start_offset_m, ends)
+    if reason:
+        return Association(reason, 0.0)
+    graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
+    association = _associate_lanes(ego, coop, own, convoy, evidence, params)
+    if association.reason:
+        return association
+    return replace(association, confidence=association.confidence * graded)
+
+
+def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
+                     evidence: Evidence, params: FusionParams) -> Association:
+    """The association by lane evidence alone, confidence at its level (see :func:`associate`)."""
     multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
     if not multi:
         return Association("", GEOMETRY_CONFIDENCE[evidence])

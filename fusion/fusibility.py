@@ -22,7 +22,8 @@ _MIN_ARC_CURVATURE: Final[float] = 1.0 / 1000.0
 _ARC_LENGTH_SLACK: Final[float] = 1.2
 _CURVATURE_SLACK: Final[float] = 0.02
 _CURVED_SIGMAS: Final[float] = 4.0
-_ARC_TOLERANCE_LANES: Final[float] = 0.5
+ARC_TOLERANCE_LANES: Final[float] = 0.5
+"""Largest mismatch of an arc prediction (rule 4 of :func:`geometric_assessment`), in lane widths."""
 _CONE_DECIDES_LANES: Final[float] = 0.4
 _TANGENT_SLACK_M: Final[float] = 2.0
 """How far [m] an end's arc may meet the other end's heading beyond that end (the arc
@@ -177,9 +178,9 @@ def geometric_assessment(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: Fusi
         if predictions:
             evidence = "arc"
             mismatch = min(predictions)
-            if mismatch > _ARC_TOLERANCE_LANES * ends.width_m:
+            if mismatch > ARC_TOLERANCE_LANES * ends.width_m:
                 return (f"a detection end lies on an arc that puts the coop start {mismatch:.2f} m off "
-                        f"(more than {_ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m, or the "
+                        f"(more than {ARC_TOLERANCE_LANES:.2f} of the lane width {ends.width_m:.2f} m, or the "
                         "arc meets the other end's heading beyond that end): another lane", "arc")
     return "", evidence
 

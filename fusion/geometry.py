@@ -57,16 +57,14 @@ def cumulative_length(points: NDArrayFloat) -> NDArrayFloat:
     return out
 
 
-def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArrayFloat) -> tuple[float, float, int]:
-    """Closest point of ``polyline`` to ``point`` (near its nearest vertex).
-
-    Returns ``(s, distance, segment)``: arc length of the foot point [m], its distance [m] and
-    the index of the segment holding it. Only the two segments at the nearest vertex are
-    examined, which is exact for polylines sampled finer than their curvature radius.
-    """
+def _nearest_segment(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float, int, float]:
+    """``(distance, segment, t)`` of the closest point of ``polyline`` to ``point``: its
+    distance [m], the index of the segment holding it and its fraction along that segment.
+    Only the two segments at the nearest vertex are examined (exact for polylines sampled
+    finer than their curvature radius)."""
     k = int(norms(polyline - point).argmin())
     px, py = float(point[0]), float(point[1])
-    best = (math.inf, 0.0, 0)
+    best = (math.inf, 0, 0.0)
     for i in (k - 1, k):
         if i < 0 or i + 1 >= polyline.shape[0]:
             continue
@@ -76,8 +74,26 @@ def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArra
         t = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / seg2)) if seg2 > 0.0 else 0.0
         dist = math.hypot(ax + t * dx - px, ay + t * dy - py)
         if dist < best[0]:
-            best = (dist, float(arclength[i] + t * (arclength[i + 1] - arclength[i])), i)
-    return best[1], best[0], best[2]
+            best = (dist, i, t)
+    return best
+
+
+def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArrayFloat) -> tuple[float, float, int]:
+    """Closest point of ``polyline`` to ``point`` (near its nearest vertex, see
+    :func:`_nearest_segment`).
+
+    Returns ``(s, distance, segment)``: arc length of the foot point [m], its distance [m] and
+    the index of the segment holding it.
+    """
+    dist, i, t = _nearest_segment(point, polyline)
+    return float(arclength[i] + t * (arclength[i + 1] - arclength[i])), dist, i
+
+
+def foot_point(point: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
+    """The closest point of ``polyline`` to ``point`` (near its nearest vertex, see
+    :func:`_nearest_segment`), same frame [m]."""
+    _, i, t = _nearest_segment(point, polyline)
+    return polyline[i] + t * (polyline[i + 1] - polyline[i])
 
 
 def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:

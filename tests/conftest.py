@@ -39,6 +39,20 @@ def bundled_map(name: str) -> Path:
     return path
 
 
+def junction_fork_reach_m(graph, lane) -> float:
+    """How far (m) past the fork of the bundled junction a detection going straight on still
+    ends inside the turning lane ``lane`` (a connecting road ``*_left_*`` or ``*_right_*``):
+    the turn's reference arc of radius R0 = ``JUNCTION_HALF_SIZE_M`` carries one lane of width
+    w on its right, centre radius R = R0 + w/2 turning left, R0 − w/2 turning right; a point d
+    along the straight lies √(R² + d²) − R off that arc, half a lane width at
+    d = √((R + w/2)² − R²)."""
+    maps = load_tool("make_maps")
+    half = 0.5 * maps.LANE_WIDTH_M
+    name = graph.odr_map.roads[lane.road_id].name
+    radius = maps.JUNCTION_HALF_SIZE_M + (half if "_left_" in name else -half)
+    return ((radius + half) ** 2 - radius**2) ** 0.5
+
+
 @pytest.fixture(scope="session")
 def town01_path() -> Path:
     return carla_map("Town01")

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import bundled_map
+from conftest import bundled_map, junction_fork_reach_m
 from graph_maps import multi_section_map
 
 import fusion
@@ -26,7 +26,7 @@ from cold_maps.simulation.neighbours import NeighbourSensor, neighbour_key
 from cold_maps.simulation.sensor import LaneSensor
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 from fusion.analytic import AnalyticRoad, Segment, detect
-from fusion.association import CONFIDENCE_EDGES_BOTH, CONFIDENCE_EDGES_ONE, GEOMETRY_CONFIDENCE
+from fusion.association import CONFIDENCE_AT_LIMIT, CONFIDENCE_EDGES_BOTH, CONFIDENCE_EDGES_ONE, GEOMETRY_CONFIDENCE
 from fusion.fusibility import geometric_check, lane_ends
 from fusion.spline import lane_end_fits
 
@@ -111,7 +111,9 @@ def test_s_bend_weakness_and_road_edges() -> None:
     alone = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0)
     assert alone[0].kind == "spline" and alone[-1].kind == "spline"
     with_edges = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 1)
-    assert with_edges[0].kind == "spline" and with_edges[0].confidence == CONFIDENCE_EDGES_BOTH
+    assert with_edges[0].kind == "spline"
+    # the S-bend puts the coop start off the cone: some of the lateral margin is used
+    assert CONFIDENCE_EDGES_BOTH * CONFIDENCE_AT_LIMIT < with_edges[0].confidence < CONFIDENCE_EDGES_BOTH
     assert with_edges[-1].kind == "none" and "another lane" in with_edges[-1].reason
     # the neighbour lanes are fused as well: the ego's right neighbour with the coop's, from the ego's part on
     (index, left, right), = with_edges[0].lanes
@@ -254,11 +256,14 @@ def _junction_drive(junction):
 
 def test_relation_kinds_at_a_junction(junction) -> None:
     """The paper's rule at a fork: a turning coop is valid (``branch``) while the ego's
-    detection ends before the fork, ``other_branch`` once it has passed it; the coop on the
-    ego's route is ``own``; the vehicle behind is ``behind``."""
+    detection ends before the fork or, past it, still inside the turning lane (the straight
+    and the turn overlap until they are half a lane width apart: closed form
+    :func:`conftest.junction_fork_reach_m`), ``other_branch`` beyond; the coop on the ego's
+    route is ``own``; the vehicle behind is ``behind``."""
     drive = _junction_drive(junction)
     fork = float(drive.ego.lane_starts[1])
     kinds: dict[str, set[str]] = {}
+    past_fork_valid = 0
     for frame in range(drive.frames):
         states = drive.states(frame)
         ego = states["ego"]
@@ -270,9 +275,12 @@ def test_relation_kinds_at_a_junction(junction) -> None:
             assert kind in RELATION_KINDS
             kinds.setdefault(state.role, set()).add(kind)
             if state.role == "turn":
-                assert kind == ("other_branch" if ego.station + 30.0 >= fork else "branch")
+                past_m, reach_m = ego.station + 30.0 - fork, junction_fork_reach_m(junction, state.track.lanes[1])
+                if abs(past_m - reach_m) > 0.2:  # sampled borders
+                    assert kind == ("branch" if past_m < reach_m else "other_branch"), (past_m, reach_m)
+                past_fork_valid += 0 < past_m and kind == "branch"
     assert kinds["coop"] == {"own"} and kinds["behind"] == {"behind"}
-    assert kinds["turn"] == {"branch", "other_branch"}
+    assert kinds["turn"] == {"branch", "other_branch"} and past_fork_valid > 0
 
 
 def test_gap_length_must_match(junction) -> None:
@@ -408,15 +416,16 @@ def _straight_lane(x0: float, centre_y: float, width: float = W) -> tuple[np.nda
 
 @pytest.mark.parametrize("coop_in_new_lane", [True, False])
 def test_lane_opening_in_the_gap_takes_the_best_continuation(coop_in_new_lane: bool) -> None:
-    """A lane opens on the left inside the gap (its centre only 2 m left of the ego's lane at
-    the coop, so geometry alone passes both; both coops see one edge agree and one contradict):
+    """A lane opens on the left inside the gap (3.2 m wide at the coop, its centre only 1.4 m
+    left of the ego's lane and each border within half a lane width of the ego's, so geometry
+    alone passes both; both coops see one edge agree and one contradict):
     the coop whose own lane is the new one is rejected because the ego's lane continues into
     the coop's right neighbour better; the coop in the continued lane is fused (0.5)."""
     from fusion.association import CONFIDENCE_LANE_COUNT_CHANGE, associate
 
     pose = fusion.Pose2D(0.0, 0.0, 0.0)
     ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0), road_edges=fusion.RoadEdges(0, 0, 0, 0))
-    new, old = _straight_lane(50.0, 2.0, 2.0), _straight_lane(50.0, 0.0)
+    new, old = _straight_lane(50.0, 1.4, 3.2), _straight_lane(50.0, 0.0)
     if coop_in_new_lane:
         own, neighbour, edges = new, fusion.NeighbourLane(-1, *old), fusion.RoadEdges(0, -1, 0, -1)
     else:
@@ -427,3 +436,140 @@ def test_lane_opening_in_the_gap_takes_the_best_continuation(coop_in_new_lane: b
         assert result.confidence == 0.0 and "continues into the coop's lane -1 better" in result.reason
     else:
         assert (result.reason, result.confidence) == ("", CONFIDENCE_LANE_COUNT_CHANGE)
+
+
+# --- tightened geometric rules without neighbours (--lanes 0) ----------------------------------
+
+FORK_RADIUS_M = 25.0
+FORK_REACH_M = math.sqrt((FORK_RADIUS_M + W / 2) ** 2 - FORK_RADIUS_M**2)
+"""How far past a fork into a right turn of radius R a straight lane's centre still lies inside the
+turning lane: √(R² + d²) − R = W/2 at d = √((R + W/2)² − R²) ≈ 9.52 m."""
+
+
+@pytest.mark.parametrize("past_fork_m", [FORK_REACH_M - 1.0, FORK_REACH_M + 1.0])
+def test_convoy_overlap_must_end_inside_the_coop_lane(past_fork_m: float) -> None:
+    """Ego on a straight [0, 30 m], coop 25 m ahead on a branch that turned right (R 25 m) at
+    30 − d: its start is within 1 m and 30° of the ego's lane (the start rule passes either
+    way); the ego's end lies √(R² + d²) − R from the coop's centre, inside its lane (fused)
+    while d < 9.52 m, outside (another lane) beyond."""
+    from fusion.association import overlap_end_offset
+
+    main, branch = _fork(FORK_RADIUS_M, 30.0 - past_fork_m)
+    ego, coop = detect(main, 0.0, 30.0, W / 2, -W / 2), detect(branch, 25.0, 30.0, W / 2, -W / 2)
+    borders, _ = fusion.api.ego_frame_borders(ego, coop)
+    offset, half_width = overlap_end_offset(((borders[0], borders[1]), (borders[2], borders[3])))
+    assert offset == pytest.approx(math.hypot(FORK_RADIUS_M, past_fork_m) - FORK_RADIUS_M, abs=0.02)
+    assert half_width == pytest.approx(W / 2, abs=0.01)
+    result = fusion.fuse(ego, coop, params=PARAMS)
+    if past_fork_m < FORK_REACH_M:
+        assert result.kind == "convoy", result.reason
+    else:
+        assert result.kind == "none" and "outside its half width" in result.reason
+
+
+@pytest.mark.parametrize("width", [0.5, 1.5, 2.0, 3.0])
+def test_lane_opening_inside_the_ego_lane_line_needs_both_borders(width: float) -> None:
+    """A lane of ``width`` opening along the ego's left border line on a straight (borders at
+    W/2 and W/2 − width, 30 m ahead): its centre lies W/2 − width/2 < W/2 off, so the centre rule
+    passes; its right border lies W − width off, so it is another lane exactly when that exceeds
+    W/2 (width < W/2). The ego's own lane narrowing by 1 m on each side is fused."""
+    from fusion.association import border_excess
+
+    pose, ahead = fusion.Pose2D(0.0, 0.0, 0.0), fusion.Pose2D(60.0, 0.0, 0.0)
+    ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0))
+    coop = fusion.LaneDetection(ahead, *_straight_lane(0.0, W / 2 - width / 2, width))
+    left, right = (border + (ahead.x, 0.0) for border in (coop.left, coop.right))
+    ends = lane_ends(ego.left, ego.right, left, right)
+    assert geometric_check(pose, ahead, ends, PARAMS) == ""
+    assert border_excess(((ego.left, ego.right), (left, right)), ends) == pytest.approx(W - width, abs=1e-9)
+    result = fusion.fuse(ego, coop, params=PARAMS)
+    assert (result.kind == "spline") == (width > W / 2), result.reason
+    narrower = fusion.LaneDetection(ahead, *_straight_lane(0.0, 0.0, W - 2.0))
+    assert fusion.fuse(ego, narrower, params=PARAMS).kind == "spline"
+
+
+def test_fork_branch_the_ego_end_still_lies_in_is_its_lane() -> None:
+    """With the fork reported (``--lanes 1``): a branch the ego's detection end still lies
+    inside (fork d = 4 m before it, R 25 m: 0.32 m off) is a lane the detection lies on, so a
+    coop continuing it is fused; one it has left (d = 15 m: 4.15 m off) is the other branch."""
+    for past_fork_m, fused in ((4.0, True), (15.0, False)):
+        main, branch = _fork(FORK_RADIUS_M, 30.0 - past_fork_m)
+        ego = detect(main, 0.0, 30.0, W / 2, -W / 2)
+        seen = detect(branch, 30.0 - past_fork_m, past_fork_m, W / 2, -W / 2)
+        fork = fusion.LaneBranch(*(_to_frame(_world(b, seen.pose), ego.pose) for b in (seen.left, seen.right)))
+        ego = fusion.LaneDetection(ego.pose, ego.left, ego.right, branches=(fork,))
+        result = fusion.fuse(ego, detect(branch, 50.0, 30.0, W / 2, -W / 2), params=PARAMS)
+        assert (result.kind == "spline") == fused, result.reason
+        assert fusion.fuse(ego, detect(main, 50.0, 30.0, W / 2, -W / 2), params=PARAMS).kind == "spline"
+
+
+def test_report_errors_by_route() -> None:
+    """True fusions pooled by route: own [0.1, 0.3] and [0.2] (mean 0.2, max 0.3, p95 0.29),
+    branch [1, 2] (mean 1.5, p95 1.95); a false fusion and a true one without a scored lane
+    are in neither; the record round-trips and summary.md shows the table; a scenario whose
+    records carry no kind of pair has no ``by_route``."""
+    from cold_maps.evaluation.report import FrameRecord, ScenarioAccumulator, ScenarioKey, ScenarioResult
+    from cold_maps.evaluation.report import association_markdown
+
+    acc = ScenarioAccumulator(ScenarioKey("m", "spline", "hermite", 20.0, "left"))
+    for frame, (errors, truth, relation) in enumerate(((np.array([0.1, 0.3]), True, "own"), (np.array([0.2]), True, "own"),
+                                                       (np.array([1.0, 2.0]), True, "branch"),
+                                                       (np.array([5.0]), False, "adjacent"))):
+        acc.add(FrameRecord(frame, 0.0, "ego", "c", errors, predicted_fusible=True, truly_fusible=truth,
+                            relation=relation, confidence=0.8))
+    acc.add(FrameRecord(9, 0.0, "ego", "c", np.empty(0), rejected="gt_unmatched", predicted_fusible=True,
+                        truly_fusible=True, relation="own", confidence=0.8))
+    result = acc.result()
+    routes = dict(result.by_route)
+    assert (routes["own_route"].fused, routes["branch"].fused) == (2, 1)
+    assert (routes["own_route"].mean_error_m, routes["own_route"].max_error_m) == pytest.approx((0.2, 0.3))
+    assert routes["own_route"].p95_error_m == pytest.approx(0.29)
+    assert (routes["branch"].mean_error_m, routes["branch"].p95_error_m) == pytest.approx((1.5, 1.95))
+    record = result.to_dict()
+    assert record["by_route"]["branch"] == {"fused": 1, "mean_error_m": 1.5, "max_error_m": 2.0,
+                                            "p95_error_m": pytest.approx(1.95)}
+    assert ScenarioResult.from_dict(record).by_route == result.by_route
+    assert "| m | spline | hermite | 20.0 | left | 2 / 0.200 / 0.300 / 0.290 | 1 / 1.500 / 2.000 / 1.950 |" in (
+        association_markdown([result]))
+    local = ScenarioAccumulator(ScenarioKey("m", "local", "", 0.0, "left"))
+    local.add(FrameRecord(0, 0.0, "ego", "", np.array([0.1])))
+    assert local.result().by_route == () and "by_route" not in local.result().to_dict()
+
+
+@pytest.mark.parametrize("shift_m", [0.0, 0.3, 0.6, 1.2])
+def test_confidence_falls_with_the_used_lateral_margin(shift_m: float) -> None:
+    """Coop lanes shifted sideways by δ on a straight: in a convoy the start offset δ uses δ/1 m
+    of its limit (the end offset δ only δ/(W/2)), across a 30 m gap each border lies δ outside
+    the cone, δ/(W/2) of its limit; the confidence is the level 0.8 (cone) times
+    1 − (1 − 0.5)·used: 0.8, lower the larger δ, never below half the level while fused."""
+    pose = fusion.Pose2D(0.0, 0.0, 0.0)
+    ego = fusion.LaneDetection(pose, *_straight_lane(0.0, 0.0))
+    level = GEOMETRY_CONFIDENCE["cone"]
+    for ahead_m, used in ((25.0, min(shift_m / PARAMS.convoy_max_offset_m, 1.0)), (60.0, shift_m / (W / 2))):
+        coop = fusion.LaneDetection(fusion.Pose2D(ahead_m, 0.0, 0.0), *_straight_lane(0.0, shift_m))
+        result = fusion.fuse(ego, coop, params=PARAMS)
+        if used < 1.0:
+            assert result.kind != "none", result.reason
+            assert result.confidence == pytest.approx(level * (1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used), abs=1e-6)
+        else:
+            assert result.kind == "none"
+
+
+@pytest.mark.parametrize("lateral_m, inside", [(0.0, True), (1.6, True), (-1.6, True), (1.9, False), (-1.9, False)])
+def test_offset_inside_a_curved_lane(lateral_m: float, inside: bool) -> None:
+    """Lane -1 (3.5 m) right of a reference arc of radius 50 m turning left: its centre runs
+    on radius 51.75 m about (0, 50). A point ``lateral_m`` off that centre line at angle θ
+    lies inside the lane exactly when |lateral| ≤ 1.75 m, at θ·51.75 m along it."""
+    from graph_maps import lane as make_lane
+    from graph_maps import odr_map, road, section
+
+    from cold_maps.network.lane_area import offset_inside
+
+    graph = build_lane_graph(odr_map([road("1", 60.0, [section(0.0, 60.0, right=[make_lane(-1)])],
+                                           curvature=1 / 50.0)]))
+    theta, radius = 0.6, 51.75 + lateral_m
+    point = (radius * math.sin(theta), 50.0 - radius * math.cos(theta))
+    offset = offset_inside(graph, LaneKey("1", 0, -1), point)
+    assert (offset is not None) == inside
+    if inside:
+        assert offset == pytest.approx(theta * 51.75, abs=0.02)

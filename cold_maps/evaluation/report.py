@@ -27,7 +27,11 @@
           "fusibility": {"precision": 0.98, "recall": 1.0,     # fusibility check vs GT
                          "fused": {"own": 250, "branch": 12},   # true fusions: ego's route / a branch
                          "false": {"adjacent": 2},              # false fusions by kind of pair
-                         "by_confidence": [{"threshold": 0.5, "precision": 0.99, "recall": 0.97}]}
+                         "by_confidence": [{"threshold": 0.5, "precision": 0.99, "recall": 0.97}]},
+          "by_route": {"own_route": {"fused": 250, "mean_error_m": 0.01, "max_error_m": 0.2, "p95_error_m": 0.05},
+                       "branch": {"fused": 12, "mean_error_m": 0.3, "max_error_m": 1.9, "p95_error_m": 1.2}},
+                                     # only when its fusions carry the kind of pair: the errors of the
+                                     # true fusions on the ego's own route and on another branch
           # only in runs with --coops > 1, --history or --exchange (absent otherwise):
           "vehicles": 3,             # vehicles fused: 1 local, 2 a pair, more a chain
           "history_m": 100.0,        # lane history the coops send (m)
@@ -42,7 +46,8 @@
 
 The kinds of pairs are ``cold_maps.simulation.drive.RELATION_KINDS``; ``by_confidence`` counts
 a decision as fusible only when its association confidence reaches the threshold
-(:data:`CONFIDENCE_THRESHOLDS`). Errors are pooled point distances (not averages of per-frame averages). A value that does
+(:data:`CONFIDENCE_THRESHOLDS`); ``by_route`` pools the errors of the true fusions by where the
+coop drives (:data:`ROUTE_GROUPS`). Errors are pooled point distances (not averages of per-frame averages). A value that does
 not exist (no fused frame, no runtime measured, no fusibility decision) is ``null``.
 Every file is written to a temporary name and renamed, so none is ever half-written.
 """
@@ -73,6 +78,9 @@ METRICS_SCHEMA_VERSION: Final[int] = 1
 P95_PERCENT: Final[float] = 95.0
 CONFIDENCE_THRESHOLDS: Final[tuple[float, ...]] = (0.0, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 1.0)
 """Association confidences at which summary.md and metrics.json give a precision-recall point."""
+ROUTE_GROUPS: Final[Mapping[str, str]] = {"own_route": "own", "branch": "branch"}
+"""``by_route`` group → the relation kind of the true fusions it pools (the coop's lane on the
+ego's own route, or on another branch of a fork inside the gap)."""
 
 # The paper's results (cold-fusion-paper.tex, sec. IV "Results"). Table II: per road type and
 # method, (mean error m, max error m) for the left and right border. The paper's "MSE" is
@@ -231,6 +239,28 @@ class RuntimeStats:
 
 
 @dataclass(frozen=True, slots=True)
+class RouteErrors:
+    """Errors of the true fusions of one :data:`ROUTE_GROUPS` group.
+
+    Fields: ``fused`` their count; ``mean_error_m``, ``max_error_m``, ``p95_error_m`` the
+    pooled closest-point distances (m; NaN without a fusion).
+    """
+
+    fused: int
+    mean_error_m: float
+    max_error_m: float
+    p95_error_m: float
+
+    @classmethod
+    def of(cls, records: Sequence[FrameRecord]) -> RouteErrors:
+        """The statistics over the errors of ``records``."""
+        errors = np.concatenate([r.errors_m for r in records]) if records else np.empty(0)
+        if not errors.size:
+            return cls(len(records), math.nan, math.nan, math.nan)
+        return cls(len(records), float(errors.mean()), float(errors.max()), float(np.percentile(errors, P95_PERCENT)))
+
+
+@dataclass(frozen=True, slots=True)
 class ScenarioResult:
     """Aggregated result of one scenario; the fields of one ``metrics.json`` record.
 
@@ -258,6 +288,8 @@ class ScenarioResult:
             ``other_branch``, ``behind``, ``other``).
         by_confidence: (threshold, precision, recall) per :data:`CONFIDENCE_THRESHOLDS`
             (NaN when undefined); empty when no decision carries a confidence.
+        by_route: (group, :class:`RouteErrors`) per :data:`ROUTE_GROUPS` group; empty when
+            no fusion of the scenario carries the kind of its pair.
     """
 
     key: ScenarioKey
@@ -283,6 +315,7 @@ class ScenarioResult:
     fused_by_relation: tuple[tuple[str, int], ...] = ()
     false_by_relation: tuple[tuple[str, int], ...] = ()
     by_confidence: tuple[tuple[float, float, float], ...] = ()
+    by_route: tuple[tuple[str, RouteErrors], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
@@ -306,7 +339,10 @@ class ScenarioResult:
                            "fused": dict(self.fused_by_relation), "false": dict(self.false_by_relation),
                            "by_confidence": [{"threshold": t, "precision": f(p), "recall": f(r)}
                                              for t, p, r in self.by_confidence]},
-        } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {})
+        } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {}) | (
+            {"by_route": {group: {"fused": e.fused, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
+                                  "p95_error_m": f(e.p95_error_m)} for group, e in self.by_route}}
+            if self.by_route else {})
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
@@ -339,13 +375,17 @@ class ScenarioResult:
                             _none_to_nan(point["precision"], f"{where}.fusibility.by_confidence"),
                             _none_to_nan(point["recall"], f"{where}.fusibility.by_confidence"))
                            for point in fusibility.get("by_confidence", []))
+            by_route = tuple((str(group), RouteErrors(int(errors["fused"]), *(
+                _none_to_nan(errors[name], f"{where}.by_route.{group}.{name}")
+                for name in ("mean_error_m", "max_error_m", "p95_error_m"))))
+                for group, errors in record.get("by_route", {}).items())
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
-                       **num)
+                       by_route=by_route, **num)
         except ReportError:
             raise
         except KeyError as exc:
@@ -434,6 +474,9 @@ class ScenarioAccumulator:
             fused_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if r.truly_fusible).items())),
             false_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if not r.truly_fusible).items())),
             by_confidence=by_confidence,
+            by_route=tuple((group, RouteErrors.of([r for r in fused_pairs if r.fused and r.truly_fusible
+                                                   and r.relation == kind]))
+                           for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
@@ -583,10 +626,16 @@ def extended_markdown(results: Sequence[ScenarioResult]) -> str:
 def association_markdown(results: Sequence[ScenarioResult]) -> str:
     """The fusibility decisions per scenario (left-border records; both borders share them):
     precision, recall, true fusions on the ego's route / a branch, false fusions by kind,
-    then one precision / recall point per confidence threshold. "" when no scenario decided."""
-    rows, curve = [], []
+    then one precision / recall point per confidence threshold, then the errors of the true
+    fusions on the ego's own route and on another branch per border. "" when no scenario
+    decided."""
+    rows, curve, routes = [], [], []
     for r in sorted(results, key=_sort_key):
         k = r.key
+        if r.by_route:
+            routes.append([k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1), k.boundary,
+                           *(f"{e.fused} / {_fmt(e.mean_error_m)} / {_fmt(e.max_error_m)} / {_fmt(e.p95_error_m)}"
+                             for _, e in r.by_route)])
         if k.boundary != "left" or not (r.fused_by_relation or r.false_by_relation or r.by_confidence):
             continue
         name = [k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1)]
@@ -605,6 +654,11 @@ def association_markdown(results: Sequence[ScenarioResult]) -> str:
         text += ("\nPrecision / recall when only decisions of at least this association confidence count "
                  "as fusible:\n\n" + _table(["map", "fusion", "interp.", "d_s [m]",
                                                *(f"≥ {t:g}" for t in CONFIDENCE_THRESHOLDS)], curve))
+    if routes:
+        text += ("\nErrors of the true fusions by where the coop drives: on the ego's own route, or on another "
+                 "branch of a fork (fused / mean / max / p95 [m]):\n\n"
+                 + _table(["map", "fusion", "interp.", "d_s [m]", "boundary",
+                           *(group.replace("_", " ") for group in ROUTE_GROUPS)], routes))
     return text
 
 

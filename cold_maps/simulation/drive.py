@@ -25,6 +25,7 @@ from typing import Final, Literal, Mapping, Sequence
 
 import numpy as np
 
+from cold_maps.network.lane_area import offset_inside
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat
 from cold_maps.network.route import route_from_lanes
@@ -430,7 +431,11 @@ def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_d
     ``behind``) must also be ahead on the drive itself (``0 < lead_m`` relative to ``ego``,
     itself a chain's coop or the ego), so that on a loop a vehicle behind does not count as
     reachable ahead around it. Adjacent and opposite lanes, vehicles behind, and a coop on
-    another branch of a fork the ego's detection has already passed are not."""
+    another branch of a fork the ego's detection has passed and left are not. Where the
+    detection ends is every lane its end point lies in: the track's lane, and a lane that
+    left the track at a fork inside the detection but has not yet drifted half its width
+    away from that point (branches of a junction overlap past their common entry; the
+    detection lies on each of them from the fork to its end)."""
     if coop.role in SHARED_STATION_ROLES and not 0.0 < coop.lead_m - ego.lead_m <= max_distance_m:
         return False
     if not ahead_in_ego_frame(ego, coop) or not _reachable(graph, ego.lane, ego.lane_offset_m, coop, max_distance_m):
@@ -440,7 +445,34 @@ def lane_relation(graph: LaneGraph, ego: VehicleState, coop: VehicleState, max_d
     last, last_offset_m = track.lane_at(min(ego.station + detection_m, track.length))
     if coop.lane in track.lanes[first: last + 1]:
         return True
-    return _reachable(graph, track.lanes[last], last_offset_m, coop, max_distance_m - detection_m)
+    budget_m = max_distance_m - detection_m
+    if _reachable(graph, track.lanes[last], last_offset_m, coop, budget_m):
+        return True
+    end = min(ego.station + detection_m, track.length)
+    return any(coop.lane in lanes or _reachable(graph, lanes[-1], offset_m, coop, budget_m)
+               for lanes, offset_m in _fork_lanes_at(graph, track, first, last, end))
+
+
+def _fork_lanes_at(graph: LaneGraph, track: Track, first: int, last: int,
+                   station: float) -> list[tuple[tuple[LaneKey, ...], float]]:
+    """The lanes from a fork of ``track`` between its lanes ``first`` and ``last`` to a lane
+    that contains the track's centre point at ``station`` (the detection lies on all of
+    them), each with the distance (m) along that last lane to the point's cross-section
+    (:func:`cold_maps.network.lane_area.offset_inside`)."""
+    x, y, _ = track.strip.pose(station)
+    found = []
+    for index in range(first, last):
+        past_fork_m = station - float(track.lane_starts[index + 1])
+        stack = [((lane,), 0.0) for lane in graph.successors[track.lanes[index]] if lane != track.lanes[index + 1]]
+        while stack:
+            lanes, entry_m = stack.pop()
+            offset_m = offset_inside(graph, lanes[-1], (x, y))
+            if offset_m is not None:
+                found.append((lanes, offset_m))
+            exit_m = entry_m + graph.lengths[lanes[-1]]
+            if exit_m < past_fork_m:
+                stack += [((*lanes, after), exit_m) for after in graph.successors[lanes[-1]] if after not in lanes]
+    return found
 
 
 RELATION_KINDS: Final[tuple[str, ...]] = ("own", "branch", "adjacent", "opposite", "other_branch", "behind", "other")
