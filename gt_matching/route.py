@@ -23,8 +23,9 @@ GUESS_STRIDE: Final = 3
 #: this many samples at least, and at most this many in all.
 MIN_COARSE_STRIDE: Final = 25
 MAX_COARSE_SAMPLES: Final = 256
-#: Borders with more samples than this find nearest samples with a KD-tree (its build
-#: time pays off over the frames of a long route; short routes change often).
+#: Borders with more samples than this find the nearest samples of anchors and of the
+#: points their window does not settle with a KD-tree (its build time pays off over the
+#: frames of a long route; short routes change often).
 KD_TREE_SAMPLES: Final = 16384
 #: Borders asked for distances to the resampled GT more often than this also get one (a
 #: route measured many times: every lane of every frame while a drive stays on it). Its
@@ -32,10 +33,12 @@ KD_TREE_SAMPLES: Final = 16384
 #: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
-#: interpolate its arc length along the detection.
+#: interpolate its arc length by point index.
 ANCHOR_STRIDE: Final = 20
-#: Arc length either side of an interpolated seed searched for the nearest sample, m.
-ANCHOR_REACH_M: Final = 0.2
+#: Arc length either side of an interpolated seed searched for the nearest sample, m
+#: (on Town01 all but about one seed in 2000 lie within it of the nearest sample; the
+#: points of the others are searched over the whole border).
+ANCHOR_REACH_M: Final = 0.04
 #: Points farther than this from the border are searched over all samples, m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
@@ -299,8 +302,12 @@ class RouteBorder:
         return around
 
     def _seed_sample(self, points: NDArrayFloat) -> NDArrayInt:
-        """Index of a sample near each point's nearest one: the nearest within half a
-        stride of the point's nearest coarse sample (exact where the border is smooth)."""
+        """Index of a sample near each point's nearest one: the nearest from the KD-tree of
+        a border that has one (``_uses_tree``), else the nearest within half a stride of the
+        point's nearest coarse sample (exact where the border is smooth)."""
+        if self._uses_tree():
+            nearest: NDArrayInt = self._tree.query(points)[1]
+            return nearest
         coarse = self._coarse_index[np.argmin(self._squared_distances(points, self._coarse_index[None, :]), axis=1)]
         around = self._around_coarse(coarse)
         sample: NDArrayInt = around[np.arange(len(points)), np.argmin(self._squared_distances(points, around), axis=1)]
@@ -433,34 +440,27 @@ class RouteBorder:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
         border, and (``others``; else all False) whether another lane's border is closer.
 
-        A border with a KD-tree (``_uses_tree``) asks it for every point. Otherwise every
-        ``ANCHOR_STRIDE``-th point finds a sample near its nearest one (``_seed_sample``);
-        the arc lengths of the points between are interpolated along the detection, and
-        each point takes the nearest sample within ``ANCHOR_REACH_M`` of that (the seed
-        need not be exact: the window check below decides). Where that window cannot
-        settle it (minimum on its edge, a kink or lanelet joint near it, or the point
-        farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is
-        the smallest to the segments within two steps of the nearest sample (twice the
-        distance for the points near a kink or joint, or far). Only points far enough off
-        the border to possibly be closer to another line (by the clearance of the
-        checkpoints around the nearest sample) are checked against the other lines.
+        Every ``ANCHOR_STRIDE``-th point finds a sample near its nearest one
+        (``_seed_sample``); the arc lengths of the points between are interpolated by point
+        index (detected points lie about evenly apart), and each point takes the nearest sample within ``ANCHOR_REACH_M`` of that
+        (the seed need not be exact: the window check below decides). Where that window
+        cannot settle it (minimum on its edge, a kink or lanelet joint near it, or the point
+        farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers (from the KD-tree of a
+        border that has one). The exact distance is the smallest to the segments within two
+        steps of the nearest sample (twice the distance for the points near a kink or
+        joint, or far). Only points far enough off the border to possibly be closer to
+        another line (by the clearance of the checkpoints around the nearest sample) are
+        checked against the other lines.
         """
         if not exact:
             self._calls += 1
-        if self._uses_tree():
-            resampled, sample = self._tree.query(points)
-            redo = np.empty(0, dtype=np.int64)
-            if exact:
-                redo = np.flatnonzero(~self._smooth(resampled, sample) | (resampled > REFINE_DISTANCE_M))
-        else:
-            anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
-            anchors[-1] = len(points) - 1
-            along = arc_lengths(points)
-            seed = np.interp(along, along[anchors], self.sample_arc[self._seed_sample(points[anchors])])
-            resampled, sample, settled = self._nearest_samples(points, seed)
-            redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
-            if len(redo):
-                resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
+        anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
+        anchors[-1] = len(points) - 1
+        seed = np.interp(np.arange(len(points)), anchors, self.sample_arc[self._seed_sample(points[anchors])])
+        resampled, sample, settled = self._nearest_samples(points, seed)
+        redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
+        if len(redo):
+            resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
         arc = self.sample_arc[sample]
         other_closer = np.zeros(len(points), dtype=bool)
         if others:
