@@ -373,15 +373,16 @@ class RouteBorder:
         return closer
 
     def _nearest_samples(
-        self, points: NDArrayFloat, seed_arc: NDArrayFloat
+        self, points: NDArrayFloat, seed: NDArrayFloat
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
-        """Per point, the smallest distance (m) to the samples within ``ANCHOR_REACH_M`` of
-        arc length ``seed_arc``, that sample's index, and whether the window settles it: the
+        """Per point, the smallest distance (m) to the samples of the window centred on the
+        sample index ``seed`` (rounded; ``ANCHOR_REACH_M`` either side, and a sample more
+        where lanelets join), that sample's index, and whether the window settles it: the
         minimum is not on its edge (it may continue outside), and no kink or lanelet joint
         near it may start another minimum (``_clear_of_breaks``)."""
         last = len(self.samples) - 1
         width = self._window_x.shape[1]
-        first = np.minimum(np.searchsorted(self.sample_arc, seed_arc - ANCHOR_REACH_M), last)
+        first = np.clip(np.rint(seed).astype(np.int64) - width // 2, 0, last)
         squared = self._window_x[first] - points[:, :1]
         squared *= squared
         dy = self._window_y[first] - points[:, 1:]
@@ -389,15 +390,15 @@ class RouteBorder:
         closest = np.argmin(squared, axis=1)
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (first + width - 1 >= last))
         distance, sample = np.sqrt(squared[np.arange(len(points)), closest]), first + closest
-        settled = np.zeros(len(points), dtype=bool)
-        settled[inside] = self._smooth(distance[inside], sample[inside])
-        return distance, sample, settled
+        return distance, sample, inside & self._smooth(distance, sample)
 
     def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:
         """Whether no kink or lanelet joint near each point's nearest sample (index
         ``sample``, ``distance`` m away) may start another minimum (``_clear_of_breaks``)."""
-        arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         breaks = self._break_arc
+        if len(breaks) == 0:
+            return np.ones(len(sample), dtype=bool)
+        arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         low, high = np.searchsorted(breaks, arc - reach), np.searchsorted(breaks, arc + reach, side="right")
         smooth = low == high
         check = np.flatnonzero(~smooth)
@@ -441,22 +442,23 @@ class RouteBorder:
         border, and (``others``; else all False) whether another lane's border is closer.
 
         Every ``ANCHOR_STRIDE``-th point finds a sample near its nearest one
-        (``_seed_sample``); the arc lengths of the points between are interpolated by point
-        index (detected points lie about evenly apart), and each point takes the nearest sample within ``ANCHOR_REACH_M`` of that
-        (the seed need not be exact: the window check below decides). Where that window
-        cannot settle it (minimum on its edge, a kink or lanelet joint near it, or the point
-        farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers (from the KD-tree of a
-        border that has one). The exact distance is the smallest to the segments within two
-        steps of the nearest sample (twice the distance for the points near a kink or
-        joint, or far). Only points far enough off the border to possibly be closer to
-        another line (by the clearance of the checkpoints around the nearest sample) are
-        checked against the other lines.
+        (``_seed_sample``); the sample indices of the points between are interpolated by
+        point index (detected points lie about evenly apart), and each point takes the
+        nearest sample within ``ANCHOR_REACH_M`` of that (the seed need not be exact: the
+        window check below decides). Where that window cannot settle it (minimum on its
+        edge, a kink or lanelet joint near it, or the point farther than
+        ``REFINE_DISTANCE_M``) ``_nearest`` answers (from the KD-tree of a border that has
+        one). The exact distance is the smallest to the segments within two steps of the
+        nearest sample (twice the distance for the points near a kink or joint, or far).
+        Only points far enough off the border to possibly be closer to another line (by the
+        clearance of the checkpoints around the nearest sample) are checked against the
+        other lines.
         """
         if not exact:
             self._calls += 1
         anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
         anchors[-1] = len(points) - 1
-        seed = np.interp(np.arange(len(points)), anchors, self.sample_arc[self._seed_sample(points[anchors])])
+        seed = np.interp(np.arange(len(points)), anchors, self._seed_sample(points[anchors]))
         resampled, sample, settled = self._nearest_samples(points, seed)
         redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
         if len(redo):
