@@ -376,8 +376,8 @@ class RouteBorder:
         self, points: NDArrayFloat, seed: NDArrayFloat
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples of the window centred on the
-        sample index ``seed`` (rounded; ``ANCHOR_REACH_M`` either side, and a sample more
-        where lanelets join), that sample's index, and whether the window settles it: the
+        sample index ``seed`` (rounded; at least ``ANCHOR_REACH_M`` either side, a sample
+        more where lanelets join), that sample's index, and whether the window settles it: the
         minimum is not on its edge (it may continue outside), and no kink or lanelet joint
         near it may start another minimum (``_clear_of_breaks``)."""
         last = len(self.samples) - 1
