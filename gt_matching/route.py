@@ -33,7 +33,7 @@ KD_TREE_SAMPLES: Final = 16384
 #: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
-#: interpolate its arc length by point index.
+#: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
 #: Arc length either side of an interpolated seed searched for the nearest sample, m
 #: (on Town01 all but about one seed in 2000 lie within it of the nearest sample; the
