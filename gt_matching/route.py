@@ -35,10 +35,14 @@ KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
-#: Arc length either side of an interpolated seed searched for the nearest sample, m
-#: (on Town01 all but about one seed in 2000 lie within it of the nearest sample; the
-#: points of the others are searched over the whole border).
-ANCHOR_REACH_M: Final = 0.04
+#: Arc length either side of an interpolated seed searched first for the nearest sample,
+#: m (on Town01's noise-free detections all but about one seed in 2000 lie within it of
+#: the nearest sample).
+NARROW_REACH_M: Final = 0.04
+#: Arc length either side of the narrow window's edge minimum searched next, m (noisy
+#: detected points scatter their nearest samples along the border); the points it leaves
+#: on its edge too are searched over the whole border.
+ANCHOR_REACH_M: Final = 0.2
 #: Points farther than this from the border are searched over all samples, m.
 REFINE_DISTANCE_M: Final = 1.0
 #: A border vertex turning by more than this is a kink: points whose nearest sample lies
@@ -260,13 +264,14 @@ class RouteBorder:
         )
         self._coarse_half_m = (self._coarse_stride // 2 + 1) * self.step_m
         # A window may hold a repeated sample where two lanelets join.
-        width = int(2.0 * ANCHOR_REACH_M / self.step_m) + 1 + min(len(parts), 2)
-        beyond = np.full(width - 1, np.inf)
+        widths = [int(2.0 * reach / self.step_m) + 1 + min(len(parts), 2) for reach in (NARROW_REACH_M, ANCHOR_REACH_M)]
+        beyond = np.full(widths[-1] - 1, np.inf)
         padded_x, padded_y = (np.concatenate((self.samples[:, axis], beyond)) for axis in (0, 1))
         self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
-        self._window_x = sliding_window_view(padded_x, width)
-        self._window_y = sliding_window_view(padded_y, width)
-        """Row k: x (y) of the samples k to k + width - 1, m (infinite past the last)."""
+        self._windows = tuple((sliding_window_view(padded_x, width), sliding_window_view(padded_y, width))
+                              for width in widths)
+        """Narrow and wide windows: row k of each view holds x (y) of the samples k to
+        k + width - 1, m (infinite past the last)."""
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
         )
@@ -375,22 +380,37 @@ class RouteBorder:
     def _nearest_samples(
         self, points: NDArrayFloat, seed: NDArrayFloat
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
-        """Per point, the smallest distance (m) to the samples of the window centred on the
-        sample index ``seed`` (rounded; at least ``ANCHOR_REACH_M`` either side, a sample
-        more where lanelets join), that sample's index, and whether the window settles it: the
-        minimum is not on its edge (it may continue outside), and no kink or lanelet joint
-        near it may start another minimum (``_clear_of_breaks``)."""
+        """Per point, the smallest distance (m) to the samples of the narrow window centred
+        on the sample index ``seed`` (rounded; at least ``NARROW_REACH_M`` either side, a
+        sample more where lanelets join), or of the wide one (``ANCHOR_REACH_M``) centred on
+        the narrow one's minimum where that lies on its edge; that sample's index, and
+        whether the window settles it: the minimum is not on the edge (it may continue
+        outside), and no kink or lanelet joint near it may start another minimum
+        (``_clear_of_breaks``)."""
+        narrow, wide = self._windows
+        distance, sample, inside = self._window_minimum(points, np.rint(seed).astype(np.int64), narrow)
+        edge = np.flatnonzero(~inside)
+        if len(edge):
+            distance[edge], sample[edge], inside[edge] = self._window_minimum(points[edge], sample[edge], wide)
+        return distance, sample, inside & self._smooth(distance, sample)
+
+    def _window_minimum(
+        self, points: NDArrayFloat, centre: NDArrayInt, window: tuple[NDArrayFloat, NDArrayFloat]
+    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
+        """Per point, the smallest distance (m) to the samples of ``window`` (x and y views)
+        centred on sample ``centre``, that sample's index, and whether it lies inside the
+        window (not on an edge that is not the border's end)."""
         last = len(self.samples) - 1
-        width = self._window_x.shape[1]
-        first = np.clip(np.rint(seed).astype(np.int64) - width // 2, 0, last)
-        squared = self._window_x[first] - points[:, :1]
+        window_x, window_y = window
+        width = window_x.shape[1]
+        first = np.clip(centre - width // 2, 0, last)
+        squared = window_x[first] - points[:, :1]
         squared *= squared
-        dy = self._window_y[first] - points[:, 1:]
+        dy = window_y[first] - points[:, 1:]
         squared += dy * dy
         closest = np.argmin(squared, axis=1)
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (first + width - 1 >= last))
-        distance, sample = np.sqrt(squared[np.arange(len(points)), closest]), first + closest
-        return distance, sample, inside & self._smooth(distance, sample)
+        return np.sqrt(squared[np.arange(len(points)), closest]), first + closest, inside
 
     def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:
         """Whether no kink or lanelet joint near each point's nearest sample (index
@@ -444,8 +464,8 @@ class RouteBorder:
         Every ``ANCHOR_STRIDE``-th point finds a sample near its nearest one
         (``_seed_sample``); the sample indices of the points between are interpolated by
         point index (detected points lie about evenly apart), and each point takes the
-        nearest sample within ``ANCHOR_REACH_M`` of that (the seed need not be exact: the
-        window check below decides). Where that window cannot settle it (minimum on its
+        nearest sample within ``NARROW_REACH_M`` of that, or ``ANCHOR_REACH_M`` where the
+        nearest lies farther (the seed need not be exact: the window check below decides). Where that window cannot settle it (minimum on its
         edge, a kink or lanelet joint near it, or the point farther than
         ``REFINE_DISTANCE_M``) ``_nearest`` answers (from the KD-tree of a border that has
         one). The exact distance is the smallest to the segments within two steps of the
