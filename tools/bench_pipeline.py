@@ -118,14 +118,18 @@ def report(map_path: Path, frames: int, repeat: int, cpu: bool) -> list[str]:
 
 def baseline_report(ref: str, argv: list[str]) -> list[str]:
     """The report lines of commit ``ref``'s own benchmark with the arguments ``argv``: its
-    tree extracted (``git archive``) to a temporary folder and run there."""
+    tree extracted (``git archive``) to a temporary folder and run there (without
+    ``--cpu`` when its benchmark has no such option: it then times the wall clock)."""
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
                              check=True).stdout
     with tempfile.TemporaryDirectory(prefix="bench-pipeline-") as folder:
         with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
             tar.extractall(folder, filter="tar")
+        script = Path(folder) / "tools" / "bench_pipeline.py"
+        if "--cpu" not in script.read_text(encoding="utf-8"):
+            argv = [arg for arg in argv if arg != "--cpu"]
         environment = {**os.environ, "PYTHONPATH": folder}
-        done = subprocess.run([sys.executable, str(Path(folder) / "tools" / "bench_pipeline.py"), *argv],
+        done = subprocess.run([sys.executable, str(script), *argv],
                               check=False, capture_output=True, text=True, env=environment, cwd=folder)
     if done.returncode:
         raise SystemExit(f"bench_pipeline.py of {ref} failed: {done.stderr.strip().splitlines()[-1:]}")
