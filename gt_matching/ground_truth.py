@@ -35,6 +35,9 @@ from gt_matching.route import BorderPart, RouteBorder
 MAX_SEQUENCES: Final = 4096
 #: Assembled routes kept per ``GroundTruth`` (consecutive frames of a drive reuse them).
 ROUTE_CACHE_SIZE: Final = 256
+#: Poses whose candidate lanelets a ``GroundTruth`` keeps (every lane measured in a frame
+#: is matched at the same pose, the ego's).
+CANDIDATE_CACHE_SIZE: Final = 8
 #: ``GroundTruth`` objects kept by ``match_lane``/``evaluate_lane``.
 GROUND_TRUTH_CACHE_SIZE: Final = 4
 #: A lanelet sequence fits a detection when at least this share of the detection's
@@ -179,6 +182,7 @@ class GroundTruth:
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
         self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
+        self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
             for side in ("left", "right"):
@@ -280,7 +284,19 @@ class GroundTruth:
         return part
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
-        """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose."""
+        """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose
+        (those of the last ``CANDIDATE_CACHE_SIZE`` poses kept)."""
+        found = self._near_pose.get(pose)
+        if found is None:
+            found = self._near_pose[pose] = self._find_candidates(pose)
+            if len(self._near_pose) > CANDIDATE_CACHE_SIZE:
+                self._near_pose.popitem(last=False)
+        else:
+            self._near_pose.move_to_end(pose)
+        return found
+
+    def _find_candidates(self, pose: Pose) -> list[_Candidate]:
+        """``_candidates`` of a pose, from Lanelet2's matching."""
         from lanelet2 import matching
 
         config = self.config

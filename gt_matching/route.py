@@ -23,8 +23,9 @@ GUESS_STRIDE: Final = 3
 #: this many samples at least, and at most this many in all.
 MIN_COARSE_STRIDE: Final = 25
 MAX_COARSE_SAMPLES: Final = 256
-#: Borders with more samples than this find nearest samples with a KD-tree (its build
-#: time pays off over the frames of a long route; short routes change often).
+#: Borders with more samples than this find the nearest samples of anchors and of the
+#: points their window does not settle with a KD-tree (its build time pays off over the
+#: frames of a long route; short routes change often).
 KD_TREE_SAMPLES: Final = 16384
 #: Borders asked for distances to the resampled GT more often than this also get one (a
 #: route measured many times: every lane of every frame while a drive stays on it). Its
@@ -32,9 +33,15 @@ KD_TREE_SAMPLES: Final = 16384
 #: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
 #: Every this many detected points look up their nearest sample; the others
-#: interpolate its arc length along the detection.
+#: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
-#: Arc length either side of an interpolated seed searched for the nearest sample, m.
+#: Arc length either side of an interpolated seed searched first for the nearest sample,
+#: m (on Town01's noise-free detections all but about one seed in 2000 lie within it of
+#: the nearest sample).
+NARROW_REACH_M: Final = 0.04
+#: Arc length either side of the narrow window's edge minimum searched next, m (noisy
+#: detected points scatter their nearest samples along the border); the points it leaves
+#: on its edge too are searched over the whole border.
 ANCHOR_REACH_M: Final = 0.2
 #: Points farther than this from the border are searched over all samples, m.
 REFINE_DISTANCE_M: Final = 1.0
@@ -257,13 +264,14 @@ class RouteBorder:
         )
         self._coarse_half_m = (self._coarse_stride // 2 + 1) * self.step_m
         # A window may hold a repeated sample where two lanelets join.
-        width = int(2.0 * ANCHOR_REACH_M / self.step_m) + 1 + min(len(parts), 2)
-        beyond = np.full(width - 1, np.inf)
+        widths = [int(2.0 * reach / self.step_m) + 1 + min(len(parts), 2) for reach in (NARROW_REACH_M, ANCHOR_REACH_M)]
+        beyond = np.full(widths[-1] - 1, np.inf)
         padded_x, padded_y = (np.concatenate((self.samples[:, axis], beyond)) for axis in (0, 1))
         self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
-        self._window_x = sliding_window_view(padded_x, width)
-        self._window_y = sliding_window_view(padded_y, width)
-        """Row k: x (y) of the samples k to k + width - 1, m (infinite past the last)."""
+        self._windows = tuple((sliding_window_view(padded_x, width), sliding_window_view(padded_y, width))
+                              for width in widths)
+        """Narrow and wide windows: row k of each view holds x (y) of the samples k to
+        k + width - 1, m (infinite past the last)."""
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
         )
@@ -299,8 +307,12 @@ class RouteBorder:
         return around
 
     def _seed_sample(self, points: NDArrayFloat) -> NDArrayInt:
-        """Index of a sample near each point's nearest one: the nearest within half a
-        stride of the point's nearest coarse sample (exact where the border is smooth)."""
+        """Index of a sample near each point's nearest one: the nearest from the KD-tree of
+        a border that has one (``_uses_tree``), else the nearest within half a stride of the
+        point's nearest coarse sample (exact where the border is smooth)."""
+        if self._uses_tree():
+            nearest: NDArrayInt = self._tree.query(points)[1]
+            return nearest
         coarse = self._coarse_index[np.argmin(self._squared_distances(points, self._coarse_index[None, :]), axis=1)]
         around = self._around_coarse(coarse)
         sample: NDArrayInt = around[np.arange(len(points)), np.argmin(self._squared_distances(points, around), axis=1)]
@@ -366,31 +378,47 @@ class RouteBorder:
         return closer
 
     def _nearest_samples(
-        self, points: NDArrayFloat, seed_arc: NDArrayFloat
+        self, points: NDArrayFloat, seed: NDArrayFloat
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
-        """Per point, the smallest distance (m) to the samples within ``ANCHOR_REACH_M`` of
-        arc length ``seed_arc``, that sample's index, and whether the window settles it: the
-        minimum is not on its edge (it may continue outside), and no kink or lanelet joint
-        near it may start another minimum (``_clear_of_breaks``)."""
+        """Per point, the smallest distance (m) to the samples of the narrow window centred
+        on the sample index ``seed`` (rounded; at least ``NARROW_REACH_M`` either side, a
+        sample more where lanelets join), or of the wide one (``ANCHOR_REACH_M``) centred on
+        the narrow one's minimum where that lies on its edge; that sample's index, and
+        whether the window settles it: the minimum is not on the edge (it may continue
+        outside), and no kink or lanelet joint near it may start another minimum
+        (``_clear_of_breaks``)."""
+        narrow, wide = self._windows
+        distance, sample, inside = self._window_minimum(points, np.rint(seed).astype(np.int64), narrow)
+        edge = np.flatnonzero(~inside)
+        if len(edge):
+            distance[edge], sample[edge], inside[edge] = self._window_minimum(points[edge], sample[edge], wide)
+        return distance, sample, inside & self._smooth(distance, sample)
+
+    def _window_minimum(
+        self, points: NDArrayFloat, centre: NDArrayInt, window: tuple[NDArrayFloat, NDArrayFloat]
+    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
+        """Per point, the smallest distance (m) to the samples of ``window`` (x and y views)
+        centred on sample ``centre``, that sample's index, and whether it lies inside the
+        window (not on an edge that is not the border's end)."""
         last = len(self.samples) - 1
-        width = self._window_x.shape[1]
-        first = np.minimum(np.searchsorted(self.sample_arc, seed_arc - ANCHOR_REACH_M), last)
-        squared = self._window_x[first] - points[:, :1]
+        window_x, window_y = window
+        width = window_x.shape[1]
+        first = np.clip(centre - width // 2, 0, last)
+        squared = window_x[first] - points[:, :1]
         squared *= squared
-        dy = self._window_y[first] - points[:, 1:]
+        dy = window_y[first] - points[:, 1:]
         squared += dy * dy
         closest = np.argmin(squared, axis=1)
         inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (first + width - 1 >= last))
-        distance, sample = np.sqrt(squared[np.arange(len(points)), closest]), first + closest
-        settled = np.zeros(len(points), dtype=bool)
-        settled[inside] = self._smooth(distance[inside], sample[inside])
-        return distance, sample, settled
+        return np.sqrt(squared[np.arange(len(points)), closest]), first + closest, inside
 
     def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:
         """Whether no kink or lanelet joint near each point's nearest sample (index
         ``sample``, ``distance`` m away) may start another minimum (``_clear_of_breaks``)."""
-        arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         breaks = self._break_arc
+        if len(breaks) == 0:
+            return np.ones(len(sample), dtype=bool)
+        arc, reach = self.sample_arc[sample], 2.0 * distance + self.step_m
         low, high = np.searchsorted(breaks, arc - reach), np.searchsorted(breaks, arc + reach, side="right")
         smooth = low == high
         check = np.flatnonzero(~smooth)
@@ -433,34 +461,28 @@ class RouteBorder:
         """Closest-point distances of ``points`` (world frame, m, in driving order) to this
         border, and (``others``; else all False) whether another lane's border is closer.
 
-        A border with a KD-tree (``_uses_tree``) asks it for every point. Otherwise every
-        ``ANCHOR_STRIDE``-th point finds a sample near its nearest one (``_seed_sample``);
-        the arc lengths of the points between are interpolated along the detection, and
-        each point takes the nearest sample within ``ANCHOR_REACH_M`` of that (the seed
-        need not be exact: the window check below decides). Where that window cannot
-        settle it (minimum on its edge, a kink or lanelet joint near it, or the point
-        farther than ``REFINE_DISTANCE_M``) ``_nearest`` answers. The exact distance is
-        the smallest to the segments within two steps of the nearest sample (twice the
-        distance for the points near a kink or joint, or far). Only points far enough off
-        the border to possibly be closer to another line (by the clearance of the
-        checkpoints around the nearest sample) are checked against the other lines.
+        Every ``ANCHOR_STRIDE``-th point finds a sample near its nearest one
+        (``_seed_sample``); the sample indices of the points between are interpolated by
+        point index (detected points lie about evenly apart), and each point takes the
+        nearest sample within ``NARROW_REACH_M`` of that, or ``ANCHOR_REACH_M`` where the
+        nearest lies farther (the seed need not be exact: the window check below decides). Where that window cannot settle it (minimum on its
+        edge, a kink or lanelet joint near it, or the point farther than
+        ``REFINE_DISTANCE_M``) ``_nearest`` answers (from the KD-tree of a border that has
+        one). The exact distance is the smallest to the segments within two steps of the
+        nearest sample (twice the distance for the points near a kink or joint, or far).
+        Only points far enough off the border to possibly be closer to another line (by the
+        clearance of the checkpoints around the nearest sample) are checked against the
+        other lines.
         """
         if not exact:
             self._calls += 1
-        if self._uses_tree():
-            resampled, sample = self._tree.query(points)
-            redo = np.empty(0, dtype=np.int64)
-            if exact:
-                redo = np.flatnonzero(~self._smooth(resampled, sample) | (resampled > REFINE_DISTANCE_M))
-        else:
-            anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
-            anchors[-1] = len(points) - 1
-            along = arc_lengths(points)
-            seed = np.interp(along, along[anchors], self.sample_arc[self._seed_sample(points[anchors])])
-            resampled, sample, settled = self._nearest_samples(points, seed)
-            redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
-            if len(redo):
-                resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
+        anchors = np.arange(0, len(points) + ANCHOR_STRIDE - 1, ANCHOR_STRIDE)
+        anchors[-1] = len(points) - 1
+        seed = np.interp(np.arange(len(points)), anchors, self._seed_sample(points[anchors]))
+        resampled, sample, settled = self._nearest_samples(points, seed)
+        redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
+        if len(redo):
+            resampled[redo], sample[redo] = self._nearest(points[redo], resampled[redo])
         arc = self.sample_arc[sample]
         other_closer = np.zeros(len(points), dtype=bool)
         if others:

@@ -158,3 +158,22 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
                 np.testing.assert_array_equal(a.unmatched, b.unmatched)
     built = sum("clearances" in vars(part) for part in lazy._parts.values())
     assert 0 < built < len(lazy._parts)
+
+
+def test_lanes_matched_at_one_pose_share_its_candidates(grid: tuple[Any, Any, GroundTruth]) -> None:
+    """Every lane of a frame is matched at the ego's pose: Lanelet2's matching runs once per
+    pose, and each lane's match equals that of a GroundTruth that never saw the pose."""
+    from unittest import mock
+
+    lanelet_map, graph, _ = grid
+    gt = GroundTruth(lanelet_map, graph, prepare_all=False)
+    for left, right, pose in random_frames(lanelet_map, graph, 6, seed=11):
+        lanes = [(left, right), (left + 0.3, right + 0.3), (left[: len(left) // 2], right[: len(right) // 2])]
+        with mock.patch.object(GroundTruth, "_find_candidates", autospec=True,
+                               side_effect=GroundTruth._find_candidates) as find:
+            matches = [gt.match(*lane, pose) for lane in lanes]
+        assert find.call_count == 1
+        for lane, match in zip(lanes, matches):
+            fresh = GroundTruth(lanelet_map, graph, prepare_all=False).match(*lane, pose)
+            assert (match.route_key, match.matched, match.mismatch) == (fresh.route_key, fresh.matched, fresh.mismatch)
+            np.testing.assert_array_equal(match.left_gt, fresh.left_gt)

@@ -183,6 +183,48 @@ def test_points_past_the_gt_ends_are_counted_beyond_the_tolerance() -> None:
     assert points_past_ends(points, gt, distances, 0.02) == 3
 
 
+
+def _past_ends_reference(points: np.ndarray, gt: np.ndarray, distances: np.ndarray, step_m: float) -> int:
+    """``points_past_ends`` point by point: the end direction from the first vertex farther
+    than the tolerance, every point tested on its own."""
+    from cold_maps.groundtruth.meter import GT_END_TOLERANCE_M
+
+    count = 0
+    for end, inner in ((gt[-1], gt[-2::-1]), (gt[0], gt[1:])):
+        apart = [v for v in inner if math.hypot(*(end - v)) > GT_END_TOLERANCE_M]
+        if not apart:
+            continue
+        direction = (end - apart[0]) / math.hypot(*(end - apart[0]))
+        for point, distance in zip(points, distances):
+            offset = point - end
+            count += bool(offset @ direction > GT_END_TOLERANCE_M and math.hypot(*offset) <= distance + step_m)
+    return count
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    dense_end=st.integers(0, 20),
+    spacing_m=st.floats(0.001, 0.2),
+    heading=st.floats(-math.pi, math.pi),
+    seed=st.integers(0, 2**16),
+)
+def test_points_past_ends_equals_a_point_by_point_count(dense_end: int, spacing_m: float, heading: float,
+                                                        seed: int) -> None:
+    """GT borders whose ends carry up to 20 vertices closer together than the tolerance (the
+    end direction lies beyond the first vertices searched) and points scattered around
+    both ends: the vectorised count equals the point-by-point one."""
+    from cold_maps.groundtruth.meter import points_past_ends
+
+    rng = np.random.default_rng(seed)
+    along = np.concatenate((np.arange(dense_end) * spacing_m, dense_end * spacing_m + np.cumsum(rng.uniform(0.2, 2.0, 8))))
+    along = np.concatenate((along, along[-1] + along[-1] - along[::-1][1:]))
+    gt = np.column_stack((along * math.cos(heading), along * math.sin(heading))) + rng.normal(0.0, 0.01, (len(along), 2))
+    points = np.vstack([end + rng.normal(0.0, 1.0, (40, 2)) for end in (gt[0], gt[-1])])
+    nearest = np.min(np.hypot(*(points[:, None, :] - gt[None]).transpose(2, 0, 1)), axis=1)
+    distances = nearest + rng.uniform(-0.03, 0.03, len(points))
+    assert points_past_ends(points, gt, distances, 0.02) == _past_ends_reference(points, gt, distances, 0.02)
+
+
 # ---- maps crdesigner rejects ------------------------------------------------------------------
 
 

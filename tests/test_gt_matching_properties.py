@@ -247,3 +247,41 @@ def test_partial_sort_percentile_equals_numpy(values: list[float], percent: floa
 
     expected = float(np.percentile(values, percent))
     assert _percentile(np.array(values), percent) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    path=paths,
+    gaps=st.lists(st.floats(0.01, 4.0), min_size=2, max_size=300),
+    noise_m=st.floats(0.0, 0.4),
+    seed=st.integers(0, 2**16),
+    long_border=st.booleans(),
+)
+def test_route_border_distances_equal_a_kd_tree_for_unevenly_spaced_points(
+    path: tuple[np.ndarray, np.ndarray], gaps: list[float], noise_m: float, seed: int, long_border: bool
+) -> None:
+    """Seeds interpolated by point index miss where the detected points lie unevenly apart
+    (a fused lane's gap, a sparse stretch): the window then leaves the point to the global
+    search (coarse samples, or the KD-tree of a long border), and every point's distance is
+    a KD-tree's over the border's samples."""
+    from unittest import mock
+
+    from gt_matching import route
+    from gt_matching.route import RouteBorder
+
+    centre, headings = path
+    builder = LaneletMapBuilder()
+    builder.add_lane(centre, WIDTH_M, headings)
+    lanelet_map, graph = builder.build()
+    gt = GroundTruth(lanelet_map, graph)
+    (geometry,) = (g for g in gt._geometry.values() if not g.key[1])
+    border = RouteBorder(gt.lines, [gt._part(geometry, "left")], set())
+    vertices = border.vertices
+    along = np.minimum(np.cumsum(gaps), float(np.sum(np.hypot(*np.diff(vertices, axis=0).T))))
+    cum = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(vertices, axis=0).T))))
+    points = np.column_stack((np.interp(along, cum, vertices[:, 0]), np.interp(along, cum, vertices[:, 1])))
+    points += np.random.default_rng(seed).normal(0.0, noise_m, points.shape)
+    expected = cKDTree(border.samples).query(points)[0]
+    with mock.patch.object(route, "KD_TREE_SAMPLES", 0 if long_border else route.KD_TREE_SAMPLES):
+        found = border.distances(points, exact=False, others=False)
+    np.testing.assert_allclose(found.distances, expected, rtol=0.0, atol=1e-12)

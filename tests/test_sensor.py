@@ -86,3 +86,23 @@ def test_vehicle_world_round_trip(x: float, y: float, yaw: float, points: list[t
     local = np.array(points, dtype=np.float64)
     back = world_to_vehicle(vehicle_to_world(local, x, y, yaw), x, y, yaw)
     np.testing.assert_allclose(back, local, atol=1e-6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    seed=st.integers(0, 2**16),
+    count=st.integers(2, 60),
+    stations=st.lists(st.floats(-10.0, 200.0), min_size=1, max_size=20),
+)
+def test_strip_pose_is_the_interpolated_centreline_bit_for_bit(seed: int, count: int, stations: list[float]) -> None:
+    """``LaneStrip.pose`` (one station in scalars) gives exactly the centre point of
+    ``interpolate`` (vectorised) at any station, clamped to the strip, vertices included."""
+    rng = np.random.default_rng(seed)
+    centre = np.cumsum(rng.uniform(0.05, 5.0, (count, 1)) * np.column_stack((np.ones(count), rng.normal(0.0, 0.3, count))),
+                       axis=0)
+    half = np.column_stack((np.zeros(count), np.full(count, 1.75)))
+    strip = LaneStrip.from_borders(centre + half, centre - half)
+    for station in [*stations, *strip.station.tolist(), strip.length, 0.0]:
+        x, y, _ = strip.pose(station)
+        expected = strip.interpolate(np.array([station]))[0][0]
+        assert (x, y) == (float(expected[0]), float(expected[1]))

@@ -94,22 +94,37 @@ class Measurement:
     gt_unmatched: str = ""
 
 
+#: Vertices next to an end of a GT border searched first for one farther than
+#: ``GT_END_TOLERANCE_M`` from it (the border's end direction); the rest only if none is.
+END_VERTICES: Final[int] = 8
+
+
+def _end_direction(end: NDArrayFloat, inner: NDArrayFloat) -> NDArrayFloat | None:
+    """Unit vector (world frame) to ``end`` from the first of the vertices ``inner`` (ordered
+    away from the end) farther than ``GT_END_TOLERANCE_M`` from it; None when none is."""
+    for vertices in (inner[:END_VERTICES], inner[END_VERTICES:]):
+        away = end - vertices
+        length = np.hypot(*away.T)
+        apart = np.flatnonzero(length > GT_END_TOLERANCE_M)
+        if apart.size:
+            direction: NDArrayFloat = away[apart[0]] / length[apart[0]]
+            return direction
+    return None
+
+
 def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat, distances_m: NDArrayFloat, step_m: float) -> int:
     """How many ``points`` (``(N, 2)``, m) lie more than ``GT_END_TOLERANCE_M`` past the
     first or last vertex of the polyline ``gt`` along its end direction while that vertex is
     their nearest GT point (within ``step_m`` of their GT distance ``distances_m``)."""
     count = 0
-    for end, inner in ((gt[-1], gt[:-1][::-1]), (gt[0], gt[1:])):
-        away = end - inner
-        length = np.hypot(*away.T)
-        apart = np.flatnonzero(length > GT_END_TOLERANCE_M)
-        if not apart.size:
+    for end, inner in ((gt[-1], gt[-2::-1]), (gt[0], gt[1:])):
+        direction = _end_direction(end, inner)
+        if direction is None:
             continue
-        direction = away[apart[0]] / length[apart[0]]
         offset = points - end
-        past = offset @ direction > GT_END_TOLERANCE_M
-        nearest = np.hypot(*offset.T) <= distances_m + step_m
-        count += int(np.count_nonzero(past & nearest))
+        past = np.flatnonzero(offset @ direction > GT_END_TOLERANCE_M)
+        if past.size:
+            count += int(np.count_nonzero(np.hypot(*offset[past].T) <= distances_m[past] + step_m))
     return count
 
 

@@ -104,8 +104,12 @@ class LaneStrip:
                 self.right[index] * (1.0 - w) + self.right[after] * w)
 
     def pose(self, station: float) -> tuple[float, float, float]:
-        """Position (m) and heading (rad) of the centreline at a station."""
-        (index,), (w,) = self._weights(np.array([station]))
+        """Position (m) and heading (rad) of the centreline at a station (``_weights`` of
+        one station, in scalars)."""
+        clamped = min(max(float(station), 0.0), self.length)
+        index = min(max(int(np.searchsorted(self.station, clamped, side="right")) - 1, 0), len(self.station) - 2)
+        before = self.station[index]
+        w = (clamped - before) / (self.station[index + 1] - before)
         centre = self.centerline[index] * (1.0 - w) + self.centerline[index + 1] * w
         yaw = float(np.interp(station, self.station, self.heading))
         return float(centre[0]), float(centre[1]), float(np.arctan2(np.sin(yaw), np.cos(yaw)))
