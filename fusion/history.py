@@ -134,8 +134,9 @@ def _overlap_departure(probes: NDArrayComplex, history: NDArrayComplex, k: int, 
     n_window = min(k + 1, math.ceil((length_m + _PROBE_MARGIN_M) / spacing_m) + 1)
     stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), n_window - 1))
     h = history[k::-stride][: (n_window - 1) // stride + 1]
-    d = probes[:, None] - h
-    nearest = (d.real * d.real + d.imag * d.imag).argmin(axis=1)
+    squares = (probes[:, None] - h).view(np.float64)
+    squares *= squares
+    nearest = (squares[:, ::2] + squares[:, 1::2]).argmin(axis=1)
     j = np.minimum(nearest, h.shape[0] - 2)
     here = h[j]
     backwards = h[j + 1] - here
@@ -233,7 +234,8 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     result = ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
                               ends.gap_m)
     lanes = tuple(matched_lane(ego, coop, index, "spline", interpolation, params) for index in association.matched)
-    return replace(result, confidence=association.confidence, lanes=lanes)
+    return FusionResult(result.left, result.right, result.left_source, result.right_source, "history", ends.gap_m,
+                        confidence=association.confidence, lanes=lanes)
 
 
 def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
