@@ -107,7 +107,8 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
             break
         borders = ((step.left, step.left_source), (step.right, step.right_source))
         if parts:  # the lane so far ends with the n points of ``end``: the link's ego prefix copies them
-            parts = [(np.concatenate((points[:-n], border)), np.concatenate((labels[:-n], _carried(labels[-n:], source))))
+            parts = [(np.concatenate((points[:-n], border)),
+                      np.concatenate((labels[:-n], _carried(labels[-n:], source))))
                      for (points, labels), n, (border, source) in zip(parts, (end.left.shape[0], end.right.shape[0]),
                                                                         borders)]
         else:  # the first link's ego is the lane so far
