@@ -10,7 +10,8 @@ lane built so far ("ahead" means ahead of its sender, whatever the road did sinc
 ego), and the link's result replaces them. A link whose check
 fails ends the chain there: the lane built so far is the result and the link's reason is
 the chain's reason. Per-point sources follow the points through every link. A chain
-costs its links' fusions and one concatenation per link.
+costs its links' fusions and one concatenation per link after the first (whose result is
+the lane so far as it is).
 """
 
 from __future__ import annotations
