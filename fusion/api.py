@@ -63,12 +63,13 @@ def _convoy_reason(x_rel: float, starts: tuple[OverlapStart, OverlapStart], para
 
 
 def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionParams, borders: Borders,
-            x_rel: float, fits: EndFits) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+            x_rel: float, fits: EndFits, ends: LaneEnds | None = None
+            ) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
     if mode not in _MODES:
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
         raise InvalidParameterError(f"params must be a FusionParams, got {type(params).__name__}")
-    ends = lane_ends(*borders)
+    ends = ends or lane_ends(*borders)
     kind: FusionKind = ("convoy" if ends.gap_m <= 0.0 else "spline") if mode == "auto" else mode
     el, er, cl, cr = borders
     starts = None
@@ -105,12 +106,14 @@ def is_fusible(ego: LaneDetection, coop: LaneDetection, params: FusionParams = D
 
 
 def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAULT_PARAMS,
-           *, mode: str = "auto", framed: tuple[Borders, tuple[float, float, float]] | None = None) -> Association:
+           *, mode: str = "auto", framed: tuple[Borders, tuple[float, float, float]] | None = None,
+           ends: LaneEnds | None = None) -> Association:
     """The fusibility decision of :func:`is_fusible` with its confidence in [0, 1] and the
     neighbour lanes matched (:class:`fusion.association.Association`); ``framed`` is
-    :func:`ego_frame_borders` of the pair when the caller has it already."""
+    :func:`ego_frame_borders` of the pair and ``ends`` its :func:`fusion.fusibility.lane_ends`
+    when the caller has them already."""
     borders, (x_rel, _, _) = framed or ego_frame_borders(ego, coop)
-    return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params))[1]
+    return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params), ends)[1]
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,

@@ -10,7 +10,8 @@ lane built so far ("ahead" means ahead of its sender, whatever the road did sinc
 ego), and the link's result replaces them. A link whose check
 fails ends the chain there: the lane built so far is the result and the link's reason is
 the chain's reason. Per-point sources follow the points through every link. A chain
-costs its links' fusions and one concatenation per link.
+costs its links' fusions and one concatenation per link after the first (whose result is
+the lane so far as it is).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from fusion.history import fuse_history
 from fusion.types import FusionKind, FusionParams, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 _EGO: Final[int] = int(Source.EGO)
+_EGO_BYTE: Final[bytes] = bytes([_EGO])
 
 
 @dataclass(frozen=True)
@@ -72,11 +74,12 @@ class ChainResult:
 def _carried(previous: NDArrayInt8, new: NDArrayInt8) -> NDArrayInt8:
     """Labels of a link's result: its leading (and, for a coop ending inside the lane, trailing)
     ``EGO`` run is the lane built so far, unchanged, so it keeps that lane's labels."""
-    out = new.copy()
-    not_ego = np.flatnonzero(new != _EGO)
-    if not not_ego.size:
+    raw = new.tobytes()  # int8 labels as bytes: the runs are what strip() removes
+    lead = len(raw) - len(raw.lstrip(_EGO_BYTE))
+    if lead == len(raw):
         return previous.copy()
-    lead, trail = int(not_ego[0]), new.shape[0] - 1 - int(not_ego[-1])
+    trail = len(raw) - len(raw.rstrip(_EGO_BYTE))
+    out = new.copy()
     out[:lead] = previous[:lead]
     if trail:
         out[-trail:] = previous[-trail:]
@@ -96,31 +99,36 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
         if not isinstance(coop, LaneDetection):
             raise InvalidDetectionError(f"coops[{i}] must be a LaneDetection, got {type(coop).__name__}")
     end = ego  # the detection whose last points end the lane built so far
-    parts = [[to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)] for b in (ego.left, ego.right)]
+    parts: list[tuple[NDArrayFloat, NDArrayInt8]] = []  # the lane built so far per border; none yet: the ego's
     links: list[ChainLink] = []
     for coop in coops:
         step = fuse_history(end, coop, mode=mode, interpolation=interpolation, params=params)
         links.append(ChainLink(coop.sender, step.kind, step.gap_m, step.reason))
         if step.kind == "none":
             break
-        runs = []
-        for part, own, border, source in zip(parts, (end.left, end.right), (step.left, step.right),
-                                             (step.left_source, step.right_source)):
-            n = own.shape[0]  # the lane so far ends with these points: the link's ego prefix copies them
-            part[:] = (np.concatenate((part[0][:-n], border)),
-                       np.concatenate((part[1][:-n], _carried(part[1][-n:], source))))
-            runs.append(_trailing(source))
-        end = _last_points(coop if runs[0][0] != _EGO else end, runs[0][1], runs[1][1])
-    reason = links[-1].reason if links and links[-1].kind == "none" else ""
-    fused = sum(link.kind != "none" for link in links)
+        borders = ((step.left, step.left_source), (step.right, step.right_source))
+        if parts:  # the lane so far ends with the n points of ``end``: the link's ego prefix copies them
+            parts = [(np.concatenate((points[:-n], border)),
+                      np.concatenate((labels[:-n], _carried(labels[-n:], source))))
+                     for (points, labels), n, (border, source) in zip(parts, (end.left.shape[0], end.right.shape[0]),
+                                                                        borders)]
+        else:  # the first link's ego is the lane so far
+            parts = list(borders)
+        (label, n_left), (_, n_right) = _trailing(step.left_source), _trailing(step.right_source)
+        end = _last_points(coop if label != _EGO else end, n_left, n_right)
+    if not parts:
+        parts = [(to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)) for b in (ego.left, ego.right)]
+    failed = bool(links) and links[-1].kind == "none"
+    reason = links[-1].reason if failed else ""
     (left, left_source), (right, right_source) = parts
+    fused = len(links) - failed
     return ChainResult(left, right, left_source, right_source, tuple(links), 1 + fused, reason)
 
 
 def _trailing(source: NDArrayInt8) -> tuple[int, int]:
     """``(label, length)`` of the last run of equal labels."""
-    changes = np.flatnonzero(source != source[-1])
-    return int(source[-1]), source.shape[0] - (int(changes[-1]) + 1 if changes.size else 0)
+    raw = source.tobytes()
+    return int(source[-1]), len(raw) - len(raw.rstrip(raw[-1:]))
 
 
 def _last_points(detection: LaneDetection, n_left: int, n_right: int) -> LaneDetection:

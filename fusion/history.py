@@ -44,11 +44,14 @@ from dataclasses import replace
 from typing import Final, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, assess, ego_frame_borders, ego_frame_result, fuse, matched_lane
 from fusion.fusibility import lane_ends, relative_pose
-from fusion.geometry import cumulative_length, end_direction, norms, project_point, transform
+from fusion.geometry import cumulative_length, end_direction, project_point, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+
+NDArrayComplex = npt.NDArray[np.complex128]
 
 _HEADING_WINDOW_M: Final[float] = 2.0
 _HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex for its heading
@@ -66,93 +69,103 @@ def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
     return end_direction(points[lo: hi + 1], True, _HEADING_WINDOW_M)
 
 
-def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, ego_offset: NDArrayFloat,
-               coop_offset: NDArrayFloat, *, keep_first: bool = False) -> NDArrayFloat:
+def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, ego_offset: complex,
+               coop_offset: complex, *, keep_first: bool = False) -> NDArrayFloat:
     """History points after arc length ``s_from`` (from it with ``keep_first``) and before the
     last one, each moved by the seam offsets faded linearly in arc length (see the module
-    docstring): ``ego_offset`` (m, 2-vector) at ``s_from``, ``coop_offset`` at the history's end."""
-    first = int(np.searchsorted(s_history, s_from if keep_first else s_from + _MIN_COVER_M,
-                                side="left" if keep_first else "right"))
+    docstring): ``ego_offset`` (m, x + iy) at ``s_from``, ``coop_offset`` at the history's end."""
+    first = int(s_history.searchsorted(s_from if keep_first else s_from + _MIN_COVER_M,
+                                       side="left" if keep_first else "right"))
     last = s_history.shape[0] - 1
     w = (s_history[first:last] - s_from) / (s_history[-1] - s_from)
-    e, c = complex(*ego_offset), complex(*coop_offset)
-    z = np.ascontiguousarray(history[first:last]).view(np.complex128)[:, 0] + e + w * (c - e)
+    z = history[first:last].view(np.complex128)[:, 0] + ego_offset + w * (coop_offset - ego_offset)
     return z.view(np.float64).reshape(-1, 2)
 
 
-def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> NDArrayFloat:
-    """Offset [m] of the coop border's first point from the history's end, across the
+def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> complex:
+    """Offset [m] (x + iy) of the coop border's first point from the history's end, across the
     lane's direction there (the along-track part is the spacing of the two, not an error); the
     direction is the mean of the two chords that end and start there, exact on an arc."""
     (hx, hy), (cx, cy) = end_direction(history, True, _HEADING_WINDOW_M), end_direction(coop, False, _HEADING_WINDOW_M)
     norm = math.hypot(hx + cx, hy + cy) or 1.0
     tx, ty = (hx + cx) / norm, (hy + cy) / norm
-    dx, dy = (coop[0] - history[-1]).tolist()
+    (x0, y0), (x1, y1) = coop[0].tolist(), history[-1].tolist()
+    dx, dy = x0 - x1, y0 - y1
     across = -ty * dx + tx * dy
-    return np.array([-ty * across, tx * across])
+    return complex(-ty * across, tx * across)
 
 
 class _Cover(NamedTuple):
     """Where an ego border end meets the history (frame of the history).
 
     Fields: ``rest`` the history from the vertex before the one nearest the end on;
-    ``s_rest`` its arc lengths [m]; ``s_e`` the foot's arc length on ``rest`` [m]; ``foot``
-    the end's foot point; ``offset_m`` the end's distance from it [m]; ``heading_rad`` the
-    angle between the history and the ego border there [rad]; ``departure_m`` how far [m] the
-    lateral offset of the ego border from the history changes where the two overlap
-    (:func:`_overlap_departure`).
+    ``s_rest`` its arc lengths [m]; ``s_e`` the foot's arc length on ``rest`` [m];
+    ``ego_offset`` the end minus its foot point [m, x + iy]; ``offset_m`` the end's distance
+    from the foot [m]; ``heading_rad`` the angle between the history and the ego border there
+    [rad]; ``departure_m`` how far [m] the lateral offset of the ego border from the history
+    changes where the two overlap (:func:`_overlap_departure`).
     """
 
     rest: NDArrayFloat
     s_rest: NDArrayFloat
     s_e: float
-    foot: NDArrayFloat
+    ego_offset: complex
     offset_m: float
     heading_rad: float
     departure_m: float
 
 
-def _overlap_departure(ego: NDArrayFloat, s_ego: NDArrayFloat, behind: NDArrayFloat, spacing_m: float) -> float:
+def _probes(ego: NDArrayFloat, s_ego: NDArrayFloat, to_history: tuple[float, float, float]) -> NDArrayComplex:
+    """The ego border's points about every :data:`_PROBE_STEP_M` back from its end (the end
+    first), moved by ``to_history`` into the history's frame, as x + iy."""
+    step = max(1, int(_PROBE_STEP_M * (ego.shape[0] - 1) / s_ego[-1]))
+    return transform(ego[::-step], *to_history).view(np.complex128)[:, 0]
+
+
+def _overlap_departure(probes: NDArrayComplex, history: NDArrayComplex, k: int, length_m: float,
+                       spacing_m: float) -> float:
     """Largest change [m] of the signed lateral offset of the ego border from the history along
-    their overlap, from its value at the ego's end: the ego border (points ``ego`` at arc lengths
-    ``s_ego``, frame of the history) is probed about every :data:`_PROBE_STEP_M` back from its
-    end and each probe is offset across the history segment at its nearest history vertex,
-    among the last vertices of ``behind`` (the history up to the vertex nearest the ego's end,
-    ``spacing_m`` apart on average) over one ego length plus :data:`_PROBE_MARGIN_M`, thinned
-    to about :data:`_VERTEX_STEP_M` apart; probes behind the history's start are left out."""
-    probes = np.ascontiguousarray(ego[::-max(1, int(_PROBE_STEP_M * (ego.shape[0] - 1) / s_ego[-1]))])
-    window = behind[::-1][: math.ceil((s_ego[-1] + _PROBE_MARGIN_M) / spacing_m) + 1]
-    whole = window.shape[0] == behind.shape[0]
-    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), window.shape[0] - 1))
-    h = np.ascontiguousarray(window[::stride]).view(np.complex128)[:, 0]
-    p = probes.view(np.complex128)[:, 0]
-    d = p[:, None] - h[None, :]
-    nearest = (d.real * d.real + d.imag * d.imag).argmin(axis=1)
+    their overlap, from its value at the ego's end: each of the ego's ``probes``
+    (:func:`_probes`, ``length_m`` long border) is offset across the history segment at its
+    nearest history vertex, among the last vertices of the history up to its vertex ``k``
+    nearest the ego's end (``spacing_m`` apart on average) over one ego length plus
+    :data:`_PROBE_MARGIN_M`, thinned to about :data:`_VERTEX_STEP_M` apart; probes behind the
+    history's start are left out. ``history`` as x + iy."""
+    n_window = min(k + 1, math.ceil((length_m + _PROBE_MARGIN_M) / spacing_m) + 1)
+    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), n_window - 1))
+    h = history[k::-stride][: (n_window - 1) // stride + 1]
+    squares = (probes[:, None] - h).view(np.float64)
+    squares *= squares
+    nearest = (squares[:, ::2] + squares[:, 1::2]).argmin(axis=1)
     j = np.minimum(nearest, h.shape[0] - 2)
-    backwards = h[j + 1] - h[j]
-    offset = ((p - h[j]) * backwards.conjugate()).imag / np.abs(backwards)
-    covered = (nearest < h.shape[0] - 1) | (not whole)
-    return float(np.abs(offset[covered] - offset[0]).max())
+    here = h[j]
+    backwards = h[j + 1] - here
+    offset = ((probes - here) * backwards.conjugate()).imag / np.abs(backwards)
+    if n_window == k + 1:
+        offset = offset[nearest < h.shape[0] - 1]
+    return float(np.abs(offset - offset[0]).max())
 
 
-def _cover(ego: NDArrayFloat, s_ego: NDArrayFloat, direction: complex, history: NDArrayFloat) -> _Cover | None:
-    """Where the end of an ego border (points ``ego`` at arc lengths ``s_ego``, unit end
-    direction ``direction`` as x + iy, all in the history's frame) meets the history; None
-    when the history does not reach back past the end."""
-    end = ego[-1]
-    k = int(norms(history - end).argmin())
+def _cover(probes: NDArrayComplex, length_m: float, direction: complex, history: NDArrayFloat) -> _Cover | None:
+    """Where the end of an ego border (``length_m`` long, its :func:`_probes`,
+    unit end direction ``direction`` as x + iy, all in the history's frame) meets the history;
+    None when the history does not reach back past the end."""
+    points = history.view(np.complex128)[:, 0]
+    k = int(np.abs(points - probes[0]).argmin())
     if k == 0 or k == history.shape[0] - 1:
         return None
     rest = history[k - 1:]
     s_rest = cumulative_length(rest)
-    s_e, offset, i = project_point(end, rest[:3], s_rest[:3])
+    s_e, offset, i = project_point(probes[:1].view(np.float64), rest[:3], s_rest[:3])
     if s_e <= _MIN_COVER_M and k == 1:
         return None
     heading = complex(*_heading(rest, 1)) / direction
     t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
-    foot = rest[i] + t * (rest[i + 1] - rest[i])
-    departure = _overlap_departure(ego, s_ego, history[: k + 1], s_rest[-1] / (rest.shape[0] - 1))
-    return _Cover(rest, s_rest, s_e, foot, offset, abs(math.atan2(heading.imag, heading.real)), departure)
+    (ax, ay), (bx, by) = rest[i: i + 2].tolist()
+    foot = complex(ax + t * (bx - ax), ay + t * (by - ay))
+    departure = _overlap_departure(probes, points, k, length_m, s_rest[-1] / (rest.shape[0] - 1))
+    return _Cover(rest, s_rest, s_e, complex(probes[0]) - foot, offset, abs(math.atan2(heading.imag, heading.real)),
+                  departure)
 
 
 def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> str:
@@ -194,34 +207,35 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     ends = lane_ends(el, er, cl, cr)
     if x_rel <= 0.0 or ends.gap_m <= 0.0:
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-    association = assess(ego, coop, params, mode=mode, framed=framed)
+    association = assess(ego, coop, params, mode=mode, framed=framed, ends=ends)
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
-    # the history stays in the coop frame; the ego's borders go there
+    # the history stays in the coop frame; the ego's border probes go there
     to_coop = relative_pose(coop.pose, ego.pose)
     rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
-    ego_points = transform(ego.points, *to_coop)
     n_left = el.shape[0]
-    ego_borders = (ego_points[:n_left], ego_points[n_left:])
-    arclengths = (ego.arclength[:n_left], ego.arclength[n_left:])
-    covers = [_cover(points, s, complex(*end_direction(own, True, _HEADING_WINDOW_M)) * rotation, side)
-              for points, s, own, side in zip(ego_borders, arclengths, (el, er), (history.left, history.right))]
-    if covers[0] is None or covers[1] is None:
-        t_end = complex(*ends.t_end) * rotation
-        p_end = transform(np.array([ends.p_end]), *to_coop)[0]
-        return _partial(ego, coop, p_end, (t_end.real, t_end.imag), mode, interpolation, params)
+    covers = []
+    for own, s, side in ((el, ego.arclength[:n_left], history.left), (er, ego.arclength[n_left:], history.right)):
+        cover = _cover(_probes(own, s, to_coop), float(s[-1]),
+                       complex(*end_direction(own, True, _HEADING_WINDOW_M)) * rotation, side)
+        if cover is None:
+            t_end = complex(*ends.t_end) * rotation
+            p_end = transform(np.array([ends.p_end]), *to_coop)[0]
+            return _partial(ego, coop, p_end, (t_end.real, t_end.imag), mode, interpolation, params)
+        covers.append(cover)
     for side, cover in zip(("left", "right"), covers):
         reason = _reason(side, cover, ends.width_m, params)
         if reason:
             return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, reason)
-    gaps = [seam_blend(cover.rest, cover.s_rest, cover.s_e, e[-1] - cover.foot, _coop_offset(cover.rest, c))
-            for cover, e, c in zip(covers, ego_borders, (coop.left, coop.right))]
+    gaps = [seam_blend(cover.rest, cover.s_rest, cover.s_e, cover.ego_offset, _coop_offset(cover.rest, c))
+            for cover, c in zip(covers, (coop.left, coop.right))]
     n_gap = gaps[0].shape[0]
     gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
     result = ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
                               ends.gap_m)
     lanes = tuple(matched_lane(ego, coop, index, "spline", interpolation, params) for index in association.matched)
-    return replace(result, confidence=association.confidence, lanes=lanes)
+    return FusionResult(result.left, result.right, result.left_source, result.right_source, "history", ends.gap_m,
+                        confidence=association.confidence, lanes=lanes)
 
 
 def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
@@ -236,8 +250,7 @@ def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end
         ahead = history[_ahead_of(history, p_end, t_end)]
         if ahead.shape[0] < 2:
             return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
-        joined = seam_blend(ahead, cumulative_length(ahead), 0.0, np.zeros(2), _coop_offset(ahead, first),
-                            keep_first=True)
+        joined = seam_blend(ahead, cumulative_length(ahead), 0.0, 0j, _coop_offset(ahead, first), keep_first=True)
         extended.append(np.concatenate((joined, first)))
     longer = replace(coop, left=extended[0], right=extended[1], history=None)
     result = fuse(ego, longer, mode=mode, interpolation=interpolation, params=params)
