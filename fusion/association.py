@@ -171,8 +171,9 @@ def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
     on the two other borders span the cross-section."""
     (el, er), (cl, cr) = own
     end = 0.5 * (el[-1] + er[-1])
-    left, right = foot_point(end, cl), foot_point(end, cr)
-    return float(np.hypot(*(end - 0.5 * (left + right)))), 0.5 * float(np.hypot(*(left - right)))
+    (lx, ly), (rx, ry) = foot_point(end, cl), foot_point(end, cr)
+    ex, ey = end.tolist()
+    return math.hypot(ex - 0.5 * (lx + rx), ey - 0.5 * (ly + ry)), 0.5 * math.hypot(lx - rx, ly - ry)
 
 
 def _end_inside(ego_lane: Lane, other: Lane) -> bool:
@@ -294,7 +295,7 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     association = _associate_lanes(ego, coop, own, convoy, evidence, params)
     if association.reason:
         return association
-    return replace(association, confidence=association.confidence * graded)
+    return Association("", association.confidence * graded, association.matched)
 
 
 def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
