@@ -75,7 +75,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
         if params.fusibility == "paper":
             reason, evidence = paper_check(ego.pose, coop.pose, ends, params), "open"
         else:
-            reason, evidence = geometric_assessment(ego.pose, coop.pose, ends, params, fits)
+            reason, evidence = geometric_assessment(ego.pose, coop.pose, ends, params, fits.arcs)
     elif ends.gap_m > 0.0:
         reason, evidence = f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", "cone"
     else:
@@ -84,8 +84,8 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     if reason:
         return kind, Association(reason, 0.0), ends, starts
     start_offset_m = None if starts is None else max(start.offset_m for start in starts)
-    association = associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits, start_offset_m,
-                            ends)
+    association = associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits.arcs,
+                            start_offset_m, ends)
     return kind, association, ends, starts
 
 

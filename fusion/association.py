@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, Final, Mapping
+from typing import Callable, Final, Mapping, Sequence
 
 import numpy as np
 
@@ -48,7 +48,7 @@ from fusion.fusibility import (
     relative_pose,
     s_bend_shift,
 )
-from fusion.geometry import foot_point, transform
+from fusion.geometry import EndFit, foot_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
@@ -142,7 +142,7 @@ class _Pairs:
         (el, er), (cl, cr) = ego_lane, coop_lane
         ends = lane_ends(el, er, cl, cr)
         fits = EndFits((el, er, cl, cr), self.params)
-        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, fits)[0]
+        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, fits.arcs)[0]
 
     def plausible(self, shift: int) -> bool | None:
         """Whether shift δ passes on every pair it forms with lane 0; None without a pair."""
@@ -232,7 +232,7 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
 
 
 def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
-                   fits: EndFits | None = None, start_offset_m: float | None = None,
+                   fits: Callable[[], Sequence[EndFit]] | None = None, start_offset_m: float | None = None,
                    ends: LaneEnds | None = None) -> tuple[str, float]:
     """``(reason, used)``: why the coop's lane is not the ego's by the two tightened geometric
     rules ("" when it may be), and the largest share in [0, 1] of a lateral limit the pair
@@ -279,7 +279,8 @@ def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, par
 
 
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
-              params: FusionParams, fits: EndFits | None = None, start_offset_m: float | None = None,
+              params: FusionParams, fits: Callable[[], Sequence[EndFit]] | None = None,
+              start_offset_m: float | None = None,
               ends: LaneEnds | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop

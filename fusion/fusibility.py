@@ -206,11 +206,16 @@ def _curvature(a: EndFit, b: EndFit) -> tuple[float, float]:
     return 0.5 * (a.curvature + b.curvature), 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
 
 
+def clearly_curved(k: float, sd: float) -> bool:
+    """Whether an end of curvature ``k`` (σ ``sd``) [1/m] is clearly curved: |κ| at least
+    1/1000 m⁻¹ and 4σ."""
+    return abs(k) >= max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd)
+
+
 def _opposite_curves(k0: float, s0: float, k1: float, s1: float) -> bool:
     """Whether two ends with curvatures ``k0``, ``k1`` (σ ``s0``, ``s1``) [1/m] clearly curve
     opposite ways."""
-    clear = all(abs(k) >= max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd) for k, sd in ((k0, s0), (k1, s1)))
-    return clear and k0 * k1 < 0.0
+    return clearly_curved(k0, s0) and clearly_curved(k1, s1) and k0 * k1 < 0.0
 
 
 def s_bend_shift(gap_m: float, fits: Sequence[EndFit]) -> float:

@@ -15,6 +15,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
+from fusion.fusibility import clearly_curved
 from fusion.geometry import EndFit, fit_ends
 from fusion.types import FusionParams, NDArrayFloat
 
@@ -23,6 +24,7 @@ _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _STRAIGHT_SIGMAS: Final[float] = 2.5
+_WHOLE_WINDOW_M: Final[float] = 1e6  # longer than any detection: a fit over all of a border's points
 TRANSITION_SHARE: Final[float] = 0.5  # share of a turn between straight ends in its clothoids (equal thirds)
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GL_NODES_SQUARED: Final[NDArrayFloat] = _GL_NODES * _GL_NODES
@@ -254,18 +256,43 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
 
 class EndFits:
     """:func:`lane_end_fits` of four ego-frame borders (ego left, ego right, coop left, coop
-    right) with ``params.heading_window_m``, computed once on the first call."""
+    right) with ``params.heading_window_m``, computed once on the first call; :meth:`arcs`
+    the same with the curvature of the whole detection where the end cannot resolve it."""
 
     def __init__(self, borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
                  params: FusionParams):
         self._borders, self._params = borders, params
         self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
+        self._arcs: tuple[EndFit, ...] | None = None
 
     def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
         if self._fits is None:
             el, er, cl, cr = self._borders
             self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
         return self._fits
+
+    def arcs(self) -> tuple[EndFit, ...]:
+        """The end fits, where a border end is an arc (finite σ_κ) but not clearly curved
+        (:func:`fusion.fusibility.clearly_curved`) with the curvature and σ_κ [1/m] of the
+        fit over all of the border's points instead when that fit is an arc too and has the
+        smaller σ_κ (:func:`fusion.geometry.fit_ends` with one window over the whole border:
+        its cubic test says whether the whole detection is one arc). Under detection noise a
+        2–6 m end window cannot tell a gentle curve (R 130 m) from a straight; the ~30 m of a
+        whole detection can, and its σ_κ comes from the same noise estimate. A clearly curved
+        end (every noise-free arc, a tight corner) keeps its own fit."""
+        if self._arcs is None:
+            fits = self()
+            weak = [e for e, fit in enumerate(fits)
+                    if fit.curvature_sigma < math.inf and not clearly_curved(fit.curvature, fit.curvature_sigma)]
+            arcs = list(fits)
+            if weak:
+                whole = fit_ends([self._borders[e] for e in weak], [e < 2 for e in weak], (_WHOLE_WINDOW_M,),
+                                 _NOISE_SAMPLE_M)
+                for e, fit in zip(weak, whole):
+                    if fit.curvature_sigma < fits[e].curvature_sigma:
+                        arcs[e] = fits[e]._replace(curvature=fit.curvature, curvature_sigma=fit.curvature_sigma)
+            self._arcs = tuple(arcs)
+        return self._arcs
 
 
 def transition_tangent(turn_rad: float, share: float) -> float:
