@@ -34,7 +34,6 @@ import math
 from dataclasses import dataclass, replace
 from typing import Callable, Final, Mapping, Sequence
 
-import numpy as np
 
 from fusion.convoy import overlap_start
 from fusion.fusibility import (
@@ -284,8 +283,8 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
               ends: LaneEnds | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame; ``fits`` their end fits, ``start_offset_m`` a convoy's
-    start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
+    lane) borders in the ego frame; ``fits`` their end fits (:meth:`fusion.spline.EndFits.arcs`),
+    ``start_offset_m`` a convoy's start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
     or the road-edge evidence that decided) times 1 − (1 − :data:`CONFIDENCE_AT_LIMIT`)·used,
     ``used`` the share of a lateral limit the pair uses: monotone in the margin. See the
     module docstring."""

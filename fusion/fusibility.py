@@ -149,8 +149,10 @@ def geometric_assessment(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: Fusi
        neighbour lane when a curve starts or ends inside the gap, or both ends lie in one
        curve, however gentle; the same lane is off only by a clothoid shift (L²/24R).
        ``end_fits`` returns the least-squares fits of the (ego left, ego right) ends and (coop
-       left, coop right) starts (:func:`fusion.spline.lane_end_fits`); the rule is skipped
-       without them. Two straight ends (a whole curve inside the gap), clothoid ends and ends
+       left, coop right) starts (:func:`fusion.spline.lane_end_fits`; :func:`fusion.fuse`
+       passes :meth:`fusion.spline.EndFits.arcs`, which takes the curvature of a whole
+       detection that is one arc where the end window cannot resolve it under noise); the
+       rule is skipped without them. Two straight ends (a whole curve inside the gap), clothoid ends and ends
        curving opposite ways leave the radius in the gap open: only the cone applies then.
     """
     x_rel, _, _ = relative_pose(ego, coop)
