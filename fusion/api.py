@@ -7,7 +7,6 @@ one transform, the result to the world frame in another); all checks are frame-i
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Final, Sequence
 
 import numpy as np
@@ -77,7 +76,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
         if params.fusibility == "paper":
             reason, evidence = paper_check(ego.pose, coop.pose, ends, params), "open"
         else:
-            reason, evidence = geometric_assessment(ego.pose, coop.pose, ends, params, fits)
+            reason, evidence = geometric_assessment(ego.pose, coop.pose, ends, params, fits.arcs)
     elif ends.gap_m > 0.0:
         reason, evidence = f"no overlap: the coop detection starts {ends.gap_m:.2f} m after the ego detection ends", "cone"
     else:
@@ -86,8 +85,8 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
     if reason:
         return kind, Association(reason, 0.0), ends, starts
     start_offset_m = None if starts is None else max(start.offset_m for start in starts)
-    association = associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits, start_offset_m,
-                            ends)
+    association = associate(ego, coop, ((el, er), (cl, cr)), kind == "convoy", evidence, params, fits.arcs,
+                            start_offset_m, ends)
     return kind, association, ends, starts
 
 
@@ -117,14 +116,17 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
-                     gap_m: float, reason: str = "") -> FusionResult:
+                     gap_m: float, reason: str = "", confidence: float = 0.0,
+                     lanes: tuple[tuple[int, NDArrayFloat, NDArrayFloat], ...] = ()) -> FusionResult:
     """Result from ego-frame ``parts``, the left border's then as many of the right border's, with
-    one :class:`Source` per part: one concatenation and one transform to the world frame."""
+    one :class:`Source` per part: one concatenation and one transform to the world frame (the
+    other fields as :class:`FusionResult`)."""
     counts = [points.shape[0] for points in parts]
     world = to_world(np.concatenate(parts), ego.pose)
     labels = sources.repeat(counts)
     n_left = sum(counts[: len(parts) // 2])
-    return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason)
+    return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason,
+                        confidence, lanes)
 
 
 def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
@@ -146,14 +148,16 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     el, er, _, _ = borders
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
-    result = _fused(ego, coop, borders, fits, kind, starts, interpolation, params)
+    parts, sources = _fused(coop, borders, fits, kind, starts, interpolation, params)
     lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
-    return replace(result, gap_m=ends.gap_m, confidence=association.confidence, lanes=lanes)
+    return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes)
 
 
-def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKind,
-           starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str, params: FusionParams) -> FusionResult:
-    """The fused lane of a pair found fusible (``kind``, the convoy overlap ``starts``)."""
+def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKind,
+           starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str,
+           params: FusionParams) -> tuple[Sequence[NDArrayFloat], NDArrayInt8]:
+    """The ego-frame parts and their sources (:func:`ego_frame_result`) of the fused lane of a
+    pair found fusible (``kind``, the convoy overlap ``starts``)."""
     el, er, cl, cr = borders
     if kind == "convoy":
         assert starts is not None
@@ -161,7 +165,7 @@ def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: EndF
         n_left = cl.shape[0]
         parts, sources = zip(*convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
                              *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend))
-        return ego_frame_result(ego, parts, np.array(sources, dtype=np.int8), "convoy", 0.0)
+        return parts, np.array(sources, dtype=np.int8)
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(
@@ -169,7 +173,7 @@ def _fused(ego: LaneDetection, coop: LaneDetection, borders: Borders, fits: EndF
             params.spacing_m)
     else:
         gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
-    return ego_frame_result(ego, (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES, "spline", 0.0)
+    return (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES
 
 
 def matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: FusionKind, interpolation: str,
@@ -181,5 +185,6 @@ def matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: Fusi
     starts = None
     if kind == "convoy":
         starts = _overlap_starts(borders, lanes[0].arclength)
-    fused = _fused(lanes[0], lanes[1], borders, EndFits(borders, params), kind, starts, interpolation, params)
+    parts, sources = _fused(lanes[1], borders, EndFits(borders, params), kind, starts, interpolation, params)
+    fused = ego_frame_result(lanes[0], parts, sources, kind, 0.0)
     return index, fused.left, fused.right

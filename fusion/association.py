@@ -32,9 +32,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, Final, Mapping
+from typing import Callable, Final, Mapping, Sequence
 
-import numpy as np
 
 from fusion.convoy import overlap_start
 from fusion.fusibility import (
@@ -48,7 +47,7 @@ from fusion.fusibility import (
     relative_pose,
     s_bend_shift,
 )
-from fusion.geometry import foot_point, transform
+from fusion.geometry import EndFit, foot_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 
@@ -142,7 +141,7 @@ class _Pairs:
         (el, er), (cl, cr) = ego_lane, coop_lane
         ends = lane_ends(el, er, cl, cr)
         fits = EndFits((el, er, cl, cr), self.params)
-        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, fits)[0]
+        return not geometric_assessment(self.ego.pose, self.coop.pose, ends, self.params, fits.arcs)[0]
 
     def plausible(self, shift: int) -> bool | None:
         """Whether shift δ passes on every pair it forms with lane 0; None without a pair."""
@@ -171,8 +170,9 @@ def overlap_end_offset(own: tuple[Lane, Lane]) -> tuple[float, float]:
     on the two other borders span the cross-section."""
     (el, er), (cl, cr) = own
     end = 0.5 * (el[-1] + er[-1])
-    left, right = foot_point(end, cl), foot_point(end, cr)
-    return float(np.hypot(*(end - 0.5 * (left + right)))), 0.5 * float(np.hypot(*(left - right)))
+    (lx, ly), (rx, ry) = foot_point(end, cl), foot_point(end, cr)
+    ex, ey = end.tolist()
+    return math.hypot(ex - 0.5 * (lx + rx), ey - 0.5 * (ly + ry)), 0.5 * math.hypot(lx - rx, ly - ry)
 
 
 def _end_inside(ego_lane: Lane, other: Lane) -> bool:
@@ -231,7 +231,7 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
 
 
 def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
-                   fits: EndFits | None = None, start_offset_m: float | None = None,
+                   fits: Callable[[], Sequence[EndFit]] | None = None, start_offset_m: float | None = None,
                    ends: LaneEnds | None = None) -> tuple[str, float]:
     """``(reason, used)``: why the coop's lane is not the ego's by the two tightened geometric
     rules ("" when it may be), and the largest share in [0, 1] of a lateral limit the pair
@@ -278,12 +278,13 @@ def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, par
 
 
 def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool, evidence: Evidence,
-              params: FusionParams, fits: EndFits | None = None, start_offset_m: float | None = None,
+              params: FusionParams, fits: Callable[[], Sequence[EndFit]] | None = None,
+              start_offset_m: float | None = None,
               ends: LaneEnds | None = None) -> Association:
     """The association of a pair whose lanes 0 passed the geometric check (``evidence``: the
     rule that passed them; a convoy overlap counts as ``"cone"``). ``own``: (ego lane, coop
-    lane) borders in the ego frame; ``fits`` their end fits, ``start_offset_m`` a convoy's
-    start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
+    lane) borders in the ego frame; ``fits`` their end fits (:meth:`fusion.spline.EndFits.arcs`),
+    ``start_offset_m`` a convoy's start offset and ``ends`` their lane ends when known (for :func:`geometry_check`). The confidence of a fused pair is its level (the rule
     or the road-edge evidence that decided) times 1 − (1 − :data:`CONFIDENCE_AT_LIMIT`)·used,
     ``used`` the share of a lateral limit the pair uses: monotone in the margin. See the
     module docstring."""
@@ -294,7 +295,7 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     association = _associate_lanes(ego, coop, own, convoy, evidence, params)
     if association.reason:
         return association
-    return replace(association, confidence=association.confidence * graded)
+    return Association("", association.confidence * graded, association.matched)
 
 
 def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,

@@ -149,8 +149,10 @@ def geometric_assessment(ego: Pose2D, coop: Pose2D, ends: LaneEnds, params: Fusi
        neighbour lane when a curve starts or ends inside the gap, or both ends lie in one
        curve, however gentle; the same lane is off only by a clothoid shift (L²/24R).
        ``end_fits`` returns the least-squares fits of the (ego left, ego right) ends and (coop
-       left, coop right) starts (:func:`fusion.spline.lane_end_fits`); the rule is skipped
-       without them. Two straight ends (a whole curve inside the gap), clothoid ends and ends
+       left, coop right) starts (:func:`fusion.spline.lane_end_fits`; :func:`fusion.fuse`
+       passes :meth:`fusion.spline.EndFits.arcs`, which takes the curvature of a whole
+       detection that is one arc where the end window cannot resolve it under noise); the
+       rule is skipped without them. Two straight ends (a whole curve inside the gap), clothoid ends and ends
        curving opposite ways leave the radius in the gap open: only the cone applies then.
     """
     x_rel, _, _ = relative_pose(ego, coop)
@@ -206,11 +208,16 @@ def _curvature(a: EndFit, b: EndFit) -> tuple[float, float]:
     return 0.5 * (a.curvature + b.curvature), 0.5 * math.hypot(a.curvature_sigma, b.curvature_sigma)
 
 
+def clearly_curved(k: float, sd: float) -> bool:
+    """Whether an end of curvature ``k`` (σ ``sd``) [1/m] is clearly curved: |κ| at least
+    1/1000 m⁻¹ and 4σ."""
+    return abs(k) >= max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd)
+
+
 def _opposite_curves(k0: float, s0: float, k1: float, s1: float) -> bool:
     """Whether two ends with curvatures ``k0``, ``k1`` (σ ``s0``, ``s1``) [1/m] clearly curve
     opposite ways."""
-    clear = all(abs(k) >= max(_MIN_ARC_CURVATURE, _CURVED_SIGMAS * sd) for k, sd in ((k0, s0), (k1, s1)))
-    return clear and k0 * k1 < 0.0
+    return clearly_curved(k0, s0) and clearly_curved(k1, s1) and k0 * k1 < 0.0
 
 
 def s_bend_shift(gap_m: float, fits: Sequence[EndFit]) -> float:

@@ -57,24 +57,26 @@ def cumulative_length(points: NDArrayFloat) -> NDArrayFloat:
     return out
 
 
-def _nearest_segment(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float, int, float]:
-    """``(distance, segment, t)`` of the closest point of ``polyline`` to ``point``: its
-    distance [m], the index of the segment holding it and its fraction along that segment.
+def _nearest_segment(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float, int, float, float, float]:
+    """``(distance, segment, t, x, y)`` of the closest point of ``polyline`` to ``point``: its
+    distance [m], the index of the segment holding it, its fraction along that segment and
+    its coordinates [m].
     Only the two segments at the nearest vertex are examined (exact for polylines sampled
     finer than their curvature radius)."""
     k = int(norms(polyline - point).argmin())
-    px, py = float(point[0]), float(point[1])
-    best = (math.inf, 0, 0.0)
-    for i in (k - 1, k):
-        if i < 0 or i + 1 >= polyline.shape[0]:
-            continue
-        ax, ay = float(polyline[i, 0]), float(polyline[i, 1])
-        dx, dy = float(polyline[i + 1, 0]) - ax, float(polyline[i + 1, 1]) - ay
+    px, py = point.tolist()
+    first = max(k - 1, 0)
+    vertices = polyline[first:k + 2].tolist()  # the nearest vertex and its neighbours, as floats
+    best = (math.inf, 0, 0.0, px, py)
+    for j in range(len(vertices) - 1):
+        (ax, ay), (bx, by) = vertices[j], vertices[j + 1]
+        dx, dy = bx - ax, by - ay
         seg2 = dx * dx + dy * dy
         t = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / seg2)) if seg2 > 0.0 else 0.0
-        dist = math.hypot(ax + t * dx - px, ay + t * dy - py)
+        fx, fy = ax + t * dx, ay + t * dy
+        dist = math.hypot(fx - px, fy - py)
         if dist < best[0]:
-            best = (dist, i, t)
+            best = (dist, first + j, t, fx, fy)
     return best
 
 
@@ -85,15 +87,14 @@ def project_point(point: NDArrayFloat, polyline: NDArrayFloat, arclength: NDArra
     Returns ``(s, distance, segment)``: arc length of the foot point [m], its distance [m] and
     the index of the segment holding it.
     """
-    dist, i, t = _nearest_segment(point, polyline)
+    dist, i, t, _, _ = _nearest_segment(point, polyline)
     return float(arclength[i] + t * (arclength[i + 1] - arclength[i])), dist, i
 
 
-def foot_point(point: NDArrayFloat, polyline: NDArrayFloat) -> NDArrayFloat:
-    """The closest point of ``polyline`` to ``point`` (near its nearest vertex, see
+def foot_point(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float, float]:
+    """The closest point ``(x, y)`` of ``polyline`` to ``point`` (near its nearest vertex, see
     :func:`_nearest_segment`), same frame [m]."""
-    _, i, t = _nearest_segment(point, polyline)
-    return polyline[i] + t * (polyline[i + 1] - polyline[i])
+    return _nearest_segment(point, polyline)[3:]
 
 
 def end_direction(points: NDArrayFloat, at_end: bool, window_m: float) -> tuple[float, float]:

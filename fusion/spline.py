@@ -15,6 +15,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
+from fusion.fusibility import clearly_curved
 from fusion.geometry import EndFit, fit_ends
 from fusion.types import FusionParams, NDArrayFloat
 
@@ -23,6 +24,16 @@ _MIN_KNOT_STEP_M: Final[float] = 1e-9
 _NOISE_SAMPLE_M: Final[float] = 5.0
 _WINDOWS_M: Final[tuple[float, ...]] = (2.0, 3.0, 4.5, 6.0)
 _STRAIGHT_SIGMAS: Final[float] = 2.5
+_WHOLE_WINDOW_M: Final[float] = 1e6  # longer than any detection: a fit over all of a border's points
+_WHOLE_MAX_TURN_RAD: Final[float] = 0.75
+"""Largest turn [rad] of a border's chord at its end fit's curvature for which the fit over
+the whole border is tried: the quadratic model of :func:`fusion.geometry.fit_ends` is exact
+to about 1 % in κ up to this turn per window (8 m radius over 6 m); a tighter curve over a
+whole detection is no arc in that model."""
+_RESOLVED_SIGMAS: Final[float] = 10.0
+"""An end fit with |κ| ≥ this many σ_κ (and clearly curved) measures its curvature to 10 %:
+its arc's radius interval (± 2 % + 3σ) is then narrow enough without the whole detection."""
+_AGREE_SIGMAS: Final[float] = 3.0  # an end and its whole border are one arc when their curvatures agree within this
 TRANSITION_SHARE: Final[float] = 0.5  # share of a turn between straight ends in its clothoids (equal thirds)
 _GL_NODES, _GL_WEIGHTS = (np.polynomial.legendre.leggauss(16) + np.array([[1.0], [0.0]])) * 0.5  # on [0, 1]
 _GL_NODES_SQUARED: Final[NDArrayFloat] = _GL_NODES * _GL_NODES
@@ -254,18 +265,50 @@ def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFlo
 
 class EndFits:
     """:func:`lane_end_fits` of four ego-frame borders (ego left, ego right, coop left, coop
-    right) with ``params.heading_window_m``, computed once on the first call."""
+    right) with ``params.heading_window_m``, computed once on the first call; :meth:`arcs`
+    the same with the curvature of the whole detection where that is one arc."""
 
     def __init__(self, borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
                  params: FusionParams):
         self._borders, self._params = borders, params
         self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
+        self._arcs: tuple[EndFit, ...] | None = None
 
     def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
         if self._fits is None:
             el, er, cl, cr = self._borders
             self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
         return self._fits
+
+    def arcs(self) -> tuple[EndFit, ...]:
+        """The end fits, or, when one of them does not resolve its curvature
+        (:data:`_RESOLVED_SIGMAS`, :func:`fusion.fusibility.clearly_curved`; infinite σ_κ
+        included), each with the
+        direction, curvature and σ_κ of the fit over all of its border's points where that fit
+        is an arc (:func:`fusion.geometry.fit_ends` with one window over the whole border: its
+        cubic test says whether the whole detection is one arc), has the smaller σ_κ and
+        agrees with the end's curvature within 3σ of their difference. Under detection noise
+        a 2–6 m end window cannot tell a gentle curve (R 130 m) from a straight or pin down
+        its heading; the ~30 m of a whole detection can, and its σ_κ comes from the same noise
+        estimate. Four resolved ends (every noise-free arc, a tight corner) keep their
+        fits, and so do all when every end's curvature turns its border by more than
+        :data:`_WHOLE_MAX_TURN_RAD` (a curve beyond the fit's model), or an end whose whole
+        detection is no single arc in the fit's model."""
+        if self._arcs is None:
+            fits = self()
+            self._arcs = fits
+            turns = [abs(fit.curvature) * math.dist(*border[::border.shape[0] - 1].tolist())
+                     for fit, border in zip(fits, self._borders) if fit.curvature_sigma < math.inf]
+            if (not all(abs(fit.curvature) >= _RESOLVED_SIGMAS * fit.curvature_sigma and clearly_curved(
+                    fit.curvature, fit.curvature_sigma) for fit in fits)
+                    and min(turns, default=0.0) <= _WHOLE_MAX_TURN_RAD):
+                whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M)
+                self._arcs = tuple(end._replace(direction=fit.direction, curvature=fit.curvature,
+                                                curvature_sigma=fit.curvature_sigma)
+                                   if fit.curvature_sigma < end.curvature_sigma and abs(fit.curvature - end.curvature)
+                                   <= _AGREE_SIGMAS * math.hypot(fit.curvature_sigma, end.curvature_sigma) else end
+                                   for end, fit in zip(fits, whole))
+        return self._arcs
 
 
 def transition_tangent(turn_rad: float, share: float) -> float:
