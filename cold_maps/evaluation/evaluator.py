@@ -49,6 +49,7 @@ from cold_maps.simulation.drive import (
 )
 from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 if TYPE_CHECKING:
     from cold_maps.recording.recorder import Recorder
@@ -181,20 +182,30 @@ class MapEvaluator:
             collector.gt_warnings.append(self.gt_warning)
 
     def run_drive(self, drive_index: int, collector: Collector, *, recorder: Recorder | None = None,
-                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None) -> int:
-        """Evaluates every frame of one drive (a work unit: its error models draw from the
-        drive's own generator); returns the next free global frame index."""
+                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None,
+                  frames: range | None = None) -> int:
+        """Evaluates the ``frames`` (default: all) of one drive, whose frame 0 has the global
+        index ``frame_offset`` (a work unit: its error models draw from the drive's own
+        generator; a part of a drive only when :attr:`frames_independent`); returns the
+        global index after the last frame."""
         self.prepare()
         drive = self.drives[drive_index]
-        LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-        frame_index = frame_offset
-        for frame in range(drive.frames):
-            self._frame(collector, drive_index, frame, frame_index, recorder)
+        frames = range(drive.frames) if frames is None else frames
+        if frames.start == 0:
+            LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
+        for frame in frames:
+            self._frame(collector, drive_index, frame, frame_offset + frame, recorder)
             collector.frames_done += 1
-            frame_index += 1
             if on_frame is not None:
                 on_frame()
-        return frame_index
+        return frame_offset + frames.stop
+
+    @property
+    def frames_independent(self) -> bool:
+        """Whether a frame can be evaluated without the frames before it: the sensor error
+        models are off (nothing draws from the drive's generator) and no history or message
+        exchange carries state from frame to frame."""
+        return self.exchange is None and self.plan.errors == SensorErrorModel()
 
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import os
+from dataclasses import dataclass
 from typing import Any, Final, Mapping, Sequence
 
 import numpy as np
@@ -51,26 +52,52 @@ def _save(figure: Any, path: str | os.PathLike[str]) -> None:
     atomic_write_bytes(path, buffer.getvalue())
 
 
+@dataclass(frozen=True)
+class ErrorSeries:
+    """The error per frame of one scenario (usually one boundary of one fusion).
+
+    Fields:
+        label: its name in the legend.
+        frames: frame indices of its evaluations.
+        means, maxima: mean and max error of each evaluation (m), NaN without a lane.
+    """
+
+    label: str
+    frames: NDArrayFloat
+    means: NDArrayFloat
+    maxima: NDArrayFloat
+
+    @classmethod
+    def of(cls, scenario: ScenarioAccumulator) -> ErrorSeries:
+        """The series of a scenario's records."""
+        records = scenario.records
+        return cls(f"{scenario.key.fusion} {scenario.key.boundary}",
+                   np.array([r.frame for r in records], dtype=float),
+                   np.array([r.errors_m.mean() if r.fused else np.nan for r in records]),
+                   np.array([r.errors_m.max() if r.fused else np.nan for r in records]))
+
+
 def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
     """Mean (solid) and max (dashed) error per frame (m) of each scenario, usually the left
     and right boundary of one fusion; frames without a lane are gaps."""
     if not scenarios:
         raise ValueError("plot_frame_errors: no scenarios to plot")
+    plot_error_series(path, [ErrorSeries.of(s) for s in scenarios],
+                      title=title or f"error per frame: {scenarios[0].key.map}")
+
+
+def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str) -> None:
+    """:func:`plot_frame_errors` of the scenarios' series."""
     figure = _figure()
     axes = figure.add_subplot()
-    for index, scenario in enumerate(scenarios):
-        records = scenario.records
-        frames = np.array([r.frame for r in records], dtype=float)
-        means = np.array([r.errors_m.mean() if r.fused else np.nan for r in records])
-        maxima = np.array([r.errors_m.max() if r.fused else np.nan for r in records])
-        label = f"{scenario.key.fusion} {scenario.key.boundary}"
+    for index, line in enumerate(series):
         color = f"C{index}"
-        axes.plot(frames, means, color=color, linestyle="-", label=f"{label} mean")
-        axes.plot(frames, maxima, color=color, linestyle="--", label=f"{label} max")
+        axes.plot(line.frames, line.means, color=color, linestyle="-", label=f"{line.label} mean")
+        axes.plot(line.frames, line.maxima, color=color, linestyle="--", label=f"{line.label} max")
     axes.set_xlabel("frame")
     axes.set_ylabel("error [m]")
     axes.set_ylim(bottom=0.0)
-    axes.set_title(title or f"error per frame: {scenarios[0].key.map}")
+    axes.set_title(title)
     axes.grid(True, alpha=0.3)
     axes.legend(loc="upper right", fontsize="small")
     _save(figure, path)
@@ -117,20 +144,30 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
     _save(figure, path)
 
 
-def plot_error_vs_range(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
-    """Max error (m) of every fused evaluation against its perception range (m), one colour per
-    vehicle count (chain length); correct fusions filled, the others hollow."""
+def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayFloat]:
+    """Per vehicle count (chain length): (perception range m, max error m, 1.0 if the pair
+    is truly on one lane else 0.0) of every fused evaluation with a finite range, ``(N, 3)``."""
     groups: dict[int, list[tuple[float, float, bool]]] = {}
     for scenario in scenarios:
         groups.setdefault(scenario.key.vehicles, []).extend(
             (r.perception_range_m, float(r.errors_m.max()), bool(r.truly_fusible)) for r in scenario.records
             if r.fused and np.isfinite(r.perception_range_m))
-    if not any(groups.values()):
+    return {vehicles: np.array(points, dtype=float).reshape(-1, 3) for vehicles, points in groups.items()}
+
+
+def plot_error_vs_range(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
+    """Max error (m) of every fused evaluation against its perception range (m), one colour per
+    vehicle count (chain length); correct fusions filled, the others hollow."""
+    plot_range_points(path, range_points(scenarios), title=title)
+
+
+def plot_range_points(path: str | os.PathLike[str], groups: Mapping[int, NDArrayFloat], title: str) -> None:
+    """:func:`plot_error_vs_range` of the scenarios' :func:`range_points`."""
+    if not any(len(values) for values in groups.values()):
         raise ValueError("plot_error_vs_range: no fused evaluation to plot")
     figure = _figure(boxed=False)
     axes = figure.add_subplot()
-    for index, (vehicles, points) in enumerate(sorted(groups.items())):
-        values = np.array(points, dtype=float).reshape(-1, 3)
+    for index, (vehicles, values) in enumerate(sorted(groups.items())):
         right = values[:, 2] > 0
         color = f"C{index}"
         axes.scatter(values[right, 0], values[right, 1], s=8, color=color, label=f"{vehicles} vehicle(s)")
