@@ -89,6 +89,11 @@ class MapEvaluator:
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
                          if plan.history_m > 0 or plan.messages.enabled else None)
+        self._scenario_keys: dict[Scenario, tuple[ScenarioKey, ScenarioKey]] = {}
+        self._relations: dict[str, tuple[bool, str]] = {}
+        """The frame's :meth:`_relation` by vehicle name."""
+        self._true_lanes: dict[str, tuple[NDArrayFloat, NDArrayFloat]] = {}
+        """The frame's :meth:`true_lane` by vehicle name."""
 
     @property
     def total_frames(self) -> int:
@@ -224,6 +229,8 @@ class MapEvaluator:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
+        self._relations.clear()
+        self._true_lanes.clear()
         sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours)
                   for name, state in drive.states(frame).items()}
         sent: dict[str, int] = {}
@@ -245,7 +252,7 @@ class MapEvaluator:
                 if name == "ego" or abs(abs(other.state.lead_m) - scenario.lead_m) > 1e-9:
                     continue
                 if name in sent:
-                    for key in (scenario.key(plan.name, b) for b in ("left", "right")):
+                    for key in self._keys(scenario):
                         collector.add_traffic(key, sent[name], 1.0 / FRAME_RATE_HZ)
                 fused = self._pair(collector, scenario, ego, other, index, stamp, metrics)
                 if fused is not None:
@@ -262,7 +269,7 @@ class MapEvaluator:
 
     def _local(self, collector: Collector, scenario: Scenario, ego: Sensed, index: int, stamp: float,
                metrics: dict[str, float | None]) -> dict[str, NDArrayFloat]:
-        keys = [scenario.key(self.plan.name, b) for b in ("left", "right")]
+        keys = self._keys(scenario)
         if ego.detection is None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped"))
@@ -297,9 +304,8 @@ class MapEvaluator:
     def _pair(self, collector: Collector, scenario: Scenario, ego: Sensed, other: Sensed, index: int, stamp: float,
               metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
         plan = self.plan
-        keys = [scenario.key(plan.name, b) for b in ("left", "right")]
-        truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m, self.sensor.range_m)
-        relation = relation_kind(ego.state, other.state, truth)
+        keys = self._keys(scenario)
+        truth, relation = self._relation(ego.state, other.state)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
@@ -334,7 +340,7 @@ class MapEvaluator:
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None
         measured = self._measure(result.left, result.right, detection_pose(ego.detection),
-                                 self.true_lane(ego.state, other.state))
+                                 self._frame_true_lane(ego.state, other.state))
         if isinstance(measured, str) or measured.gt_unmatched:
             rejected, why = _rejection(measured)
             reject(rejected, True, runtime, result.confidence, why)
@@ -352,7 +358,7 @@ class MapEvaluator:
         """A chain of the ego and the scenario's coops (:func:`fusion.fuse_chain`), when all of
         them are present; a chain that ends early is rejected with its failing link's reason."""
         plan = self.plan
-        keys = [scenario.key(plan.name, b) for b in ("left", "right")]
+        keys = self._keys(scenario)
         members = [sensed.get(f"coop{lead:g}") for lead in scenario.chain_leads_m]
         ego = sensed["ego"]
         if any(member is None for member in members):
@@ -385,7 +391,7 @@ class MapEvaluator:
             reject(reason_category(chain.reason), False, runtime)
             return
         measured = self._measure(chain.left, chain.right, detection_pose(ego.detection),
-                                 self.true_lane(ego.state, coops[-1].state))
+                                 self._frame_true_lane(ego.state, coops[-1].state))
         if isinstance(measured, str):
             reject(measured, True, runtime)
             return
@@ -393,6 +399,30 @@ class MapEvaluator:
         detections = {c.state.name: world_borders(c.detection) for c in coops if c.detection is not None}
         self._keep_overlay(collector, scenario, index, measured, {"ego": world_borders(ego.detection), **detections},
                            {"left": chain.left, "right": chain.right})
+
+    def _keys(self, scenario: Scenario) -> tuple[ScenarioKey, ScenarioKey]:
+        """The report keys of the scenario's left and right boundary on this map."""
+        keys = self._scenario_keys.get(scenario)
+        if keys is None:
+            keys = self._scenario_keys[scenario] = (scenario.key(self.plan.name, "left"),
+                                                    scenario.key(self.plan.name, "right"))
+        return keys
+
+    def _relation(self, ego: VehicleState, other: VehicleState) -> tuple[bool, str]:
+        """Whether ``other`` is truly on a trajectory of the ego (:func:`lane_relation`) and
+        the kind of the pair (:func:`relation_kind`); once per frame and vehicle."""
+        found = self._relations.get(other.name)
+        if found is None:
+            truth = lane_relation(self.graph, ego, other, self.relation_max_m, self.sensor.range_m)
+            found = self._relations[other.name] = (truth, relation_kind(ego, other, truth))
+        return found
+
+    def _frame_true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """:meth:`true_lane`, once per frame and vehicle."""
+        found = self._true_lanes.get(other.name)
+        if found is None:
+            found = self._true_lanes[other.name] = self.true_lane(ego, other)
+        return found
 
     def true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
         """The lane a fusion of ``other`` into the ego should reproduce: the other's track
@@ -403,7 +433,7 @@ class MapEvaluator:
             return other.track.borders_between(ego.station, min(end, other.track.length))
         return ego.track.borders_between(ego.station, min(end, ego.track.length))
 
-    def _record(self, collector: Collector, scenario: Scenario, keys: list[ScenarioKey], measured: Measurement,
+    def _record(self, collector: Collector, scenario: Scenario, keys: tuple[ScenarioKey, ...], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
                 confidence: float = math.nan) -> None:

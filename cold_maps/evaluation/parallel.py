@@ -24,6 +24,7 @@ import sys
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import pairwise
 from multiprocessing import get_context
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Final, Iterator, Sequence
@@ -193,7 +194,7 @@ def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUni
         for index, drive in enumerate(evaluator.drives):
             count = min(pieces, max(drive.frames // MIN_UNIT_FRAMES, 1)) if evaluator.frames_independent else 1
             bounds = [round(k * drive.frames / count) for k in range(count + 1)]
-            units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in zip(bounds, bounds[1:]))
+            units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in pairwise(bounds))
             offset += drive.frames
     return units
 

@@ -78,8 +78,13 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     frame of its own coop (Fig. 7) and the overlay of its worst frame (Fig. 8); per map,
     when the run records vehicle counts, the max error against the perception range of
     every fusion."""
-    from cold_maps.evaluation.plots import ErrorSeries, plot_error_series, plot_frame_overlay, plot_range_points, \
-        range_points
+    from cold_maps.evaluation.plots import (
+        ErrorSeries,
+        plot_error_series,
+        plot_frame_overlay,
+        plot_range_points,
+        range_points,
+    )
 
     folder = out / PLOTS_DIR
     folder.mkdir(exist_ok=True)
@@ -267,20 +272,21 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
         from cold_maps.evaluation.parallel import submit_units
 
         submitted = submit_units(executor, evaluators, workers, stamp_base_ns if options.mcap else None)
-    with ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval", stream=options.progress) as bar:
-        with ExitStack() as stack:
-            recorder = None
-            if options.mcap:
-                from cold_maps.recording.recorder import Recorder
+    with ExitStack() as stack:
+        bar = stack.enter_context(ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval",
+                                              stream=options.progress))
+        recorder = None
+        if options.mcap:
+            from cold_maps.recording.recorder import Recorder
 
-                recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME,
-                                                        map_path=", ".join(str(p.path) for p in plans),
-                                                        params=options.run_params, stamp_base_ns=stamp_base_ns))
-            if submitted is not None:
-                from cold_maps.evaluation.parallel import merge_units
+            recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME,
+                                                    map_path=", ".join(str(p.path) for p in plans),
+                                                    params=options.run_params, stamp_base_ns=stamp_base_ns))
+        if submitted is not None:
+            from cold_maps.evaluation.parallel import merge_units
 
-                merge_units(submitted, collector, recorder, bar.update)
-                return
-            offset = 0
-            for evaluator in evaluators:
-                offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)
+            merge_units(submitted, collector, recorder, bar.update)
+            return
+        offset = 0
+        for evaluator in evaluators:
+            offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)
