@@ -33,6 +33,11 @@ AXES_BOX: Final[tuple[float, float, float, float]] = (0.09, 0.11, 0.98, 0.92)
 labels, axis labels and title, fixed instead of measuring the text (``tight_layout``)."""
 
 
+def preload() -> None:
+    """Imports matplotlib's figure and Agg canvas now (in a worker idle before the plots)."""
+    _figure()
+
+
 def _figure(boxed: bool = True) -> Any:
     """A figure on the Agg canvas; ``boxed``: its axes fill :data:`AXES_BOX`."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -272,6 +272,11 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
         from cold_maps.evaluation.parallel import submit_units
 
         submitted = submit_units(executor, evaluators, workers, stamp_base_ns if options.mcap else None)
+        if options.plots:
+            from cold_maps.evaluation.plots import preload
+
+            for _ in range(workers):  # a worker without units left imports matplotlib meanwhile
+                executor.submit(preload)
     with ExitStack() as stack:
         bar = stack.enter_context(ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval",
                                               stream=options.progress))
