@@ -227,7 +227,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         for evaluator in evaluators:
             LOG.info("%s: preparing ground truth", evaluator.plan.path)
             evaluator.prepare()
-            LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
+            if LOG.isEnabledFor(logging.DEBUG):  # the check costs a pass over the driven lanes: once, in note_drives
+                LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
     except BaseException:
         for folder in created:
             if any(folder.iterdir()):
