@@ -33,9 +33,32 @@ AXES_BOX: Final[tuple[float, float, float, float]] = (0.09, 0.11, 0.98, 0.92)
 labels, axis labels and title, fixed instead of measuring the text (``tight_layout``)."""
 
 
+_AXES: dict[str, Any] = {}
+"""Per plot kind, the axes this process draws that kind on again: the figure, its labels,
+grid, ticks and their text layouts are kept, each plot replaces the lines and legend."""
+
+
 def preload() -> None:
     """Imports matplotlib's figure and Agg canvas now (in a worker idle before the plots)."""
     _figure()
+
+
+def _axes(kind: str, xlabel: str, ylabel: str) -> Any:
+    """The axes for a plot of ``kind`` (in :data:`AXES_BOX`, labelled, with a grid),
+    without the lines and legend of the previous plot, autoscaling on."""
+    axes = _AXES.get(kind)
+    if axes is None:
+        axes = _AXES[kind] = _figure().add_subplot()
+        axes.set_xlabel(xlabel)
+        axes.set_ylabel(ylabel)
+        axes.grid(True, alpha=0.3)
+    else:
+        for line in list(axes.lines):
+            line.remove()
+        if axes.get_legend() is not None:
+            axes.get_legend().remove()
+        axes.set_autoscale_on(True)
+    return axes
 
 
 def _figure(boxed: bool = True) -> Any:
@@ -93,19 +116,17 @@ def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[Scenario
 
 def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str) -> None:
     """:func:`plot_frame_errors` of the scenarios' series."""
-    figure = _figure()
-    axes = figure.add_subplot()
+    axes = _axes("errors", "frame", "error [m]")
     for index, line in enumerate(series):
         color = f"C{index}"
         axes.plot(line.frames, line.means, color=color, linestyle="-", label=f"{line.label} mean")
         axes.plot(line.frames, line.maxima, color=color, linestyle="--", label=f"{line.label} max")
-    axes.set_xlabel("frame")
-    axes.set_ylabel("error [m]")
+    axes.relim()
+    axes.autoscale_view()
     axes.set_ylim(bottom=0.0)
     axes.set_title(title)
-    axes.grid(True, alpha=0.3)
     axes.legend(loc="upper right", fontsize="small")
-    _save(figure, path)
+    _save(axes.figure, path)
 
 
 def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArrayFloat],
@@ -128,8 +149,7 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
         layers.append((check_polyline(f"fused {name}", points), COLOR_FUSED, "--", 1.5, "fused"))
     if not layers:
         raise ValueError("plot_frame_overlay: nothing to plot")
-    figure = _figure()
-    axes = figure.add_subplot()
+    axes = _axes("overlay", "x (east) [m]", "y (north) [m]")
     labelled: set[str] = set()
     for points, color, style, width, label in layers:
         axes.plot(points[:, 0], points[:, 1], color=color, linestyle=style, linewidth=width,
@@ -141,12 +161,9 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
     axes.set_xlim(low[0], high[0])
     axes.set_ylim(low[1], high[1])
     axes.set_aspect("equal", adjustable="box")
-    axes.set_xlabel("x (east) [m]")
-    axes.set_ylabel("y (north) [m]")
     axes.set_title(title)
-    axes.grid(True, alpha=0.3)
     axes.legend(loc="best", fontsize="small")
-    _save(figure, path)
+    _save(axes.figure, path)
 
 
 def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayFloat]:
