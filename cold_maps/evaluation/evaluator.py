@@ -285,7 +285,7 @@ class MapEvaluator:
                                                gt_unmatched=why))
             return {}
         self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
-        self._keep_overlay(collector, scenario, index, measured, {"ego": (left, right)}, {})
+        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
         shown = np.vstack((left, right))
         low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
         return {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
@@ -348,8 +348,8 @@ class MapEvaluator:
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                      truth, metrics if main else None, relation=relation, confidence=result.confidence)
         if main:
-            detections = {"ego": world_borders(ego.detection), other.state.name: world_borders(other.detection)}
-            self._keep_overlay(collector, scenario, index, measured, detections,
+            self._keep_overlay(collector, scenario, index, measured,
+                               {"ego": ego.detection, other.state.name: other.detection},
                                {"left": result.left, "right": result.right})
         return result.left, result.right
 
@@ -396,8 +396,8 @@ class MapEvaluator:
             reject(measured, True, runtime)
             return
         self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None)
-        detections = {c.state.name: world_borders(c.detection) for c in coops if c.detection is not None}
-        self._keep_overlay(collector, scenario, index, measured, {"ego": world_borders(ego.detection), **detections},
+        detections = {c.state.name: c.detection for c in coops if c.detection is not None}
+        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection, **detections},
                            {"left": chain.left, "right": chain.right})
 
     def _keys(self, scenario: Scenario) -> tuple[ScenarioKey, ScenarioKey]:
@@ -449,15 +449,18 @@ class MapEvaluator:
                 metrics[f"{prefix}_range_m"] = length
 
     def _keep_overlay(self, collector: Collector, scenario: Scenario, index: int, measured: Measurement,
-                      detections: dict[str, tuple[NDArrayFloat, NDArrayFloat]], fused: dict[str, NDArrayFloat]) -> None:
+                      detections: dict[str, fusion.LaneDetection], fused: dict[str, NDArrayFloat]) -> None:
+        """Keeps this frame (the senders' detections drawn in the world frame) as the
+        scenario's overlay when its error is the largest so far."""
         worst = float(max(measured.left_errors_m.max(), measured.right_errors_m.max()))
         label = (self.plan.name, scenario.label)
         kept = collector.overlays.get(label)
         if kept is None or worst > kept.max_error_m:
-            shown = np.vstack([*fused.values(), *(b for pair in detections.values() for b in pair)])
+            borders = {name: world_borders(detection) for name, detection in detections.items()}
+            shown = np.vstack([*fused.values(), *(b for pair in borders.values() for b in pair)])
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
-            collector.overlays[label] = Overlay(index, worst, gt, detections, fused)
+            collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:
