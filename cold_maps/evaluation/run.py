@@ -115,12 +115,26 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     return jobs
 
 
+def start_plots(out: Path, collector: Collector, executor: Executor | None) -> Callable[[], list[Path]]:
+    """Starts drawing the :func:`plot_jobs` of a run on ``executor``'s workers; returns the
+    call that waits for them (without an executor: that draws them here) and returns the
+    files."""
+    jobs = plot_jobs(out, collector)
+    drawing = [executor.submit(job) for job in jobs] if executor is not None else []
+
+    def finish() -> list[Path]:
+        for job in jobs if executor is None else ():
+            job()
+        for future in drawing:
+            future.result()
+        return [job.args[0] for job in jobs]
+
+    return finish
+
+
 def write_plots(out: Path, collector: Collector) -> list[Path]:
     """Draws the :func:`plot_jobs` of a run here; returns the files."""
-    jobs = plot_jobs(out, collector)
-    for job in jobs:
-        job()
-    return [job.args[0] for job in jobs]
+    return start_plots(out, collector, None)()
 
 
 def false_fusion_markdown(collector: Collector) -> str:
@@ -144,14 +158,10 @@ def false_fusion_markdown(collector: Collector) -> str:
 
 
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
-                  plots: bool = True, results: Sequence[ScenarioResult] | None = None,
-                  executor: Executor | None = None) -> list[ScenarioResult]:
+                  plots: bool = True, results: Sequence[ScenarioResult] | None = None) -> list[ScenarioResult]:
     """``frames.csv``, ``summary.md`` (the per-scenario table, notes, then ``sections``:
-    (title, markdown)), ``metrics.json`` and the plots (drawn on ``executor`` meanwhile, if
-    given); returns the scenario results (``results``: the collector's, when the caller has
-    them already)."""
-    jobs = plot_jobs(out, collector) if plots and not partial else []
-    drawing = [executor.submit(job) for job in jobs] if executor is not None else []
+    (title, markdown)), ``metrics.json`` and the plots; returns the scenario results
+    (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
@@ -163,10 +173,8 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
         text += f"\n## {title}\n\n{body}"
     atomic_write_text(out / "summary.md", text)
     write_metrics_json(out / "metrics.json", results, partial=partial)
-    for job in jobs if executor is None else ():
-        job()
-    for future in drawing:
-        future.result()
+    if plots and not partial:
+        write_plots(out, collector)
     return results
 
 
@@ -255,10 +263,12 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
                 terminate(executor)
                 executor = None
         partial = error is not None
+        plotted = start_plots(out, collector, executor) if options.plots and not partial else None
         results = [a.result() for a in collector.accumulators.values()]
         sections = list(extra_sections(collector, results)) if extra_sections is not None else []
-        results = write_outputs(out, collector, partial=partial, sections=sections, plots=options.plots,
-                                results=results, executor=executor)
+        results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results)
+        if plotted is not None:
+            plotted()
     return RunResult(results, collector, partial, error)
 
 
