@@ -183,6 +183,16 @@ def run_unit(unit: WorkUnit, stamp_base_ns: int | None) -> UnitResult:
     return UnitResult(collector, [] if recorder is None else recorder.take())
 
 
+def _most_pieces(evaluator: MapEvaluator, frames: int) -> int:
+    """How many frame ranges a drive of ``frames`` frames of ``evaluator`` may be cut into."""
+    return max(frames // MIN_UNIT_FRAMES, 1) if evaluator.frames_independent else 1
+
+
+def most_units(evaluators: Sequence[MapEvaluator]) -> int:
+    """The most work units the drives of ``evaluators`` can be cut into (no use for more workers)."""
+    return sum(_most_pieces(e, drive.frames) for e in evaluators for drive in e.drives)
+
+
 def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUnit]:
     """Every drive of every evaluator, global frame indices continuing across them; a drive
     with independent frames cut into ranges (about :data:`UNITS_PER_WORKER` units per
@@ -192,7 +202,7 @@ def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUni
     units, offset = [], 0
     for map_index, evaluator in enumerate(evaluators):
         for index, drive in enumerate(evaluator.drives):
-            count = min(pieces, max(drive.frames // MIN_UNIT_FRAMES, 1)) if evaluator.frames_independent else 1
+            count = min(pieces, _most_pieces(evaluator, drive.frames))
             bounds = [round(k * drive.frames / count) for k in range(count + 1)]
             units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in pairwise(bounds))
             offset += drive.frames

@@ -245,13 +245,15 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         raise
     collector = Collector()
     error: BaseException | None = None
-    workers = min(options.workers, sum(len(e.drives) for e in evaluators))
+    workers = 1
     with ExitStack() as stack:
         executor: Executor | None = None
-        if workers > 1:
-            from cold_maps.evaluation.parallel import run_pool
+        if options.workers > 1:
+            from cold_maps.evaluation.parallel import most_units, run_pool
 
-            executor = stack.enter_context(run_pool(evaluators, workers))
+            workers = min(options.workers, most_units(evaluators))
+            if workers > 1:
+                executor = stack.enter_context(run_pool(evaluators, workers))
         try:
             _run_all(plans, evaluators, collector, options, executor, workers)
         except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
