@@ -177,14 +177,10 @@ def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayF
     return {vehicles: np.array(points, dtype=float).reshape(-1, 3) for vehicles, points in groups.items()}
 
 
-def plot_error_vs_range(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
+def plot_error_vs_range(path: str | os.PathLike[str], groups: Mapping[int, NDArrayFloat], title: str = "") -> None:
     """Max error (m) of every fused evaluation against its perception range (m), one colour per
-    vehicle count (chain length); correct fusions filled, the others hollow."""
-    plot_range_points(path, range_points(scenarios), title=title)
-
-
-def plot_range_points(path: str | os.PathLike[str], groups: Mapping[int, NDArrayFloat], title: str) -> None:
-    """:func:`plot_error_vs_range` of the scenarios' :func:`range_points`."""
+    vehicle count (chain length); correct fusions filled, the others hollow. ``groups``: the
+    scenarios' :func:`range_points`."""
     if not any(len(values) for values in groups.values()):
         raise ValueError("plot_error_vs_range: no fused evaluation to plot")
     figure = _figure(boxed=False)

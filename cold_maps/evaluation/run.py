@@ -81,8 +81,8 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     from cold_maps.evaluation.plots import (
         ErrorSeries,
         plot_error_series,
+        plot_error_vs_range,
         plot_frame_overlay,
-        plot_range_points,
         range_points,
     )
 
@@ -105,7 +105,7 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
             extended.setdefault(key.map, []).append(accumulator)
     for map_name, accumulators in extended.items():
         path = folder / f"error_vs_range_{_file_part(map_name)}.png"
-        jobs.append(functools.partial(plot_range_points, path, range_points(accumulators),
+        jobs.append(functools.partial(plot_error_vs_range, path, range_points(accumulators),
                                       title=f"{map_name}: max error against perception range"))
     for (map_name, label), overlay in collector.overlays.items():
         path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
