@@ -214,17 +214,12 @@ def _timestamp(ns: int) -> Any:
     return Timestamp(ns // NS_PER_S, ns % NS_PER_S)
 
 
-def scene_update(ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> Any:
+def scene_update(ns: int, names: Sequence[str], drawn: Sequence[NDArrayFloat], color: RGBA) -> Any:
     """A ``foxglove.SceneUpdate`` replacing everything on its topic with one entity per line.
 
-    ``lines`` maps entity ids to ``(N, 2)`` world-frame polylines (m); ``ns`` is the log time
-    (ns since the Unix epoch).
+    ``names`` are the entity ids of the ``(N, 2)`` world-frame polylines (m) ``drawn`` (as
+    :func:`display_lines` returns them); ``ns`` is the log time (ns since the Unix epoch).
     """
-    return _scene_message(ns, list(lines), display_lines(lines), color)
-
-
-def _scene_message(ns: int, names: Sequence[str], drawn: Sequence[NDArrayFloat], color: RGBA) -> Any:
-    """The ``foxglove.SceneUpdate`` of :func:`scene_update` from the lines as drawn."""
     from foxglove.messages import (
         Color,
         LinePrimitive,
@@ -282,8 +277,8 @@ class EncodedMessage:
 
 @dataclass(frozen=True, slots=True)
 class _PendingScene:
-    """A ``SceneUpdate`` whose lines are simplified with the next batch (fields as in
-    :func:`scene_update`; ``lines`` checked, in the order of ``names``)."""
+    """A :func:`scene_update` whose lines are drawn with the next batch (``lines``: checked,
+    in the order of ``names``)."""
 
     topic: str
     log_time_ns: int
@@ -435,7 +430,7 @@ class Recorder:
         drawn = iter(_drawn([line for item in queue if isinstance(item, _PendingScene) for line in item.lines]))
         return [item if isinstance(item, EncodedMessage) else EncodedMessage(
             item.topic, "scene", item.log_time_ns,
-            _scene_message(item.log_time_ns, item.names, [next(drawn) for _ in item.names], item.color).encode())
+            scene_update(item.log_time_ns, item.names, [next(drawn) for _ in item.names], item.color).encode())
             for item in queue]
 
     def _write(self, messages: Sequence[EncodedMessage]) -> None:
