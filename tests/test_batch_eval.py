@@ -65,6 +65,39 @@ def test_two_workers_agree_with_one_on_town01(tmp_path, town01_path):
                          _run(tmp_path / "two", [town01_path], 2, *common))
 
 
+def _evaluators(*argv: str) -> list:
+    from cold_maps.evaluation.evaluator import MapEvaluator
+
+    return [MapEvaluator(plan) for plan in evaluate._plans(evaluate.build_parser().parse_args(list(argv)))]
+
+
+def test_drives_with_independent_frames_are_cut_into_frame_ranges():
+    from cold_maps.evaluation.parallel import UNITS_PER_WORKER, most_units, work_units
+
+    straight, rural = bundled_map("straight"), bundled_map("rural")
+    evaluators = _evaluators("--map", str(straight), "--map", str(rural), "--frames", "45", "--routes", "1")
+    assert all(e.frames_independent for e in evaluators) and [e.total_frames for e in evaluators] == [45, 45]
+    units = work_units(evaluators, 2)
+    # 2 drives, 2 workers: 2 * UNITS_PER_WORKER / 2 ranges per drive, at most one per 10 frames (4)
+    assert UNITS_PER_WORKER >= 4 and len(units) == 8
+    for map_index in (0, 1):
+        ranges = [(u.first, u.stop) for u in units if u.map_index == map_index]
+        assert ranges == [(0, 11), (11, 22), (22, 34), (34, 45)]  # rounded quarters, contiguous
+    assert {u.frame_offset for u in units if u.map_index == 1} == {45}  # global indices continue
+    assert most_units(evaluators) == 8 and most_units(evaluators[:1]) == 4  # one drive still uses 4 workers
+    noisy = _evaluators("--map", str(straight), "--frames", "45", "--routes", "2", "--noise", "0.02")
+    assert not noisy[0].frames_independent and most_units(noisy) == 2
+    assert [(u.drive, u.first, u.stop, u.frame_offset) for u in work_units(noisy, 2)] == [(0, 0, 45, 0),
+                                                                                            (1, 0, 45, 45)]
+
+
+def test_two_workers_agree_with_one_when_drives_are_cut_into_frame_ranges(tmp_path):
+    """One drive, cut into 4 frame ranges on the 2 workers."""
+    common = ("--frames", "40", "--routes", "1", "--gaps", "20")
+    maps = [bundled_map("rural")]
+    _assert_same_outputs(_run(tmp_path / "one", maps, 1, *common), _run(tmp_path / "two", maps, 2, *common))
+
+
 def test_sigint_with_workers_leaves_partial_outputs(tmp_path):
     """Ctrl-C of a run in two workers: exit 130, the finished drives in a valid partial MCAP
     and a partial report, no worker left behind."""

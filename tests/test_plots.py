@@ -93,3 +93,33 @@ def test_heavy_dependencies_are_imported_lazily():
             "cold_maps.common.progress; print(sorted(m for m in ('matplotlib', 'mcap', 'foxglove', 'shapely', 'orjson') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"
+
+
+def test_a_plot_drawn_after_another_equals_it_drawn_first(tmp_path, scenarios):
+    """Each process keeps one axes per plot kind: nothing of a previous plot (lines, legend,
+    limits, title) shows in the next one."""
+    from matplotlib.image import imread
+
+    from cold_maps.evaluation import plots
+
+    radius, half = 40.0, 1.75
+    small = {"gt": {"left": arc(radius, half, 0.0, 90.0)}, "detections": {"ego": (arc(radius, half, 0.0, 30.0),
+                                                                                  arc(radius, -half, 0.0, 30.0))},
+             "fused": {}}
+    large = {"gt": {"left": arc(2 * radius, half, 0.0, 150.0)}, "fused": {"left": arc(2 * radius, 0.5, 0.0, 120.0)},
+             "detections": {"coop9": (arc(2 * radius, half, 60.0, 30.0), arc(2 * radius, -half, 60.0, 30.0))}}
+    one = [scenarios[0]]
+    shifted = [ScenarioAccumulator(s.key, [FrameRecord(r.frame + 500, r.stamp_s, r.ego, r.coop, 3.0 * r.errors_m,
+                                                       rejected=r.rejected) for r in s.records]) for s in scenarios]
+    draws = [("errors", lambda path: plot_frame_errors(path, one, title="first")),
+             ("errors", lambda path: plot_frame_errors(path, shifted, title="second")),
+             ("overlay", lambda path: plot_frame_overlay(path, title="first", **small)),
+             ("overlay", lambda path: plot_frame_overlay(path, title="second", **large))]
+    for index, (_, draw) in enumerate(draws):
+        draw(tmp_path / f"after_{index}.png")
+    for index, (kind, draw) in enumerate(draws):
+        plots._AXES.pop(kind, None)  # a fresh figure for this plot
+        draw(tmp_path / f"fresh_{index}.png")
+        after, fresh = imread(tmp_path / f"after_{index}.png"), imread(tmp_path / f"fresh_{index}.png")
+        assert after.shape == fresh.shape and np.array_equal(after, fresh), index
+    assert not np.array_equal(imread(tmp_path / "fresh_0.png"), imread(tmp_path / "fresh_1.png"))

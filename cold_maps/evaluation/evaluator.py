@@ -49,6 +49,7 @@ from cold_maps.simulation.drive import (
 )
 from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 if TYPE_CHECKING:
     from cold_maps.recording.recorder import Recorder
@@ -88,6 +89,11 @@ class MapEvaluator:
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
                          if plan.history_m > 0 or plan.messages.enabled else None)
+        self._scenario_keys: dict[Scenario, tuple[ScenarioKey, ScenarioKey]] = {}
+        self._relations: dict[str, tuple[bool, str]] = {}
+        """The frame's :meth:`_relation` by vehicle name."""
+        self._true_lanes: dict[str, tuple[NDArrayFloat, NDArrayFloat]] = {}
+        """The frame's :meth:`true_lane` by vehicle name."""
 
     @property
     def total_frames(self) -> int:
@@ -181,20 +187,30 @@ class MapEvaluator:
             collector.gt_warnings.append(self.gt_warning)
 
     def run_drive(self, drive_index: int, collector: Collector, *, recorder: Recorder | None = None,
-                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None) -> int:
-        """Evaluates every frame of one drive (a work unit: its error models draw from the
-        drive's own generator); returns the next free global frame index."""
+                  frame_offset: int = 0, on_frame: Callable[[], None] | None = None,
+                  frames: range | None = None) -> int:
+        """Evaluates the ``frames`` (default: all) of one drive, whose frame 0 has the global
+        index ``frame_offset`` (a work unit: its error models draw from the drive's own
+        generator; a part of a drive only when :attr:`frames_independent`); returns the
+        global index after the last frame."""
         self.prepare()
         drive = self.drives[drive_index]
-        LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-        frame_index = frame_offset
-        for frame in range(drive.frames):
-            self._frame(collector, drive_index, frame, frame_index, recorder)
+        frames = range(drive.frames) if frames is None else frames
+        if frames.start == 0:
+            LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
+        for frame in frames:
+            self._frame(collector, drive_index, frame, frame_offset + frame, recorder)
             collector.frames_done += 1
-            frame_index += 1
             if on_frame is not None:
                 on_frame()
-        return frame_index
+        return frame_offset + frames.stop
+
+    @property
+    def frames_independent(self) -> bool:
+        """Whether a frame can be evaluated without the frames before it: the sensor error
+        models are off (nothing draws from the drive's generator) and no history or message
+        exchange carries state from frame to frame."""
+        return self.exchange is None and self.plan.errors == SensorErrorModel()
 
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""
@@ -213,6 +229,8 @@ class MapEvaluator:
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
+        self._relations.clear()
+        self._true_lanes.clear()
         sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours)
                   for name, state in drive.states(frame).items()}
         sent: dict[str, int] = {}
@@ -234,7 +252,7 @@ class MapEvaluator:
                 if name == "ego" or abs(abs(other.state.lead_m) - scenario.lead_m) > 1e-9:
                     continue
                 if name in sent:
-                    for key in (scenario.key(plan.name, b) for b in ("left", "right")):
+                    for key in self._keys(scenario):
                         collector.add_traffic(key, sent[name], 1.0 / FRAME_RATE_HZ)
                 fused = self._pair(collector, scenario, ego, other, index, stamp, metrics)
                 if fused is not None:
@@ -251,7 +269,7 @@ class MapEvaluator:
 
     def _local(self, collector: Collector, scenario: Scenario, ego: Sensed, index: int, stamp: float,
                metrics: dict[str, float | None]) -> dict[str, NDArrayFloat]:
-        keys = [scenario.key(self.plan.name, b) for b in ("left", "right")]
+        keys = self._keys(scenario)
         if ego.detection is None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped"))
@@ -267,7 +285,7 @@ class MapEvaluator:
                                                gt_unmatched=why))
             return {}
         self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
-        self._keep_overlay(collector, scenario, index, measured, {"ego": (left, right)}, {})
+        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
         shown = np.vstack((left, right))
         low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
         return {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
@@ -286,9 +304,8 @@ class MapEvaluator:
     def _pair(self, collector: Collector, scenario: Scenario, ego: Sensed, other: Sensed, index: int, stamp: float,
               metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
         plan = self.plan
-        keys = [scenario.key(plan.name, b) for b in ("left", "right")]
-        truth = lane_relation(self.graph, ego.state, other.state, self.relation_max_m, self.sensor.range_m)
-        relation = relation_kind(ego.state, other.state, truth)
+        keys = self._keys(scenario)
+        truth, relation = self._relation(ego.state, other.state)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
@@ -323,7 +340,7 @@ class MapEvaluator:
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None
         measured = self._measure(result.left, result.right, detection_pose(ego.detection),
-                                 self.true_lane(ego.state, other.state))
+                                 self._frame_true_lane(ego.state, other.state))
         if isinstance(measured, str) or measured.gt_unmatched:
             rejected, why = _rejection(measured)
             reject(rejected, True, runtime, result.confidence, why)
@@ -331,8 +348,8 @@ class MapEvaluator:
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                      truth, metrics if main else None, relation=relation, confidence=result.confidence)
         if main:
-            detections = {"ego": world_borders(ego.detection), other.state.name: world_borders(other.detection)}
-            self._keep_overlay(collector, scenario, index, measured, detections,
+            self._keep_overlay(collector, scenario, index, measured,
+                               {"ego": ego.detection, other.state.name: other.detection},
                                {"left": result.left, "right": result.right})
         return result.left, result.right
 
@@ -341,7 +358,7 @@ class MapEvaluator:
         """A chain of the ego and the scenario's coops (:func:`fusion.fuse_chain`), when all of
         them are present; a chain that ends early is rejected with its failing link's reason."""
         plan = self.plan
-        keys = [scenario.key(plan.name, b) for b in ("left", "right")]
+        keys = self._keys(scenario)
         members = [sensed.get(f"coop{lead:g}") for lead in scenario.chain_leads_m]
         ego = sensed["ego"]
         if any(member is None for member in members):
@@ -374,14 +391,38 @@ class MapEvaluator:
             reject(reason_category(chain.reason), False, runtime)
             return
         measured = self._measure(chain.left, chain.right, detection_pose(ego.detection),
-                                 self.true_lane(ego.state, coops[-1].state))
+                                 self._frame_true_lane(ego.state, coops[-1].state))
         if isinstance(measured, str):
             reject(measured, True, runtime)
             return
         self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None)
-        detections = {c.state.name: world_borders(c.detection) for c in coops if c.detection is not None}
-        self._keep_overlay(collector, scenario, index, measured, {"ego": world_borders(ego.detection), **detections},
+        detections = {c.state.name: c.detection for c in coops if c.detection is not None}
+        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection, **detections},
                            {"left": chain.left, "right": chain.right})
+
+    def _keys(self, scenario: Scenario) -> tuple[ScenarioKey, ScenarioKey]:
+        """The report keys of the scenario's left and right boundary on this map."""
+        keys = self._scenario_keys.get(scenario)
+        if keys is None:
+            keys = self._scenario_keys[scenario] = (scenario.key(self.plan.name, "left"),
+                                                    scenario.key(self.plan.name, "right"))
+        return keys
+
+    def _relation(self, ego: VehicleState, other: VehicleState) -> tuple[bool, str]:
+        """Whether ``other`` is truly on a trajectory of the ego (:func:`lane_relation`) and
+        the kind of the pair (:func:`relation_kind`); once per frame and vehicle."""
+        found = self._relations.get(other.name)
+        if found is None:
+            truth = lane_relation(self.graph, ego, other, self.relation_max_m, self.sensor.range_m)
+            found = self._relations[other.name] = (truth, relation_kind(ego, other, truth))
+        return found
+
+    def _frame_true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """:meth:`true_lane`, once per frame and vehicle."""
+        found = self._true_lanes.get(other.name)
+        if found is None:
+            found = self._true_lanes[other.name] = self.true_lane(ego, other)
+        return found
 
     def true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
         """The lane a fusion of ``other`` into the ego should reproduce: the other's track
@@ -392,7 +433,7 @@ class MapEvaluator:
             return other.track.borders_between(ego.station, min(end, other.track.length))
         return ego.track.borders_between(ego.station, min(end, ego.track.length))
 
-    def _record(self, collector: Collector, scenario: Scenario, keys: list[ScenarioKey], measured: Measurement,
+    def _record(self, collector: Collector, scenario: Scenario, keys: tuple[ScenarioKey, ...], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
                 confidence: float = math.nan) -> None:
@@ -408,15 +449,18 @@ class MapEvaluator:
                 metrics[f"{prefix}_range_m"] = length
 
     def _keep_overlay(self, collector: Collector, scenario: Scenario, index: int, measured: Measurement,
-                      detections: dict[str, tuple[NDArrayFloat, NDArrayFloat]], fused: dict[str, NDArrayFloat]) -> None:
+                      detections: dict[str, fusion.LaneDetection], fused: dict[str, NDArrayFloat]) -> None:
+        """Keeps this frame (the senders' detections drawn in the world frame) as the
+        scenario's overlay when its error is the largest so far."""
         worst = float(max(measured.left_errors_m.max(), measured.right_errors_m.max()))
         label = (self.plan.name, scenario.label)
         kept = collector.overlays.get(label)
         if kept is None or worst > kept.max_error_m:
-            shown = np.vstack([*fused.values(), *(b for pair in detections.values() for b in pair)])
+            borders = {name: world_borders(detection) for name, detection in detections.items()}
+            shown = np.vstack([*fused.values(), *(b for pair in borders.values() for b in pair)])
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
-            collector.overlays[label] = Overlay(index, worst, gt, detections, fused)
+            collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:

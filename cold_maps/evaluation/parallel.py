@@ -1,20 +1,30 @@
-"""Work units in worker processes: one drive (route) of one map per unit.
+"""Work units in worker processes: the drives (routes) of the maps, each cut into frame
+ranges when its frames are independent (:attr:`MapEvaluator.frames_independent`).
 
-A worker evaluates its unit into a fresh :class:`Collector` and records the MCAP writes in
-a :class:`CallLog` instead of writing them; the parent merges the collectors and replays
-the writes into the one ``Recorder`` in unit order, so ``metrics.json``, ``frames.csv``
-and ``run.mcap`` hold the same records in the same (frame) order as a run in one process.
+A worker evaluates a unit into a fresh :class:`Collector` and a detached ``Recorder``
+(the MCAP messages encoded there); the parent merges the collectors and writes the
+messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
+same records in the same (frame) order as a run in one process. After the evaluation the
+same workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
+
+On Linux the run's workers are forked from the parent once it has prepared the maps: they
+start with its evaluators (lane graphs, ground truth, drives) instead of importing and
+loading everything again, and the fork happens before the recording and the progress bar
+start threads. Elsewhere they are spawned and load each map once (:func:`cached_evaluator`).
 Workers ignore SIGINT: on Ctrl-C the parent keeps the units that finished, terminates the
 workers and writes partial outputs as a one-process run does.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import signal
+import sys
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import pairwise
 from multiprocessing import get_context
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Final, Iterator, Sequence
@@ -25,12 +35,20 @@ from cold_maps.evaluation.scenarios import MapPlan
 
 if TYPE_CHECKING:
     from cold_maps.network.lane_graph import LaneGraph
+    from cold_maps.recording.recorder import EncodedMessage
     from gt_matching import GroundTruth
 
 START_METHOD: Final[str] = "spawn"
-"""Worker processes start fresh (no fork of a parent holding threads and Lanelet2 maps)."""
+"""Workers of :func:`process_pool` start fresh (no fork of a parent holding threads)."""
+RUN_START_METHOD: Final[str] = "fork" if sys.platform.startswith("linux") else "spawn"
+"""Workers of :func:`run_pool`: forked on Linux (module docstring)."""
 CACHED_MAPS: Final[int] = 4
 """Maps (lane graph and ground truth) a worker keeps loaded between units."""
+UNITS_PER_WORKER: Final[int] = 6
+"""Work units per worker a run aims at (drives cut into frame ranges), so that the workers
+finish together."""
+MIN_UNIT_FRAMES: Final[int] = 10
+"""Frames of a drive's range below which it is not cut further."""
 
 
 def default_workers() -> int:
@@ -45,43 +63,28 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def terminate(executor: Executor) -> None:
+    """Cancels the pending work of a :class:`ProcessPoolExecutor` and terminates its workers."""
+    processes = list((getattr(executor, "_processes", None) or {}).values())
+    executor.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 @contextmanager
-def process_pool(workers: int) -> Iterator[Executor]:
-    """``workers`` worker processes; on any exception (Ctrl-C included) pending units are
-    cancelled and the workers terminated before it propagates."""
-    executor = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(START_METHOD),
-                                   initializer=_ignore_sigint)
+def process_pool(workers: int, start_method: str = START_METHOD,
+                 initializer: Callable[..., None] = _ignore_sigint, initargs: tuple[Any, ...] = ()) -> Iterator[Executor]:
+    """``workers`` worker processes (``initializer(*initargs)`` in each, which must ignore
+    SIGINT); on any exception (Ctrl-C included) pending units are cancelled and the
+    workers terminated before it propagates."""
+    executor = ProcessPoolExecutor(max_workers=workers, mp_context=get_context(start_method),
+                                   initializer=initializer, initargs=initargs)
     try:
         yield executor
     except BaseException:
-        processes = list((getattr(executor, "_processes", None) or {}).values())
-        executor.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            process.terminate()
+        terminate(executor)
         raise
     executor.shutdown()
-
-
-class CallLog:
-    """Stands in for the ``Recorder`` in a worker: keeps every ``write_*`` call in order
-    to :meth:`replay` into the real recorder in the parent."""
-
-    def __init__(self) -> None:
-        self.calls: list[tuple[str, tuple[Any, ...], dict[str, Any]]] = []
-
-    def __getattr__(self, name: str) -> Callable[..., None]:
-        if not name.startswith("write_"):
-            raise AttributeError(name)
-
-        def record(*args: Any, **kwargs: Any) -> None:
-            self.calls.append((name, args, kwargs))
-
-        return record
-
-    def replay(self, recorder: Any) -> None:
-        """Makes the recorded calls on ``recorder``, in order."""
-        for name, args, kwargs in self.calls:
-            getattr(recorder, name)(*args, **kwargs)
 
 
 _MAPS: dict[tuple[Path, int, int], tuple[LaneGraph, GroundTruth]] = {}
@@ -104,21 +107,55 @@ def cached_evaluator(plan: MapPlan) -> MapEvaluator:
     return MapEvaluator(plan, graph=graph, ground_truth=ground_truth)
 
 
+_EVALUATORS: dict[int, MapEvaluator] = {}
+"""The run's evaluators by map index: in a forked worker the parent's (prepared, no drive
+run yet), in a spawned one built from :data:`_PLANS` at its first unit of the map."""
+_PLANS: tuple[MapPlan, ...] = ()
+
+
+def _start_worker(plans: tuple[MapPlan, ...]) -> None:
+    global _PLANS
+    _ignore_sigint()
+    _PLANS = plans
+
+
+def _evaluator(map_index: int) -> MapEvaluator:
+    if map_index not in _EVALUATORS:
+        _EVALUATORS[map_index] = cached_evaluator(_PLANS[map_index])
+    return _EVALUATORS[map_index]
+
+
+@contextmanager
+def run_pool(evaluators: Sequence[MapEvaluator], workers: int) -> Iterator[Executor]:
+    """The worker processes of a run over ``evaluators`` (prepared; module docstring); the
+    workers start at the first :func:`submit_units`."""
+    forked = RUN_START_METHOD == "fork"
+    if forked:
+        _EVALUATORS.update(enumerate(evaluators))
+    plans = () if forked else tuple(e.plan for e in evaluators)
+    try:
+        with process_pool(workers, RUN_START_METHOD, _start_worker, (plans,)) as executor:
+            yield executor
+    finally:
+        _EVALUATORS.clear()
+
+
 @dataclass(frozen=True)
 class WorkUnit:
-    """One drive of one map.
+    """Frames of one drive of one map.
 
     Fields:
-        plan: the map's plan (the worker rebuilds the same drives from its seed).
-        drive: index of the drive in the plan's evaluator.
-        frame_offset: global index of the drive's first frame.
-        frames: frames of the drive.
+        map_index: the map's evaluator in the run.
+        drive: index of the drive in it.
+        first, stop: the drive's frames ``range(first, stop)``.
+        frame_offset: global index of the drive's frame 0.
     """
 
-    plan: MapPlan
+    map_index: int
     drive: int
+    first: int
+    stop: int
     frame_offset: int
-    frames: int
 
 
 @dataclass(frozen=True)
@@ -127,50 +164,92 @@ class UnitResult:
 
     Fields:
         collector: the unit's records, runtimes and overlays.
-        log: its MCAP writes, in order.
+        messages: its MCAP messages, encoded, in order.
     """
 
     collector: Collector
-    log: CallLog
+    messages: list[EncodedMessage]
 
 
-def run_unit(unit: WorkUnit, *, record: bool) -> UnitResult:
-    """Evaluates ``unit`` (in a worker); ``record``: keep its MCAP writes."""
-    collector, log = Collector(), CallLog()
-    cached_evaluator(unit.plan).run_drive(unit.drive, collector, recorder=log if record else None,
-                                          frame_offset=unit.frame_offset)
-    return UnitResult(collector, log)
+def run_unit(unit: WorkUnit, stamp_base_ns: int | None) -> UnitResult:
+    """Evaluates ``unit`` (in a worker); ``stamp_base_ns``: the recording's stamp base, None
+    when nothing is recorded."""
+    from cold_maps.recording.recorder import Recorder
+
+    collector = Collector()
+    recorder = None if stamp_base_ns is None else Recorder.detached(stamp_base_ns)
+    _evaluator(unit.map_index).run_drive(unit.drive, collector, recorder=recorder, frame_offset=unit.frame_offset,
+                                         frames=range(unit.first, unit.stop))
+    return UnitResult(collector, [] if recorder is None else recorder.take())
 
 
-def work_units(evaluators: Sequence[MapEvaluator]) -> list[WorkUnit]:
-    """Every drive of every evaluator, global frame indices continuing across them."""
+def _most_pieces(evaluator: MapEvaluator, frames: int) -> int:
+    """How many frame ranges a drive of ``frames`` frames of ``evaluator`` may be cut into."""
+    return max(frames // MIN_UNIT_FRAMES, 1) if evaluator.frames_independent else 1
+
+
+def most_units(evaluators: Sequence[MapEvaluator]) -> int:
+    """The most work units the drives of ``evaluators`` can be cut into (no use for more workers)."""
+    return sum(_most_pieces(e, drive.frames) for e in evaluators for drive in e.drives)
+
+
+def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUnit]:
+    """Every drive of every evaluator, global frame indices continuing across them; a drive
+    with independent frames cut into ranges (about :data:`UNITS_PER_WORKER` units per
+    worker over the run, none shorter than :data:`MIN_UNIT_FRAMES` frames)."""
+    drives = sum(len(e.drives) for e in evaluators)
+    pieces = math.ceil(UNITS_PER_WORKER * workers / max(drives, 1))
     units, offset = [], 0
-    for evaluator in evaluators:
+    for map_index, evaluator in enumerate(evaluators):
         for index, drive in enumerate(evaluator.drives):
-            units.append(WorkUnit(evaluator.plan, index, offset, drive.frames))
+            count = min(pieces, _most_pieces(evaluator, drive.frames))
+            bounds = [round(k * drive.frames / count) for k in range(count + 1)]
+            units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in pairwise(bounds))
             offset += drive.frames
     return units
 
 
-def run_units(evaluators: Sequence[MapEvaluator], collector: Collector, recorder: Any,
-              on_frames: Callable[[int], None], executor: Executor) -> None:
-    """Runs every drive of ``evaluators`` as a unit on ``executor`` and merges the results
-    into ``collector`` and ``recorder`` in unit order (the notes as :meth:`MapEvaluator.run`
-    writes them); on an exception the units finished so far are merged, then it propagates."""
-    units = work_units(evaluators)
-    owners = [evaluator for evaluator in evaluators for _ in evaluator.drives]
-    futures: dict[Future[UnitResult], int] = {
-        executor.submit(run_unit, unit, record=recorder is not None): n for n, unit in enumerate(units)}
+@dataclass(frozen=True)
+class SubmittedUnits:
+    """The units of a run on its pool.
+
+    Fields:
+        evaluators: the run's evaluators.
+        units: the units, in frame order.
+        futures: their results by unit number.
+    """
+
+    evaluators: Sequence[MapEvaluator]
+    units: list[WorkUnit]
+    futures: dict[Future[UnitResult], int]
+
+
+def submit_units(executor: Executor, evaluators: Sequence[MapEvaluator], workers: int,
+                 stamp_base_ns: int | None) -> SubmittedUnits:
+    """Starts every unit of ``evaluators`` on ``executor`` (the first submission starts the
+    workers); ``stamp_base_ns`` as in :func:`run_unit`."""
+    units = work_units(evaluators, workers)
+    return SubmittedUnits(evaluators, units,
+                          {executor.submit(run_unit, unit, stamp_base_ns): n for n, unit in enumerate(units)})
+
+
+def merge_units(submitted: SubmittedUnits, collector: Collector, recorder: Any,
+                on_frames: Callable[[int], None]) -> None:
+    """Merges the results into ``collector`` and ``recorder`` in unit order as they come
+    (the notes as :meth:`MapEvaluator.run` writes them); on an exception the units finished
+    so far are merged, then it propagates."""
+    units, futures = submitted.units, submitted.futures
     finished: dict[int, UnitResult] = {}
 
     def merge(n: int) -> None:
-        unit, result, evaluator = units[n], finished.pop(n), owners[n]
-        if unit.drive == 0:
+        unit, result = units[n], finished.pop(n)
+        evaluator = submitted.evaluators[unit.map_index]
+        if unit.drive == 0 and unit.first == 0:
             evaluator.note_drives(collector)
         collector.merge(result.collector)
         if recorder is not None:
-            result.log.replay(recorder)
-        if unit.drive == len(evaluator.drives) - 1:
+            recorder.log(result.messages)
+        if unit.drive == len(evaluator.drives) - 1 and unit.stop == evaluator.drives[unit.drive].frames:
             evaluator.note_unmatched(collector)
 
     merged = 0
@@ -178,7 +257,7 @@ def run_units(evaluators: Sequence[MapEvaluator], collector: Collector, recorder
         for future in as_completed(futures):
             n = futures[future]
             finished[n] = future.result()
-            on_frames(units[n].frames)
+            on_frames(units[n].stop - units[n].first)
             while merged in finished:
                 merge(merged)
                 merged += 1

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import os
+from dataclasses import dataclass
 from typing import Any, Final, Mapping, Sequence
 
 import numpy as np
@@ -25,21 +26,83 @@ from cold_maps.simulation.sensor_errors import check_polyline
 FIGURE_SIZE_IN: Final[tuple[float, float]] = (8.0, 4.5)
 DPI: Final[int] = 100
 OVERLAY_VIEW_MARGIN_M: Final[float] = 10.0
+PNG_COMPRESS_LEVEL: Final[int] = 1
+"""zlib level of the PNGs: fastest, about 20 % larger files than the default 6."""
+AXES_BOX: Final[tuple[float, float, float, float]] = (0.09, 0.11, 0.98, 0.92)
+"""Left, bottom, right, top edge of the axes area (figure fractions): room for the tick
+labels, axis labels and title, fixed instead of measuring the text (``tight_layout``)."""
 
 
-def _figure() -> Any:
+_AXES: dict[str, Any] = {}
+"""Per plot kind, the axes this process draws that kind on again: the figure, its labels,
+grid, ticks and their text layouts are kept, each plot replaces the lines and legend."""
+
+
+def preload() -> None:
+    """Imports matplotlib's figure and Agg canvas now (in a worker idle before the plots)."""
+    _figure()
+
+
+def _axes(kind: str, xlabel: str, ylabel: str) -> Any:
+    """The axes for a plot of ``kind`` (in :data:`AXES_BOX`, labelled, with a grid),
+    without the lines and legend of the previous plot, autoscaling on."""
+    axes = _AXES.get(kind)
+    if axes is None:
+        axes = _AXES[kind] = _figure().add_subplot()
+        axes.set_xlabel(xlabel)
+        axes.set_ylabel(ylabel)
+        axes.grid(True, alpha=0.3)
+    else:
+        for line in list(axes.lines):
+            line.remove()
+        if axes.get_legend() is not None:
+            axes.get_legend().remove()
+        axes.set_autoscale_on(True)
+    return axes
+
+
+def _figure(boxed: bool = True) -> Any:
+    """A figure on the Agg canvas; ``boxed``: its axes fill :data:`AXES_BOX`."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
     FigureCanvasAgg(figure)
+    if boxed:
+        left, bottom, right, top = AXES_BOX
+        figure.subplots_adjust(left=left, bottom=bottom, right=right, top=top)
     return figure
 
 
 def _save(figure: Any, path: str | os.PathLike[str]) -> None:
     buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=DPI)
+    figure.savefig(buffer, format="png", dpi=DPI, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     atomic_write_bytes(path, buffer.getvalue())
+
+
+@dataclass(frozen=True)
+class ErrorSeries:
+    """The error per frame of one scenario (usually one boundary of one fusion).
+
+    Fields:
+        label: its name in the legend.
+        frames: frame indices of its evaluations.
+        means, maxima: mean and max error of each evaluation (m), NaN without a lane.
+    """
+
+    label: str
+    frames: NDArrayFloat
+    means: NDArrayFloat
+    maxima: NDArrayFloat
+
+    @classmethod
+    def of(cls, scenario: ScenarioAccumulator) -> ErrorSeries:
+        """The series of a scenario's records."""
+        records = scenario.records
+        return cls(f"{scenario.key.fusion} {scenario.key.boundary}",
+                   np.array([r.frame for r in records], dtype=float),
+                   np.array([r.errors_m.mean() if r.fused else np.nan for r in records]),
+                   np.array([r.errors_m.max() if r.fused else np.nan for r in records]))
 
 
 def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
@@ -47,25 +110,23 @@ def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[Scenario
     and right boundary of one fusion; frames without a lane are gaps."""
     if not scenarios:
         raise ValueError("plot_frame_errors: no scenarios to plot")
-    figure = _figure()
-    axes = figure.add_subplot()
-    for index, scenario in enumerate(scenarios):
-        records = scenario.records
-        frames = np.array([r.frame for r in records], dtype=float)
-        means = np.array([r.errors_m.mean() if r.fused else np.nan for r in records])
-        maxima = np.array([r.errors_m.max() if r.fused else np.nan for r in records])
-        label = f"{scenario.key.fusion} {scenario.key.boundary}"
+    plot_error_series(path, [ErrorSeries.of(s) for s in scenarios],
+                      title=title or f"error per frame: {scenarios[0].key.map}")
+
+
+def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str) -> None:
+    """:func:`plot_frame_errors` of the scenarios' series."""
+    axes = _axes("errors", "frame", "error [m]")
+    for index, line in enumerate(series):
         color = f"C{index}"
-        axes.plot(frames, means, color=color, linestyle="-", label=f"{label} mean")
-        axes.plot(frames, maxima, color=color, linestyle="--", label=f"{label} max")
-    axes.set_xlabel("frame")
-    axes.set_ylabel("error [m]")
+        axes.plot(line.frames, line.means, color=color, linestyle="-", label=f"{line.label} mean")
+        axes.plot(line.frames, line.maxima, color=color, linestyle="--", label=f"{line.label} max")
+    axes.relim()
+    axes.autoscale_view()
     axes.set_ylim(bottom=0.0)
-    axes.set_title(title or f"error per frame: {scenarios[0].key.map}")
-    axes.grid(True, alpha=0.3)
+    axes.set_title(title)
     axes.legend(loc="upper right", fontsize="small")
-    figure.tight_layout()
-    _save(figure, path)
+    _save(axes.figure, path)
 
 
 def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArrayFloat],
@@ -88,8 +149,7 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
         layers.append((check_polyline(f"fused {name}", points), COLOR_FUSED, "--", 1.5, "fused"))
     if not layers:
         raise ValueError("plot_frame_overlay: nothing to plot")
-    figure = _figure()
-    axes = figure.add_subplot()
+    axes = _axes("overlay", "x (east) [m]", "y (north) [m]")
     labelled: set[str] = set()
     for points, color, style, width, label in layers:
         axes.plot(points[:, 0], points[:, 1], color=color, linestyle=style, linewidth=width,
@@ -101,29 +161,31 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
     axes.set_xlim(low[0], high[0])
     axes.set_ylim(low[1], high[1])
     axes.set_aspect("equal", adjustable="box")
-    axes.set_xlabel("x (east) [m]")
-    axes.set_ylabel("y (north) [m]")
     axes.set_title(title)
-    axes.grid(True, alpha=0.3)
     axes.legend(loc="best", fontsize="small")
-    figure.tight_layout()
-    _save(figure, path)
+    _save(axes.figure, path)
 
 
-def plot_error_vs_range(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
-    """Max error (m) of every fused evaluation against its perception range (m), one colour per
-    vehicle count (chain length); correct fusions filled, the others hollow."""
+def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayFloat]:
+    """Per vehicle count (chain length): (perception range m, max error m, 1.0 if the pair
+    is truly on one lane else 0.0) of every fused evaluation with a finite range, ``(N, 3)``."""
     groups: dict[int, list[tuple[float, float, bool]]] = {}
     for scenario in scenarios:
         groups.setdefault(scenario.key.vehicles, []).extend(
             (r.perception_range_m, float(r.errors_m.max()), bool(r.truly_fusible)) for r in scenario.records
             if r.fused and np.isfinite(r.perception_range_m))
-    if not any(groups.values()):
+    return {vehicles: np.array(points, dtype=float).reshape(-1, 3) for vehicles, points in groups.items()}
+
+
+def plot_error_vs_range(path: str | os.PathLike[str], groups: Mapping[int, NDArrayFloat], title: str = "") -> None:
+    """Max error (m) of every fused evaluation against its perception range (m), one colour per
+    vehicle count (chain length); correct fusions filled, the others hollow. ``groups``: the
+    scenarios' :func:`range_points`."""
+    if not any(len(values) for values in groups.values()):
         raise ValueError("plot_error_vs_range: no fused evaluation to plot")
-    figure = _figure()
+    figure = _figure(boxed=False)
     axes = figure.add_subplot()
-    for index, (vehicles, points) in enumerate(sorted(groups.items())):
-        values = np.array(points, dtype=float).reshape(-1, 3)
+    for index, (vehicles, values) in enumerate(sorted(groups.items())):
         right = values[:, 2] > 0
         color = f"C{index}"
         axes.scatter(values[right, 0], values[right, 1], s=8, color=color, label=f"{vehicles} vehicle(s)")

@@ -217,7 +217,8 @@ class FrameRecord:
 
     def __post_init__(self) -> None:
         errors = np.asarray(self.errors_m, dtype=np.float64)
-        if errors.ndim != 1 or not np.all(np.isfinite(errors)) or np.any(errors < 0):
+        # min >= 0 and max < inf: every distance finite and >= 0 (a NaN fails the first)
+        if errors.ndim != 1 or errors.size and not (errors.min() >= 0.0 and errors.max() < math.inf):
             raise ReportError(f"frame {self.frame}: errors_m must be a 1-D array of finite distances >= 0")
         if errors.size and self.rejected:
             raise ReportError(f"frame {self.frame}: an evaluation with a lane cannot be rejected ({self.rejected!r})")

@@ -9,10 +9,14 @@ finalises the MCAP (marked ``partial``) and writes the report marked partial.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import re
 import tempfile
+import time
+from concurrent.futures import Executor
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Final, Mapping, Sequence, TextIO
@@ -68,15 +72,23 @@ def _file_part(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
-def write_plots(out: Path, collector: Collector) -> list[Path]:
-    """Per map and scenario: the error per frame of its own coop (Fig. 7) and the overlay
-    of its worst frame (Fig. 8); per map, when the run records vehicle counts, the max error
-    against the perception range of every fusion; into ``out/plots``; returns the files."""
-    from cold_maps.evaluation.plots import plot_error_vs_range, plot_frame_errors, plot_frame_overlay
+def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
+    """The plots of a run, each a call drawing one PNG into ``out/plots`` (created) from
+    the data it needs (picklable, for a worker process): per map and scenario the error per
+    frame of its own coop (Fig. 7) and the overlay of its worst frame (Fig. 8); per map,
+    when the run records vehicle counts, the max error against the perception range of
+    every fusion."""
+    from cold_maps.evaluation.plots import (
+        ErrorSeries,
+        plot_error_series,
+        plot_error_vs_range,
+        plot_frame_overlay,
+        range_points,
+    )
 
     folder = out / PLOTS_DIR
     folder.mkdir(exist_ok=True)
-    written = []
+    jobs = []
     groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
@@ -85,22 +97,44 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
         if not any(r.fused for a in accumulators for r in a.records):
             continue
         path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
-        plot_frame_errors(path, accumulators, title=f"{map_name}: {label}, error per frame")
-        written.append(path)
+        jobs.append(functools.partial(plot_error_series, path, [ErrorSeries.of(a) for a in accumulators],
+                                      title=f"{map_name}: {label}, error per frame"))
     extended: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         if key.vehicles > 1 and any(r.fused for r in accumulator.records):
             extended.setdefault(key.map, []).append(accumulator)
     for map_name, accumulators in extended.items():
         path = folder / f"error_vs_range_{_file_part(map_name)}.png"
-        plot_error_vs_range(path, accumulators, title=f"{map_name}: max error against perception range")
-        written.append(path)
+        jobs.append(functools.partial(plot_error_vs_range, path, range_points(accumulators),
+                                      title=f"{map_name}: max error against perception range"))
     for (map_name, label), overlay in collector.overlays.items():
         path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
-        plot_frame_overlay(path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
-                           title=f"{map_name}: {label}, frame {overlay.frame} (max error {overlay.max_error_m:.3f} m)")
-        written.append(path)
-    return written
+        jobs.append(functools.partial(
+            plot_frame_overlay, path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
+            title=f"{map_name}: {label}, frame {overlay.frame} (max error {overlay.max_error_m:.3f} m)"))
+    return jobs
+
+
+def start_plots(out: Path, collector: Collector, executor: Executor | None) -> Callable[[], list[Path]]:
+    """Starts drawing the :func:`plot_jobs` of a run on ``executor``'s workers; returns the
+    call that waits for them (without an executor: that draws them here) and returns the
+    files."""
+    jobs = plot_jobs(out, collector)
+    drawing = [executor.submit(job) for job in jobs] if executor is not None else []
+
+    def finish() -> list[Path]:
+        for job in jobs if executor is None else ():
+            job()
+        for future in drawing:
+            future.result()
+        return [job.args[0] for job in jobs]
+
+    return finish
+
+
+def write_plots(out: Path, collector: Collector) -> list[Path]:
+    """Draws the :func:`plot_jobs` of a run here; returns the files."""
+    return start_plots(out, collector, None)()
 
 
 def false_fusion_markdown(collector: Collector) -> str:
@@ -201,7 +235,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         for evaluator in evaluators:
             LOG.info("%s: preparing ground truth", evaluator.plan.path)
             evaluator.prepare()
-            LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
+            if LOG.isEnabledFor(logging.DEBUG):  # the check costs a pass over the driven lanes: once, in note_drives
+                LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
     except BaseException:
         for folder in created:
             if any(folder.iterdir()):
@@ -210,36 +245,66 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         raise
     collector = Collector()
     error: BaseException | None = None
-    total = sum(e.total_frames for e in evaluators)
-    try:
-        with ProgressBar(total, "cold-eval", stream=options.progress) as bar:
-            if options.mcap:
-                from cold_maps.recording.recorder import Recorder
+    workers = 1
+    with ExitStack() as stack:
+        executor: Executor | None = None
+        if options.workers > 1:
+            from cold_maps.evaluation.parallel import most_units, run_pool
 
-                with Recorder(out / MCAP_NAME, map_path=", ".join(str(p.path) for p in plans),
-                              params=options.run_params, stamp_base_ns=options.stamp_base_ns) as recorder:
-                    _run_all(evaluators, collector, recorder, bar, options.workers)
-            else:
-                _run_all(evaluators, collector, None, bar, options.workers)
-    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
-        error = exc
-        LOG.debug("run ended early", exc_info=True)
-    partial = error is not None
-    results = [a.result() for a in collector.accumulators.values()]
-    sections = list(extra_sections(collector, results)) if extra_sections is not None else []
-    results = write_outputs(out, collector, partial=partial, sections=sections, plots=options.plots, results=results)
+            workers = min(options.workers, most_units(evaluators))
+            if workers > 1:
+                executor = stack.enter_context(run_pool(evaluators, workers))
+        try:
+            _run_all(plans, evaluators, collector, options, executor, workers)
+        except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
+            error = exc
+            LOG.debug("run ended early", exc_info=True)
+            if executor is not None:
+                from cold_maps.evaluation.parallel import terminate
+
+                terminate(executor)
+                executor = None
+        partial = error is not None
+        plotted = start_plots(out, collector, executor) if options.plots and not partial else None
+        results = [a.result() for a in collector.accumulators.values()]
+        sections = list(extra_sections(collector, results)) if extra_sections is not None else []
+        results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results)
+        if plotted is not None:
+            plotted()
     return RunResult(results, collector, partial, error)
 
 
-def _run_all(evaluators: Sequence[MapEvaluator], collector: Collector, recorder: Any, bar: ProgressBar,
-             workers: int) -> None:
-    drives = sum(len(e.drives) for e in evaluators)
-    if min(workers, drives) > 1:
-        from cold_maps.evaluation.parallel import process_pool, run_units
+def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], collector: Collector,
+             options: RunOptions, executor: Executor | None, workers: int) -> None:
+    """Evaluates every drive, on ``executor``'s workers if given, into ``collector`` and the
+    recording. The workers start (fork) before the progress bar and the recording start
+    threads."""
+    stamp_base_ns = time.time_ns() if options.stamp_base_ns is None else options.stamp_base_ns
+    submitted = None
+    if executor is not None:
+        from cold_maps.evaluation.parallel import submit_units
 
-        with process_pool(min(workers, drives)) as executor:
-            run_units(evaluators, collector, recorder, bar.update, executor)
-        return
-    offset = 0
-    for evaluator in evaluators:
-        offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)
+        submitted = submit_units(executor, evaluators, workers, stamp_base_ns if options.mcap else None)
+        if options.plots:
+            from cold_maps.evaluation.plots import preload
+
+            for _ in range(workers):  # a worker without units left imports matplotlib meanwhile
+                executor.submit(preload)
+    with ExitStack() as stack:
+        bar = stack.enter_context(ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval",
+                                              stream=options.progress))
+        recorder = None
+        if options.mcap:
+            from cold_maps.recording.recorder import Recorder
+
+            recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME,
+                                                    map_path=", ".join(str(p.path) for p in plans),
+                                                    params=options.run_params, stamp_base_ns=stamp_base_ns))
+        if submitted is not None:
+            from cold_maps.evaluation.parallel import merge_units
+
+            merge_units(submitted, collector, recorder, bar.update)
+            return
+        offset = 0
+        for evaluator in evaluators:
+            offset = evaluator.run(collector, recorder=recorder, frame_offset=offset, on_frame=bar.update)

@@ -40,9 +40,10 @@ import math
 import os
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Final, Iterator, Mapping
+from typing import Any, Final, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -67,6 +68,9 @@ STATUS_PARTIAL: Final[str] = "partial"
 LINE_THICKNESS_M: Final[float] = 0.15
 DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
 DISPLAY_TOLERANCE_M: Final[float] = 0.01  # SceneUpdate lines simplified to within this distance
+SCENE_BATCH: Final[int] = 256
+"""Scene updates a recorder keeps before it simplifies their lines together (one shapely
+call) and writes them, with the messages between them, in order."""
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 NS_PER_S: Final[int] = 1_000_000_000
 MAX_STAMP_BASE_NS: Final[int] = 2**63 - 1 - 10**6 * NS_PER_S  # log times stay int64 for 11 days of frames
@@ -201,8 +205,12 @@ def _check_stamp_base(stamp_base_ns: int | None) -> int | None:
 def display_lines(lines: Mapping[str, NDArrayFloat]) -> list[NDArrayFloat]:
     """Each ``(N, 2)`` polyline (m) as drawn: simplified to within ``DISPLAY_TOLERANCE_M``
     and rounded to ``DISPLAY_DECIMALS``."""
-    simple = simplify_lines([check_polyline(name, points) for name, points in lines.items()], DISPLAY_TOLERANCE_M)
-    return [np.round(line, DISPLAY_DECIMALS) for line in simple]
+    return _drawn([check_polyline(name, points) for name, points in lines.items()])
+
+
+def _drawn(lines: list[NDArrayFloat]) -> list[NDArrayFloat]:
+    """Checked ``(N, 2)`` polylines (m) as drawn (:func:`display_lines`), simplified together."""
+    return [np.round(line, DISPLAY_DECIMALS) for line in simplify_lines(lines, DISPLAY_TOLERANCE_M)]
 
 
 def _timestamp(ns: int) -> Any:
@@ -211,11 +219,11 @@ def _timestamp(ns: int) -> Any:
     return Timestamp(ns // NS_PER_S, ns % NS_PER_S)
 
 
-def scene_update(ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> Any:
+def scene_update(ns: int, names: Sequence[str], drawn: Sequence[NDArrayFloat], color: RGBA) -> Any:
     """A ``foxglove.SceneUpdate`` replacing everything on its topic with one entity per line.
 
-    ``lines`` maps entity ids to ``(N, 2)`` world-frame polylines (m); ``ns`` is the log time
-    (ns since the Unix epoch).
+    ``names`` are the entity ids of the ``(N, 2)`` world-frame polylines (m) ``drawn`` (as
+    :func:`display_lines` returns them); ``ns`` is the log time (ns since the Unix epoch).
     """
     from foxglove.messages import (
         Color,
@@ -234,7 +242,7 @@ def scene_update(ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> Any
     stamp = _timestamp(ns)
     rgba = Color(r=color[0], g=color[1], b=color[2], a=color[3])
     entities = []
-    for name, points in zip(lines, display_lines(lines)):
+    for name, points in zip(names, drawn, strict=True):
         line = LinePrimitive(
             type=LinePrimitiveLineType.LineStrip,
             pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
@@ -255,12 +263,42 @@ def frame_transform(ns: int, sender: str, x: float, y: float, yaw: float) -> Any
                           rotation=Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw)))
 
 
+@dataclass(frozen=True, slots=True)
+class EncodedMessage:
+    """One message ready for the file.
+
+    Fields:
+        topic: its channel.
+        kind: ``scene``, ``transform`` or the title of its JSON schema.
+        log_time_ns: log time (ns since the Unix epoch).
+        payload: the message, protobuf or JSON bytes.
+    """
+
+    topic: str
+    kind: str
+    log_time_ns: int
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class _PendingScene:
+    """A :func:`scene_update` whose lines are drawn with the next batch (``lines``: checked,
+    in the order of ``names``)."""
+
+    topic: str
+    log_time_ns: int
+    names: tuple[str, ...]
+    lines: tuple[NDArrayFloat, ...]
+    color: RGBA
+
+
 class Recorder:
     """Context manager writing one run's MCAP file (see the module docstring).
 
     ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata;
     ``stamp_base_ns`` (ns since the Unix epoch) is the log time of stamp 0 s, by default
-    the wall-clock time when the recording opens.
+    the wall-clock time when the recording opens. A :meth:`detached` recorder has no file:
+    it keeps its messages encoded for another recorder's :meth:`log`.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, map_path: str | os.PathLike[str] = "",
@@ -274,11 +312,39 @@ class Recorder:
         self._writer: Any = None
         self._context: Any = None
         self._channels: dict[str, Any] = {}
+        self._queue: list[EncodedMessage | _PendingScene] = []
+        self._scenes = 0
+        self._detached = False
+
+    @classmethod
+    def detached(cls, stamp_base_ns: int) -> Recorder:
+        """A recorder without a file (in a worker process): its writes are kept, encoded and
+        in order, for :meth:`take`; a recorder with the same ``stamp_base_ns`` writes them
+        into its file with :meth:`log`."""
+        recorder = cls(os.devnull, stamp_base_ns=stamp_base_ns)
+        recorder.stamp_base_ns = stamp_base_ns
+        recorder._detached = True
+        return recorder
+
+    def take(self) -> list[EncodedMessage]:
+        """The messages written to this detached recorder since the last call, in order."""
+        if not self._detached:
+            raise RecordingError(f"{self.path}: only a detached recorder hands out its messages")
+        return self._take_queue()
+
+    def log(self, messages: Sequence[EncodedMessage]) -> None:
+        """Writes the messages of a detached recorder (same stamp base) after this one's."""
+        if self._writer is None:
+            raise RecordingError(f"{self.path}: recording is not open (use it as a context manager)")
+        self._write(self._take_queue())
+        self._write(messages)
 
     def __enter__(self) -> Recorder:
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
+        if self._detached:
+            raise RecordingError("a detached recorder has no file to open")
         if self._writer is not None:
             raise RecordingError(f"{self.path}: recording is already open")
         if not self.partial_path.parent.is_dir():
@@ -311,6 +377,12 @@ class Recorder:
     def _finish(self, status: dict[str, str]) -> None:
         if self._writer is None:
             raise RecordingError(f"{self.path}: recording is not open")
+        try:
+            self._write(self._take_queue())
+        finally:
+            self._close(status)
+
+    def _close(self, status: dict[str, str]) -> None:
         writer, channels = self._writer, self._channels
         self._writer = self._context = None
         self._channels = {}
@@ -324,44 +396,65 @@ class Recorder:
 
     def _ns(self, stamp_s: float) -> int:
         """Log time (ns since the Unix epoch) of a stamp (s since the stamp base)."""
-        if self._writer is None:
+        if self._writer is None and not self._detached:
             raise RecordingError(f"{self.path}: recording is not open (use it as a context manager)")
         return self.stamp_base_ns + _stamp_ns(stamp_s)
 
     def _channel(self, topic: str, kind: str) -> Any:
-        """The channel of ``topic``: ``kind`` is ``scene``, ``transform`` or a JSON schema title."""
+        """The channel of ``topic``: ``kind`` is ``scene``, ``transform`` (the Foxglove
+        protobuf schemas) or a JSON schema title."""
         channel = self._channels.get(topic)
         if channel is None:
             import foxglove
-            from foxglove.channels import FrameTransformChannel, SceneUpdateChannel
+            from foxglove.messages import FrameTransform, SceneUpdate
 
-            if kind == "scene":
-                channel = SceneUpdateChannel(topic, context=self._context)
-            elif kind == "transform":
-                channel = FrameTransformChannel(topic, context=self._context)
+            if kind in ("scene", "transform"):
+                schema = (SceneUpdate if kind == "scene" else FrameTransform).get_schema()
+                channel = foxglove.Channel(topic, message_encoding="protobuf", context=self._context, schema=schema)
             else:
-                schema = {s["title"]: s for s in (LANE_DETECTION_SCHEMA, FRAME_METRICS_SCHEMA)}[kind]
+                document = {s["title"]: s for s in (LANE_DETECTION_SCHEMA, FRAME_METRICS_SCHEMA)}[kind]
                 channel = foxglove.Channel(topic, message_encoding="json", context=self._context, schema=foxglove.Schema(
-                    name=kind, encoding="jsonschema", data=json.dumps(schema).encode()))
+                    name=kind, encoding="jsonschema", data=json.dumps(document).encode()))
             self._channels[topic] = channel
         return channel
+
+    def _emit(self, topic: str, kind: str, ns: int, payload: bytes) -> None:
+        self._queue.append(EncodedMessage(topic, kind, ns, payload))
+
+    def _emit_scene(self, topic: str, ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> None:
+        """Queues the :func:`scene_update` of ``lines`` (checked now, drawn with the batch)."""
+        checked = tuple(check_polyline(name, points) for name, points in lines.items())
+        self._queue.append(_PendingScene(topic, ns, tuple(lines), checked, color))
+        self._scenes += 1
+        if self._scenes >= SCENE_BATCH and not self._detached:
+            self._write(self._take_queue())
+
+    def _take_queue(self) -> list[EncodedMessage]:
+        """The queued messages, in order, the scene updates' lines simplified together."""
+        queue, self._queue, self._scenes = self._queue, [], 0
+        drawn = iter(_drawn([line for item in queue if isinstance(item, _PendingScene) for line in item.lines]))
+        return [item if isinstance(item, EncodedMessage) else EncodedMessage(
+            item.topic, "scene", item.log_time_ns,
+            scene_update(item.log_time_ns, item.names, [next(drawn) for _ in item.names], item.color).encode())
+            for item in queue]
+
+    def _write(self, messages: Sequence[EncodedMessage]) -> None:
+        for message in messages:
+            self._channel(message.topic, message.kind).log(message.payload, log_time=message.log_time_ns)
 
     def _write_json(self, topic: str, ns: int, message: Mapping[str, Any]) -> None:
         import orjson
 
         schema = LANE_DETECTION_SCHEMA if topic == TOPIC_RAW_DETECTIONS else FRAME_METRICS_SCHEMA
-        self._channel(topic, schema["title"]).log(orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY),
-                                                  log_time=ns)
+        self._emit(topic, schema["title"], ns, orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY))
 
     def write_gt(self, stamp_s: float, lines: Mapping[str, NDArrayFloat]) -> None:
         """Ground-truth polylines (world frame, m) of one frame on ``/gt``."""
-        ns = self._ns(stamp_s)
-        self._channel(TOPIC_GT, "scene").log(scene_update(ns, lines, COLOR_GT), log_time=ns)
+        self._emit_scene(TOPIC_GT, self._ns(stamp_s), lines, COLOR_GT)
 
     def write_fused(self, stamp_s: float, lines: Mapping[str, NDArrayFloat]) -> None:
         """The fused lane's polylines (world frame, m) of one frame on ``/fused``; {} clears it."""
-        ns = self._ns(stamp_s)
-        self._channel(TOPIC_FUSED, "scene").log(scene_update(ns, lines, COLOR_FUSED), log_time=ns)
+        self._emit_scene(TOPIC_FUSED, self._ns(stamp_s), lines, COLOR_FUSED)
 
     def write_detection(self, stamp_s: float, frame: int, sender: str, pose: tuple[float, float, float],
                         left: NDArrayFloat, right: NDArrayFloat, *, ego: bool = False,
@@ -388,10 +481,9 @@ class Recorder:
         if lanes is not None:
             raw.update(_multi_lane(lanes))
         self._write_json(TOPIC_RAW_DETECTIONS, ns, raw)
-        self._channel(TOPIC_TF, "transform").log(frame_transform(ns, sender, x, y, yaw), log_time=ns)
+        self._emit(TOPIC_TF, "transform", ns, frame_transform(ns, sender, x, y, yaw).encode())
         world = {"left": vehicle_to_world(left, x, y, yaw), "right": vehicle_to_world(right, x, y, yaw)}
-        self._channel(TOPIC_DETECTIONS_PREFIX + sender, "scene").log(
-            scene_update(ns, world, COLOR_EGO if ego else COLOR_COOP), log_time=ns)
+        self._emit_scene(TOPIC_DETECTIONS_PREFIX + sender, ns, world, COLOR_EGO if ego else COLOR_COOP)
 
     def write_metrics(self, stamp_s: float, frame: int, values: Mapping[str, float | int | None]) -> None:
         """Per-frame metrics on ``/metrics``; NaN and None are written as null."""
