@@ -20,7 +20,7 @@ from conftest import PROJECT_ROOT, bundled_map
 
 import cold_maps
 from cold_maps.cli import evaluate, fuse, maps, sweep
-from cold_maps.cli.common import DefaultsHelpFormatter, configure_logging
+from cold_maps.cli.common import DefaultsHelpFormatter, Terminated, cli_entry, configure_logging
 from cold_maps.common.progress import ProgressBar, Spinner
 
 
@@ -241,3 +241,18 @@ def test_refusion_shows_progress_unless_switched_off(flags: list[str], drawn: bo
     assert fuse.main(["--input", str(recording), "-o", str(tmp_path / "re.mcap"), "--no-gt", *flags]) == 0
     shown = visible(terminal.getvalue())
     assert any(line.startswith("cold-fuse [") and "/" in line for line in shown) is drawn, shown
+
+
+@pytest.mark.parametrize(("signal_error", "status", "what"), [(KeyboardInterrupt, 130, "interrupted"),
+                                                               (Terminated, 143, "terminated")])
+def test_an_interruption_the_command_does_not_handle_is_one_line(signal_error: type[BaseException], status: int,
+                                                                 what: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C or SIGTERM landing where no command handles it (e.g. while a sweep imports
+    pyarrow to write its tables) ends with one stderr line and 128 + signal, no traceback."""
+
+    @cli_entry("cold-eval sweep")
+    def body(argv: object) -> int:
+        raise signal_error()
+
+    assert body([]) == status
+    assert capsys.readouterr().err == f"cold-eval: error: sweep: {what}\n"

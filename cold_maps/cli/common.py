@@ -44,26 +44,37 @@ def interruption(exc: BaseException) -> tuple[str, int]:
     return ("terminated", EXIT_TERMINATED) if isinstance(exc, Terminated) else ("interrupted", EXIT_INTERRUPTED)
 
 
-def cli_entry(body: Callable[[Sequence[str] | None], int]) -> Callable[[Sequence[str] | None], int]:
-    """Wraps a command's entry point: SIGTERM raises :class:`Terminated` while it runs (the
-    previous handler is restored after), and a closed standard output ends it quietly with
+CliBody = Callable[[Sequence[str] | None], int]
+
+
+def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
+    """Wraps the entry point of the command ``prog``: SIGTERM raises :class:`Terminated`
+    while it runs (the previous handler is restored after); an interruption the command
+    does not handle itself ends it with one line on stderr (``PROG: error: interrupted``)
+    and 130 / 143 instead of a traceback; a closed standard output ends it quietly with
     ``EXIT_BROKEN_PIPE`` instead of an error and a traceback at exit."""
 
-    @functools.wraps(body)
-    def main(argv: Sequence[str] | None = None) -> int:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
-        try:
-            status = body(argv)
-            sys.stdout.flush()
-            return status
-        except BrokenPipeError:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stdout.fileno())
-            return EXIT_BROKEN_PIPE
-        finally:
-            signal.signal(signal.SIGTERM, previous)
+    def wrap(body: CliBody) -> CliBody:
+        @functools.wraps(body)
+        def main(argv: Sequence[str] | None = None) -> int:
+            previous = signal.signal(signal.SIGTERM, _raise_terminated)
+            try:
+                status = body(argv)
+                sys.stdout.flush()
+                return status
+            except BrokenPipeError:
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, sys.stdout.fileno())
+                return EXIT_BROKEN_PIPE
+            except KeyboardInterrupt as exc:
+                what, status = interruption(exc)
+                return fail(prog, what, status)
+            finally:
+                signal.signal(signal.SIGTERM, previous)
 
-    return main
+        return main
+
+    return wrap
 
 
 class CliParser(argparse.ArgumentParser):

@@ -216,7 +216,7 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
     return sections
 
 
-@cli_entry
+@cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval`` (``cold-eval sweep ...``: :mod:`cold_maps.cli.sweep`);
     returns the exit status."""

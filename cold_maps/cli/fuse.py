@@ -192,7 +192,7 @@ def _detection_count(path: Path) -> int:
     return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic == TOPIC_RAW_DETECTIONS)
 
 
-@cli_entry
+@cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
     args = build_parser().parse_args(argv)

@@ -410,7 +410,7 @@ def build_parser(commands: Sequence[Command] = COMMANDS, selected: str | None = 
     return parser
 
 
-@cli_entry
+@cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-maps``; returns the exit status."""
     from cold_maps.cli.common import configure_logging, fail, interruption

@@ -101,10 +101,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     finished = result.computed + result.reused
-    if result.rows:
-        write_tables(out, result.rows)
-    write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=not args.no_plots)
     counts = f"{result.computed} cells computed, {result.reused} finished before, {len(result.cells)} in the grid"
+    try:
+        if result.rows:
+            write_tables(out, result.rows)
+        write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=not args.no_plots)
+    except KeyboardInterrupt as exc:
+        what, status = interruption(exc)
+        return fail(PROG, f"{what} while writing the tables ({counts}; the finished cells are kept); run the same "
+                    f"command again to write them -> {args.out}", status)
     if isinstance(result.error, KeyboardInterrupt):
         what, status = interruption(result.error)
         return fail(PROG, f"{what} ({counts}); run the same command again to finish -> {args.out}", status)
