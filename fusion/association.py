@@ -31,7 +31,7 @@ and no other shift explains the detections as well:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable, Final, Mapping, Sequence
 
 
@@ -42,6 +42,8 @@ from fusion.fusibility import (
     LaneEnds,
     arc_mismatch,
     cone_excess,
+    cone_point_excess,
+    end_turn,
     geometric_assessment,
     lane_ends,
     relative_pose,
@@ -221,12 +223,12 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
     end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
     on each border instead of the centre line)."""
     (el, er), (cl, cr) = own
+    turn = end_turn(ends)
     excess = 0.0
     for ego_border, coop_border in ((el, cl), (er, cr)):
-        p_end, p_start = (float(ego_border[-1, 0]), float(ego_border[-1, 1])), (float(coop_border[0, 0]),
-                                                                                 float(coop_border[0, 1]))
+        p_end, p_start = ego_border[-1].tolist(), coop_border[0].tolist()
         chord = math.hypot(p_start[0] - p_end[0], p_start[1] - p_end[1])
-        excess = max(excess, cone_excess(replace(ends, p_end=p_end, p_start=p_start, gap_m=chord))[1])
+        excess = max(excess, cone_point_excess(ends.t_end, turn, p_end, p_start, chord))
     return excess
 
 
