@@ -122,7 +122,7 @@ def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources:
     one :class:`Source` per part: one concatenation and one transform to the world frame (the
     other fields as :class:`FusionResult`)."""
     counts = [points.shape[0] for points in parts]
-    world = to_world(np.concatenate(parts), ego.pose)
+    world = to_world(np.concatenate(parts), ego.pose, in_place=True)
     labels = sources.repeat(counts)
     n_left = sum(counts[: len(parts) // 2])
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason,
