@@ -149,7 +149,8 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
     parts, sources = _fused(coop, borders, fits, kind, starts, interpolation, params)
-    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
+    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params)
+                  for index in association.matched) if association.matched else ()
     return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes)
 
 

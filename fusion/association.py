@@ -294,18 +294,24 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     if reason:
         return Association(reason, 0.0)
     graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
+    if not _multi_lane(ego, coop):
+        return Association("", GEOMETRY_CONFIDENCE[evidence] * graded)
     association = _associate_lanes(ego, coop, own, convoy, evidence, params)
     if association.reason:
         return association
     return Association("", association.confidence * graded, association.matched)
 
 
+def _multi_lane(ego: LaneDetection, coop: LaneDetection) -> bool:
+    """Whether either detection carries lane evidence beyond its own lane (neighbours, road
+    edges, the ego's branches)."""
+    return bool(ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges)
+
+
 def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
                      evidence: Evidence, params: FusionParams) -> Association:
-    """The association by lane evidence alone, confidence at its level (see :func:`associate`)."""
-    multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
-    if not multi:
-        return Association("", GEOMETRY_CONFIDENCE[evidence])
+    """The association by lane evidence alone (:func:`_multi_lane` holds), confidence at its
+    level (see :func:`associate`)."""
     x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
     ego_lanes = _lanes(ego, own[0], True, lambda points: points)
     coop_lanes = _lanes(coop, own[1], False, lambda points: transform(points, x_rel, y_rel, psi_rel))

@@ -127,12 +127,12 @@ class EndFit(NamedTuple):
     """Least-squares estimate at a border end (world frame); a named tuple, immutable and
     cheap to build (four per spline fusion).
 
-    Fields: ``point`` fitted end point [m]; ``direction`` unit tangent (driving direction);
+    Fields: ``point`` fitted end point ``(x, y)`` [m]; ``direction`` unit tangent (driving direction);
     ``curvature`` [1/m] (positive turning left); ``curvature_sigma`` its standard deviation
     from the detection noise [1/m], infinite when the end is no single arc.
     """
 
-    point: NDArrayFloat
+    point: tuple[float, float]
     direction: tuple[float, float]
     curvature: float
     curvature_sigma: float
@@ -225,8 +225,10 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     uncertainty.
     """
     groups: dict[tuple[int, ...], list[int]] = {}
+    n_min = math.inf
     for e, points in enumerate(borders):
         n = points.shape[0]
+        n_min = min(n_min, n)
         span = min(n - 1, _STEP_SPAN)
         (x0, y0), (x1, y1) = (points[-1 - span::span] if at_end[e] else points[: span + 1: span]).tolist()
         per_point = span / (math.hypot(x1 - x0, y1 - y0) or math.inf)
@@ -234,7 +236,7 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         if counts[-1] > n:
             counts = [min(n, count) for count in counts]
         groups.setdefault(tuple(counts), []).append(e)
-    n_noise = min(min(b.shape[0] for b in borders), max(3, int(round(noise_window_m / 0.1))))
+    n_noise = min(n_min, max(3, int(round(noise_window_m / 0.1))))
     filtered, squares, n_squares = [], 0.0, 0
     for counts, members in groups.items():
         design = _end_design(counts, min(n_noise, counts[-1]))
@@ -284,7 +286,7 @@ def _chord_fit(points: NDArrayFloat, at_end: bool) -> EndFit:
     """The end point, the whole border's chord direction and zero curvature of infinite σ."""
     (x0, y0), (x1, y1) = points[0].tolist(), points[-1].tolist()
     norm = math.hypot(x1 - x0, y1 - y0) or 1.0
-    return EndFit(np.array((x1, y1) if at_end else (x0, y0)), ((x1 - x0) / norm, (y1 - y0) / norm), 0.0, math.inf)
+    return EndFit((x1, y1) if at_end else (x0, y0), ((x1 - x0) / norm, (y1 - y0) / norm), 0.0, math.inf)
 
 
 def _end_fit(row: list[complex], design: _EndDesign, w: int, at_end: bool, sigma: float) -> EndFit:
@@ -305,7 +307,7 @@ def _end_fit(row: list[complex], design: _EndDesign, w: int, at_end: bool, sigma
     if abs(normal_p3 - arc_p3) > _CURVATURE_CHANGE_SIGMAS * sigma * design.p3_gain + _CUBIC_ARC_BIAS * abs(arc_p3):
         curvature_sigma = math.inf
     direction = (-p1 if at_end else p1) / speed
-    return EndFit(np.array((p0.real, p0.imag)), (direction.real, direction.imag),
+    return EndFit((p0.real, p0.imag), (direction.real, direction.imag),
                   -curvature if at_end else curvature, curvature_sigma)
 
 
