@@ -122,7 +122,7 @@ def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources:
     one :class:`Source` per part: one concatenation and one transform to the world frame (the
     other fields as :class:`FusionResult`)."""
     counts = [points.shape[0] for points in parts]
-    world = to_world(np.concatenate(parts), ego.pose)
+    world = to_world(np.concatenate(parts), ego.pose, in_place=True)
     labels = sources.repeat(counts)
     n_left = sum(counts[: len(parts) // 2])
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason,
@@ -149,7 +149,8 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
     parts, sources = _fused(coop, borders, fits, kind, starts, interpolation, params)
-    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
+    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params)
+                  for index in association.matched) if association.matched else ()
     return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes)
 
 

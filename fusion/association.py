@@ -31,7 +31,7 @@ and no other shift explains the detections as well:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable, Final, Mapping, Sequence
 
 
@@ -42,6 +42,8 @@ from fusion.fusibility import (
     LaneEnds,
     arc_mismatch,
     cone_excess,
+    cone_point_excess,
+    end_turn,
     geometric_assessment,
     lane_ends,
     relative_pose,
@@ -221,12 +223,12 @@ def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
     end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
     on each border instead of the centre line)."""
     (el, er), (cl, cr) = own
+    turn = end_turn(ends)
     excess = 0.0
     for ego_border, coop_border in ((el, cl), (er, cr)):
-        p_end, p_start = (float(ego_border[-1, 0]), float(ego_border[-1, 1])), (float(coop_border[0, 0]),
-                                                                                 float(coop_border[0, 1]))
+        p_end, p_start = ego_border[-1].tolist(), coop_border[0].tolist()
         chord = math.hypot(p_start[0] - p_end[0], p_start[1] - p_end[1])
-        excess = max(excess, cone_excess(replace(ends, p_end=p_end, p_start=p_start, gap_m=chord))[1])
+        excess = max(excess, cone_point_excess(ends.t_end, turn, p_end, p_start, chord))
     return excess
 
 
@@ -292,18 +294,24 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     if reason:
         return Association(reason, 0.0)
     graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
+    if not _multi_lane(ego, coop):
+        return Association("", GEOMETRY_CONFIDENCE[evidence] * graded)
     association = _associate_lanes(ego, coop, own, convoy, evidence, params)
     if association.reason:
         return association
     return Association("", association.confidence * graded, association.matched)
 
 
+def _multi_lane(ego: LaneDetection, coop: LaneDetection) -> bool:
+    """Whether either detection carries lane evidence beyond its own lane (neighbours, road
+    edges, the ego's branches)."""
+    return bool(ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges)
+
+
 def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
                      evidence: Evidence, params: FusionParams) -> Association:
-    """The association by lane evidence alone, confidence at its level (see :func:`associate`)."""
-    multi = ego.neighbours or coop.neighbours or ego.branches or ego.road_edges or coop.road_edges
-    if not multi:
-        return Association("", GEOMETRY_CONFIDENCE[evidence])
+    """The association by lane evidence alone (:func:`_multi_lane` holds), confidence at its
+    level (see :func:`associate`)."""
     x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
     ego_lanes = _lanes(ego, own[0], True, lambda points: points)
     coop_lanes = _lanes(coop, own[1], False, lambda points: transform(points, x_rel, y_rel, psi_rel))

@@ -35,8 +35,8 @@ def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat, s_ego: NDArrayFloat) ->
     s0, offset, k = project_point(coop[0], ego, s_ego)
     a, b = max(0, k - _HEADING_HALF_WINDOW), min(ego.shape[0] - 1, k + 1 + _HEADING_HALF_WINDOW)
     c = min(coop.shape[0] - 1, 2 * _HEADING_HALF_WINDOW)
-    ex, ey = float(ego[b, 0] - ego[a, 0]), float(ego[b, 1] - ego[a, 1])
-    cx, cy = float(coop[c, 0] - coop[0, 0]), float(coop[c, 1] - coop[0, 1])
+    (ax, ay), (bx, by), (c0x, c0y), (ccx, ccy) = ego[a].tolist(), ego[b].tolist(), coop[0].tolist(), coop[c].tolist()
+    ex, ey, cx, cy = bx - ax, by - ay, ccx - c0x, ccy - c0y
     diff = math.atan2(ex * cy - ey * cx, ex * cx + ey * cy)
     return OverlapStart(s_ego, s0, offset, abs(diff))
 
@@ -55,9 +55,9 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     no jump. Returns the parts in order with their :class:`Source` labels.
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
-    first = int(np.searchsorted(s_ego, s0))
-    overlap_end = min(float(s_ego[-1]) - s0, float(s_coop[-1]))
-    stop = int(np.searchsorted(s_ego, s0 + overlap_end, side="right"))
+    first = int(s_ego.searchsorted(s0))
+    overlap_end = min(s_ego.item(-1) - s0, s_coop.item(-1))
+    stop = int(s_ego.searchsorted(s0 + overlap_end, side="right"))
     u = s_ego[first:stop] - s0
     paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])
     overlap = np.ascontiguousarray(ego[first:stop]).view(np.complex128)[:, 0]
@@ -72,5 +72,5 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     if stop < ego.shape[0]:
         parts.append((ego[stop:], Source.EGO))
     else:
-        parts.append((coop[int(np.searchsorted(s_coop, overlap_end, side="right")):], Source.COOP))
+        parts.append((coop[int(s_coop.searchsorted(overlap_end, side="right")):], Source.COOP))
     return parts

@@ -191,12 +191,26 @@ def cone_excess(ends: LaneEnds) -> tuple[float, float]:
     """``(turn, excess)``: the heading change Δψ from the ego end to the coop start [rad] and
     how far [m] the coop start lies laterally outside the cone of the two end headings (rule 3
     of :func:`geometric_assessment`; 0 inside)."""
+    turn = end_turn(ends)
+    return turn, cone_point_excess(ends.t_end, turn, ends.p_end, ends.p_start, abs(ends.gap_m))
+
+
+def end_turn(ends: LaneEnds) -> float:
+    """The heading change Δψ from the ego end to the coop start [rad]."""
     t0, t1 = ends.t_end, ends.t_start
-    turn = math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
-    d = (ends.p_start[0] - ends.p_end[0], ends.p_start[1] - ends.p_end[1])
+    return math.atan2(t0[0] * t1[1] - t0[1] * t1[0], t0[0] * t1[0] + t0[1] * t1[1])
+
+
+def cone_point_excess(t_end: tuple[float, float], turn: float, p_end: tuple[float, float],
+                      p_start: tuple[float, float], distance_m: float) -> float:
+    """How far [m] ``p_start`` lies laterally outside the cone drawn from ``p_end`` between the
+    heading ``t_end`` (unit vector) and that heading turned by ``turn`` [rad], for a point
+    ``distance_m`` away (:func:`cone_excess` on floats; 0 inside)."""
+    t0 = t_end
+    d = (p_start[0] - p_end[0], p_start[1] - p_end[1])
     phi = math.atan2(t0[0] * d[1] - t0[1] * d[0], t0[0] * d[0] + t0[1] * d[1])
     outside = max(min(0.0, turn) - phi, phi - max(0.0, turn), 0.0)
-    return turn, abs(ends.gap_m) * math.sin(min(outside, math.pi / 2))
+    return distance_m * math.sin(min(outside, math.pi / 2))
 
 
 def _mean_heading(a: EndFit, b: EndFit) -> float:

@@ -103,7 +103,7 @@ def sample_pieces(pieces: Sequence[Sequence[Piece]], spacing_m: float) -> list[N
     q = np.interp(k, s, _parameter_grid(n_pieces))
     index = q.astype(np.intp)
     np.minimum(index, n_pieces - 1, out=index)
-    tau = (q - index).astype(np.complex128)  # complex × complex: no cast inside each product
+    tau = np.subtract(q, index, dtype=np.complex128)  # complex × complex: no cast inside each product
     a, b, c, d = coeffs.T.take(index, axis=1)
     z = d * tau
     z += c
@@ -237,7 +237,7 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
     """
     d0 = _mean_dir(fits[0].direction, fits[1].direction)
     d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    ends = [(complex(*fits[i].point.tolist()), complex(*fits[i + 2].point.tolist())) for i in (0, 1)]
+    ends = [(complex(*fits[i].point), complex(*fits[i + 2].point)) for i in (0, 1)]
     triangles = [_tangent_triangle(p0, d0, p3, d1) for p0, p3 in ends]
     if triangles[0] is None and triangles[1] is None:
         left, right = sample_pieces([[_bezier_piece(p0, d0, p3, d1)] for p0, p3 in ends], spacing_m)
@@ -295,13 +295,12 @@ class EndFits:
         :data:`_WHOLE_MAX_TURN_RAD` (a curve beyond the fit's model), or an end whose whole
         detection is no single arc in the fit's model."""
         if self._arcs is None:
-            fits = self()
-            self._arcs = fits
-            turns = [abs(fit.curvature) * math.dist(*border[::border.shape[0] - 1].tolist())
-                     for fit, border in zip(fits, self._borders) if fit.curvature_sigma < math.inf]
-            if (not all(abs(fit.curvature) >= _RESOLVED_SIGMAS * fit.curvature_sigma and clearly_curved(
-                    fit.curvature, fit.curvature_sigma) for fit in fits)
-                    and min(turns, default=0.0) <= _WHOLE_MAX_TURN_RAD):
+            fits = self._arcs = self()
+            if not all(abs(fit.curvature) >= _RESOLVED_SIGMAS * fit.curvature_sigma and clearly_curved(
+                    fit.curvature, fit.curvature_sigma) for fit in fits) and min(
+                    (abs(fit.curvature) * math.dist(*border[::border.shape[0] - 1].tolist())
+                     for fit, border in zip(fits, self._borders) if fit.curvature_sigma < math.inf),
+                    default=0.0) <= _WHOLE_MAX_TURN_RAD:
                 whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M)
                 self._arcs = tuple(end._replace(direction=fit.direction, curvature=fit.curvature,
                                                 curvature_sigma=fit.curvature_sigma)
