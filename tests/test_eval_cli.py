@@ -140,6 +140,49 @@ def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys
     assert not (out / "run.mcap.partial").exists()
 
 
+def test_interrupt_while_drawing_plots_rewrites_the_report_as_partial(tmp_path, monkeypatch, capsys):
+    """Ctrl-C after the last frame, while the plots are drawn: the report is rewritten as
+    partial, this run's plots (and a killed worker's temporary file) are removed, one line."""
+    from cold_maps.evaluation import plots
+
+    drawn = []
+
+    def interrupted(path, *args, **kwargs):
+        drawn.append(path)
+        if len(drawn) == 2:
+            path.with_name(f".{path.name}.abc123.part").write_bytes(b"half a PNG")
+            raise KeyboardInterrupt
+        path.write_bytes(b"PNG")
+
+    monkeypatch.setattr(plots, "plot_error_series", interrupted)
+    out = tmp_path / "out"
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "6", "--routes", "1", "--workers", "1",
+                            "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert status == 130 and err == f"cold-eval: error: interrupted; partial report in {out}"
+    assert len(drawn) == 2
+    document, records = _records(out)
+    assert document["partial"] is True and records[("curve90", "local", "", 0.0, "left")]["frames"] == 6
+    assert "PARTIAL RUN" in (out / "summary.md").read_text()
+    assert not (out / "plots").exists()
+    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"  # every frame was recorded
+
+
+def test_signals_are_held_inside_signals_ignored():
+    import os
+    import signal
+
+    from cold_maps.common.signals import signals_ignored
+
+    before = signal.getsignal(signal.SIGINT)
+    with signals_ignored():
+        os.kill(os.getpid(), signal.SIGINT)  # dropped, not raised
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    assert signal.getsignal(signal.SIGINT) is before
+    with pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), signal.SIGINT)
+
+
 @pytest.mark.parametrize("signal_name, status, word", [("SIGINT", 130, "interrupted"),
                                                        ("SIGTERM", 143, "terminated")])
 def test_signal_finalises_the_recording(tmp_path, signal_name, status, word):

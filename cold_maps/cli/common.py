@@ -38,6 +38,20 @@ def _raise_terminated(signum: int, frame: FrameType | None) -> None:
     raise Terminated()
 
 
+def _exit_now(status: int) -> None:
+    """Ends the program with ``status`` once its outputs are written, without the interpreter's
+    exit handlers: an interruption can leave a lock of a worker pool's bookkeeping thread
+    held (a signal landing inside a ``with lock:``), and joining that thread at exit would
+    then hang for ever."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(status)
+
+
 def interruption(exc: BaseException) -> tuple[str, int]:
     """What ended a run early by a signal, and the exit status: ``terminated`` 143 for
     SIGTERM, ``interrupted`` 130 for Ctrl-C."""
@@ -52,7 +66,9 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
     while it runs (the previous handler is restored after); an interruption the command
     does not handle itself ends it with one line on stderr (``PROG: error: interrupted``)
     and 130 / 143 instead of a traceback; a closed standard output ends it quietly with
-    ``EXIT_BROKEN_PIPE`` instead of an error and a traceback at exit."""
+    ``EXIT_BROKEN_PIPE`` instead of an error and a traceback at exit. Run as the program
+    (``argv`` None), an interrupted command exits at once after its outputs are written
+    (:func:`_exit_now`); called with ``argv`` (tests, other Python code) it returns."""
 
     def wrap(body: CliBody) -> CliBody:
         @functools.wraps(body)
@@ -61,16 +77,18 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
             try:
                 status = body(argv)
                 sys.stdout.flush()
-                return status
             except BrokenPipeError:
                 devnull = os.open(os.devnull, os.O_WRONLY)
                 os.dup2(devnull, sys.stdout.fileno())
                 return EXIT_BROKEN_PIPE
             except KeyboardInterrupt as exc:
                 what, status = interruption(exc)
-                return fail(prog, what, status)
+                status = fail(prog, what, status)
             finally:
                 signal.signal(signal.SIGTERM, previous)
+            if argv is None and status in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+                _exit_now(status)
+            return status
 
         return main
 

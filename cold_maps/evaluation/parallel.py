@@ -49,6 +49,8 @@ UNITS_PER_WORKER: Final[int] = 6
 finish together."""
 MIN_UNIT_FRAMES: Final[int] = 10
 """Frames of a drive's range below which it is not cut further."""
+TERMINATE_WAIT_S: Final[float] = 5.0
+"""How long :func:`terminate` waits for each terminated worker to exit [s]."""
 
 
 def default_workers() -> int:
@@ -60,15 +62,21 @@ def default_workers() -> int:
 
 
 def _ignore_sigint() -> None:
+    """Worker set-up: Ctrl-C is the parent's to handle; SIGTERM ends the worker silently
+    (not the parent's handler, inherited by fork, that raises in the worker)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def terminate(executor: Executor) -> None:
-    """Cancels the pending work of a :class:`ProcessPoolExecutor` and terminates its workers."""
+    """Cancels the pending work of a :class:`ProcessPoolExecutor` and terminates its workers
+    (waits until they have exited: nothing they were writing changes after)."""
     processes = list((getattr(executor, "_processes", None) or {}).values())
     executor.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
+    for process in processes:
+        process.join(TERMINATE_WAIT_S)
 
 
 @contextmanager

@@ -4,12 +4,15 @@ the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``plots/*.p
 
 Everything that can fail on bad input (maps, routes, ground truth, the output folder) is
 checked before the first output file is opened. An interrupted or crashed run still
-finalises the MCAP (marked ``partial``) and writes the report marked partial.
+finalises the MCAP (marked ``partial``) and writes the report marked partial; an
+interruption while the report is written rewrites it as partial without plots, and one
+after it is written (while the workers shut down) is dropped: the report stands complete.
 """
 
 from __future__ import annotations
 
 import functools
+import glob
 import logging
 import os
 import re
@@ -24,6 +27,7 @@ from typing import Any, Callable, Final, Mapping, Sequence, TextIO
 import numpy as np
 
 from cold_maps.common.progress import ProgressBar
+from cold_maps.common.signals import signals_ignored
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.evaluator import MapEvaluator
 from cold_maps.evaluation.report import (
@@ -246,7 +250,11 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     collector = Collector()
     error: BaseException | None = None
     workers = 1
-    with ExitStack() as stack:
+    # once the run ends early, and once its report is written, Ctrl-C and SIGTERM are held
+    # (``held`` closes last, after the workers are shut down): a second signal (``timeout``
+    # sends two, a user presses twice) must not cut the partial report short, and one after
+    # the report would claim a complete report is missing
+    with ExitStack() as held, ExitStack() as stack:
         executor: Executor | None = None
         if options.workers > 1:
             from cold_maps.evaluation.parallel import most_units, run_pool
@@ -257,21 +265,59 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         try:
             _run_all(plans, evaluators, collector, options, executor, workers)
         except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - any crash must still leave partial outputs
+            held.enter_context(signals_ignored())
             error = exc
             LOG.debug("run ended early", exc_info=True)
-            if executor is not None:
-                from cold_maps.evaluation.parallel import terminate
+            executor = _stopped(executor)
+        try:
+            results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
+                                    partial=error is not None)
+        except KeyboardInterrupt as exc:  # while writing a complete report: rewritten as partial, without plots
+            held.enter_context(signals_ignored())
+            error = exc
+            LOG.debug("interrupted while writing the report", exc_info=True)
+            executor = _stopped(executor)
+            _discard_plots(out, collector)
+            results = _write_report(out, collector, False, None, extra_sections, partial=True)
+        if error is None:
+            held.enter_context(signals_ignored())
+    return RunResult(results, collector, error is not None, error)
 
-                terminate(executor)
-                executor = None
-        partial = error is not None
-        plotted = start_plots(out, collector, executor) if options.plots and not partial else None
-        results = [a.result() for a in collector.accumulators.values()]
-        sections = list(extra_sections(collector, results)) if extra_sections is not None else []
-        results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results)
-        if plotted is not None:
-            plotted()
-    return RunResult(results, collector, partial, error)
+
+def _stopped(executor: Executor | None) -> None:
+    """Terminates ``executor``'s workers, if any (their pending work is dropped); None."""
+    if executor is not None:
+        from cold_maps.evaluation.parallel import terminate
+
+        terminate(executor)
+
+
+def _write_report(out: Path, collector: Collector, plots: bool, executor: Executor | None,
+                  extra_sections: Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]] | None, *,
+                  partial: bool) -> list[ScenarioResult]:
+    """The report of a run (:func:`write_outputs`), the plots (when ``plots``) drawn on
+    ``executor``'s workers meanwhile; returns the scenario results."""
+    plotted = start_plots(out, collector, executor) if plots else None
+    results = [a.result() for a in collector.accumulators.values()]
+    sections = list(extra_sections(collector, results)) if extra_sections is not None else []
+    results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results)
+    if plotted is not None:
+        plotted()
+    return results
+
+
+def _discard_plots(out: Path, collector: Collector) -> None:
+    """Removes the plot files of this run (complete or not) from ``out/plots``, and the folder
+    when nothing else is left in it: a partial report has no plots."""
+    folder = out / PLOTS_DIR
+    if not folder.is_dir():
+        return
+    for job in plot_jobs(out, collector):
+        path = job.args[0]
+        for written in (path, *folder.glob(f".{glob.escape(path.name)}.*.part")):  # a terminated worker's
+            written.unlink(missing_ok=True)
+    if not any(folder.iterdir()):
+        folder.rmdir()
 
 
 def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], collector: Collector,

@@ -48,6 +48,7 @@ from typing import Any, Final, Iterator, Mapping, Sequence
 import numpy as np
 
 import fusion
+from cold_maps.common.signals import signals_ignored
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
@@ -375,12 +376,15 @@ class Recorder:
             self._finish({"status": STATUS_PARTIAL, "reason": exc_type.__name__})
 
     def _finish(self, status: dict[str, str]) -> None:
+        """Writes what is queued and finalises the file with ``status``, Ctrl-C and SIGTERM
+        held meanwhile (a file marked complete holds every message given to it)."""
         if self._writer is None:
             raise RecordingError(f"{self.path}: recording is not open")
-        try:
-            self._write(self._take_queue())
-        finally:
-            self._close(status)
+        with signals_ignored():
+            try:
+                self._write(self._take_queue())
+            finally:
+                self._close(status)
 
     def _close(self, status: dict[str, str]) -> None:
         writer, channels = self._writer, self._channels
