@@ -32,7 +32,15 @@ value at the end by at most half the lane width (:func:`_overlap_departure`): th
 is the coop's position error, which the seam removes; heading error, odometry drift and
 noise change it by decimetres (up to 1.44 m measured with 0.5° yaw error, σ 5 cm and typical
 drift, d_s 20–50 m), while a history more than half a lane off lies nearer the neighbouring
-lane's border than this lane's. A history that does not reach back to the ego's end is
+lane's border than this lane's. *Forks*: when the ego's detection ends inside a fork on its own lane while the coop took the
+other branch, the ego's last points leave the history within a few metres (a border turning
+at radius r parts from the straight one by x²/(2r) after x metres). If the checks above
+accept the pair, an ego border whose end lies more than ``_FORK_DEPARTURE_M`` (0.25 m) off
+the straight line fitted to its offsets from the history further back (a pose or heading
+error only tilts that line), averaged over five points against noise, loses its points
+after the last one back within ``_FORK_RETURN_M`` (0.08 m), and the seam starts there: the
+lane then follows the branch the coop drove (Town01's worst branch fusion 0.36 → 0.11 m).
+A history that does not reach back to the ego's end is
 joined to the coop detection (same seam offset faded along the history) and the remaining
 gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
 """
@@ -58,6 +66,10 @@ _HEADING_HALF_POINTS: Final[int] = 10  # vertices each side of a history vertex 
 _MIN_COVER_M: Final[float] = 1e-6
 _PROBE_STEP_M: Final[float] = 1.0  # ego border probes along the overlap with the history
 _PROBE_MARGIN_M: Final[float] = 5.0  # history searched this much beyond the ego's length
+_FORK_WINDOW_M: Final[float] = 6.0  # an ego border's last metres searched for a fork
+_FORK_SMOOTH_POINTS: Final[int] = 5  # offsets averaged over this many points against noise
+_FORK_DEPARTURE_M: Final[float] = 0.25  # averaged offset from the overlap's line at the end that means a fork
+_FORK_RETURN_M: Final[float] = 0.08  # … and back within this where the border is cut
 _VERTEX_STEP_M: Final[float] = 0.5  # history vertices about this far apart for the probes (sagitta < 1 cm at R 4 m)
 _HISTORY_SOURCES: Final[NDArrayInt8] = np.array([Source.EGO, Source.COOP_HISTORY, Source.COOP] * 2, dtype=np.int8)
 
@@ -95,6 +107,24 @@ def _coop_offset(history: NDArrayFloat, coop: NDArrayFloat) -> complex:
     return complex(-ty * across, tx * across)
 
 
+class _Overlap(NamedTuple):
+    """How the ego border lies on the history where they overlap (:func:`_overlap`).
+
+    Fields: ``departure_m`` the largest change [m] of the ego border's signed offset from
+    the history, from its value at the ego's end; ``slope`` and ``intercept_m`` the straight
+    line (offset [m] against distance back from the ego's end [m]) fitted to the offsets
+    more than :data:`_FORK_WINDOW_M` back (a pose or heading error tilts it, a fork bends
+    away from it); ``end_deviation_m`` the end's offset from that line [m] (0, and no line,
+    when the departure is within :data:`_FORK_DEPARTURE_M` or too few probes lie that far
+    back).
+    """
+
+    departure_m: float
+    slope: float
+    intercept_m: float
+    end_deviation_m: float
+
+
 class _Cover(NamedTuple):
     """Where an ego border end meets the history (frame of the history).
 
@@ -102,8 +132,9 @@ class _Cover(NamedTuple):
     ``s_rest`` its arc lengths [m]; ``s_e`` the foot's arc length on ``rest`` [m];
     ``ego_offset`` the end minus its foot point [m, x + iy]; ``offset_m`` the end's distance
     from the foot [m]; ``heading_rad`` the angle between the history and the ego border there
-    [rad]; ``departure_m`` how far [m] the lateral offset of the ego border from the history
-    changes where the two overlap (:func:`_overlap_departure`).
+    [rad]; ``overlap`` how the ego border lies on the history where they overlap
+    (:func:`_overlap`); ``k`` the history vertex nearest the end; ``spacing_m`` the history's
+    mean vertex spacing from there on [m].
     """
 
     rest: NDArrayFloat
@@ -112,44 +143,97 @@ class _Cover(NamedTuple):
     ego_offset: complex
     offset_m: float
     heading_rad: float
-    departure_m: float
+    overlap: _Overlap
+    k: int
+    spacing_m: float
 
 
-def _probes(ego: NDArrayFloat, s_ego: NDArrayFloat, to_history: tuple[float, float, float]) -> NDArrayComplex:
+def _probes(ego: NDArrayFloat, s_ego: NDArrayFloat,
+            to_history: tuple[float, float, float]) -> tuple[NDArrayComplex, NDArrayFloat]:
     """The ego border's points about every :data:`_PROBE_STEP_M` back from its end (the end
-    first), moved by ``to_history`` into the history's frame, as x + iy."""
+    first), moved by ``to_history`` into the history's frame, as x + iy; and their distances
+    back from the end [m]."""
     step = max(1, int(_PROBE_STEP_M * (ego.shape[0] - 1) / s_ego[-1]))
-    return transform(ego[::-step], *to_history).view(np.complex128)[:, 0]
+    return transform(ego[::-step], *to_history).view(np.complex128)[:, 0], s_ego[-1] - s_ego[::-step]
 
 
-def _overlap_departure(probes: NDArrayComplex, history: NDArrayComplex, k: int, length_m: float,
-                       spacing_m: float) -> float:
-    """Largest change [m] of the signed lateral offset of the ego border from the history along
-    their overlap, from its value at the ego's end: each of the ego's ``probes``
-    (:func:`_probes`, ``length_m`` long border) is offset across the history segment at its
-    nearest history vertex, among the last vertices of the history up to its vertex ``k``
-    nearest the ego's end (``spacing_m`` apart on average) over one ego length plus
-    :data:`_PROBE_MARGIN_M`, thinned to about :data:`_VERTEX_STEP_M` apart; probes behind the
-    history's start are left out. ``history`` as x + iy."""
-    n_window = min(k + 1, math.ceil((length_m + _PROBE_MARGIN_M) / spacing_m) + 1)
-    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), n_window - 1))
-    h = history[k::-stride][: (n_window - 1) // stride + 1]
-    squares = (probes[:, None] - h).view(np.float64)
+def _signed_offsets(points: NDArrayComplex, window: NDArrayComplex) -> tuple[NDArrayFloat, npt.NDArray[np.bool_]]:
+    """Signed lateral offset [m] of each point (x + iy) across the segment of ``window`` (history
+    vertices in reverse driving order, x + iy) at its nearest vertex, and whether that vertex
+    is not the window's last (the oldest) one."""
+    squares = (points[:, None] - window).view(np.float64)
     squares *= squares
     nearest = (squares[:, ::2] + squares[:, 1::2]).argmin(axis=1)
-    j = np.minimum(nearest, h.shape[0] - 2)
-    here = h[j]
-    backwards = h[j + 1] - here
-    offset = ((probes - here) * backwards.conjugate()).imag / np.abs(backwards)
-    if n_window == k + 1:
-        offset = offset[nearest < h.shape[0] - 1]
-    return float(np.abs(offset - offset[0]).max())
+    j = np.minimum(nearest, window.shape[0] - 2)
+    here = window[j]
+    backwards = window[j + 1] - here
+    return ((points - here) * backwards.conjugate()).imag / np.abs(backwards), nearest < window.shape[0] - 1
 
 
-def _cover(probes: NDArrayComplex, length_m: float, direction: complex, history: NDArrayFloat) -> _Cover | None:
-    """Where the end of an ego border (``length_m`` long, its :func:`_probes`,
-    unit end direction ``direction`` as x + iy, all in the history's frame) meets the history;
-    None when the history does not reach back past the end."""
+def _history_window(history: NDArrayComplex, k: int, length_m: float, spacing_m: float) -> tuple[NDArrayComplex, bool]:
+    """The last history vertices up to its vertex ``k`` (``spacing_m`` apart on average) over
+    ``length_m`` plus :data:`_PROBE_MARGIN_M`, in reverse order, thinned to about
+    :data:`_VERTEX_STEP_M` apart; and whether the window reaches the history's start."""
+    n_window = min(k + 1, math.ceil((length_m + _PROBE_MARGIN_M) / spacing_m) + 1)
+    stride = max(1, min(int(_VERTEX_STEP_M / spacing_m), n_window - 1))
+    return history[k::-stride][: (n_window - 1) // stride + 1], n_window == k + 1
+
+
+def _overlap(probes: NDArrayComplex, back_m: NDArrayFloat, history: NDArrayComplex, k: int, length_m: float,
+             spacing_m: float) -> _Overlap:
+    """The ego border's offsets from the history along their overlap: each of the ego's
+    ``probes`` (:func:`_probes`, ``length_m`` long border; ``back_m`` their distances back
+    from its end) is offset across the history segment at its nearest vertex in the
+    :func:`_history_window` before the history's vertex ``k`` nearest the ego's end; probes
+    behind the history's start are left out. ``history`` as x + iy."""
+    window, whole = _history_window(history, k, length_m, spacing_m)
+    offset, inside = _signed_offsets(probes, window)
+    if whole:
+        offset, back_m = offset[inside], back_m[inside]
+    departure = float(np.abs(offset - offset[0]).max())
+    far = back_m > _FORK_WINDOW_M
+    if departure <= _FORK_DEPARTURE_M or int(far.sum()) < 3:  # no end deviation can reach the fork threshold
+        return _Overlap(departure, 0.0, float(offset[0]), 0.0)
+    u, o = back_m[far], offset[far]
+    u_mean, o_mean = float(u.mean()), float(o.mean())
+    slope = float((u - u_mean) @ (o - o_mean) / ((u - u_mean) @ (u - u_mean)))
+    intercept = o_mean - slope * u_mean
+    return _Overlap(departure, slope, intercept, float(offset[0]) - intercept)
+
+
+def _fork_cut(trailing: NDArrayComplex, back_m: NDArrayFloat, history: NDArrayComplex, k: int, spacing_m: float,
+              overlap: _Overlap) -> int:
+    """How many of an ego border's last points to drop because they leave the history (a
+    fork: the ego's detection ends inside it, on its own lane, while the coop took the other
+    branch); 0 to keep them all.
+
+    ``trailing``: the border's last :data:`_FORK_WINDOW_M` of points (x + iy in the history's
+    frame, driving order), ``back_m`` their distances back from its end [m]. Their offsets
+    from the history minus ``overlap``'s line, averaged over :data:`_FORK_SMOOTH_POINTS`
+    points (noise), must exceed :data:`_FORK_DEPARTURE_M` at the end; the border is then cut
+    after the last point whose average is back within :data:`_FORK_RETURN_M` (none in the
+    window: kept, that is no fork but another lane, for the other checks).
+    """
+    window, _ = _history_window(history, k, _FORK_WINDOW_M, spacing_m)
+    offset, _ = _signed_offsets(trailing, window)
+    deviation = offset - (overlap.intercept_m + overlap.slope * back_m)
+    if deviation.shape[0] < _FORK_SMOOTH_POINTS:
+        return 0
+    smooth = np.abs(np.convolve(deviation, np.full(_FORK_SMOOTH_POINTS, 1.0 / _FORK_SMOOTH_POINTS), mode="valid"))
+    if smooth[-1] <= _FORK_DEPARTURE_M:
+        return 0
+    back = np.flatnonzero(smooth <= _FORK_RETURN_M)
+    if back.shape[0] == 0:
+        return 0
+    return int(smooth.shape[0] - 1 - back[-1])
+
+
+def _cover(probes: NDArrayComplex, back_m: NDArrayFloat, length_m: float, direction: complex,
+           history: NDArrayFloat) -> _Cover | None:
+    """Where the end of an ego border (``length_m`` long; its :func:`_probes` and their
+    distances back from its end ``back_m``, unit end direction ``direction`` as x + iy, all
+    in the history's frame) meets the history; None when the history does not reach back
+    past the end."""
     points = history.view(np.complex128)[:, 0]
     k = int(np.abs(points - probes[0]).argmin())
     if k == 0 or k == history.shape[0] - 1:
@@ -163,9 +247,35 @@ def _cover(probes: NDArrayComplex, length_m: float, direction: complex, history:
     t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
     (ax, ay), (bx, by) = rest[i: i + 2].tolist()
     foot = complex(ax + t * (bx - ax), ay + t * (by - ay))
-    departure = _overlap_departure(probes, points, k, length_m, s_rest[-1] / (rest.shape[0] - 1))
+    spacing = s_rest[-1] / (rest.shape[0] - 1)
+    overlap = _overlap(probes, back_m, points, k, length_m, spacing)
     return _Cover(rest, s_rest, s_e, complex(probes[0]) - foot, offset, abs(math.atan2(heading.imag, heading.real)),
-                  departure)
+                  overlap, k, spacing)
+
+
+def _border_cover(own: NDArrayFloat, s: NDArrayFloat, history: NDArrayFloat, to_coop: tuple[float, float, float],
+                  rotation: complex) -> _Cover | None:
+    """:func:`_cover` of the ego border ``own`` (ego frame, arc lengths ``s``) on a history
+    border (coop frame; ``to_coop`` moves ego-frame points there, ``rotation`` its turn)."""
+    probes, back = _probes(own, s, to_coop)
+    return _cover(probes, back, float(s[-1]), complex(*end_direction(own, True, _HEADING_WINDOW_M)) * rotation,
+                  history)
+
+
+def _fork_trimmed(own: NDArrayFloat, s: NDArrayFloat, history: NDArrayFloat, cover: _Cover,
+                  to_coop: tuple[float, float, float], rotation: complex) -> tuple[NDArrayFloat, _Cover]:
+    """The ego border ``own`` (arc lengths ``s``) and its ``cover`` on a history border,
+    without the last points that leave the history in a fork (:func:`_fork_cut`); unchanged
+    when the overlap shows no fork (the end within :data:`_FORK_DEPARTURE_M` of the
+    overlap's line)."""
+    overlap = cover.overlap
+    if abs(overlap.end_deviation_m) <= _FORK_DEPARTURE_M:
+        return own, cover
+    first = int(s.searchsorted(s[-1] - _FORK_WINDOW_M))
+    trailing = transform(own[first:], *to_coop).view(np.complex128)[:, 0]
+    cut = _fork_cut(trailing, s[-1] - s[first:], history.view(np.complex128)[:, 0], cover.k, cover.spacing_m, overlap)
+    trimmed = _border_cover(own[:-cut], s[:-cut], history, to_coop, rotation) if cut else None
+    return (own, cover) if trimmed is None else (own[:-cut], trimmed)
 
 
 def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> str:
@@ -177,8 +287,8 @@ def _reason(side: str, cover: _Cover, width_m: float, params: FusionParams) -> s
     if cover.heading_rad > params.convoy_max_heading_rad:
         return (f"coop history heads {math.degrees(cover.heading_rad):.1f} deg away from the ego {side} border at "
                 f"its end (> {math.degrees(params.convoy_max_heading_rad):.1f} deg)")
-    if cover.departure_m > 0.5 * width_m:
-        return (f"coop history leaves the ego {side} border by {cover.departure_m:.2f} m where they overlap "
+    if cover.overlap.departure_m > 0.5 * width_m:
+        return (f"coop history leaves the ego {side} border by {cover.overlap.departure_m:.2f} m where they overlap "
                 f"(> half the lane width, {0.5 * width_m:.2f} m): another lane")
     return ""
 
@@ -214,10 +324,10 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     to_coop = relative_pose(coop.pose, ego.pose)
     rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
     n_left = el.shape[0]
+    borders = ((el, ego.arclength[:n_left], history.left), (er, ego.arclength[n_left:], history.right))
     covers = []
-    for own, s, side in ((el, ego.arclength[:n_left], history.left), (er, ego.arclength[n_left:], history.right)):
-        cover = _cover(_probes(own, s, to_coop), float(s[-1]),
-                       complex(*end_direction(own, True, _HEADING_WINDOW_M)) * rotation, side)
+    for own, s, side in borders:
+        cover = _border_cover(own, s, side, to_coop, rotation)
         if cover is None:
             t_end = complex(*ends.t_end) * rotation
             p_end = transform(np.array([ends.p_end]), *to_coop)[0]
@@ -227,6 +337,9 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
         reason = _reason(side, cover, ends.width_m, params)
         if reason:
             return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, reason)
+    # only a history the checks accept at the ego's real end may replace the ego's last points
+    (el, covers[0]), (er, covers[1]) = (_fork_trimmed(own, s, side, cover, to_coop, rotation)
+                                        for (own, s, side), cover in zip(borders, covers))
     gaps = [seam_blend(cover.rest, cover.s_rest, cover.s_e, cover.ego_offset, _coop_offset(cover.rest, c))
             for cover, c in zip(covers, (coop.left, coop.right))]
     n_gap = gaps[0].shape[0]

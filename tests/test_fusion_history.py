@@ -116,6 +116,44 @@ def test_a_coop_on_the_other_branch_is_rejected_like_the_pair(d_s):
     assert fused.kind == "history" and fused.confidence == fusion.fuse(ego, straight).confidence > 0.0
 
 
+@pytest.mark.parametrize("past_m", [2.5, 3.0])
+def test_ego_points_past_a_fork_give_way_to_the_history_of_the_branch(past_m):
+    """The ego's detection ends ``past_m`` into a fork on its own straight lane; the coop took
+    the right turn (reference radius 12 m, so the right border turns at 8.5 m) and its history
+    covers the gap. Closed form: a border turning at radius r leaves the straight one by
+    x²/(2r) at x metres past the fork. Those last ego points are not the coop's lane: they are
+    dropped where they leave the history, and the fused lane follows the branch."""
+    radius = 12.0
+    main = AnalyticRoad([Segment(200.0)])
+    branch = AnalyticRoad([Segment(60.0), Segment(radius * math.pi / 2, -1 / radius), Segment(100.0)])
+    end = 60.0 + past_m
+    ego = detect(main, end - 30.0, 30.0, *LANE)
+    coop = with_history(branch, detect(branch, end + 20.0, 30.0, *LANE), end + 20.0, 100.0, *LANE)
+    result = fusion.fuse_history(ego, coop, interpolation="hermite")
+    assert result.kind == "history"
+    ego_end = transform(ego.right[-1:], ego.pose.x, ego.pose.y, ego.pose.yaw)
+    parting = distance_to_polyline(ego_end, branch.border(LANE[1]))[0]
+    assert parting == pytest.approx(past_m**2 / (2 * (radius + LANE[1])), rel=0.1) and parting > 0.35
+    assert int((result.right_source == fusion.Source.EGO).sum()) < ego.right.shape[0]  # those points are gone
+    for border, offset in ((result.left, LANE[0]), (result.right, LANE[1])):
+        assert distance_to_polyline(border, branch.border(offset)).max() < 0.26  # below the fork threshold
+    assert distance_to_polyline(result.right, branch.border(LANE[1])).max() < 0.12
+
+
+def test_noise_alone_never_cuts_the_ego_border():
+    """σ = 5 cm on every detected and history point, coop on the ego's own straight lane:
+    the fork test's five-point average stays far below its threshold, all ego points stay."""
+    for seed in range(20):
+        ego, coop = _pair(STRAIGHT, 100.0, 20.0, 100.0, noise_m=0.05, seed=seed)
+        noisy = np.random.default_rng(200 + seed)
+        history = fusion.LaneHistory(*(b + noisy.normal(0.0, 0.05, b.shape) for b in (coop.history.left,
+                                                                                      coop.history.right)))
+        result = fusion.fuse_history(ego, replace(coop, history=history))
+        assert result.kind == "history"
+        assert [int((src == fusion.Source.EGO).sum()) for src in (result.left_source, result.right_source)] == \
+            [ego.left.shape[0], ego.right.shape[0]]
+
+
 @pytest.mark.parametrize("k", [1e-4, 2e-3])
 def test_a_history_bent_away_from_the_ego_lane_is_rejected(k):
     """Heading drift k (rad/m) bends the history sideways by k·u²/2 at u metres behind the coop
