@@ -72,6 +72,12 @@ def _nearest_segment(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float
     finer than their curvature radius)."""
     px, py = point.tolist()
     k = int(np.abs(np.ascontiguousarray(polyline).view(np.complex128)[:, 0] - complex(px, py)).argmin())
+    return foot_near_vertex(px, py, polyline, k)
+
+
+def foot_near_vertex(px: float, py: float, polyline: NDArrayFloat, k: int) -> tuple[float, int, float, float, float]:
+    """:func:`_nearest_segment` of the point ``(px, py)`` [m] when ``polyline``'s vertex ``k``
+    is already known to be its nearest: the two segments at that vertex are examined."""
     first = max(k - 1, 0)
     vertices = polyline[first:k + 2].tolist()  # the nearest vertex and its neighbours, as floats
     best = (math.inf, 0, 0.0, px, py)

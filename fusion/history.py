@@ -56,7 +56,7 @@ import numpy.typing as npt
 
 from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, assess, ego_frame_borders, ego_frame_result, fuse, matched_lane
 from fusion.fusibility import lane_ends, relative_pose
-from fusion.geometry import cumulative_length, end_direction, project_point, transform
+from fusion.geometry import cumulative_length, end_direction, foot_near_vertex, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 
 NDArrayComplex = npt.NDArray[np.complex128]
@@ -240,16 +240,15 @@ def _cover(probes: NDArrayComplex, back_m: NDArrayFloat, length_m: float, direct
         return None
     rest = history[k - 1:]
     s_rest = cumulative_length(rest)
-    s_e, offset, i = project_point(probes[:1].view(np.float64), rest[:3], s_rest[:3])
+    end = complex(probes[0])
+    offset, i, t, fx, fy = foot_near_vertex(end.real, end.imag, rest, 1)
+    s_e = float(s_rest[i] + t * (s_rest[i + 1] - s_rest[i]))
     if s_e <= _MIN_COVER_M and k == 1:
         return None
     heading = complex(*_heading(rest, 1)) / direction
-    t = (s_e - s_rest[i]) / (s_rest[i + 1] - s_rest[i])
-    (ax, ay), (bx, by) = rest[i: i + 2].tolist()
-    foot = complex(ax + t * (bx - ax), ay + t * (by - ay))
     spacing = s_rest[-1] / (rest.shape[0] - 1)
     overlap = _overlap(probes, back_m, points, k, length_m, spacing)
-    return _Cover(rest, s_rest, s_e, complex(probes[0]) - foot, offset, abs(math.atan2(heading.imag, heading.real)),
+    return _Cover(rest, s_rest, s_e, end - complex(fx, fy), offset, abs(math.atan2(heading.imag, heading.real)),
                   overlap, k, spacing)
 
 
