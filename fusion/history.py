@@ -28,21 +28,23 @@ fusion rejects. Then the history must pass within ``convoy_max_offset_m`` of the
 end, with a heading within ``convoy_max_heading_rad`` there (the coop's history *overlaps*
 the ego's detection, so the convoy tolerances apply: a neighbour lane lies a lane width
 away), and along the overlap the ego border's offset from the history may change from its
-value at the end by at most half the lane width (:func:`_overlap_departure`): the end offset
+value at the end by at most half the lane width (:func:`_overlap`): the end offset
 is the coop's position error, which the seam removes; heading error, odometry drift and
 noise change it by decimetres (up to 1.44 m measured with 0.5° yaw error, σ 5 cm and typical
 drift, d_s 20–50 m), while a history more than half a lane off lies nearer the neighbouring
-lane's border than this lane's. *Forks*: when the ego's detection ends inside a fork on its own lane while the coop took the
+lane's border than this lane's. A history that does not reach back to the ego's end is
+joined to the coop detection (same seam offset faded along the history) and the remaining
+gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
+
+Forks: when the ego's detection ends inside a fork on its own lane while the coop took the
 other branch, the ego's last points leave the history within a few metres (a border turning
 at radius r parts from the straight one by x²/(2r) after x metres). If the checks above
 accept the pair, an ego border whose end lies more than ``_FORK_DEPARTURE_M`` (0.25 m) off
 the straight line fitted to its offsets from the history further back (a pose or heading
 error only tilts that line), averaged over five points against noise, loses its points
-after the last one back within ``_FORK_RETURN_M`` (0.08 m), and the seam starts there: the
-lane then follows the branch the coop drove (Town01's worst branch fusion 0.36 → 0.11 m).
-A history that does not reach back to the ego's end is
-joined to the coop detection (same seam offset faded along the history) and the remaining
-gap goes to :func:`fusion.fuse`, whose fusibility check then sees the history's start.
+after the last one back within ``_FORK_RETURN_M`` (0.08 m), and the ego seam moves there:
+the lane then follows the branch the coop drove (Town01's worst branch fusion 0.36 → 0.11 m)
+(:func:`_fork_cut`).
 """
 
 from __future__ import annotations
