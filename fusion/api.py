@@ -68,7 +68,7 @@ def _decide(ego: LaneDetection, coop: LaneDetection, mode: str, params: FusionPa
         raise InvalidParameterError(f"mode must be one of {_MODES}, got {mode!r}")
     if not isinstance(params, FusionParams):
         raise InvalidParameterError(f"params must be a FusionParams, got {type(params).__name__}")
-    ends = ends or lane_ends(*borders)
+    ends = lane_ends(*borders) if ends is None else ends
     kind: FusionKind = ("convoy" if ends.gap_m <= 0.0 else "spline") if mode == "auto" else mode
     el, er, cl, cr = borders
     starts = None
@@ -149,8 +149,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
     parts, sources = _fused(coop, borders, fits, kind, starts, interpolation, params)
-    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params)
-                  for index in association.matched) if association.matched else ()
+    lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
     return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes)
 
 

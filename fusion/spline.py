@@ -296,18 +296,35 @@ class EndFits:
         detection is no single arc in the fit's model."""
         if self._arcs is None:
             fits = self._arcs = self()
-            if not all(abs(fit.curvature) >= _RESOLVED_SIGMAS * fit.curvature_sigma and clearly_curved(
-                    fit.curvature, fit.curvature_sigma) for fit in fits) and min(
-                    (abs(fit.curvature) * math.dist(*border[::border.shape[0] - 1].tolist())
-                     for fit, border in zip(fits, self._borders) if fit.curvature_sigma < math.inf),
-                    default=0.0) <= _WHOLE_MAX_TURN_RAD:
+            if _whole_fit_helps(fits, self._borders):
                 whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M)
-                self._arcs = tuple(end._replace(direction=fit.direction, curvature=fit.curvature,
-                                                curvature_sigma=fit.curvature_sigma)
-                                   if fit.curvature_sigma < end.curvature_sigma and abs(fit.curvature - end.curvature)
-                                   <= _AGREE_SIGMAS * math.hypot(fit.curvature_sigma, end.curvature_sigma) else end
-                                   for end, fit in zip(fits, whole))
+                self._arcs = tuple(_better_arc(end, fit) for end, fit in zip(fits, whole))
         return self._arcs
+
+
+def _whole_fit_helps(fits: Sequence[EndFit], borders: Sequence[NDArrayFloat]) -> bool:
+    """Whether :meth:`EndFits.arcs` tries the fits over the whole borders: some end does not
+    resolve its curvature (:data:`_RESOLVED_SIGMAS`, clearly curved), and the least turn of
+    a border's chord at its end's curvature (ends with a finite σ_κ) is within
+    :data:`_WHOLE_MAX_TURN_RAD`."""
+    resolved = all(abs(fit.curvature) >= _RESOLVED_SIGMAS * fit.curvature_sigma
+                   and clearly_curved(fit.curvature, fit.curvature_sigma) for fit in fits)
+    if resolved:
+        return False
+    turns = (abs(fit.curvature) * math.dist(*border[::border.shape[0] - 1].tolist())
+             for fit, border in zip(fits, borders) if fit.curvature_sigma < math.inf)
+    return min(turns, default=0.0) <= _WHOLE_MAX_TURN_RAD
+
+
+def _better_arc(end: EndFit, whole: EndFit) -> EndFit:
+    """``end`` with the direction, curvature and σ_κ of the fit over its ``whole`` border when
+    that has the smaller σ_κ and agrees within :data:`_AGREE_SIGMAS` σ of their difference."""
+    agree = abs(whole.curvature - end.curvature) <= _AGREE_SIGMAS * math.hypot(whole.curvature_sigma,
+                                                                               end.curvature_sigma)
+    if whole.curvature_sigma < end.curvature_sigma and agree:
+        return end._replace(direction=whole.direction, curvature=whole.curvature,
+                            curvature_sigma=whole.curvature_sigma)
+    return end
 
 
 def transition_tangent(turn_rad: float, share: float) -> float:

@@ -268,7 +268,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             held.enter_context(signals_ignored())
             error = exc
             LOG.debug("run ended early", exc_info=True)
-            executor = _stopped(executor)
+            _stop(executor)
+            executor = None
         try:
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
                                     partial=error is not None)
@@ -276,7 +277,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             held.enter_context(signals_ignored())
             error = exc
             LOG.debug("interrupted while writing the report", exc_info=True)
-            executor = _stopped(executor)
+            _stop(executor)
+            executor = None
             _discard_plots(out, collector)
             results = _write_report(out, collector, False, None, extra_sections, partial=True)
         if error is None:
@@ -284,8 +286,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     return RunResult(results, collector, error is not None, error)
 
 
-def _stopped(executor: Executor | None) -> None:
-    """Terminates ``executor``'s workers, if any (their pending work is dropped); None."""
+def _stop(executor: Executor | None) -> None:
+    """Terminates ``executor``'s workers, if any (their pending work is dropped)."""
     if executor is not None:
         from cold_maps.evaluation.parallel import terminate
 
