@@ -20,7 +20,7 @@ from conftest import PROJECT_ROOT, bundled_map
 
 import cold_maps
 from cold_maps.cli import evaluate, fuse, maps, sweep
-from cold_maps.cli.common import DefaultsHelpFormatter, Terminated, cli_entry, configure_logging
+from cold_maps.cli.common import MAX_GAP_M, DefaultsHelpFormatter, Terminated, cli_entry, configure_logging, gap_list
 from cold_maps.common.progress import ProgressBar, Spinner
 
 
@@ -256,3 +256,12 @@ def test_an_interruption_the_command_does_not_handle_is_one_line(signal_error: t
 
     assert body([]) == status
     assert capsys.readouterr().err == f"cold-eval: error: sweep: {what}\n"
+
+
+@pytest.mark.parametrize("text", ["0", "-5", "nan", "inf", "1e308", "10000", "20,1e4"])
+def test_a_gap_out_of_range_names_both_bounds(text: str) -> None:
+    """``--gaps`` refuses d_s outside (0, MAX_GAP_M) with a message that states both
+    bounds (a huge finite gap is not "≤ 0"); gaps inside pass unchanged."""
+    with pytest.raises(argparse.ArgumentTypeError, match=rf"> 0 m and < {MAX_GAP_M:g} m, got '{text}'"):
+        gap_list(text)
+    assert gap_list("0.5,9999") == (0.5, 9999.0)

@@ -219,12 +219,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+MAX_GAP_M: Final[float] = 1e4
+"""Largest spline gap d_s a command line accepts (m): far beyond any road a sensor of 30 m
+bridges, small enough that stations and drive lengths stay exact."""
+
+
 def gap_list(text: str) -> tuple[float, ...]:
-    """argparse type: comma-separated spline gaps d_s (m), each > 0."""
+    """argparse type: comma-separated spline gaps d_s (m), each > 0 and < ``MAX_GAP_M``."""
     try:
         gaps = tuple(float(part) for part in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated distances in m, got {text!r}") from None
-    if not gaps or any(not 0 < g < 1e4 for g in gaps):
-        raise argparse.ArgumentTypeError(f"gaps must be > 0 m, got {text!r}")
+    if not gaps or any(not 0 < g < MAX_GAP_M for g in gaps):
+        raise argparse.ArgumentTypeError(f"gaps must be > 0 m and < {MAX_GAP_M:g} m, got {text!r}")
     return gaps
