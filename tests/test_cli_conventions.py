@@ -265,3 +265,43 @@ def test_a_gap_out_of_range_names_both_bounds(text: str) -> None:
     with pytest.raises(argparse.ArgumentTypeError, match=rf"> 0 m and < {MAX_GAP_M:g} m, got '{text}'"):
         gap_list(text)
     assert gap_list("0.5,9999") == (0.5, 9999.0)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--seed", "-1"], "argument --seed: expected an integer >= 0, got -1"),
+    (["--routes", "1001"], "argument --routes: expected an integer from 1 to 1000, got 1001"),
+    (["--routes", "x"], "argument --routes: expected an integer, got 'x'"),
+    (["--lanes", "9"], "argument --lanes: expected an integer from 0 to 8, got 9"),
+    (["--history", "1e308"], "argument --history: expected a number >= 0 and < 1e+06, got 1e308"),
+    (["sweep", "--seeds", "0,-2"], "sweep: argument --seeds: seeds must be >= 0, got '0,-2'"),
+    (["sweep", "--routes", "5000"], "sweep: argument --routes: expected an integer from 1 to 1000, got 5000"),
+    (["sweep", "--noise", "0,1001"], "sweep: argument --noise: σ must be >= 0 and <= 1000 m, got '0,1001'"),
+])
+def test_hostile_numbers_are_usage_errors_that_name_the_option(args: list[str], message: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """Bounds on counts and amounts are checked on the command line (exit 2, one line, the
+    option named), before anything runs: 1e9 routes used to draw routes for hours."""
+    command, rest = (args[:1], args[1:]) if args[0] == "sweep" else ([], args)
+    with pytest.raises(SystemExit) as usage:
+        evaluate.main([*command, "--map", str(bundled_map("straight")), "--out", str(tmp_path / "o"), *rest])
+    assert usage.value.code == 2
+    help_command = "cold-eval sweep" if command else "cold-eval"
+    assert capsys.readouterr().err.splitlines() == [f"cold-eval: error: {message} (see {help_command} --help)"]
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--speed", "1e308"], "speed must be > 0 and <= 1000 m/s"),
+    (["--noise", "1e308"], "SensorErrorModel.noise_sigma_m: must be within ±1000 m"),
+    (["--pose-xy", "1e308"], "SensorErrorModel.pose_sigma_xy_m: must be within ±1000 m"),
+    (["--lateral-offset=-1e308"], "SensorErrorModel.lateral_offset_m: must be within ±1000 m"),
+])
+def test_hostile_amounts_fail_before_the_run_with_nothing_written(args: list[str], message: str, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A σ or speed of 1e308 used to overflow mid-run (NaN detections, "run failed", a
+    partial report); now it is refused before anything is written."""
+    status = evaluate.main(["--map", str(bundled_map("straight")), "--out", str(tmp_path / "o"), "--frames", "3", *args])
+    assert status == 1
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cold-eval: error: ") and message in lines[0], lines
+    assert not (tmp_path / "o").exists()

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from cold_maps.network.lane_graph import LaneKey, build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.simulation.drive import (
+    MAX_SPEED_MPS,
     ROUTE_MARGIN_M,
     DriveError,
     Track,
@@ -128,6 +129,15 @@ def test_required_route_length_closed_form():
     assert required_route_length(11, [25.0, 80.0], behind_m=50.0) == pytest.approx(50 + 10 + 80 + 30 + ROUTE_MARGIN_M)
     with pytest.raises(ValueError, match="frames"):
         required_route_length(0, [])
+
+
+@pytest.mark.parametrize("speed", [0.0, -1.0, float("nan"), float("inf"), 1e308, MAX_SPEED_MPS * (1 + 1e-12)])
+def test_a_speed_out_of_range_is_refused_before_any_length_is_computed(speed):
+    """1e308 m/s used to give an infinite route length that reached the error message."""
+    with pytest.raises(ValueError, match=rf"speed must be > 0 and <= {MAX_SPEED_MPS:g} m/s"):
+        required_route_length(5, [], speed_mps=speed)
+    assert required_route_length(5, [], speed_mps=MAX_SPEED_MPS) == pytest.approx(
+        4 * MAX_SPEED_MPS / 10.0 + 30.0 + ROUTE_MARGIN_M)
 
 
 def test_too_short_route_and_too_long_drive_raise(curve90):

@@ -168,6 +168,12 @@ def test_pose_error_has_the_configured_sigmas():
         ({"drop_probability": 1.5}, "drop_probability: must be <= 1"),
         ({"lateral_offset_m": float("nan")}, "lateral_offset_m: expected a finite number"),
         ({"pose_sigma_yaw_rad": "0.1"}, "pose_sigma_yaw_rad: expected a finite number"),
+        ({"noise_sigma_m": 1e308}, "noise_sigma_m: must be within ±1000 m"),
+        ({"lateral_offset_m": -1000.5}, "lateral_offset_m: must be within ±1000 m"),
+        ({"pose_sigma_xy_m": 1e4}, "pose_sigma_xy_m: must be within ±1000 m"),
+        ({"range_jitter_sigma_m": 1e300}, "range_jitter_sigma_m: must be within ±1000 m"),
+        ({"heading_bias_rad": -3.2}, "heading_bias_rad: must be within ±3.14159 rad"),
+        ({"pose_sigma_yaw_rad": 7.0}, "pose_sigma_yaw_rad: must be within ±3.14159 rad"),
     ],
 )
 def test_invalid_model_parameters_are_named(kwargs, message):
@@ -189,3 +195,20 @@ def test_invalid_detections_are_named():
         model.apply(left, stuck, np.random.default_rng(0))
     with pytest.raises(ValueError, match="right: expected at least 2 points, got 0"):
         check_polyline("right", np.empty((0, 2)))
+
+
+@pytest.mark.parametrize("field", ["lateral_offset_m", "noise_sigma_m", "range_jitter_sigma_m", "pose_sigma_xy_m"])
+def test_the_largest_accepted_error_keeps_detections_finite(field):
+    """At ``MAX_ERROR_M`` (the sign that is allowed, the pose σ too) every perturbed border
+    point and pose stays finite: the bound is what keeps a σ of 1e308 from reaching the
+    fusion as NaN."""
+    from cold_maps.simulation.sensor_errors import MAX_ERROR_M
+
+    model = SensorErrorModel(**{field: MAX_ERROR_M, "heading_bias_rad": -math.pi, "pose_sigma_yaw_rad": math.pi})
+    rng = np.random.default_rng(4)
+    x = np.linspace(0.0, 30.0, 301)
+    left, right = np.column_stack((x, np.full_like(x, 1.75))), np.column_stack((x, np.full_like(x, -1.75)))
+    for _ in range(50):
+        borders = model.apply(left, right, rng)
+        assert borders is None or all(np.isfinite(border).all() for border in borders)
+        assert np.isfinite(model.perturb_pose(3.0e5, -2.0e6, 3.0, rng)).all()

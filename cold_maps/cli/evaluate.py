@@ -20,12 +20,12 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry, gap_list, make_parser, positive_int
+from cold_maps.cli.common import cli_entry, gap_list, int_in, make_parser, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
-from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, PAPER_GAPS_M
+from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, PAPER_GAPS_M
 from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
 from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
 from fusion.bezier import DEFAULT_TOLERANCE_M
@@ -37,12 +37,16 @@ DEFAULT_OUT: Final[str] = "out/cold-eval"
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
 MAX_LANES: Final[int] = 8
+MAX_OPTION_VALUE: Final[float] = 1e6
+"""Bound (exclusive) of the non-negative amounts (history m, drift σ, tolerances m, loss,
+latency and intervals s): far above any meaningful setting, and finite arithmetic on them."""
 UNRECORDED: Final[frozenset[str]] = frozenset({"workers", "verbose", "quiet", "no_progress"})
 """Options that change no result, left out of the recording's ``cold.run`` parameters."""
 
 
 def _routes(text: str) -> int | None:
-    return None if text == "all" else positive_int(text)
+    """argparse type: 'all' (None) or a route count from 1 to ``MAX_COVER_ROUTES``."""
+    return None if text == "all" else int_in(1, MAX_COVER_ROUTES)(text)
 
 
 def _non_negative(text: str) -> float:
@@ -50,16 +54,10 @@ def _non_negative(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 <= value < 1e6:
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    if not 0 <= value < MAX_OPTION_VALUE:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0 and < {MAX_OPTION_VALUE:g}, got {text}")
     return value
 
-
-def _lane_count(text: str) -> int:
-    value = int(text)
-    if not 0 <= value <= MAX_LANES:
-        raise argparse.ArgumentTypeError(f"expected an integer from 0 to {MAX_LANES}, got {text}")
-    return value
 
 
 def _stamp_base(text: str) -> int:
@@ -112,7 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--frames", type=positive_int, default=None,
                         help=f"frames per route (default {DEFAULT_FRAMES}, fewer on a map too short for them; "
                              "--paper: the whole route at 1 m per frame)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of routes and error models (default 0)")
+    parser.add_argument("--seed", type=int_in(0), default=0, help="seed of routes and error models (default 0)")
     parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
                         help="spline interpolation (default both)")
@@ -122,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="also evaluate this fusion method across the gaps: a name registered in the "
                              "cold_maps.fusion_methods entry points or package.module:function "
                              "(repeatable; default: none)")
-    parser.add_argument("--lanes", type=_lane_count, default=0,
+    parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
     parser.add_argument("--no-distractors", action="store_true",

@@ -16,8 +16,9 @@ import argparse
 from pathlib import Path
 from typing import Callable, Final, Sequence, TypeVar
 
-from cold_maps.cli.common import gap_list, make_parser, positive_int
-from cold_maps.simulation.drive import PAPER_GAPS_M
+from cold_maps.cli.common import gap_list, int_in, make_parser, positive_int
+from cold_maps.simulation.drive import MAX_COVER_ROUTES, PAPER_GAPS_M
+from cold_maps.simulation.sensor_errors import MAX_ERROR_M
 
 PROG: Final[str] = "cold-eval sweep"
 DEFAULT_FRAMES: Final[int] = 100
@@ -41,8 +42,15 @@ def _list(kind: Callable[[str], T], what: str) -> Callable[[str], tuple[T, ...]]
 
 def _sigmas(text: str) -> tuple[float, ...]:
     values = _list(float, "σ in m")(text)
-    if any(not 0 <= v < 1e3 for v in values):
-        raise argparse.ArgumentTypeError(f"σ must be >= 0 m, got {text!r}")
+    if any(not 0 <= v <= MAX_ERROR_M for v in values):
+        raise argparse.ArgumentTypeError(f"σ must be >= 0 and <= {MAX_ERROR_M:g} m, got {text!r}")
+    return values
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    values = _list(int, "integers")(text)
+    if any(v < 0 for v in values):
+        raise argparse.ArgumentTypeError(f"seeds must be >= 0, got {text!r}")
     return values
 
 
@@ -61,10 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "(repeatable; default: none)")
     parser.add_argument("--noise", type=_sigmas, default=(0.0,), help="sensor noise σ levels in m (default 0)")
     parser.add_argument("--pose-xy", type=_sigmas, default=(0.0,), help="coop pose σ levels in m (default 0)")
-    parser.add_argument("--seeds", type=_list(int, "integers"), default=(0,), help="seeds (default 0)")
+    parser.add_argument("--seeds", type=_seeds, default=(0,), help="seeds (default 0)")
     parser.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES,
                         help=f"frames per route (default {DEFAULT_FRAMES})")
-    parser.add_argument("--routes", type=positive_int, default=DEFAULT_ROUTES,
+    parser.add_argument("--routes", type=int_in(1, MAX_COVER_ROUTES), default=DEFAULT_ROUTES,
                         help=f"routes per map and cell (default {DEFAULT_ROUTES})")
     parser.add_argument("--out", type=Path, required=True, help="output folder (finished cells are kept there)")
     parser.add_argument("--workers", type=positive_int, default=None,

@@ -34,6 +34,10 @@ from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
 FRAME_RATE_HZ: Final[float] = 10.0
 DEFAULT_SPEED_MPS: Final[float] = 10.0
+MAX_SPEED_MPS: Final[float] = 1000.0
+"""Fastest ego a drive accepts (m/s): 100 m per frame at 10 Hz, more than three sensor
+ranges, so consecutive frames share nothing beyond it; the bound keeps drive lengths finite
+(1e308 m/s made the needed route length inf)."""
 CONVOY_HEADWAY_M: Final[float] = 25.0
 """The paper's convoy headway d_v (m)."""
 PAPER_GAPS_M: Final[tuple[float, ...]] = (20.0, 30.0, 50.0)
@@ -261,8 +265,9 @@ def required_route_length(frames: int, leads_m: Sequence[float], *, behind_m: fl
     and room for one ``behind_m`` behind it."""
     if frames < 1:
         raise ValueError(f"frames: expected at least 1, got {frames!r}")
-    if not (math.isfinite(speed_mps) and speed_mps > 0 and math.isfinite(rate_hz) and rate_hz > 0):
-        raise ValueError(f"speed and frame rate must be finite and > 0, got {speed_mps!r} m/s, {rate_hz!r} Hz")
+    if not (0 < speed_mps <= MAX_SPEED_MPS and math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"speed must be > 0 and <= {MAX_SPEED_MPS:g} m/s and the frame rate finite and > 0, "
+                         f"got {speed_mps!r} m/s, {rate_hz!r} Hz")
     ahead = max([0.0, *leads_m])
     return behind_m + (frames - 1) * speed_mps / rate_hz + ahead + sensor_range_m + ROUTE_MARGIN_M
 

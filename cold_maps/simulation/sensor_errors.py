@@ -9,12 +9,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Final
 
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
 from gt_matching.polyline import arc_lengths
+
+MAX_ERROR_M: Final[float] = 1000.0
+"""Largest lateral offset (either sign), noise σ, range jitter σ and pose σ the error
+models accept (m): errors of a kilometre leave no lane to detect, and the bound keeps every
+perturbed coordinate finite (a σ of 1e308 overflowed the detections to NaN mid-run)."""
+MAX_ANGLE_RAD: Final[float] = math.pi
+"""Largest heading bias (either sign) and yaw σ the error models accept (rad): beyond π a
+rotation only wraps around."""
+_SIGNED: Final[frozenset[str]] = frozenset({"lateral_offset_m", "heading_bias_rad"})
+_ANGLES: Final[frozenset[str]] = frozenset({"heading_bias_rad", "pose_sigma_yaw_rad"})
 
 
 def check_polyline(name: str, points: object, min_points: int = 2) -> NDArrayFloat:
@@ -75,6 +86,9 @@ class SensorErrorModel:
         drop_probability: probability that a frame's detection is lost (0..1).
         pose_sigma_xy_m: σ of the localisation error on the sender's x and y (m, world).
         pose_sigma_yaw_rad: σ of the localisation error on the sender's yaw (rad).
+
+    Lengths lie within ``MAX_ERROR_M`` and angles within ``MAX_ANGLE_RAD``; anything else
+    raises ValueError naming the field.
     """
 
     lateral_offset_m: float = 0.0
@@ -90,8 +104,11 @@ class SensorErrorModel:
             value = getattr(self, field.name)
             if not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"SensorErrorModel.{field.name}: expected a finite number, got {value!r}")
-            if field.name not in ("lateral_offset_m", "heading_bias_rad") and value < 0:
+            if field.name not in _SIGNED and value < 0:
                 raise ValueError(f"SensorErrorModel.{field.name}: must be >= 0, got {value!r}")
+            bound, unit = (MAX_ANGLE_RAD, "rad") if field.name in _ANGLES else (MAX_ERROR_M, "m")
+            if field.name != "drop_probability" and abs(value) > bound:
+                raise ValueError(f"SensorErrorModel.{field.name}: must be within ±{bound:g} {unit}, got {value!r}")
         if self.drop_probability > 1:
             raise ValueError(f"SensorErrorModel.drop_probability: must be <= 1, got {self.drop_probability!r}")
 
