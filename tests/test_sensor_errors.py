@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.simulation.sensor_errors import SensorErrorModel, check_polyline
+from cold_maps.simulation.sensor_errors import MAX_ERROR_M, SensorErrorModel, check_polyline
 from gt_matching.polyline import arc_lengths as arc_length
 
 STEP_M = 0.10
@@ -202,8 +202,6 @@ def test_the_largest_accepted_error_keeps_detections_finite(field):
     """At ``MAX_ERROR_M`` (the sign that is allowed, the pose σ too) every perturbed border
     point and pose stays finite: the bound is what keeps a σ of 1e308 from reaching the
     fusion as NaN."""
-    from cold_maps.simulation.sensor_errors import MAX_ERROR_M
-
     model = SensorErrorModel(**{field: MAX_ERROR_M, "heading_bias_rad": -math.pi, "pose_sigma_yaw_rad": math.pi})
     rng = np.random.default_rng(4)
     x = np.linspace(0.0, 30.0, 301)

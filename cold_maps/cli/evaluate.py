@@ -44,9 +44,12 @@ UNRECORDED: Final[frozenset[str]] = frozenset({"workers", "verbose", "quiet", "n
 """Options that change no result, left out of the recording's ``cold.run`` parameters."""
 
 
+_route_count = int_in(1, MAX_COVER_ROUTES)
+
+
 def _routes(text: str) -> int | None:
     """argparse type: 'all' (None) or a route count from 1 to ``MAX_COVER_ROUTES``."""
-    return None if text == "all" else int_in(1, MAX_COVER_ROUTES)(text)
+    return None if text == "all" else _route_count(text)
 
 
 def _non_negative(text: str) -> float:
@@ -57,7 +60,6 @@ def _non_negative(text: str) -> float:
     if not 0 <= value < MAX_OPTION_VALUE:
         raise argparse.ArgumentTypeError(f"expected a number >= 0 and < {MAX_OPTION_VALUE:g}, got {text}")
     return value
-
 
 
 def _stamp_base(text: str) -> int:
