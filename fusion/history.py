@@ -345,11 +345,9 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
             for cover, c in zip(covers, (coop.left, coop.right))]
     n_gap = gaps[0].shape[0]
     gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
-    result = ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
-                              ends.gap_m)
     lanes = tuple(matched_lane(ego, coop, index, "spline", interpolation, params) for index in association.matched)
-    return FusionResult(result.left, result.right, result.left_source, result.right_source, "history", ends.gap_m,
-                        confidence=association.confidence, lanes=lanes)
+    return replace(ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
+                                    ends.gap_m), confidence=association.confidence, lanes=lanes)
 
 
 def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
