@@ -19,15 +19,16 @@ speed 1 ± 30 %); we evaluate them at the parameter whose arc length is s
 (``_arc_length_parameter``; for paramPoly3 scaled so the record still ends at p_end, as
 ``cold_maps.opendrive.geometry.param_poly3`` does).
 crdesigner also reads road and junction ids as integers (OpenDRIVE ids are strings),
-rejects spirals of (nearly, ``np.isclose``) constant curvature, reads only
-``connectingRoad`` in junction connections (``int(None)`` on a direct junction's
-``linkedRoad``) and places each ``<geometry>`` record at the running sum of the lengths
-before it, not at its ``s`` (raising "Tried to calculate a position outside of the
-borders of the reference path" when the sum falls short of the road length): such maps
-are converted from a rewritten copy (``crdesigner_copy``), and the lanelets' OpenDRIVE
-lanes name the original roads. A signal whose country crdesigner has no sign catalogue
-for (``KeyError: 'SWE'``) is read as its fallback country "ZAM" (signs are not part of
-our output).
+rejects spirals of (nearly, ``np.isclose``) constant curvature, divides by an arc's
+curvature (``ZeroDivisionError`` on a straight ``<arc curvature="0">``), cleans an empty
+``<geoReference>``'s None text (``TypeError``), reads only ``connectingRoad`` in
+junction connections (``int(None)`` on a direct junction's ``linkedRoad``) and places
+each ``<geometry>`` record at the running sum of the lengths before it, not at its ``s``
+(raising "Tried to calculate a position outside of the borders of the reference path"
+when the sum falls short of the road length): such maps are converted from a rewritten
+copy (``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
+A signal whose country crdesigner has no sign catalogue for (``KeyError: 'SWE'``) is read
+as its fallback country "ZAM" (signs are not part of our output).
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -283,14 +284,17 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     Non-integer road and junction ids become fresh integers (crdesigner parses ids with
     ``int``), with every reference; spirals of constant curvature (crdesigner raises
     "Curvature at the start and at the end of a spiral must be different") become the
-    arcs or lines they are; a junction connection naming only a ``linkedRoad`` (direct
-    junction) names it as ``connectingRoad`` too; line, arc and spiral records are
-    lengthened or shortened to end where the next record (or the road) starts
-    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
+    arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines; an
+    empty ``<geoReference>`` (crdesigner passes its None text on) is dropped; a junction
+    connection naming only a ``linkedRoad`` (direct junction) names it as
+    ``connectingRoad`` too; line, arc and spiral records are lengthened or shortened to end
+    where the next record (or the road) starts (``_align_records``). ``data`` has been
+    checked by ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
-    rewrites = _constant_spirals_to_arcs(root) + _linked_as_connecting(root) + _align_records(root)
+    rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
+                + _linked_as_connecting(root) + _align_records(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -350,6 +354,31 @@ def _constant_spirals_to_arcs(root: etree._Element) -> int:
         spiral.getparent().replace(spiral, shape)
         replaced += 1
     return replaced
+
+
+def _straight_arcs_to_lines(root: etree._Element) -> int:
+    """Replace each ``<arc>`` of curvature 0 (crdesigner's arc divides by it) by the
+    ``<line>`` it is; the number replaced."""
+    replaced = 0
+    for arc in list(root.iter("{*}arc")):
+        try:
+            straight = float(arc.get("curvature", "")) == 0.0
+        except ValueError:
+            continue  # crdesigner names the bad attribute itself
+        if straight:
+            arc.getparent().replace(arc, etree.Element("line"))
+            replaced += 1
+    return replaced
+
+
+def _drop_empty_geo_reference(root: etree._Element) -> int:
+    """Remove a header ``<geoReference>`` without text (crdesigner cleans its None text as
+    a projection string); 1 if removed, else 0. ``read_geo_reference`` reads it as ""."""
+    geo = root.find("{*}header/{*}geoReference")
+    if geo is None or (geo.text or "").strip():
+        return 0
+    geo.getparent().remove(geo)
+    return 1
 
 
 ALIGN_TOLERANCE_M: Final[float] = 1e-6

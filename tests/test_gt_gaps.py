@@ -264,6 +264,25 @@ def test_crdesigner_copy_rewrites_what_crdesigner_rejects() -> None:
     data, _ = crdesigner_copy(text.encode())
     assert etree.fromstring(data).find(".//connection").get("connectingRoad") == "1"
     assert crdesigner_copy(_road("<line/>", 30.0, 30.0).encode()) is None
+    data, _ = crdesigner_copy(_road('<arc curvature="-0.0"/>', 30.0, 30.0).encode())
+    assert etree.fromstring(data).find(".//arc") is None and etree.fromstring(data).find(".//line") is not None
+    assert crdesigner_copy(_road('<arc curvature="1e-12"/>', 30.0, 30.0).encode()) is None
+
+
+@pytest.mark.parametrize("geo_reference", ["<geoReference/>", "<geoReference>\n  </geoReference>"])
+def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_reference) -> None:
+    """A straight ``<arc curvature="0">`` (crdesigner: ZeroDivisionError) on a map whose
+    geoReference has no text (crdesigner: TypeError cleaning None) converts and checks."""
+    from lxml import etree
+
+    from cold_maps.groundtruth.check import check_map
+
+    header = f'<header revMajor="1" revMinor="6">{geo_reference}</header>'
+    text = _road('<arc curvature="0"/>', 30.0, 30.0).replace('<header revMajor="1" revMinor="6"/>', header)
+    data, _ = crdesigner_copy(text.encode())
+    assert etree.fromstring(data).find(".//geoReference") is None
+    report = check_map(_write(tmp_path, "m", text), cache=False)
+    assert report.trustworthy and len(report.lanes) == 1
 
 
 @pytest.mark.parametrize(
@@ -284,8 +303,7 @@ def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, ext
 
 
 def test_branch_map_geometry_is_what_the_issue_describes() -> None:
-    from cold_maps.network.lane_graph import build_lane_graph
-    from cold_maps.network.lane_graph import LaneKey
+    from cold_maps.network.lane_graph import LaneKey, build_lane_graph
     from cold_maps.opendrive.parser import parse_opendrive
 
     graph = build_lane_graph(parse_opendrive(branch_gap_map(0.02).encode()))
