@@ -166,6 +166,18 @@ def test_coop_station_lead_and_chord_on_the_curve(curve90, lead, frame):
     assert np.hypot(*(_xy(coop) - _xy(ego))) <= lead + 1e-9  # a chord is never longer than its arc
 
 
+def test_covering_routes_start_on_a_lane_short_by_round_off_only(curve90):
+    """A lane whose longest route falls short of the length by less than
+    ``LENGTH_TOLERANCE_M`` (the same road's lanes sampled in opposite directions) is a
+    start: two routes of the inner lane's length cover both lanes, not the outer twice."""
+    from cold_maps.network.routing import LENGTH_TOLERANCE_M, longest_route_lengths
+
+    longest = longest_route_lengths(curve90)
+    inner = min(curve90.lanes, key=longest.__getitem__)
+    routes = covering_routes(curve90, 2, longest[inner] + 0.5 * LENGTH_TOLERANCE_M, np.random.default_rng(0))
+    assert {route[0] for route in routes} == set(curve90.lanes)
+
+
 def test_covering_routes_until_every_startable_lane_is_covered(junction):
     from cold_maps.network.routing import longest_route_lengths
 

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Final
 
 from cold_maps.evaluation.scenarios import MapPlan
+from cold_maps.network.routing import LENGTH_TOLERANCE_M
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
     ROUTE_MARGIN_M,
@@ -28,9 +28,6 @@ from cold_maps.simulation.drive import (
     required_route_length,
 )
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
-
-FIT_TOLERANCE_M: Final[float] = 1e-6
-"""Slack (m) on the comparison of a needed length with the longest route (round-off)."""
 
 
 @dataclass(frozen=True)
@@ -61,7 +58,7 @@ def _most_frames(plan: MapPlan, longest_m: float, leads: tuple[float, ...] = (),
                  distractors: tuple[float, ...] = ()) -> int:
     """Frames (>= 0) a route of ``longest_m`` holds with coops at ``leads`` and
     ``distractors`` (the plan's frames when it is endless)."""
-    spare = longest_m - _needed(plan, 1, leads, distractors) + FIT_TOLERANCE_M
+    spare = longest_m - _needed(plan, 1, leads, distractors) + LENGTH_TOLERANCE_M
     if spare < 0:
         return 0
     return 1 + math.floor(spare * FRAME_RATE_HZ / plan.speed_mps) if math.isfinite(spare) else plan.frames
@@ -76,7 +73,7 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
     leads = tuple(sorted({*plan.coop_leads_m, *plan.chain_leads_m}))
     distractors = plan.coop_leads_m if plan.distractors else ()
     whole = _needed(plan, plan.frames, leads, distractors)
-    if whole <= longest_m + FIT_TOLERANCE_M:
+    if whole <= longest_m + LENGTH_TOLERANCE_M:
         return FittedPlan(plan, distractors, whole, ())
     most = _most_frames(plan, longest_m)
     frames = min(most, plan.frames) if plan.frames_at_most else plan.frames
@@ -95,7 +92,7 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
                      f"{longest_m:.0f} m, {plan.frames} frames of the local scenario need "
                      f"{_needed(plan, plan.frames, (), ()):.0f} m")
     kept = distractors
-    while kept and _needed(plan, frames, leads, kept) > longest_m + FIT_TOLERANCE_M:
+    while kept and _needed(plan, frames, leads, kept) > longest_m + LENGTH_TOLERANCE_M:
         kept = kept[:-1]
     if kept != distractors:
         dropped = distractors[len(kept):]
@@ -103,7 +100,7 @@ def fit_plan(plan: MapPlan, longest_m: float, *, where: str) -> FittedPlan:
                      f"{frames} frames with them need {_needed(plan, frames, leads, kept + dropped[:1]):.0f} m "
                      f"of route, the longest is {longest_m:.0f} m")
     fitting = leads
-    while fitting and _needed(plan, frames, fitting, ()) > longest_m + FIT_TOLERANCE_M:
+    while fitting and _needed(plan, frames, fitting, ()) > longest_m + LENGTH_TOLERANCE_M:
         fitting = fitting[:-1]
     if fitting != leads:
         dropped = leads[len(fitting):]

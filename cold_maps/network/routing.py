@@ -16,7 +16,10 @@ import numpy as np
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 
-LENGTH_TOLERANCE_M: Final[float] = 1e-9
+LENGTH_TOLERANCE_M: Final[float] = 1e-6
+"""Slack (m) on comparing a route length with a needed one: lane lengths summed in a
+different order, or the same road's lanes sampled in opposite directions, differ by
+round-off (99.99999999999999 against 100.0 m)."""
 
 
 class NoRouteError(ValueError):

@@ -29,7 +29,11 @@ from cold_maps.network.lane_area import offset_inside
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat
 from cold_maps.network.route import route_from_lanes
-from cold_maps.network.routing import longest_route_lengths, random_route
+from cold_maps.network.routing import (
+    LENGTH_TOLERANCE_M,
+    longest_route_lengths,
+    random_route,
+)
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 
 FRAME_RATE_HZ: Final[float] = 10.0
@@ -290,7 +294,7 @@ def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
     if not graph.lanes:
         raise DriveError(f"{_map_name(graph)}: the map has no driving lanes")
     longest = longest_route_lengths(graph)
-    startable = [lane for lane in graph.lanes if longest[lane] >= length_m]
+    startable = [lane for lane in graph.lanes if longest[lane] >= length_m - LENGTH_TOLERANCE_M]
     if not startable:
         best = max(longest.values())
         raise DriveError(f"{_map_name(graph)}: no drivable route of {length_m:.0f} m (longest {best:.0f} m)",
