@@ -381,6 +381,10 @@ def _drop_empty_geo_reference(root: etree._Element) -> int:
     return 1
 
 
+CONVERTED_LANE_TYPES: Final[tuple[str, ...]] = ("connectingRamp",)
+"""OpenDRIVE lane types converted besides crdesigner's default ``filter_types`` (which
+has driving, entry, exit, onRamp, offRamp but not the ramp between two motorways)."""
+
 ALIGN_TOLERANCE_M: Final[float] = 1e-6
 """A ``<geometry>`` record ending farther than this (m) from where the next record (or
 the road) starts is lengthened or shortened to end there."""
@@ -454,6 +458,7 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
 
     config = OpenDriveConfig()
     config.proj_string_odr = None
+    config.filter_types = [*config.filter_types, *CONVERTED_LANE_TYPES]
     network = network_module.Network(config)
     sources: dict[int, tuple[tuple[str, int, int], ...]] = {}
     to_base = network_module.convert_to_base_lanelet_network

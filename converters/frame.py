@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Final
 if TYPE_CHECKING:
     import lanelet2.projection
 
-FORMAT_VERSION: Final[int] = 7
-"""Version of our OSM layout and frame convention; part of the cache key."""
+FORMAT_VERSION: Final[int] = 8
+"""Version of our OSM layout and frame convention; part of the cache key (8: lanes of
+type connectingRamp are converted too)."""
 
 GENERATOR_PREFIX: Final[str] = "cold-maps-converters/"
 """Start of the ``generator`` attribute of ``<osm>`` in every file we write; every

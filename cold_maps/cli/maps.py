@@ -36,7 +36,7 @@ from cold_maps.cli.common import (
     result_line,
 )
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
-from cold_maps.opendrive.model import OpenDriveMap
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap
 
 PROG: Final[str] = "cold-maps"
 CSV_HEADER: Final[tuple[str, ...]] = ("road_id", "section", "lane_id", "side", "s", "x", "y", "z")
@@ -48,7 +48,6 @@ CRS_MEMBER: Final[str] = "cold_maps:crs"
 """GeoJSON foreign member (RFC 7946 §6.1) of the FeatureCollection saying which frame the
 coordinates are in: ``{"frame": "wgs84" | "local", "description": ..., "geoReference":
 PROJ string or null}``."""
-EXPORT_LANE_TYPES: Final[tuple[str, ...]] = ("driving",)
 
 
 @dataclass(frozen=True)
@@ -108,7 +107,7 @@ def map_info(odr_map: OpenDriveMap) -> list[str]:
     lane_types = Counter(lane.type for section in sections for lane in section.lanes)
     geometry = Counter(g.kind for road in roads for g in road.plan_view)
     connections = sum(len(j.connections) for j in odr_map.junctions.values())
-    graph = build_lane_graph(odr_map, EXPORT_LANE_TYPES)
+    graph = build_lane_graph(odr_map, VEHICLE_LANE_TYPES)
     geo = header.geo_reference
     rules = Counter(road.rule for road in roads)
     return [
@@ -188,7 +187,7 @@ def lane_border_polylines(odr_map: OpenDriveMap, step: float) -> Iterator[Border
     from cold_maps.opendrive.sampling import sample_road
 
     for road in odr_map.roads.values():
-        for samples in sample_road(road, step=step, lane_types=EXPORT_LANE_TYPES, record_ends=True):
+        for samples in sample_road(road, step=step, lane_types=VEHICLE_LANE_TYPES, record_ends=True):
             s, left, right = borders_in_driving_direction(road, samples)
             for side, xyz in (("left", left), ("right", right)):
                 yield BorderPolyline(road.id, samples.section, samples.lane_id, side, s, xyz)
@@ -311,7 +310,8 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE map")
     parser.add_argument("--threshold", type=float, default=THRESHOLD_M, help="largest allowed disagreement (m)")
     parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
-    parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only driving")
+    parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only the vehicle lanes "
+                        f"({', '.join(VEHICLE_LANE_TYPES)})")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
     add_strict_option(parser)
 
@@ -328,7 +328,7 @@ def _check(args: argparse.Namespace) -> int:
         args.map,
         threshold_m=args.threshold,
         step_m=args.step,
-        lane_types=None if args.all_lanes else ("driving",),
+        lane_types=None if args.all_lanes else VEHICLE_LANE_TYPES,
         cache=not args.no_cache,
         odr_map=odr_map,
     )

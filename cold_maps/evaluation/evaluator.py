@@ -106,7 +106,7 @@ class MapEvaluator:
         holds only what fits, ``self.fit_notes`` says what was left out."""
         plan = self.plan
         if not self.graph.lanes:
-            raise DriveError(f"{plan.path}: the map has no driving lanes")
+            raise DriveError(f"{plan.path}: the map has no driving lanes (of types {', '.join(self.graph.lane_types)})")
         longest = longest_route_lengths(self.graph)
         if plan.start_lane is None:
             fitted = fit_plan(plan, max(longest.values()), where=str(plan.path))

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
-from cold_maps.opendrive.model import OpenDriveMap
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
@@ -285,7 +285,7 @@ def check_lanelet_map(
     path: str = "",
     threshold_m: float = THRESHOLD_M,
     step_m: float = STEP_M,
-    lane_types: Sequence[str] | None = ("driving",),
+    lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
     routing_graph: Any = None,
     only: Collection[tuple[str, int, int]] | None = None,
     lane_graph: LaneGraph | None = None,
@@ -329,7 +329,7 @@ def check_map(
     *,
     threshold_m: float = THRESHOLD_M,
     step_m: float = STEP_M,
-    lane_types: Sequence[str] | None = ("driving",),
+    lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
     cache: bool = True,
     cache_dir: str | os.PathLike[str] | None = None,
     strict: bool = False,

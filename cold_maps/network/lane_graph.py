@@ -28,9 +28,8 @@ from typing import Final, Iterator, Literal, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from cold_maps.opendrive.model import ContactPoint, OpenDriveMap, Road, RoadLink
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, ContactPoint, OpenDriveMap, Road, RoadLink
 
-DEFAULT_LANE_TYPES: Final[tuple[str, ...]] = ("driving",)
 LENGTH_STEP_M: Final[float] = 0.5
 """Sampling step (m) of the lane centrelines whose polyline lengths weigh the graph."""
 
@@ -115,7 +114,7 @@ class LaneGraph:
 
 def build_lane_graph(
     odr_map: OpenDriveMap,
-    lane_types: Sequence[str] | None = DEFAULT_LANE_TYPES,
+    lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
     *,
     length_step: float = LENGTH_STEP_M,
 ) -> LaneGraph:

@@ -12,7 +12,7 @@ The model is pure data: geometry is evaluated by the modules in
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Mapping
+from typing import Final, Literal, Mapping
 
 GeometryKind = Literal["line", "arc", "spiral", "poly3", "paramPoly3"]
 ContactPoint = Literal["start", "end"]
@@ -115,6 +115,13 @@ class Geometry:
     cv: float = 0.0
     dv: float = 0.0
     p_range: Literal["arcLength", "normalized"] = "normalized"
+
+
+VEHICLE_LANE_TYPES: Final[tuple[str, ...]] = ("driving", "entry", "exit", "onRamp", "offRamp", "connectingRamp")
+"""OpenDRIVE lane types that motor vehicles drive along one way (ASAM OpenDRIVE 1.6
+§9.5.3: "driving", the lanes into and out of a motorway and the ramps; OSI classifies
+them as driving lanes): the lanes of the lane graph, the sensor, the export and the
+ground-truth check by default."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,7 +21,7 @@ import numpy as np
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
-from cold_maps.opendrive.model import LaneSection, Road
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, LaneSection, Road
 from cold_maps.opendrive.reference_line import check_s, record_joint, reference_pose
 
 JOINED_M: Final[float] = 1e-6
@@ -183,7 +183,8 @@ def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: floa
 
 
 def sample_road(
-    road: Road, step: float = 0.1, lane_types: Sequence[str] | None = ("driving",), *, record_ends: bool = False
+    road: Road, step: float = 0.1, lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES, *,
+    record_ends: bool = False
 ) -> list[LaneBorderSamples]:
     """Borders of every lane whose type is in ``lane_types`` (None: all lanes), section by section.
 

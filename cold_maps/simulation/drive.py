@@ -292,7 +292,7 @@ def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
     if count is not None and count < 1:
         raise ValueError(f"routes: expected at least 1, got {count!r}")
     if not graph.lanes:
-        raise DriveError(f"{_map_name(graph)}: the map has no driving lanes")
+        raise DriveError(f"{_map_name(graph)}: the map has no driving lanes (of types {', '.join(graph.lane_types)})")
     longest = longest_route_lengths(graph)
     startable = [lane for lane in graph.lanes if longest[lane] >= length_m - LENGTH_TOLERANCE_M]
     if not startable:
