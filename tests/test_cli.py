@@ -161,6 +161,17 @@ def test_map_info_counts_of_a_hand_built_map() -> None:
     assert lines["lane graph"] == "11 driving lanes, 6 links, 0 issues"
 
 
+def test_map_info_names_the_lane_graph_issues_under_their_count() -> None:
+    from graph_maps import lane, odr_map, road, section, to_road
+
+    ghost = road("A", 50.0, [section(0, 50, right=[lane(-1, succ=[-1])])], succ=to_road("ghost", "start"))
+    lines = map_info(odr_map([ghost]))
+    at = next(i for i, line in enumerate(lines) if line.startswith("lane graph: "))
+    assert lines[at] == "lane graph: 1 driving lanes, 0 links, 1 issues"
+    assert lines[at + 1] == "  road A successor: road ghost does not exist"
+    assert not lines[at + 2].startswith("  ")
+
+
 def test_info_is_fast_to_import_and_reports_the_georeference(town04_path: Path) -> None:
     code = (
         "import sys; from cold_maps.cli.maps import main; rc = main(['info', sys.argv[1]]); "

@@ -96,9 +96,10 @@ def _run_info(args: argparse.Namespace) -> int:
 
 
 def map_info(odr_map: OpenDriveMap) -> list[str]:
-    """Summary lines of a map: header, roads, sections, lanes, junctions, geometry, then
-    reference-line gaps and kinks and lane links whose borders do not meet."""
-    from cold_maps.network.continuity import continuity_report
+    """Summary lines of a map: header, roads, sections, lanes, junctions, geometry, the lane
+    graph and its issues (the first ``LISTED_MAX``, indented), then reference-line gaps and
+    kinks and lane links whose borders do not meet."""
+    from cold_maps.network.continuity import LISTED_MAX, continuity_report
     from cold_maps.network.lane_graph import build_lane_graph
 
     header = odr_map.header
@@ -128,6 +129,7 @@ def map_info(odr_map: OpenDriveMap) -> list[str]:
         f"geometry: {_counts(geometry)}",
         f"lane graph: {len(graph.lanes)} driving lanes, {sum(1 for _ in graph.edges())} links, "
         f"{len(graph.issues)} issues",
+        *(f"  {issue}" for issue in graph.issues[:LISTED_MAX]),
         *continuity_report(odr_map, graph),
     ]
 
