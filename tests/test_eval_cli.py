@@ -231,6 +231,24 @@ def test_false_fusions_are_counted_and_kept_apart():
     assert "| m | spline | paper | 20 | left | 2 | 1 | 0.200 | 0.300 |" in false_fusion_markdown(collector)
 
 
+def test_a_run_without_fusions_says_so_instead_of_empty_tables(tmp_path):
+    import numpy as np
+
+    from cold_maps.evaluation.collector import Collector
+    from cold_maps.evaluation.paper import runtime_markdown
+    from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.run import NO_FUSIONS, false_fusion_markdown, write_outputs
+
+    collector = Collector()
+    collector.add(ScenarioKey("m", "local", "", 0.0, "left"), FrameRecord(0, 0.0, "ego", "", np.array([0.01])))
+    assert false_fusion_markdown(collector) == "" and runtime_markdown(collector) == ""
+    write_outputs(tmp_path, collector, partial=False, plots=False,
+                  sections=[("Runtime (Table I)", runtime_markdown(collector))])
+    summary = (tmp_path / "summary.md").read_text()
+    assert summary.count(f"\n\n{NO_FUSIONS}") == 2
+    assert "| map | fusion | frames |" not in summary and "| fused | false fusions |" not in summary
+
+
 def test_stamp_base_sets_the_log_times(tmp_path):
     """--stamp-base 1700000000.25: frame i is logged at that time plus i / 10 Hz, exactly in ns."""
     from mcap.reader import make_reader

@@ -108,7 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
     parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--routes", type=_routes, default=DEFAULT_ROUTES,
-                        help="routes per map, or 'all' for as many as cover every driving lane (default 3)")
+                        help="routes per map, or 'all' for one more until every lane a route of the drive's "
+                             "length can start on is covered (default 3)")
     parser.add_argument("--frames", type=positive_int, default=None,
                         help=f"frames per route (default {DEFAULT_FRAMES}, fewer on a map too short for them; "
                              "--paper: the whole route at 1 m per frame)")

@@ -90,13 +90,16 @@ def _stats(values: Sequence[float]) -> str:
 
 def runtime_markdown(collector: Collector) -> str:
     """Table I: fusion runtime per frame (mean / σ / max, ms) of each scenario's own coop,
-    and the overlap (convoy) or fusibility (spline) check timed alone, beside the paper's."""
+    and the overlap (convoy) or fusibility (spline) check timed alone, beside the paper's;
+    "" when no pair was fused."""
     rows = []
     for (map_name, label), fuse in collector.fuse_ms.items():
         check = collector.check_ms.get((map_name, label), [])
         kind = label.split("-")[0]
         paper = " / ".join(f"{v:.2f}" for v in PAPER_TABLE_I_MS[kind]) if kind in PAPER_TABLE_I_MS else "–"
         rows.append(f"| {map_name} | {label} | {len(fuse)} | {_stats(fuse)} | {_stats(check)} | {paper} |")
+    if not rows:
+        return ""
     header = ("| map | fusion | frames | fusion mean / σ / max [ms] | check alone mean / σ / max [ms] | "
               "paper Table I [ms] |\n|---|---|---|---|---|---|\n")
     return ("Fusion time per frame (`fusion.fuse`, includes its checks), and the check alone (`fusion.is_fusible`: "

@@ -141,9 +141,14 @@ def write_plots(out: Path, collector: Collector) -> list[Path]:
     return start_plots(out, collector, None)()
 
 
+NO_FUSIONS: Final[str] = "None: no pair was fused.\n"
+"""Body of a summary section that tabulates fused pairs when there are none."""
+
+
 def false_fusion_markdown(collector: Collector) -> str:
     """Per scenario with fusibility decisions: the fusions of pairs that are not on one lane
-    (their errors are in the main table) and the errors of the correct fusions alone."""
+    (their errors are in the main table) and the errors of the correct fusions alone; ""
+    when no pair was fused."""
     rows = []
     for key, accumulator in collector.accumulators.items():
         fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
@@ -155,6 +160,8 @@ def false_fusion_markdown(collector: Collector) -> str:
         stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
         rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {key.boundary} | "
                     f"{len(fused)} | {wrong} | {stats} |")
+    if not rows:
+        return ""
     return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
             "false fusions; their errors are included in the table above. The last two columns pool the "
             "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | boundary | fused | false fusions | "
@@ -174,7 +181,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
     sections = [*sections, ("False fusions", false_fusion_markdown(collector))]
     for title, body in sections:
-        text += f"\n## {title}\n\n{body}"
+        text += f"\n## {title}\n\n{body or NO_FUSIONS}"
     atomic_write_text(out / "summary.md", text)
     write_metrics_json(out / "metrics.json", results, partial=partial)
     if plots and not partial:
