@@ -24,6 +24,10 @@ signed t the spec and ``Lane.borders`` describe.
 
 from __future__ import annotations
 
+from typing import Final
+
+import numpy as np
+
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import Lane, LaneSection, Road
@@ -83,6 +87,35 @@ def section_borders(
             borders[lane.id] = (inner, outer)
             inner = outer
     return borders
+
+
+WRONG_SIDE_TOLERANCE_M: Final[float] = 0.01
+"""How far (m) a lane's outer border may lie on the inner side of its inner border
+before ``wrong_side_borders`` reports it."""
+WRONG_SIDE_STEP_M: Final[float] = 1.0
+"""Spacing (m) of the stations where ``wrong_side_borders`` compares the borders (plus
+each section's ends)."""
+
+
+def wrong_side_borders(road: Road) -> list[tuple[int, int, float]]:
+    """(section index, lane id, most negative width in m) of each lane drawn from
+    ``<border>`` records whose outer border lies more than ``WRONG_SIDE_TOLERANCE_M`` on
+    the inner side of its inner border somewhere: the lane runs over its inner neighbour.
+    A map that writes right lanes' borders as distances (positive, as crdesigner reads
+    them) instead of t shows it on every such lane."""
+    found = []
+    for index, section in enumerate(road.lane_sections):
+        bordered = [lane for lane in section.lanes if lane.id != 0 and lane.borders and not lane.widths]
+        if not bordered:
+            continue
+        s = np.unique(np.r_[np.arange(section.s, section.s_end, WRONG_SIDE_STEP_M), section.s_end])
+        borders = section_borders(road, index, s)
+        for lane in bordered:
+            inner, outer = borders[lane.id]
+            width = float(np.min((outer - inner) * (1.0 if lane.id > 0 else -1.0)))
+            if width < -WRONG_SIDE_TOLERANCE_M:
+                found.append((index, lane.id, width))
+    return found
 
 
 def lane_border_offsets(

@@ -44,6 +44,7 @@ from typing import Final, Iterable
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.lanes import wrong_side_borders
 from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
     Connection,
@@ -189,6 +190,19 @@ class _Reader:
                 self.path or "<input>", road_id, tag, ", ".join(sorted(names)),
             )
 
+    def warn_wrong_side(self, road: Road) -> None:
+        """One warning per road whose ``<border>`` lanes run over their inner neighbours
+        (``lanes.wrong_side_borders``)."""
+        found = wrong_side_borders(road)
+        if found:
+            index, lane_id, width = min(found, key=lambda item: item[2])
+            _LOG.warning(
+                "%s: road %s: %d lane(s) drawn from <border> records have their outer border on the inner side "
+                "of the inner one (worst: section %d lane %d, by %.3f m), so they run over the next lane inwards; "
+                "we read a border as t from the centre lane (ASAM), a map that writes right lanes' borders as "
+                "distances is drawn wrongly", self.path or "<input>", road.id, len(found), index, lane_id, -width,
+            )
+
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
         try:
@@ -257,6 +271,7 @@ class _Reader:
             raise self.error("the map has no <road>", root)
         for road in roads.values():
             validate_road(road, self.path)
+            self.warn_wrong_side(road)
         for element_type, element_id, element in links:
             known = roads if element_type == "road" else junctions
             if element_id not in known:
