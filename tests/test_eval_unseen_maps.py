@@ -297,3 +297,13 @@ def test_two_maps_with_one_name_are_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "share the name 'ring'" in err[0]
     assert not out.exists()
+
+
+def test_repeated_routes_are_noted_as_such(tmp_path_factory):
+    """Two 40 m two-way roads in a row: a route of the plan's length starts only on the
+    first lane of each direction, so a third route repeats one of them."""
+    status, out = _run(tmp_path_factory, "repeats", two_roads(40.0), "--routes", "3")
+    assert status == 0
+    summary = (out / "summary.md").read_text()
+    assert "repeats: 3 route(s) of 6 frames" in summary
+    assert "covering 4 of 4 driving lanes (2 distinct: a repeated route drives the same lanes again" in summary

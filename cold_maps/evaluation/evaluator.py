@@ -173,9 +173,12 @@ class MapEvaluator:
         collector.notes.extend(self.fit_notes)
         if self.fit_notes:
             collector.reduced_maps.append(plan.name)
+        distinct = len({drive.ego.lanes for drive in self.drives})
+        repeats = (f" ({distinct} distinct: a repeated route drives the same lanes again, with fresh draws of any "
+                   "sensor errors)" if distinct < len(self.drives) else "")
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
-            f"{self.coverage[0]} of {self.coverage[1]} driving lanes")
+            f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}")
         loop_m = min(d.ego.shortest_loop_m for d in self.drives)
         farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
         if loop_m < farthest_m:
