@@ -285,7 +285,9 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     ``int``), with every reference; spirals of constant curvature (crdesigner raises
     "Curvature at the start and at the end of a spiral must be different") become the
     arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines; an
-    empty ``<geoReference>`` (crdesigner passes its None text on) is dropped; a junction
+    empty ``<geoReference>`` (crdesigner passes its None text on) is dropped; a ``<signal>``
+    whose s lies off its road (crdesigner places it on the reference line and raises) is
+    moved to the nearer road end; a junction
     connection naming only a ``linkedRoad`` (direct junction) names it as
     ``connectingRoad`` too; line, arc and spiral records are lengthened or shortened to end
     where the next record (or the road) starts (``_align_records``). ``data`` has been
@@ -294,7 +296,7 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
-                + _linked_as_connecting(root) + _align_records(root))
+                + _signals_on_their_roads(root) + _linked_as_connecting(root) + _align_records(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -369,6 +371,27 @@ def _straight_arcs_to_lines(root: etree._Element) -> int:
             arc.getparent().replace(arc, etree.Element("line"))
             replaced += 1
     return replaced
+
+
+def _signals_on_their_roads(root: etree._Element) -> int:
+    """Move each ``<signal>`` whose s lies outside [0, its road's length] to the nearer
+    end (writers round: CommonRoad's USA_Lanker puts one 0.6 m past a 51.9 m road); the
+    number moved. Signals carry no lane geometry, only the regulatory elements."""
+    moved = 0
+    for road in root.iter("{*}road"):
+        try:
+            length = float(road.get("length", ""))
+        except ValueError:
+            continue  # crdesigner names the bad attribute itself
+        for signal in road.iterfind("{*}signals/{*}signal"):
+            try:
+                s = float(signal.get("s", ""))
+            except ValueError:
+                continue
+            if not 0.0 <= s <= length:
+                signal.set("s", repr(min(max(s, 0.0), length)))
+                moved += 1
+    return moved
 
 
 def _drop_empty_geo_reference(root: etree._Element) -> int:

@@ -269,6 +269,21 @@ def test_crdesigner_copy_rewrites_what_crdesigner_rejects() -> None:
     assert crdesigner_copy(_road('<arc curvature="1e-12"/>', 30.0, 30.0).encode()) is None
 
 
+def test_a_signal_past_its_road_end_is_moved_to_the_end_for_crdesigner(tmp_path) -> None:
+    from lxml import etree
+
+    from cold_maps.groundtruth.check import check_map
+
+    signals = ('<signals><signal s="30.6" t="-4" id="1" dynamic="yes" orientation="+" country="DE" type="1000001" '
+               'subtype="-1"/><signal s="-0.2" t="-4" id="2" dynamic="no" orientation="+" country="DE" type="274" '
+               'subtype="-1" value="50"/></signals>')
+    text = _road("<line/>", 30.0, 30.0, signals)
+    data, _ = crdesigner_copy(text.encode())
+    assert [float(s.get("s")) for s in etree.fromstring(data).iter("signal")] == [30.0, 0.0]
+    report = check_map(_write(tmp_path, "m", text), cache=False)
+    assert report.trustworthy and len(report.lanes) == 1
+
+
 @pytest.mark.parametrize("geo_reference", ["<geoReference/>", "<geoReference>\n  </geoReference>"])
 def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_reference) -> None:
     """A straight ``<arc curvature="0">`` (crdesigner: ZeroDivisionError) on a map whose
