@@ -27,8 +27,9 @@ each ``<geometry>`` record at the running sum of the lengths before it, not at i
 (raising "Tried to calculate a position outside of the borders of the reference path"
 when the sum falls short of the road length): such maps are converted from a rewritten
 copy (``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
-A signal whose country crdesigner has no sign catalogue for (``KeyError: 'SWE'``) is read
-as its fallback country "ZAM" (signs are not part of our output).
+A signal whose country crdesigner has no sign catalogue or stop-line entry for
+(``KeyError: 'SWE'``, ``KeyError: 'BEL'``) is read as its fallback country "ZAM" (signs
+are not part of our output).
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -456,13 +457,19 @@ def _align_records(root: etree._Element) -> int:
     return changed
 
 
+STOP_LINE_COUNTRIES: Final[frozenset[str]] = frozenset({"DEU", "ZAM", "USA", "CHN", "ESP"})
+"""Countries of crdesigner 0.8.5's stop-line sign table (``traffic_signals.py``, a local
+dict): any other country raises ``KeyError`` there for every static sign, even one it has
+a sign catalogue for (Belgium on CommonRoad's BEL_Wervik)."""
+
+
 def _known_country(original: Any, catalogues: Any) -> Any:
     """crdesigner's ``get_signal_country`` answering "ZAM" (its fallback) for a country
-    it has no traffic-sign catalogue for."""
+    it has no traffic-sign catalogue or no stop-line entry for."""
 
     def get_signal_country(signal_country: str) -> str:
         country = original(signal_country)
-        return country if country in catalogues else "ZAM"
+        return country if country in catalogues and country in STOP_LINE_COUNTRIES else "ZAM"
 
     return get_signal_country
 

@@ -305,10 +305,12 @@ def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_re
     [
         ("<line/>", 30.0, '<signals><signal s="10" t="-4" id="1" dynamic="no" orientation="+" '
          'country="se" type="c" subtype="31" value="5"/></signals>', ""),
+        ("<line/>", 30.0, '<signals><signal s="10" t="-4" id="1" dynamic="no" orientation="+" '
+         'country="BEL" type="274" subtype="-1" value="50" unit="km/h"/></signals>', ""),
         ('<spiral curvStart="0.01" curvEnd="0.0100000001"/>', 30.0, "", ""),
         ('<arc curvature="0.01"/>', 29.2, "", SECTION_BEYOND_RECORD),
     ],
-    ids=["swedish-signal", "nearly-constant-spiral", "record-short-of-road"],
+    ids=["swedish-signal", "belgian-signal", "nearly-constant-spiral", "record-short-of-road"],
 )
 def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, extra, sections) -> None:
     from cold_maps.groundtruth.check import check_map
