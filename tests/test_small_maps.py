@@ -250,16 +250,19 @@ def _contacts(odr_map):
     return roads, connections
 
 
-def test_contradicting_contact_points_are_repaired_with_one_warning_each(caplog):
-    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive"):
+def test_contradicting_contact_points_are_repaired_with_one_warning_and_an_info_each(caplog):
+    with caplog.at_level(logging.INFO, logger="cold_maps.opendrive"):
         repaired = parse_opendrive(contradicting_links().encode(), path="bad.xodr")
     consistent = parse_opendrive(contradicting_links(contradict=False).encode(), path="good.xodr")
     assert _contacts(repaired) == _contacts(consistent)
-    warnings = [r.getMessage() for r in caplog.records if r.name == "cold_maps.opendrive"]
-    assert len(warnings) == 3
+    records = [r for r in caplog.records if r.name == "cold_maps.opendrive"]
+    warnings = [r.getMessage() for r in records if r.levelno == logging.WARNING]
+    each = [r.getMessage() for r in records if r.levelno == logging.INFO]
+    assert len(warnings) == 1 and "bad.xodr: 3 road link(s) or junction connection(s)" in warnings[0]
+    assert len(each) == 3
     assert any(f'road 1 successor road 2: contactPoint="start" is {CONTRADICTING_ROAD_M:.2f} m away' in w
-               for w in warnings)
-    assert any(f'connecting road 3): contactPoint="end" is {CONNECTING_ROAD_M:.2f} m away' in w for w in warnings)
+               for w in each)
+    assert any(f'connecting road 3): contactPoint="end" is {CONNECTING_ROAD_M:.2f} m away' in w for w in each)
     graph, expected = build_lane_graph(repaired), build_lane_graph(consistent)
     assert graph.successors == expected.successors
     assert max(longest_route_lengths(graph).values()) == pytest.approx(220.0)

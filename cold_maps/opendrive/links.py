@@ -143,8 +143,8 @@ def _repaired_link(link: RoadLink | None, contradiction: Contradiction | None) -
 
 def repair_contact_points(odr_map: OpenDriveMap, *, strict: bool = False) -> OpenDriveMap:
     """``odr_map`` with every road link and junction connection whose ``contactPoint``
-    contradicts the geometry repaired (one warning each on the ``cold_maps.opendrive``
-    logger); the same map when none does. ``strict``: raises ``OpenDriveError`` naming
+    contradicts the geometry repaired (one warning with their count on the
+    ``cold_maps.opendrive`` logger, an info record each); the same map when none does. ``strict``: raises ``OpenDriveError`` naming
     the first contradicting link (and how many there are) instead."""
     ends = {road_id: _road_ends(road) for road_id, road in odr_map.roads.items()}
     road_links = _road_link_contradictions(odr_map, ends)
@@ -156,9 +156,11 @@ def repair_contact_points(odr_map: OpenDriveMap, *, strict: bool = False) -> Ope
         more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
         raise OpenDriveError(f"{found[0].describe()}{more}; strict mode refuses links that contradict the geometry",
                              path=odr_map.path)
+    name = odr_map.path or "<input>"
     for contradiction in found:
-        LOG.warning("%s: %s; repaired to contactPoint=\"%s\"", odr_map.path or "<input>", contradiction.describe(),
-                    contradiction.repaired)
+        LOG.info("%s: %s; repaired to contactPoint=\"%s\"", name, contradiction.describe(), contradiction.repaired)
+    LOG.warning("%s: %d road link(s) or junction connection(s) name a contactPoint the geometry contradicts, "
+                "repaired (first: %s; -v lists each)", name, len(found), found[0].describe())
     roads = {road_id: replace(road,
                               predecessor=_repaired_link(road.predecessor, road_links.get((road_id, "predecessor"))),
                               successor=_repaired_link(road.successor, road_links.get((road_id, "successor"))))
