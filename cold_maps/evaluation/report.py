@@ -581,7 +581,7 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     if warnings:
         parts.append("\n**GROUND TRUTH NOT TRUSTWORTHY on this run:**\n\n" + "".join(f"- {w}\n" for w in warnings))
     header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "RMSE [m]", "max [m]", "p95 [m]",
-              "range [m]", "fused / frames", "rejected", "fus. precision", "fus. recall",
+              "range [m]", "fused / evaluated", "rejected", "fus. precision", "fus. recall",
               "runtime mean / σ / max [ms]"]
     rows = []
     for r in sorted(results, key=_sort_key):
@@ -613,7 +613,7 @@ def extended_markdown(results: Sequence[ScenarioResult]) -> str:
     for r in sorted(results, key=_sort_key):
         groups.setdefault((r.key.vehicles, r.key.history_m, r.key.exchange), []).append(r)
     header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "max [m]", "p95 [m]",
-              "correct mean / max / p95 [m]", "range [m]", "fused / frames", "bytes / msg", "bytes / s"]
+              "correct mean / max / p95 [m]", "range [m]", "fused / evaluated", "bytes / msg", "bytes / s"]
     parts = []
     for (vehicles, history, exchange), group in sorted(groups.items()):
         rows = [[r.key.map, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,

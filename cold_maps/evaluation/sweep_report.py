@@ -94,7 +94,7 @@ def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: in
     lines = [f"# Sweep\n\n{status}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over seeds "
              "and both borders, the range their mean.\n\n## Spline fusion against the gap d_s\n\n"
              "| map | method | noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | range [m] | "
-             "fused / frames |\n|---|---|---|---|---|---|---|---|---|"]
+             "fused / evaluated |\n|---|---|---|---|---|---|---|---|---|"]
     lines += [f"| {p.map} | {p.interpolation} | {p.noise_sigma_m:g} | {p.pose_sigma_xy_m:g} | {p.d_s_m:g} | "
               f"{_number(p.max_error_m)} | {_number(p.p95_error_m)} | {_number(p.range_m, 1)} | "
               f"{p.fused_frames} / {p.frames} |" for p in points]
