@@ -2,7 +2,8 @@
 
 crdesigner re-projects every vertex from the map's geoReference to pseudo-Mercator
 (``proj_string_odr``); we switch that off, so the CommonRoad vertices stay in the
-OpenDRIVE inertial frame (the ``<offset>`` of the geoReference is not applied either).
+OpenDRIVE inertial frame (nor is the header's ``<offset>``: crdesigner would subtract it
+from every geometry record, so the copy it converts has none, see ``crdesigner_copy``).
 We also skip its lane join/split "mirroring", which moves the borders of a lane that
 opens or closes from zero width (bundled highway.xodr: lane -4 off by up to 4 m), so the
 lanelets keep the OpenDRIVE borders. And we record, before crdesigner renumbers its
@@ -286,7 +287,9 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     ``int``), with every reference; spirals of constant curvature (crdesigner raises
     "Curvature at the start and at the end of a spiral must be different") become the
     arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines; an
-    empty ``<geoReference>`` (crdesigner passes its None text on) is dropped; a ``<signal>``
+    empty ``<geoReference>`` (crdesigner passes its None text on) and the header's
+    ``<offset>`` (crdesigner subtracts it from every record's x, y and hdg, which moves the
+    lanelets out of the inertial frame and, with an hdg, bends them) are dropped; a ``<signal>``
     whose s lies off its road (crdesigner places it on the reference line and raises) is
     moved to the nearer road end; a junction
     connection naming only a ``linkedRoad`` (direct junction) names it as
@@ -297,7 +300,8 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
-                + _signals_on_their_roads(root) + _linked_as_connecting(root) + _align_records(root))
+                + _drop_header_offset(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
+                + _align_records(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -393,6 +397,17 @@ def _signals_on_their_roads(root: etree._Element) -> int:
                 signal.set("s", repr(min(max(s, 0.0), length)))
                 moved += 1
     return moved
+
+
+def _drop_header_offset(root: etree._Element) -> int:
+    """Remove the header's ``<offset>`` (it places the inertial frame in the geoReference's
+    projection, which ``cold_maps.opendrive.georeference`` applies; the lanelets stay in
+    the inertial frame); 1 if removed, else 0."""
+    offset = root.find("{*}header/{*}offset")
+    if offset is None:
+        return 0
+    offset.getparent().remove(offset)
+    return 1
 
 
 def _drop_empty_geo_reference(root: etree._Element) -> int:

@@ -284,6 +284,28 @@ def test_a_signal_past_its_road_end_is_moved_to_the_end_for_crdesigner(tmp_path)
     assert report.trustworthy and len(report.lanes) == 1
 
 
+@pytest.mark.parametrize("offset", ['x="55.451" y="109.52" z="0" hdg="0"', 'x="0" y="0.04" z="0" hdg="0"',
+                                    'x="3" y="-2" z="1" hdg="0.3"'])
+def test_the_header_offset_leaves_the_ground_truth_in_the_inertial_frame(tmp_path, offset) -> None:
+    """crdesigner subtracts the header's <offset> from every record: ASAM's ValidSampleCrossing
+    (offset 55.45, 109.52 m) was off by 122.8 m, a 4 cm offset passed the check unseen."""
+    from converters import load_lanelet2
+    from gt_matching import GroundTruth
+
+    header = f'<header revMajor="1" revMinor="6"><offset {offset}/></header>'
+    text = _road("<line/>", 30.0, 30.0).replace('<header revMajor="1" revMinor="6"/>', header)
+    lanelet_map, routing = load_lanelet2(_write(tmp_path, "m", text), cache_dir=tmp_path / "cache")
+    lanelets = list(GroundTruth(lanelet_map, routing).lanelet_map.laneletLayer)
+    assert len(lanelets) == 1
+    right = np.array([(p.x, p.y) for p in lanelets[0].rightBound])
+    left = np.array([(p.x, p.y) for p in lanelets[0].leftBound])
+    # lane -1 of the straight road along +x from the origin, 3.5 m wide, in the inertial frame
+    np.testing.assert_allclose(left[:, 1], 0.0, atol=1e-6)
+    np.testing.assert_allclose(right[:, 1], -3.5, atol=1e-6)
+    assert min(left[:, 0].min(), right[:, 0].min()) == pytest.approx(0.0, abs=1e-6)
+    assert max(left[:, 0].max(), right[:, 0].max()) == pytest.approx(30.0, abs=1e-6)
+
+
 @pytest.mark.parametrize("geo_reference", ["<geoReference/>", "<geoReference>\n  </geoReference>"])
 def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_reference) -> None:
     """A straight ``<arc curvature="0">`` (crdesigner: ZeroDivisionError) on a map whose
