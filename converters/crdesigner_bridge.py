@@ -289,7 +289,8 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines; an
     empty ``<geoReference>`` (crdesigner passes its None text on) and the header's
     ``<offset>`` (crdesigner subtracts it from every record's x, y and hdg, which moves the
-    lanelets out of the inertial frame and, with an hdg, bends them) are dropped; a ``<signal>``
+    lanelets out of the inertial frame and, with an hdg, bends them) are dropped; a centre
+    lane without a type (ASAM's Ex_Entry_Exit; crdesigner raises) gets "none"; a ``<signal>``
     whose s lies off its road (crdesigner places it on the reference line and raises) is
     moved to the nearer road end; a junction
     connection naming only a ``linkedRoad`` (direct junction) names it as
@@ -300,8 +301,8 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
-                + _drop_header_offset(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
-                + _align_records(root))
+                + _drop_header_offset(root) + _typed_centre_lanes(root) + _signals_on_their_roads(root)
+                + _linked_as_connecting(root) + _align_records(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -397,6 +398,17 @@ def _signals_on_their_roads(root: etree._Element) -> int:
                 signal.set("s", repr(min(max(s, 0.0), length)))
                 moved += 1
     return moved
+
+
+def _typed_centre_lanes(root: etree._Element) -> int:
+    """Give each centre ``<lane>`` without a ``type`` the type "none" (what our parser reads
+    it as); the number typed."""
+    typed = 0
+    for lane in root.iterfind(".//{*}center/{*}lane"):
+        if lane.get("type") is None:
+            lane.set("type", "none")
+            typed += 1
+    return typed
 
 
 def _drop_header_offset(root: etree._Element) -> int:

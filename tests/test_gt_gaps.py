@@ -306,6 +306,16 @@ def test_the_header_offset_leaves_the_ground_truth_in_the_inertial_frame(tmp_pat
     assert max(left[:, 0].max(), right[:, 0].max()) == pytest.approx(30.0, abs=1e-6)
 
 
+def test_a_centre_lane_without_type_converts_and_checks(tmp_path) -> None:
+    """ASAM's Ex_Entry_Exit.xodr omits the centre lanes' type (crdesigner raised)."""
+    from cold_maps.groundtruth.check import check_map
+
+    text = _road("<line/>", 30.0, 30.0).replace('<lane id="0" type="none"/>', '<lane id="0"/>')
+    assert '<lane id="0"/>' in text
+    report = check_map(_write(tmp_path, "m", text), cache=False)
+    assert report.trustworthy and len(report.lanes) == 1
+
+
 @pytest.mark.parametrize("geo_reference", ["<geoReference/>", "<geoReference>\n  </geoReference>"])
 def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_reference) -> None:
     """A straight ``<arc curvature="0">`` (crdesigner: ZeroDivisionError) on a map whose

@@ -194,3 +194,19 @@ def test_link_gaps_report_borders_that_miss(tmp_path: Path, capsys: pytest.Captu
     out = capsys.readouterr().out
     assert "lane links whose borders miss by over 1 cm: 2 of 2" in out
     assert "road 1 section 0 lane -1 -> road 2 section 0 lane -1: 2.5 cm" in out
+
+
+def test_a_centre_lane_without_type_is_none_with_one_warning(caplog: pytest.LogCaptureFixture) -> None:
+    untyped = (road("1", '<geometry s="0" x="0" y="0" hdg="0" length="20"><line/></geometry>')
+               + road("2", '<geometry s="0" x="0" y="9" hdg="0" length="20"><line/></geometry>'))
+    data = xodr(untyped.replace('<lane id="0" type="none"/>', '<lane id="0"/>'))
+    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
+        odr_map = parse_opendrive(data, path="asam.xodr")
+    assert [odr_map.roads[r].lane_sections[0].lane(0).type for r in ("1", "2")] == ["none", "none"]
+    warnings = [r.getMessage() for r in caplog.records]
+    assert warnings == ['asam.xodr: the centre <lane> of 2 road(s) has no type (first: road 1): taken as "none" '
+                        "(strict mode refuses it)"]
+    with pytest.raises(OpenDriveError, match="missing required attribute 'type'"):
+        parse_opendrive(data, path="asam.xodr", strict=True)
+    with pytest.raises(OpenDriveError, match="missing required attribute 'type'"):
+        parse_opendrive(xodr(untyped.replace('<lane id="-2" type="driving">', '<lane id="-2">')))

@@ -30,7 +30,8 @@ curvature or record start that a record omits (RoadRunner writes ``<spiral curvE
 ``<paramPoly3/>``, ``<elevation/>``, ``<superelevation/>``) is 0, the value an empty
 record stands for (and ``pRange`` defaults to "normalized" as in the schema); one warning
 per element kind and road names the attributes taken as 0. ``strict=True`` refuses them
-("missing required attribute").
+("missing required attribute"). So is a centre lane without a ``type`` (taken as "none",
+one warning per map).
 """
 
 from __future__ import annotations
@@ -76,6 +77,9 @@ _RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
 _P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
 _JUNCTION_TYPES: Final[tuple[str, ...]] = ("default", "direct", "virtual", "crossing")
 _LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
+CENTRE_LANE_TYPE: Final[str] = "none"
+"""Type of a centre lane (id 0, no width, its type means nothing) that has none: ASAM's
+own Ex_Entry_Exit.xodr omits it on every road."""
 _ONCE_PER_ROAD: Final[frozenset[str]] = frozenset(
     {"link", "planView", "elevationProfile", "lateralProfile", "lanes"}
 )
@@ -134,6 +138,7 @@ class _Reader:
         self.strict = strict
         self.road_id = ""
         self.defaulted: dict[tuple[str, str], set[str]] = {}
+        self.untyped_centres: list[str] = []
 
     # -- attribute access -------------------------------------------------------------
 
@@ -183,11 +188,18 @@ class _Reader:
         return tuple(self.number(element, name, 0.0) for name in names)
 
     def warn_defaults(self) -> None:
-        """One warning per element kind and road whose records omitted attributes."""
+        """One warning per element kind and road whose records omitted attributes, and one
+        for the centre lanes without a type."""
         for (tag, road_id), names in self.defaulted.items():
             _LOG.warning(
                 "%s: road %s: <%s> without %s: taken as 0 (strict mode refuses it)",
                 self.path or "<input>", road_id, tag, ", ".join(sorted(names)),
+            )
+        if self.untyped_centres:
+            _LOG.warning(
+                "%s: the centre <lane> of %d road(s) has no type (first: road %s): taken as \"%s\" (strict mode "
+                "refuses it)", self.path or "<input>", len(self.untyped_centres), self.untyped_centres[0],
+                CENTRE_LANE_TYPE,
             )
 
     def warn_wrong_side(self, road: Road) -> None:
@@ -468,9 +480,14 @@ class _Reader:
                         predecessors.append(self.integer(link, "id"))
                     elif link.tag == "successor":
                         successors.append(self.integer(link, "id"))
+        if lane_id == 0 and element.get("type") is None and not self.strict:
+            self.untyped_centres.append(self.road_id)
+            lane_type = CENTRE_LANE_TYPE
+        else:
+            lane_type = self.required(element, "type")
         return Lane(
             id=lane_id,
-            type=self.required(element, "type"),
+            type=lane_type,
             level=self.flag(element, "level"),
             widths=self.cubics(widths, "sOffset"),
             borders=self.cubics(borders, "sOffset"),
