@@ -292,23 +292,33 @@ def test_curved_road_borders_far_from_origin_match_independent_evaluation(geom):
     assert worst < 1e-6
 
 
-def test_border_lanes_drawn_over_their_inner_neighbour_are_reported(caplog) -> None:
+def test_lanes_drawn_over_their_inner_neighbour_are_reported(caplog) -> None:
     """The adversarial border map's signed borders are fine; written as distances (the
     right lanes' a, b, c, d negated: positive, as crdesigner reads them) lane -1 lies on
-    the left of lane 0 by as much as its border's peak and lane -2 on the left of -1."""
+    the left of lane 0 by as much as its border's peak and lane -2 on the left of -1. A
+    width polynomial that dips below zero is reported the same way."""
     from adversarial_maps import border_map
 
-    from cold_maps.opendrive.lanes import WRONG_SIDE_TOLERANCE_M, wrong_side_borders
+    from cold_maps.opendrive.lanes import WRONG_SIDE_TOLERANCE_M, wrong_side_lanes
     from cold_maps.opendrive.parser import parse_opendrive
 
     signed = border_map()
-    assert wrong_side_borders(parse_opendrive(signed.encode()).roads["7"]) == []
+    assert wrong_side_lanes(parse_opendrive(signed.encode()).roads["7"]) == []
     distances = signed.replace('a="-3.5" b="0.0" c="-0.001" d="1e-05"', 'a="3.5" b="0.0" c="0.001" d="-1e-05"')
     distances = distances.replace('a="-6.5" b="-0.02"', 'a="6.5" b="0.02"')
     with caplog.at_level("WARNING"):
-        found = wrong_side_borders(parse_opendrive(distances.encode(), path="d.xodr").roads["7"])
-    assert [(index, lane) for index, lane, _ in found] == [(0, -1), (0, -2)]
-    worst = {lane: width for _, lane, width in found}
+        found = wrong_side_lanes(parse_opendrive(distances.encode(), path="d.xodr").roads["7"])
+    assert [(lane.section, lane.lane_id, lane.from_borders) for lane in found] == [(0, -1, True), (0, -2, True)]
     peak_s = 2 * 0.001 / (3 * 1e-5)  # where the border 3.5 + 0.001 s² - 1e-5 s³ (lane 0 at t = 0) is widest
-    assert worst[-1] == pytest.approx(-(3.5 + 0.001 * peak_s**2 - 1e-5 * peak_s**3), abs=WRONG_SIDE_TOLERANCE_M)
-    assert "d.xodr: road 7: 2 lane(s) drawn from <border> records" in caplog.text
+    assert found[0].width_m == pytest.approx(-(3.5 + 0.001 * peak_s**2 - 1e-5 * peak_s**3), abs=WRONG_SIDE_TOLERANCE_M)
+    assert "d.xodr: road 7: 2 lane(s) have their outer border on the inner side" in caplog.text
+    assert "writes right lanes' borders as distances" in caplog.text
+    caplog.clear()
+    narrowing = signed.replace('<border sOffset="0.0" a="-3.5" b="0.0" c="-0.001" d="1e-05"/>',
+                               '<width sOffset="0.0" a="3.0" b="-0.1" c="0.0" d="0.0"/>')
+    with caplog.at_level("WARNING"):
+        found = wrong_side_lanes(parse_opendrive(narrowing.encode(), path="w.xodr").roads["7"])
+    # width 3 - 0.1 s reaches -5 m at the road's end (80 m); lane -2's border is t, unchanged
+    assert [(lane.lane_id, lane.from_borders) for lane in found] == [(-1, False)]
+    assert found[0].width_m == pytest.approx(3.0 - 0.1 * 80.0)
+    assert "width -5.000 m from its <width> records" in caplog.text and "as distances" not in caplog.text

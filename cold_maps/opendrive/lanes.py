@@ -24,13 +24,14 @@ signed t the spec and ``Lane.borders`` describe.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
-from cold_maps.opendrive.model import Lane, LaneSection, Road
+from cold_maps.opendrive.model import CubicPoly, Lane, LaneSection, Road
 from cold_maps.opendrive.reference_line import check_s
 
 
@@ -91,31 +92,56 @@ def section_borders(
 
 WRONG_SIDE_TOLERANCE_M: Final[float] = 0.01
 """How far (m) a lane's outer border may lie on the inner side of its inner border
-before ``wrong_side_borders`` reports it."""
+before ``wrong_side_lanes`` reports it."""
 WRONG_SIDE_STEP_M: Final[float] = 1.0
-"""Spacing (m) of the stations where ``wrong_side_borders`` compares the borders (plus
-each section's ends)."""
+"""Spacing (m) of the stations where ``wrong_side_lanes`` compares the borders (plus each
+section's ends)."""
 
 
-def wrong_side_borders(road: Road) -> list[tuple[int, int, float]]:
-    """(section index, lane id, most negative width in m) of each lane drawn from
-    ``<border>`` records whose outer border lies more than ``WRONG_SIDE_TOLERANCE_M`` on
-    the inner side of its inner border somewhere: the lane runs over its inner neighbour.
-    A map that writes right lanes' borders as distances (positive, as crdesigner reads
-    them) instead of t shows it on every such lane."""
+@dataclass(frozen=True)
+class WrongSideLane:
+    """A lane whose outer border lies on the inner side of its inner border somewhere.
+
+    Fields:
+        section: index of its lane section in the road.
+        lane_id: its id.
+        width_m: its most negative width (m, < -``WRONG_SIDE_TOLERANCE_M``).
+        from_borders: drawn from ``<border>`` records (else ``<width>`` records).
+    """
+
+    section: int
+    lane_id: int
+    width_m: float
+    from_borders: bool
+
+
+def wrong_side_lanes(road: Road) -> list[WrongSideLane]:
+    """The lanes of ``road`` that run over their inner neighbour: a ``<width>`` polynomial
+    below zero (ASAM: widths are not negative), or ``<border>`` records that put the outer
+    border on the inner side (a map that writes right lanes' borders as distances,
+    positive as crdesigner reads them, instead of t shows it on every such lane)."""
     found = []
     for index, section in enumerate(road.lane_sections):
         bordered = [lane for lane in section.lanes if lane.id != 0 and lane.borders and not lane.widths]
-        if not bordered:
+        varying = [lane for lane in section.lanes if lane.widths and not _constant_non_negative(lane.widths)]
+        if not bordered and not varying:
             continue
         s = np.unique(np.r_[np.arange(section.s, section.s_end, WRONG_SIDE_STEP_M), section.s_end])
-        borders = section_borders(road, index, s)
-        for lane in bordered:
-            inner, outer = borders[lane.id]
-            width = float(np.min((outer - inner) * (1.0 if lane.id > 0 else -1.0)))
+        widths = {lane.id: cubic_poly.evaluate(lane.widths, s, s_offset=section.s) for lane in varying}
+        if bordered:
+            borders = section_borders(road, index, s)
+            widths |= {lane.id: (borders[lane.id][1] - borders[lane.id][0]) * (1.0 if lane.id > 0 else -1.0)
+                       for lane in bordered}
+        for lane in section.lanes:
+            width = float(np.min(widths[lane.id])) if lane.id in widths else 0.0
             if width < -WRONG_SIDE_TOLERANCE_M:
-                found.append((index, lane.id, width))
+                found.append(WrongSideLane(index, lane.id, width, not lane.widths))
     return found
+
+
+def _constant_non_negative(records: tuple[CubicPoly, ...]) -> bool:
+    """Whether every record is a constant a >= 0 (no sampling needed)."""
+    return all(r.b == 0.0 and r.c == 0.0 and r.d == 0.0 and r.a >= 0.0 for r in records)
 
 
 def lane_border_offsets(

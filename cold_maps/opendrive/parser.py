@@ -45,7 +45,7 @@ from typing import Final, Iterable
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
-from cold_maps.opendrive.lanes import wrong_side_borders
+from cold_maps.opendrive.lanes import wrong_side_lanes
 from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
     Connection,
@@ -203,17 +203,20 @@ class _Reader:
             )
 
     def warn_wrong_side(self, road: Road) -> None:
-        """One warning per road whose ``<border>`` lanes run over their inner neighbours
-        (``lanes.wrong_side_borders``)."""
-        found = wrong_side_borders(road)
-        if found:
-            index, lane_id, width = min(found, key=lambda item: item[2])
-            _LOG.warning(
-                "%s: road %s: %d lane(s) drawn from <border> records have their outer border on the inner side "
-                "of the inner one (worst: section %d lane %d, by %.3f m), so they run over the next lane inwards; "
-                "we read a border as t from the centre lane (ASAM), a map that writes right lanes' borders as "
-                "distances is drawn wrongly", self.path or "<input>", road.id, len(found), index, lane_id, -width,
-            )
+        """One warning per road whose lanes run over their inner neighbours
+        (``lanes.wrong_side_lanes``)."""
+        found = wrong_side_lanes(road)
+        if not found:
+            return
+        worst = min(found, key=lambda lane: lane.width_m)
+        hint = ("; we read a <border> as t from the centre lane (ASAM), a map that writes right lanes' borders as "
+                "distances is drawn wrongly" if any(lane.from_borders for lane in found) else "")
+        _LOG.warning(
+            "%s: road %s: %d lane(s) have their outer border on the inner side of the inner one, so they run over "
+            "the next lane inwards (worst: section %d lane %d, width %.3f m from its <%s> records)%s",
+            self.path or "<input>", road.id, len(found), worst.section, worst.lane_id, worst.width_m,
+            "border" if worst.from_borders else "width", hint,
+        )
 
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
