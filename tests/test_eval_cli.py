@@ -270,3 +270,25 @@ def test_bad_stamp_base_is_a_usage_error(value, capsys):
     with pytest.raises(SystemExit) as exit_info:
         evaluate.main(["--map", "x.xodr", "--stamp-base", value])
     assert exit_info.value.code == 2 and "--stamp-base" in capsys.readouterr().err
+
+
+def test_unscored_evaluations_are_said_to_match_no_ground_truth():
+    """Over 1 % of a map's evaluations rejected gt_unmatched: a warning with the count and
+    the matcher's reasons (a lane the GT covers can still fail to match, e.g. where a
+    lanelet overlaps itself)."""
+    import numpy as np
+
+    from cold_maps.evaluation.collector import Collector
+    from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.trust import GT_UNMATCHED, UNMATCHED_SHARE_LIMIT, unmatched_warnings
+
+    collector = Collector()
+    key = ScenarioKey("m", "local", "", 0.0, "left")
+    for frame in range(98):
+        collector.add(key, FrameRecord(frame, 0.0, "ego", "", np.array([0.01])))
+    for frame in (98, 99):
+        collector.add(key, FrameRecord(frame, 0.0, "ego", "", np.empty(0), rejected=GT_UNMATCHED,
+                                       gt_unmatched="off_lane"))
+    assert 2 / 100 > UNMATCHED_SHARE_LIMIT
+    assert unmatched_warnings(collector) == [
+        "m: 2 of 100 evaluations (2.0%) not scored, no ground-truth lanelets matched the detected lane (off_lane: 2)"]

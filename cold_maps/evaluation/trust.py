@@ -2,7 +2,7 @@
 ``cold-maps check`` verdict on the lanes the drives use.
 
 A run says so in its one-line result and at the top of ``summary.md`` when more than
-``UNMATCHED_SHARE_LIMIT`` of a map's evaluations had no covering GT (rejected
+``UNMATCHED_SHARE_LIMIT`` of a map's evaluations matched no GT lanelets (rejected
 "gt_unmatched", see ``groundtruth.meter``), or when ``check`` flags a lane the drives use
 (a border off by more than its threshold, or a lane-graph edge between two of them that
 is no Lanelet2 routing successor).
@@ -76,7 +76,7 @@ def unmatched_warnings(collector: Collector) -> list[str]:
         if count > UNMATCHED_SHARE_LIMIT * totals[name]:
             why = ", ".join(f"{reason}: {n}" for reason, n in sorted(reasons.items()))
             warnings.append(f"{name}: {count} of {totals[name]} evaluations ({count / totals[name]:.1%}) not scored, "
-                            f"the GT does not cover the lane ({why})")
+                            f"no ground-truth lanelets matched the detected lane ({why})")
     return warnings
 
 
