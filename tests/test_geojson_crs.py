@@ -67,3 +67,17 @@ def test_map_without_georeference_asks_for_crs_local(tmp_path: Path, capsys: pyt
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no <geoReference>" in err and "--crs local" in err
     assert not out.exists()
+
+
+def test_csv_refuses_wgs84_and_info_prints_the_offset_in_full(tmp_path: Path, capsys) -> None:
+    """CSV rows are always in the inertial frame, so ``--crs wgs84`` with csv is a usage error
+    (exit 2, one line, no file); ``info`` prints a UTM-sized offset to the millimetre (``:g``
+    printed 5330987.654 as 5.33099e+06, 2.3 m off)."""
+    out = tmp_path / "b.csv"
+    assert main(["export", str(SMALL_MAP), "--format", "csv", "--crs", "wgs84", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--crs wgs84 needs --format geojson" in err[0] and not out.exists()
+    far = tmp_path / "far.xodr"
+    far.write_text(SMALL_MAP.read_text().replace('<offset x="100.5" y="-20"', '<offset x="690000.125" y="5330987.654"'))
+    assert main(["info", str(far)]) == 0
+    assert "offset: x=690000.125 y=5330987.654 z=3 hdg=0.25" in capsys.readouterr().out

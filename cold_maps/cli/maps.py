@@ -28,9 +28,11 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 import numpy as np
 
 from cold_maps.cli.common import (
+    EXIT_USAGE,
     DefaultsHelpFormatter,
     add_output_options,
     cli_entry,
+    fail,
     make_parser,
     one_line,
     result_line,
@@ -117,7 +119,7 @@ def map_info(odr_map: OpenDriveMap) -> list[str]:
         f"name: {header.name or '-'}",
         f"vendor: {header.vendor or '-'}",
         f"geoReference: {geo.proj or '-'}",
-        f"offset: x={geo.offset_x:g} y={geo.offset_y:g} z={geo.offset_z:g} hdg={geo.offset_hdg:g}",
+        f"offset: x={geo.offset_x:.15g} y={geo.offset_y:.15g} z={geo.offset_z:.15g} hdg={geo.offset_hdg:.15g}",
         f"roads: {len(odr_map.roads)} ({sum(1 for r in roads if r.junction != '-1')} in junctions), "
         f"{sum(r.length for r in roads) / 1000:.3f} km of reference line",
         f"traffic rule: {_counts(rules)}",
@@ -153,9 +155,9 @@ def _configure_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
     parser.add_argument("--format", choices=("csv", "geojson"), default="csv", help="file format")
     parser.add_argument(
-        "--crs", choices=("wgs84", "local"), default="wgs84",
+        "--crs", choices=("wgs84", "local"), default=None,
         help="geojson coordinates: WGS84 lon/lat through the map's geoReference (RFC 7946, default) or the "
-        "OpenDRIVE inertial frame in m (csv is always the inertial frame)",
+        "OpenDRIVE inertial frame in m (csv is always the inertial frame: --crs wgs84 is refused there)",
     )
     parser.add_argument("-o", "--output", required=True, metavar="FILE",
                         help="file to write (its folder must exist); - for standard output")
@@ -251,6 +253,10 @@ def _write_geojson(
 
 
 def _run_export(args: argparse.Namespace) -> int:
+    if args.format == "csv" and args.crs == "wgs84":
+        return fail(f"{PROG} export", "--crs wgs84 needs --format geojson: csv rows are in the OpenDRIVE inertial "
+                    "frame (x, y, z in m)", EXIT_USAGE)
+    args.crs = args.crs or ("wgs84" if args.format == "geojson" else "local")
     odr_map = _load(args)
     written = Counter[str]()
 
