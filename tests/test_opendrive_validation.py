@@ -205,3 +205,23 @@ def test_every_command_refuses_in_one_line_and_writes_nothing(command, tmp_path,
     assert len(lines) == 1 and "curvature" in lines[0] and "road '1'" in lines[0], captured.err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["refused.xodr"]
+
+
+@pytest.mark.parametrize(("record", "worst"), [
+    ('a="1.2" b="0" c="0" d="0"', None),  # esmini's pitch_by_super_elevation: steep, finite
+    ('a="0" b="-0.05" c="0" d="0"', (30.0, 1.5)),  # the 30 m road ends rolled by -1.5 rad (past -1.4 after 28 m)
+    ('a="1.5708" b="0" c="0" d="0"', (0.0, 1.5708)),  # on its side: tan(roll) ~ 1e5
+])
+def test_a_roll_beyond_the_bound_is_refused(record, worst) -> None:
+    from cold_maps.opendrive.validation import MAX_SUPERELEVATION_RAD
+
+    data = variant(SMALL_MAP, '<superelevation s="0" a="0" b="0" c="0" d="0"/>', f'<superelevation s="0" {record}/>')
+    if worst is None:
+        road = next(iter(parse_opendrive(data, path=NAME).roads.values()))
+        assert all(np.isfinite(samples.inner).all() and np.isfinite(samples.outer).all()
+                   for samples in sample_road(road, lane_types=None))
+        return
+    error = refused(data)
+    s_m, roll_rad = worst
+    assert error.element == "superelevation"
+    assert f"roll the road by {roll_rad:.6g} rad at s={s_m:.6g} m, more than {MAX_SUPERELEVATION_RAD:g} rad" in str(error)

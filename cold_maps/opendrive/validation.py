@@ -34,7 +34,8 @@ Mercator < 2.1e7 m; the maps we know stay within 1.5 km). A road is at most
 which bounds the samples of a road to 1e6 at the default 0.1 m step. Curvatures are at
 most ``MAX_CURVATURE_PER_M`` = 1e3 1/m (a 1 mm radius; the maps we know stay below 0.5)
 and headings at most ``MAX_HEADING_RAD`` = 1e6 rad in magnitude (the maps we know write
-up to 9.5). A cubic record is bounded over the span it applies to by the sum of its
+up to 9.5); a superelevation rolls the road by at most ``MAX_SUPERELEVATION_RAD`` = 1.4
+rad (borders rise by tan(roll) · t, without bound towards π/2). A cubic record is bounded over the span it applies to by the sum of its
 coefficients' magnitudes times the powers of that span, so a coefficient of 1e308 or a
 width that reaches 1e9 m within its section is refused, while a large coefficient on a
 record that ends a few centimetres later is not. A border that lies t m from a reference
@@ -51,6 +52,7 @@ from typing import Final, Sequence
 
 import numpy as np
 
+from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.errors import OpenDriveError
 from cold_maps.opendrive.geometry import evaluate as evaluate_record
 from cold_maps.opendrive.geometry import param_poly3, poly3
@@ -66,6 +68,12 @@ MAX_CURVATURE_PER_M: Final[float] = 1e3
 """Largest |curvature| (1/m) of an arc or spiral end."""
 MAX_HEADING_RAD: Final[float] = 1e6
 """Largest |hdg| (rad) of a geometry record."""
+MAX_SUPERELEVATION_RAD: Final[float] = 1.4
+"""Largest |roll| (rad, 80°) of a superelevation: borders rise by tan(roll) · t, 5.8 · t
+here and without bound towards π/2, where the road stands on its side (the esmini maps
+reach 1.2 rad, in a unit test of extreme roll; CARLA's none)."""
+SUPERELEVATION_STEP_M: Final[float] = 0.1
+"""Spacing (m) of the stations where the roll is compared with its bound."""
 MAX_JUMP_M: Final[float] = 10.0
 """Largest jump (m) between consecutive geometry records on a road whose records draw less."""
 COVERAGE_TOLERANCE_M: Final[float] = 1.0
@@ -124,6 +132,7 @@ class _RoadCheck:
         self.jumps()
         self.profiles("elevation", road.elevation, road.length, "s")
         self.profiles("superelevation", road.superelevation, road.length, "s")
+        self.roll_bound()
         reach = self.profiles("laneOffset", road.lane_offsets, road.length, "s")
         reach += max(self.section_reach(section) for section in road.lane_sections)
         self.border_length(reach)
@@ -217,6 +226,21 @@ class _RoadCheck:
             v = CubicPoly(0.0, geometry.av, geometry.bv, geometry.cv, geometry.dv)
             self.curve_bound("paramPoly3", u, p_end, where, "aU, bU, cU, dU")
             self.curve_bound("paramPoly3", v, p_end, where, "aV, bV, cV, dV")
+
+    def roll_bound(self) -> None:
+        """The superelevation stays within ``MAX_SUPERELEVATION_RAD`` (sampled every
+        ``SUPERELEVATION_STEP_M`` and at each record's start)."""
+        records = self.road.superelevation
+        if not records:
+            return
+        s = np.unique(np.r_[np.arange(0.0, self.road.length, SUPERELEVATION_STEP_M), self.road.length,
+                            [min(max(r.s0, 0.0), self.road.length) for r in records]])
+        roll = np.abs(cubic_poly.evaluate(records, s))
+        worst = int(np.argmax(roll))
+        if roll[worst] > MAX_SUPERELEVATION_RAD:
+            raise self.refuse("superelevation", "a, b, c, d", f"roll the road by {roll[worst]:.6g} rad at "
+                              f"s={s[worst]:.6g} m, more than {MAX_SUPERELEVATION_RAD:g} rad (borders rise by "
+                              "tan(roll) times their offset)")
 
     def curve_bound(self, element: str, record: CubicPoly, span: float, where: str, names: str) -> None:
         """A local curve coordinate (m) over the parameter range [0, span]."""
