@@ -174,7 +174,8 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
         try:
             scenario, sources, opendrive = _run_crdesigner(source)
         except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
-            raise ConversionError(str(path), f"converter crashed: {type(exc).__name__}: {exc}") from exc
+            why = f"{type(exc).__name__}: {exc}" if str(exc) else f"{type(exc).__name__} without a message (-vv: where)"
+            raise ConversionError(str(path), f"converter crashed: {why}") from exc
     heights = RoadHeights(opendrive)
     junction_of = {str(road.id): str(road.junction.id) for road in opendrive.roads if road.junction is not None}
     network = scenario.lanelet_network
@@ -290,7 +291,9 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     empty ``<geoReference>`` (crdesigner passes its None text on) and the header's
     ``<offset>`` (crdesigner subtracts it from every record's x, y and hdg, which moves the
     lanelets out of the inertial frame and, with an hdg, bends them) are dropped; a centre
-    lane without a type (ASAM's Ex_Entry_Exit; crdesigner raises) gets "none"; a ``<signal>``
+    lane without a type (ASAM's Ex_Entry_Exit; crdesigner raises) gets "none", and a lane type
+    crdesigner does not know (OpenDRIVE 1.8's walking, slipLane, ...) its nearest known one
+    (``_lane_types_it_knows``); a ``<signal>``
     whose s lies off its road (crdesigner places it on the reference line and raises) is
     moved to the nearer road end; a junction
     connection naming only a ``linkedRoad`` (direct junction) names it as
@@ -301,7 +304,8 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
-                + _drop_header_offset(root) + _typed_centre_lanes(root) + _signals_on_their_roads(root)
+                + _drop_header_offset(root) + _typed_centre_lanes(root) + _lane_types_it_knows(root)
+                + _signals_on_their_roads(root)
                 + _linked_as_connecting(root) + _align_records(root))
     if original is None and not rewrites:
         return None
@@ -398,6 +402,29 @@ def _signals_on_their_roads(root: etree._Element) -> int:
                 signal.set("s", repr(min(max(s, 0.0), length)))
                 moved += 1
     return moved
+
+
+CRDESIGNER_LANE_TYPES: Final[frozenset[str]] = frozenset({
+    "none", "driving", "stop", "shoulder", "biking", "sidewalk", "border", "restricted", "parking", "bidirectional",
+    "median", "special1", "special2", "special3", "roadWorks", "tram", "rail", "entry", "exit", "offRamp", "onRamp",
+    "curb", "connectingRamp"})
+"""Lane types crdesigner 0.8.5 accepts (``roadLanes.Lane.laneTypes``; any other raises an
+``Exception`` without a message)."""
+KNOWN_LANE_TYPE: Final[dict[str, str]] = {"slipLane": "driving", "walking": "sidewalk"}
+"""Lane type given to crdesigner for a newer one it lacks ("none" for the rest: HOV, bus,
+taxi, shared, ... are not converted)."""
+
+
+def _lane_types_it_knows(root: etree._Element) -> int:
+    """Give each lane whose type crdesigner does not know its ``KNOWN_LANE_TYPE`` (else
+    "none"); the number retyped."""
+    retyped = 0
+    for lane in root.iter("{*}lane"):
+        lane_type = lane.get("type")
+        if lane_type is not None and lane_type not in CRDESIGNER_LANE_TYPES:
+            lane.set("type", KNOWN_LANE_TYPE.get(lane_type, "none"))
+            retyped += 1
+    return retyped
 
 
 def _typed_centre_lanes(root: etree._Element) -> int:

@@ -306,6 +306,22 @@ def test_the_header_offset_leaves_the_ground_truth_in_the_inertial_frame(tmp_pat
     assert max(left[:, 0].max(), right[:, 0].max()) == pytest.approx(30.0, abs=1e-6)
 
 
+def test_lane_types_crdesigner_lacks_convert_and_check(tmp_path) -> None:
+    """OpenDRIVE 1.8's slipLane (a vehicle lane: checked) and walking (crdesigner raised an
+    Exception without a message on both)."""
+    from lxml import etree
+
+    from cold_maps.groundtruth.check import check_map
+
+    walking = '<lane id="-2" type="walking"><width sOffset="0" a="2" b="0" c="0" d="0"/></lane>'
+    text = (_road("<line/>", 30.0, 30.0).replace('<lane id="-1" type="driving">', '<lane id="-1" type="slipLane">')
+            .replace("</lane></right>", f"</lane>{walking}</right>"))
+    data, _ = crdesigner_copy(text.encode())
+    assert [lane.get("type") for lane in etree.fromstring(data).iter("lane")] == ["none", "driving", "sidewalk"]
+    report = check_map(_write(tmp_path, "m", text), cache=False)
+    assert report.trustworthy and [(lane.road_id, lane.lane_id) for lane in report.lanes] == [("1", -1)]
+
+
 def test_a_centre_lane_without_type_converts_and_checks(tmp_path) -> None:
     """ASAM's Ex_Entry_Exit.xodr omits the centre lanes' type (crdesigner raised)."""
     from cold_maps.groundtruth.check import check_map

@@ -71,5 +71,5 @@ def test_a_map_without_vehicle_lanes_names_the_types_it_looked_for() -> None:
         sidewalks = sidewalks.replace(f'type="{lane_type}"', 'type="sidewalk"')
     graph = build_lane_graph(parse_opendrive(sidewalks.encode()))
     with pytest.raises(DriveError, match=r"no driving lanes \(of types driving, entry, exit, onRamp, offRamp, "
-                                         r"connectingRamp\)"):
+                                         r"connectingRamp, slipLane\)"):
         covering_routes(graph, 1, 10.0, np.random.default_rng(0))

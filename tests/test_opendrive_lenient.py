@@ -197,8 +197,11 @@ def test_link_gaps_report_borders_that_miss(tmp_path: Path, capsys: pytest.Captu
 
 
 def test_a_centre_lane_without_type_is_none_with_one_warning(caplog: pytest.LogCaptureFixture) -> None:
-    untyped = (road("1", '<geometry s="0" x="0" y="0" hdg="0" length="20"><line/></geometry>')
-               + road("2", '<geometry s="0" x="0" y="9" hdg="0" length="20"><line/></geometry>'))
+    two_sections = road("1", '<geometry s="0" x="0" y="0" hdg="0" length="20"><line/></geometry>')
+    section = two_sections[two_sections.index("<laneSection"):two_sections.index("</laneSection>")]
+    two_sections = two_sections.replace("</laneSection>", "</laneSection>" + section.replace('s="0"', 's="10"', 1)
+                                        + "</laneSection>", 1)
+    untyped = two_sections + road("2", '<geometry s="0" x="0" y="9" hdg="0" length="20"><line/></geometry>')
     data = xodr(untyped.replace('<lane id="0" type="none"/>', '<lane id="0"/>'))
     with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
         odr_map = parse_opendrive(data, path="asam.xodr")

@@ -117,11 +117,12 @@ class Geometry:
     p_range: Literal["arcLength", "normalized"] = "normalized"
 
 
-VEHICLE_LANE_TYPES: Final[tuple[str, ...]] = ("driving", "entry", "exit", "onRamp", "offRamp", "connectingRamp")
+VEHICLE_LANE_TYPES: Final[tuple[str, ...]] = (
+    "driving", "entry", "exit", "onRamp", "offRamp", "connectingRamp", "slipLane")
 """OpenDRIVE lane types that motor vehicles drive along one way (ASAM OpenDRIVE 1.6
-§9.5.3: "driving", the lanes into and out of a motorway and the ramps; OSI classifies
-them as driving lanes): the lanes of the lane graph, the sensor, the export and the
-ground-truth check by default."""
+§9.5.3: "driving", the lanes into and out of a motorway and the ramps; 1.8's slip lane;
+OSI classifies them as driving lanes): the lanes of the lane graph, the sensor, the
+export and the ground-truth check by default."""
 
 
 @dataclass(frozen=True, slots=True)

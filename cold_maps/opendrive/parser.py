@@ -138,7 +138,8 @@ class _Reader:
         self.strict = strict
         self.road_id = ""
         self.defaulted: dict[tuple[str, str], set[str]] = {}
-        self.untyped_centres: list[str] = []
+        self.untyped_centres: dict[str, None] = {}
+        """Roads (in file order) with a centre lane that has no type."""
 
     # -- attribute access -------------------------------------------------------------
 
@@ -198,7 +199,7 @@ class _Reader:
         if self.untyped_centres:
             _LOG.warning(
                 "%s: the centre <lane> of %d road(s) has no type (first: road %s): taken as \"%s\" (strict mode "
-                "refuses it)", self.path or "<input>", len(self.untyped_centres), self.untyped_centres[0],
+                "refuses it)", self.path or "<input>", len(self.untyped_centres), next(iter(self.untyped_centres)),
                 CENTRE_LANE_TYPE,
             )
 
@@ -484,7 +485,7 @@ class _Reader:
                     elif link.tag == "successor":
                         successors.append(self.integer(link, "id"))
         if lane_id == 0 and element.get("type") is None and not self.strict:
-            self.untyped_centres.append(self.road_id)
+            self.untyped_centres[self.road_id] = None
             lane_type = CENTRE_LANE_TYPE
         else:
             lane_type = self.required(element, "type")
