@@ -395,7 +395,7 @@ class _Reader:
             raise self.error(f"geometry length must be >= 0, got {length}", element)
         shapes = [child for child in element if child.tag in _GEOMETRY_KINDS]
         if len(shapes) != 1:
-            found = "no known kind" if not shapes else f"{len(shapes)} kinds"
+            found = "no known kind" if not shapes else f"{len(shapes)} shapes ({', '.join(str(s.tag) for s in shapes)})"
             expected = ", ".join(sorted(_GEOMETRY_KINDS))
             raise self.error(f"geometry has {found} (expected exactly one of {expected})", element)
         if length == 0.0:
