@@ -312,3 +312,13 @@ def test_junction_without_connecting_road_links_uses_the_incoming_road_link() ->
     assert ambiguous.successors[k("W", 0, -1)] == ()
     assert len(ambiguous.issues) == 3
     assert all("cannot tell which end of road W meets the junction" in issue for issue in ambiguous.issues)
+
+
+def test_section_links_to_missing_lanes_are_reported_and_fall_back_to_same_ids() -> None:
+    """ASAM's check_lanes_id_linkage: a lane linking to a lane the next (or previous)
+    section lacks was dropped without a word."""
+    a = road("A", 60.0, [section(0, 30, right=[lane(-1, succ=[1])]), section(30, 60, right=[lane(-1, pred=[-2])])])
+    graph = build_lane_graph(odr_map([a]))
+    assert graph.issues == ("road A section 1 lane -1: predecessor lane -2 is not in section 0",
+                            "road A section 0 lane -1: successor lane 1 is not in section 1")
+    assert edges(graph) == {(LaneKey("A", 0, -1), LaneKey("A", 1, -1))}

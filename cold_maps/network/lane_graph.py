@@ -129,7 +129,7 @@ def build_lane_graph(
     types = None if lane_types is None else tuple(lane_types)
     nodes = _nodes(odr_map, types)
     issues: list[str] = []
-    contacts = _section_contacts(odr_map, nodes)
+    contacts = _section_contacts(odr_map, nodes, issues)
     contacts |= _road_link_contacts(odr_map, nodes, issues)
     contacts |= _junction_contacts(odr_map, nodes, issues)
     successors: dict[LaneKey, set[LaneKey]] = {lane: set() for lane in nodes}
@@ -180,9 +180,11 @@ def _contact(a: _LaneEnd, b: _LaneEnd) -> tuple[_LaneEnd, _LaneEnd]:
 
 
 def _section_contacts(
-    odr_map: OpenDriveMap, nodes: Mapping[LaneKey, str]
+    odr_map: OpenDriveMap, nodes: Mapping[LaneKey, str], issues: list[str]
 ) -> set[tuple[_LaneEnd, _LaneEnd]]:
-    """Contacts between successive lane sections of each road."""
+    """Contacts between successive lane sections of each road; a lane link naming a lane
+    the other section lacks is reported in ``issues`` (and the lanes fall back to same-id
+    contacts)."""
     contacts: set[tuple[_LaneEnd, _LaneEnd]] = set()
     for road in odr_map.roads.values():
         for index in range(len(road.lane_sections) - 1):
@@ -191,6 +193,13 @@ def _section_contacts(
             after_ids = {lane.id for lane in after.lanes}
             pairs = {(lane.id, to) for lane in before.lanes for to in lane.successors}
             pairs |= {(frm, lane.id) for lane in after.lanes for frm in lane.predecessors}
+            for a, b in sorted(pairs):
+                if b not in after_ids:
+                    issues.append(f"road {road.id} section {index} lane {a}: successor lane {b} is not in section "
+                                  f"{index + 1}")
+                elif a not in before_ids:
+                    issues.append(f"road {road.id} section {index + 1} lane {b}: predecessor lane {a} is not in "
+                                  f"section {index}")
             pairs = {(a, b) for a, b in pairs if a in before_ids and b in after_ids}
             linked_before = {a for a, _ in pairs}
             linked_after = {b for _, b in pairs}
