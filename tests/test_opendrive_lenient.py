@@ -213,3 +213,18 @@ def test_a_centre_lane_without_type_is_none_with_one_warning(caplog: pytest.LogC
         parse_opendrive(data, path="asam.xodr", strict=True)
     with pytest.raises(OpenDriveError, match="missing required attribute 'type'"):
         parse_opendrive(xodr(untyped.replace('<lane id="-2" type="driving">', '<lane id="-2">')))
+
+
+def test_records_whose_length_disagrees_with_the_next_s_are_listed() -> None:
+    """ASAM's check_road_geometry_length: a record 2 m short of the next one's s, one 3 m
+    long, the last 1 m short of the road's end; the reference line follows the s (each
+    record drawn on to the next), so the joints show no gap, and ``info`` lists the lengths."""
+    from cold_maps.network.continuity import record_length_mismatches
+
+    records = ('<geometry s="0" x="0" y="0" hdg="0" length="8"><line/></geometry>'
+               '<geometry s="10" x="10" y="0" hdg="0" length="8"><line/></geometry>'
+               '<geometry s="15" x="15" y="0" hdg="0" length="4"><line/></geometry>')
+    odr_map = parse_opendrive(xodr(road("1", records, length=20.0)))
+    found = [(joint.s, joint.gap_m) for joint in record_length_mismatches(odr_map)]
+    assert found == [(10.0, -2.0), (15.0, 3.0), (20.0, -1.0)]
+    assert reference_line_defects(odr_map) == []

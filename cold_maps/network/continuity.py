@@ -123,9 +123,26 @@ def _lane(lane: LaneKey) -> str:
     return f"road {lane.road_id} section {lane.section} lane {lane.lane_id}"
 
 
+def record_length_mismatches(odr_map: OpenDriveMap, tolerance_m: float = GAP_TOLERANCE_M) -> list[RecordJoint]:
+    """``<geometry>`` records whose ``length`` ends more than ``tolerance_m`` before or after
+    the next record's ``s`` (or the road's length, for the last): the reference line follows
+    the records' s (each drawn on to the next), so the length is ignored there; as
+    ``RecordJoint`` with ``s`` the record's end by s and ``gap_m`` the signed mismatch (m,
+    > 0: the record is longer), ``kink_rad`` 0."""
+    found = []
+    for road in odr_map.roads.values():
+        for index, record in enumerate(road.plan_view):
+            end = road.plan_view[index + 1].s if index + 1 < len(road.plan_view) else road.length
+            mismatch = record.s + record.length - end
+            if abs(mismatch) > tolerance_m:
+                found.append(RecordJoint(road.id, end, mismatch, 0.0))
+    return found
+
+
 def continuity_report(odr_map: OpenDriveMap, graph: LaneGraph) -> list[str]:
-    """Report lines: reference-line gaps and kinks, then lane links whose borders do not
-    meet, each a count line followed by the ``LISTED_MAX`` largest, indented."""
+    """Report lines: reference-line gaps and kinks, geometry records whose length
+    disagrees with where the next one starts, then lane links whose borders do not meet,
+    each a count line followed by the ``LISTED_MAX`` largest, indented."""
     every = record_joints(odr_map)
     joints = _defects(every, GAP_TOLERANCE_M, KINK_TOLERANCE_RAD)
     lines = [
@@ -137,6 +154,12 @@ def continuity_report(odr_map: OpenDriveMap, graph: LaneGraph) -> list[str]:
             f"  road {joint.road_id} s={joint.s:.3f}: gap {joint.gap_m * 1e3:.1f} mm, "
             f"kink {math.degrees(joint.kink_rad):.3f} deg"
         )
+    mismatches = record_length_mismatches(odr_map)
+    records = sum(len(road.plan_view) for road in odr_map.roads.values())
+    lines.append(f"geometry records whose length ends over {GAP_TOLERANCE_M * 1e3:g} mm from the next record's s or "
+                 f"the road end (drawn to it): {len(mismatches)} of {records}")
+    for joint in sorted(mismatches, key=lambda j: -abs(j.gap_m))[:LISTED_MAX]:
+        lines.append(f"  road {joint.road_id} record ending at s={joint.s:.3f}: length off by {joint.gap_m:+.3f} m")
     gaps = link_gaps(graph)
     lines.append(
         f"lane links whose borders miss by over {LINK_TOLERANCE_M * 1e2:g} cm: {len(gaps)} of {sum(1 for _ in graph.edges())}"
