@@ -5,7 +5,7 @@ road. Some exporters write the wrong end: road 21's successor is road 22 at
 ``contactPoint="start"`` although road 21's end meets road 22's *end*. A link whose named
 end lies farther than ``CONTACT_FAR_M`` from the end it should touch while the other end
 lies within ``CONTACT_TOUCH_TOLERANCE_M`` contradicts the geometry: it is repaired (the
-other end) with one logged warning per link, or refused in strict mode. Links where
+other end) with one logged warning per map (-v: one per link), or refused in strict mode. Links where
 neither end or both ends touch are left as written.
 
 Ends are reference-line points (inertial frame, m): a road link joins the reference lines
@@ -144,8 +144,9 @@ def _repaired_link(link: RoadLink | None, contradiction: Contradiction | None) -
 def repair_contact_points(odr_map: OpenDriveMap, *, strict: bool = False) -> OpenDriveMap:
     """``odr_map`` with every road link and junction connection whose ``contactPoint``
     contradicts the geometry repaired (one warning with their count on the
-    ``cold_maps.opendrive`` logger, an info record each); the same map when none does. ``strict``: raises ``OpenDriveError`` naming
-    the first contradicting link (and how many there are) instead."""
+    ``cold_maps.opendrive`` logger, an info record each); the same map when none does.
+    ``strict``: raises ``OpenDriveError`` naming the first contradicting link (and how many
+    there are) instead."""
     ends = {road_id: _road_ends(road) for road_id, road in odr_map.roads.items()}
     road_links = _road_link_contradictions(odr_map, ends)
     connections = _connection_contradictions(odr_map, ends)
