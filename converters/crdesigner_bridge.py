@@ -174,7 +174,8 @@ def odr_to_lanelets(path: Path, *, verbose: bool = False) -> tuple[list[SourceLa
         try:
             scenario, sources, opendrive = _run_crdesigner(source)
         except Exception as exc:  # crdesigner raises anything from KeyError to IndexError
-            why = f"{type(exc).__name__}: {exc}" if str(exc) else f"{type(exc).__name__} without a message (-vv: where)"
+            kind = type(exc).__name__
+            why = f"{kind}: {exc}" if str(exc) else f"{kind} without a message (-vv: where)"
             raise ConversionError(str(path), f"converter crashed: {why}") from exc
     heights = RoadHeights(opendrive)
     junction_of = {str(road.id): str(road.junction.id) for road in opendrive.roads if road.junction is not None}
@@ -287,26 +288,20 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     Non-integer road and junction ids become fresh integers (crdesigner parses ids with
     ``int``), with every reference; spirals of constant curvature (crdesigner raises
     "Curvature at the start and at the end of a spiral must be different") become the
-    arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines; an
-    empty ``<geoReference>`` (crdesigner passes its None text on) and the header's
-    ``<offset>`` (crdesigner subtracts it from every record's x, y and hdg, which moves the
-    lanelets out of the inertial frame and, with an hdg, bends them) are dropped; a centre
-    lane without a type (ASAM's Ex_Entry_Exit; crdesigner raises) gets "none", and a lane type
-    crdesigner does not know (OpenDRIVE 1.8's walking, slipLane, ...) its nearest known one
-    (``_lane_types_it_knows``); a ``<signal>``
+    arcs or lines they are, and arcs of zero curvature (crdesigner divides by it) lines;
+    the header elements crdesigner mishandles are dropped (``_header_it_reads``); lane
+    types it lacks become the nearest it knows (``_lane_types_it_knows``); a ``<signal>``
     whose s lies off its road (crdesigner places it on the reference line and raises) is
-    moved to the nearer road end; a junction
-    connection naming only a ``linkedRoad`` (direct junction) names it as
-    ``connectingRoad`` too; line, arc and spiral records are lengthened or shortened to end
-    where the next record (or the road) starts (``_align_records``). ``data`` has been
-    checked by ``read_geo_reference``.
+    moved to the nearer road end; a junction connection naming only a ``linkedRoad``
+    (direct junction) names it as ``connectingRoad`` too; line, arc and spiral records are
+    lengthened or shortened to end where the next record (or the road) starts
+    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
-    rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _drop_empty_geo_reference(root)
-                + _drop_header_offset(root) + _typed_centre_lanes(root) + _lane_types_it_knows(root)
-                + _signals_on_their_roads(root)
-                + _linked_as_connecting(root) + _align_records(root))
+    rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _header_it_reads(root)
+                + _lane_types_it_knows(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
+                + _align_records(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -417,46 +412,31 @@ taxi, shared, ... are not converted)."""
 
 def _lane_types_it_knows(root: etree._Element) -> int:
     """Give each lane whose type crdesigner does not know its ``KNOWN_LANE_TYPE`` (else
-    "none"); the number retyped."""
+    "none"), and a centre lane without a type "none" (what our parser reads it as; ASAM's
+    Ex_Entry_Exit omits it, crdesigner raises); the number retyped."""
     retyped = 0
     for lane in root.iter("{*}lane"):
         lane_type = lane.get("type")
-        if lane_type is not None and lane_type not in CRDESIGNER_LANE_TYPES:
-            lane.set("type", KNOWN_LANE_TYPE.get(lane_type, "none"))
+        untyped_centre = lane_type is None and _local_name(lane.getparent()) == "center"
+        if untyped_centre or (lane_type is not None and lane_type not in CRDESIGNER_LANE_TYPES):
+            lane.set("type", KNOWN_LANE_TYPE.get(lane_type or "", "none"))
             retyped += 1
     return retyped
 
 
-def _typed_centre_lanes(root: etree._Element) -> int:
-    """Give each centre ``<lane>`` without a ``type`` the type "none" (what our parser reads
-    it as); the number typed."""
-    typed = 0
-    for lane in root.iterfind(".//{*}center/{*}lane"):
-        if lane.get("type") is None:
-            lane.set("type", "none")
-            typed += 1
-    return typed
-
-
-def _drop_header_offset(root: etree._Element) -> int:
-    """Remove the header's ``<offset>`` (it places the inertial frame in the geoReference's
-    projection, which ``cold_maps.opendrive.georeference`` applies; the lanelets stay in
-    the inertial frame); 1 if removed, else 0."""
-    offset = root.find("{*}header/{*}offset")
-    if offset is None:
-        return 0
-    offset.getparent().remove(offset)
-    return 1
-
-
-def _drop_empty_geo_reference(root: etree._Element) -> int:
-    """Remove a header ``<geoReference>`` without text (crdesigner cleans its None text as
-    a projection string); 1 if removed, else 0. ``read_geo_reference`` reads it as ""."""
-    geo = root.find("{*}header/{*}geoReference")
-    if geo is None or (geo.text or "").strip():
-        return 0
-    geo.getparent().remove(geo)
-    return 1
+def _header_it_reads(root: etree._Element) -> int:
+    """Remove the header's ``<offset>`` (crdesigner subtracts it from every record's x, y
+    and hdg, which moves the lanelets out of the inertial frame and, with an hdg, bends
+    them; ``cold_maps.opendrive.georeference`` applies it where it belongs) and a
+    ``<geoReference>`` without text (crdesigner cleans its None text as a projection
+    string; ``read_geo_reference`` reads it as ""); the number removed."""
+    removed = 0
+    for child in list(root.iterfind("{*}header/*")):
+        name = _local_name(child)
+        if name == "offset" or (name == "geoReference" and not (child.text or "").strip()):
+            child.getparent().remove(child)
+            removed += 1
+    return removed
 
 
 CONVERTED_LANE_TYPES: Final[tuple[str, ...]] = ("connectingRamp",)

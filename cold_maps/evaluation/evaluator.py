@@ -45,6 +45,7 @@ from cold_maps.simulation.drive import (
     covering_routes,
     lane_relation,
     relation_kind,
+    require_driving_lanes,
     route_from_start,
 )
 from cold_maps.simulation.neighbours import NeighbourSensor
@@ -105,8 +106,7 @@ class MapEvaluator:
         plan to the map's longest route first (``evaluation.fit``): ``self.plan`` then
         holds only what fits, ``self.fit_notes`` says what was left out."""
         plan = self.plan
-        if not self.graph.lanes:
-            raise DriveError(f"{plan.path}: the map has no driving lanes (of types {', '.join(self.graph.lane_types)})")
+        require_driving_lanes(self.graph)
         longest = longest_route_lengths(self.graph)
         if plan.start_lane is None:
             fitted = fit_plan(plan, max(longest.values()), where=str(plan.path))

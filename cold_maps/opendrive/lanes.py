@@ -132,8 +132,8 @@ def wrong_side_lanes(road: Road) -> list[WrongSideLane]:
             borders = section_borders(road, index, s)
             widths |= {lane.id: (borders[lane.id][1] - borders[lane.id][0]) * (1.0 if lane.id > 0 else -1.0)
                        for lane in bordered}
-        for lane in section.lanes:
-            width = float(np.min(widths[lane.id])) if lane.id in widths else 0.0
+        for lane in (lane for lane in section.lanes if lane.id in widths):
+            width = float(np.min(widths[lane.id]))
             if width < -WRONG_SIDE_TOLERANCE_M:
                 found.append(WrongSideLane(index, lane.id, width, not lane.widths))
     return found

@@ -5,8 +5,8 @@ road. Some exporters write the wrong end: road 21's successor is road 22 at
 ``contactPoint="start"`` although road 21's end meets road 22's *end*. A link whose named
 end lies farther than ``CONTACT_FAR_M`` from the end it should touch while the other end
 lies within ``CONTACT_TOUCH_TOLERANCE_M`` contradicts the geometry: it is repaired (the
-other end) with one logged warning per map (-v: one per link), or refused in strict mode. Links where
-neither end or both ends touch are left as written.
+other end) with one logged warning per map (-v: one per link), or refused in strict mode.
+Links where neither end or both ends touch are left as written.
 
 Ends are reference-line points (inertial frame, m): a road link joins the reference lines
 of the two roads; a junction connection joins the connecting road's named end to the end

@@ -280,6 +280,12 @@ def _map_name(graph: LaneGraph) -> str:
     return str(graph.odr_map.path or "<map>")
 
 
+def require_driving_lanes(graph: LaneGraph) -> None:
+    """DriveError naming the map and the lane types looked for when the graph has no lane."""
+    if not graph.lanes:
+        raise DriveError(f"{_map_name(graph)}: the map has no driving lanes (of types {', '.join(graph.lane_types)})")
+
+
 def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
                     rng: np.random.Generator) -> list[tuple[LaneKey, ...]]:
     """Random routes of at least ``length_m``, each starting, where it can, on a lane no
@@ -291,8 +297,7 @@ def covering_routes(graph: LaneGraph, count: int | None, length_m: float,
     """
     if count is not None and count < 1:
         raise ValueError(f"routes: expected at least 1, got {count!r}")
-    if not graph.lanes:
-        raise DriveError(f"{_map_name(graph)}: the map has no driving lanes (of types {', '.join(graph.lane_types)})")
+    require_driving_lanes(graph)
     longest = longest_route_lengths(graph)
     startable = [lane for lane in graph.lanes if longest[lane] >= length_m - LENGTH_TOLERANCE_M]
     if not startable:
