@@ -27,4 +27,4 @@ maps: $(STAMP)
 	$(BIN)/python tools/make_maps.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache .hypothesis

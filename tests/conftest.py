@@ -1,17 +1,32 @@
-"""Shared fixtures: paths of the bundled maps and of the CARLA towns in ../shared."""
+"""Shared fixtures: paths of the bundled maps and of the CARLA towns in ../shared; the
+hypothesis profiles; a conversion cache of the suite's own."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
+from hypothesis import settings
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 BUNDLED_MAPS_DIR = PROJECT_ROOT / "maps"
 CARLA_MAPS_DIR = PROJECT_ROOT.parent / "shared" / "maps" / "carla"
+TEST_CACHE_DIR = PROJECT_ROOT / ".pytest_cache" / "cold-maps"
+
+# "ci" (chosen when $CI is set, as on the CI runner): the same examples on every run, no
+# example database; "dev" (otherwise): random examples, failures replayed from .hypothesis/.
+# Choose one with --hypothesis-profile.
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+settings.register_profile("dev")
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+# Conversions go to a cache of the suite's own (removed by `make clean`), never the user's;
+# tests that exercise the cache location set their own.
+os.environ["COLD_MAPS_CACHE_DIR"] = str(TEST_CACHE_DIR)
 
 
 def load_tool(name: str) -> ModuleType:

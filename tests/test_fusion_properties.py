@@ -16,13 +16,30 @@ from fusion.geometry import distance_to_polyline
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
+MAX_TURN_RAD = math.pi / 2  # the fusion refuses a coop heading over 90° + t_psi from the ego's
+
+
+def turn_road(k: float, turn: float, entry: float) -> AnalyticRoad:
+    """Straight, clothoid of length ``entry`` into curvature ``k`` (1/m), arc, clothoid out, straight.
+    The two clothoids turn |k|·entry together, so the arc turns the rest of ``turn`` (rad), at least
+    1 m: the whole road turns max(turn, |k|·(entry + 1)) ≤ ``MAX_TURN_RAD`` for the strategy's ranges."""
+    arc_m = max(1.0, (turn - abs(k) * entry) / abs(k))
+    return AnalyticRoad([Segment(80.0), Segment(entry, 0.0, k), Segment(arc_m, k),
+                         Segment(entry, k, 0.0), Segment(120.0)])  # ≥ s_end + gap + 30 m
+
+
 roads = st.builds(
-    lambda k, turn, entry: AnalyticRoad([Segment(80.0), Segment(entry, 0.0, k), Segment(max(1.0, turn / abs(k)), k),
-                                         Segment(entry, k, 0.0), Segment(120.0)]),  # ≥ s_end + gap + 30 m
+    turn_road,
     k=st.floats(1 / 60.0, 1 / 18.0).flatmap(lambda k: st.sampled_from([k, -k])),
-    turn=st.floats(0.05, math.pi / 2),
+    turn=st.floats(0.05, MAX_TURN_RAD),
     entry=st.floats(0.5, 15.0),
 )
+
+
+@SETTINGS
+@given(road=roads)
+def test_generated_roads_turn_at_most_a_right_angle(road: AnalyticRoad) -> None:
+    assert abs(road.heading[-1] - road.heading[0]) <= MAX_TURN_RAD + 1e-9
 
 
 def along(points: np.ndarray, truth: np.ndarray) -> np.ndarray:
