@@ -117,6 +117,67 @@ class Geometry:
     p_range: Literal["arcLength", "normalized"] = "normalized"
 
 
+ROAD_MARK_TYPES: Final[tuple[str, ...]] = (
+    "none", "solid", "broken", "solid solid", "solid broken", "broken solid", "broken broken", "botts dots",
+    "grass", "curb", "custom", "edge")
+"""``<roadMark type>`` values (ASAM OpenDRIVE 1.8 e_roadMarkType)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RoadMarkLine:
+    """One ``<line>`` of a ``<roadMark><type>``: a repeated dash of a complex mark.
+
+    Fields:
+        length: length of one painted dash (m; the whole stretch when ``space`` is 0).
+        space: gap between dashes (m).
+        t_offset: lateral offset of the line from the border it marks (m, +t left).
+        s_offset: start of the first dash from the mark's start (m).
+        rule: "caution", "no passing", "none", or "" when absent.
+        width: line width (m), None when absent.
+        color: line colour, "" when absent (the mark's colour applies).
+    """
+
+    length: float
+    space: float
+    t_offset: float
+    s_offset: float
+    rule: str = ""
+    width: float | None = None
+    color: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class RoadMark:
+    """One ``<roadMark>`` of a lane: the marking of the lane's OUTER border (for the centre
+    lane, of the centre line) from ``s_offset`` to the next record's ``s_offset`` or the
+    end of the lane section.
+
+    Fields:
+        s_offset: start relative to the lane-section start (m).
+        type: one of ``ROAD_MARK_TYPES`` ("none": no marking).
+        weight: "standard" or "bold" ("standard" when absent).
+        color: "standard", "white", "yellow", ... ("standard" when absent).
+        width: paint width (m), None when absent.
+        lane_change: "increase", "decrease", "both" or "none" (crossing allowed towards
+            higher / lower lane ids, both or neither); "both" when absent, as the spec says.
+        material: surface material ("" when absent).
+        height: height above the road (m), 0 when absent (a curb's height).
+        type_name: the ``name`` of a ``<type>`` child ("" when none).
+        lines: the ``<line>`` records of the ``<type>`` child (empty for plain marks).
+    """
+
+    s_offset: float
+    type: str
+    weight: str = "standard"
+    color: str = "standard"
+    width: float | None = None
+    lane_change: str = "both"
+    material: str = ""
+    height: float = 0.0
+    type_name: str = ""
+    lines: tuple[RoadMarkLine, ...] = ()
+
+
 VEHICLE_LANE_TYPES: Final[tuple[str, ...]] = (
     "driving", "entry", "exit", "onRamp", "offRamp", "connectingRamp", "slipLane")
 """OpenDRIVE lane types that motor vehicles drive along one way (ASAM OpenDRIVE 1.6
@@ -142,6 +203,8 @@ class Lane:
             or, at the road ends, in the linked road (empty when unlinked).
         direction: OpenDRIVE 1.7+ ``direction`` attribute ("standard", "reversed",
             "both") or "" when absent (standard); see ``Road.drives_along_s``.
+        road_marks: ``<roadMark>`` records of the lane's outer border (the centre line for
+            lane 0), ordered by ``s_offset``; empty when the file gives none.
     """
 
     id: int
@@ -152,6 +215,7 @@ class Lane:
     predecessors: tuple[int, ...] = ()
     successors: tuple[int, ...] = ()
     direction: str = ""
+    road_marks: tuple[RoadMark, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,8 +1,8 @@
 """OpenDRIVE 1.4-1.8 reader: hardened XML in, immutable ``OpenDriveMap`` out.
 
 The tree is walked once, child by child; elements the model does not need (objects,
-signals, road marks, userData, lateral shape, surface, railroad, controllers, ...)
-are skipped. Invalid input raises ``OpenDriveError`` naming the file, the element and
+signals, userData, lateral shape, surface, railroad, controllers, a road mark's
+``<explicit>`` and ``<sway>``, ...) are skipped. Invalid input raises ``OpenDriveError`` naming the file, the element and
 its source line.
 
 Errors: malformed XML, entity declarations, wrong root, no header or roads, revMajor
@@ -31,7 +31,8 @@ curvature or record start that a record omits (RoadRunner writes ``<spiral curvE
 record stands for (and ``pRange`` defaults to "normalized" as in the schema); one warning
 per element kind and road names the attributes taken as 0. ``strict=True`` refuses them
 ("missing required attribute"). So is a centre lane without a ``type`` (taken as "none",
-one warning per map).
+one warning per map), and a ``<roadMark>`` without a ``type`` or with one the schema does
+not know (taken as "none" when absent, "custom" when unknown; one warning per map).
 """
 
 from __future__ import annotations
@@ -60,6 +61,9 @@ from cold_maps.opendrive.model import (
     OpenDriveMap,
     Road,
     RoadLink,
+    RoadMark,
+    RoadMarkLine,
+    ROAD_MARK_TYPES,
 )
 from cold_maps.opendrive.validation import validate_road
 from cold_maps.opendrive.xml_safety import parse_xml
@@ -77,6 +81,7 @@ _RULES: Final[tuple[str, ...]] = ("RHT", "LHT")
 _P_RANGES: Final[tuple[str, ...]] = ("arcLength", "normalized")
 _JUNCTION_TYPES: Final[tuple[str, ...]] = ("default", "direct", "virtual", "crossing")
 _LANE_DIRECTIONS: Final[tuple[str, ...]] = ("standard", "reversed", "both")
+_LANE_CHANGES: Final[tuple[str, ...]] = ("increase", "decrease", "both", "none")
 CENTRE_LANE_TYPE: Final[str] = "none"
 """Type of a centre lane (id 0, no width, its type means nothing) that has none: ASAM's
 own Ex_Entry_Exit.xodr omits it on every road."""
@@ -140,6 +145,8 @@ class _Reader:
         self.defaulted: dict[tuple[str, str], set[str]] = {}
         self.untyped_centres: dict[str, None] = {}
         """Roads (in file order) with a centre lane that has no type."""
+        self.odd_marks: dict[str, str] = {}
+        """Roads (in file order) with a ``<roadMark>`` type read leniently → the first such type."""
 
     # -- attribute access -------------------------------------------------------------
 
@@ -201,6 +208,13 @@ class _Reader:
                 "%s: the centre <lane> of %d road(s) has no type (first: road %s): taken as \"%s\" (strict mode "
                 "refuses it)", self.path or "<input>", len(self.untyped_centres), next(iter(self.untyped_centres)),
                 CENTRE_LANE_TYPE,
+            )
+        if self.odd_marks:
+            road_id, mark_type = next(iter(self.odd_marks.items()))
+            _LOG.warning(
+                "%s: <roadMark>s of %d road(s) have no type or one OpenDRIVE does not define (first: road %s, %s): "
+                "taken as \"none\" when absent, \"custom\" otherwise (strict mode refuses them)",
+                self.path or "<input>", len(self.odd_marks), road_id, mark_type,
             )
 
     def warn_wrong_side(self, road: Road) -> None:
@@ -472,12 +486,15 @@ class _Reader:
         borders: list[etree._Element] = []
         predecessors: list[int] = []
         successors: list[int] = []
+        marks: list[RoadMark] = []
         for child in element:
             tag = child.tag
             if tag == "width":
                 widths.append(child)
             elif tag == "border":
                 borders.append(child)
+            elif tag == "roadMark":
+                marks.append(self.road_mark(child))
             elif tag == "link":
                 for link in child:
                     if link.tag == "predecessor":
@@ -498,7 +515,43 @@ class _Reader:
             predecessors=tuple(predecessors),
             successors=tuple(successors),
             direction=self.choice(element, "direction", _LANE_DIRECTIONS, ""),
+            road_marks=tuple(sorted(marks, key=_by_s_offset)),
         )
+
+    def road_mark(self, element: etree._Element) -> RoadMark:
+        """One ``<roadMark>`` with the ``<line>``s of its ``<type>`` child."""
+        mark_type = element.get("type")
+        if self.strict or (mark_type is not None and mark_type.strip().lower() in ROAD_MARK_TYPES):
+            mark_type = self.choice(element, "type", ROAD_MARK_TYPES)
+        else:
+            self.odd_marks.setdefault(self.road_id, "no type" if mark_type is None else repr(mark_type[:40]))
+            mark_type = "none" if mark_type is None else "custom"
+        type_element = next((child for child in element if child.tag == "type"), None)
+        lines = () if type_element is None else tuple(
+            RoadMarkLine(
+                *self.coefficients(line, ("length", "space", "tOffset", "sOffset")),
+                rule=line.get("rule", ""),
+                width=self.optional_number(line, "width"),
+                color=line.get("color", ""),
+            )
+            for line in type_element if line.tag == "line"
+        )
+        return RoadMark(
+            s_offset=self.coefficients(element, ("sOffset",))[0],
+            type=mark_type,
+            weight=element.get("weight", "standard"),
+            color=element.get("color", "standard"),
+            width=self.optional_number(element, "width"),
+            lane_change=self.choice(element, "laneChange", _LANE_CHANGES, "both"),
+            material=element.get("material", ""),
+            height=self.number(element, "height", 0.0),
+            type_name="" if type_element is None else type_element.get("name", ""),
+            lines=lines,
+        )
+
+    def optional_number(self, element: etree._Element, name: str) -> float | None:
+        """A finite float attribute, None when absent."""
+        return None if element.get(name) is None else self.number(element, name)
 
     def junction(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Junction:
         connections = []
@@ -535,6 +588,10 @@ class _Reader:
 
 def _by_s0(record: CubicPoly) -> float:
     return record.s0
+
+
+def _by_s_offset(record: RoadMark) -> float:
+    return record.s_offset
 
 
 def _by_s(record: Geometry | LaneSection) -> float:
