@@ -69,6 +69,11 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
     Raises ``InvalidDetectionError`` naming ``name`` for a wrong shape, NaN/inf or fewer
     than two distinct points.
     """
+    return _validated_border(name, points)[0]
+
+
+def _validated_border(name: str, points: object) -> tuple[NDArrayFloat, npt.NDArray[np.bool_] | None]:
+    """``validated_border`` and the mask of the input points it kept (None: all)."""
     try:
         array = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -77,17 +82,44 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
         raise InvalidDetectionError(f"{name} must have shape (N, 2), got {array.shape}")
     if not np.isfinite(array).all():
         raise InvalidDetectionError(f"{name} contains NaN or inf")
+    kept = None
     if array.shape[0] >= 2:
         step = np.diff(array, axis=0)
         keep = np.empty(array.shape[0], dtype=bool)
         keep[0] = True
         keep[1:] = np.hypot(step[:, 0], step[:, 1]) > MIN_POINT_STEP_M
         if not keep.all():
-            array = array[keep]
+            array, kept = array[keep], keep
     if array.shape[0] < MIN_BORDER_POINTS:
         raise InvalidDetectionError(
             f"{name} needs at least {MIN_BORDER_POINTS} distinct points, got {array.shape[0]}"
         )
+    return _frozen(array), kept
+
+
+def _validated_sigma(name: str, sigma: object, n_points: int, kept: npt.NDArray[np.bool_] | None) -> NDArrayFloat:
+    """Read-only per-point 1σ ``(n_points,)`` [m], finite and >= 0, reduced to ``kept``."""
+    try:
+        array = np.array(sigma, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
+    if array.shape != (n_points,):
+        raise InvalidDetectionError(f"{name} must have shape ({n_points},), one per border point, got {array.shape}")
+    if not (np.isfinite(array).all() and (array >= 0.0).all()):
+        raise InvalidDetectionError(f"{name} must be finite and >= 0 m")
+    return _frozen(array if kept is None else array[kept])
+
+
+def _validated_covariance(name: str, covariance: object) -> NDArrayFloat:
+    """Read-only symmetric positive semi-definite ``(3, 3)`` covariance."""
+    try:
+        array = np.array(covariance, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
+    if array.shape != (3, 3) or not np.isfinite(array).all():
+        raise InvalidDetectionError(f"{name} must be a finite (3, 3) covariance of (x, y, yaw), got shape {array.shape}")
+    if not np.allclose(array, array.T, rtol=0.0, atol=1e-12) or np.linalg.eigvalsh(array).min() < -1e-12:
+        raise InvalidDetectionError(f"{name} must be symmetric positive semi-definite")
     return _frozen(array)
 
 
@@ -214,6 +246,11 @@ class LaneDetection:
         arclength: ``(N_left + N_right,)`` arc length of every point of ``points`` along its
             own border, from 0 at each border's first point [m] (set on construction; arc
             length does not depend on the frame, so fusion reuses it in any frame).
+        left_sigma, right_sigma: lateral 1σ [m] of every point of ``left`` / ``right`` as
+            given (one per input point; reduced with the duplicates dropped), or None when
+            the sender states no uncertainty (default).
+        pose_cov: ``(3, 3)`` covariance of the sender's pose error in (x [m], y [m],
+            yaw [rad]), world frame, or None when unknown (default).
     """
 
     pose: Pose2D
@@ -225,14 +262,24 @@ class LaneDetection:
     neighbours: tuple[NeighbourLane, ...] = ()
     road_edges: RoadEdges | None = None
     branches: tuple[LaneBranch, ...] = ()
+    left_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
+    right_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
+    pose_cov: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not isinstance(self.pose, Pose2D):
             raise InvalidDetectionError(f"LaneDetection.pose must be a Pose2D, got {type(self.pose).__name__}")
-        left = validated_border("LaneDetection.left", self.left)
-        right = validated_border("LaneDetection.right", self.right)
+        raw_left, raw_right = self.left, self.right
+        left, left_kept = _validated_border("LaneDetection.left", raw_left)
+        right, right_kept = _validated_border("LaneDetection.right", raw_right)
+        for name, sigma, raw, kept in (("left_sigma", self.left_sigma, raw_left, left_kept),
+                                       ("right_sigma", self.right_sigma, raw_right, right_kept)):
+            if sigma is not None:
+                object.__setattr__(self, name, _validated_sigma(f"LaneDetection.{name}", sigma, len(raw), kept))
+        if self.pose_cov is not None:
+            object.__setattr__(self, "pose_cov", _validated_covariance("LaneDetection.pose_cov", self.pose_cov))
         points = _frozen(np.concatenate((left, right)))
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "left", points[: left.shape[0]])

@@ -174,13 +174,17 @@ def test_signals_are_held_inside_signals_ignored():
 
     from cold_maps.common.signals import signals_ignored
 
-    before = signal.getsignal(signal.SIGINT)
-    with signals_ignored():
-        os.kill(os.getpid(), signal.SIGINT)  # dropped, not raised
-        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
-    assert signal.getsignal(signal.SIGINT) is before
-    with pytest.raises(KeyboardInterrupt):
-        os.kill(os.getpid(), signal.SIGINT)
+    # A suite started in the background (``pytest &``) inherits SIGINT ignored: set Python's own handler.
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with signals_ignored():
+            os.kill(os.getpid(), signal.SIGINT)  # dropped, not raised
+            assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, inherited)
 
 
 @pytest.mark.parametrize("signal_name, status, word", [("SIGINT", 130, "interrupted"),

@@ -105,3 +105,17 @@ def test_unfusible_result_is_the_ego_lane_in_world_frame() -> None:
     np.testing.assert_allclose(result.left, to_world(ego.left, pose))
     assert (result.left_source == fusion.Source.EGO).all()
     assert np.isfinite(result.gap_m)
+
+
+def test_detection_sigma_follows_the_points_it_keeps_and_is_validated() -> None:
+    left = np.array([[0.0, 1.0], [0.0, 1.0], [1.0, 1.0], [2.0, 1.0]])  # a duplicate, dropped
+    right = np.array([[0.0, -1.0], [1.0, -1.0]])
+    detection = LaneDetection(Pose2D(0.0, 0.0, 0.0), left, right, left_sigma=[0.1, 0.2, 0.3, 0.4],
+                              right_sigma=np.zeros(2), pose_cov=np.diag([0.01, 0.01, 1e-4]))
+    assert detection.left_sigma.tolist() == [0.1, 0.3, 0.4]
+    assert detection.left_sigma.shape[0] == detection.left.shape[0]
+    for bad in ({"left_sigma": [0.1]}, {"right_sigma": [0.1, -0.1]}, {"right_sigma": [0.1, np.nan]},
+                {"pose_cov": np.eye(2)}, {"pose_cov": np.array([[1.0, 2, 0], [0, 1, 0], [0, 0, 1]])},
+                {"pose_cov": -np.eye(3)}):
+        with pytest.raises(InvalidDetectionError, match="LaneDetection"):
+            LaneDetection(Pose2D(0.0, 0.0, 0.0), left, right, **bad)
