@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import pytest
+from batch_outputs import default_sigint
 from conftest import bundled_map
 
 from cold_maps.cli import evaluate
@@ -174,7 +175,7 @@ def test_signals_are_held_inside_signals_ignored():
 
     from cold_maps.common.signals import signals_ignored
 
-    # A suite started in the background (``pytest &``) inherits SIGINT ignored: set Python's own handler.
+    # A suite started in the background (`pytest &`) inherits SIGINT ignored: set Python's own handler.
     inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with signals_ignored():
@@ -203,7 +204,7 @@ def test_signal_finalises_the_recording(tmp_path, signal_name, status, word):
     process = subprocess.Popen(
         [sys.executable, "-m", "cold_maps.cli.evaluate", "--map", str(bundled_map("rural")), "--frames", "1500",
          "--routes", "1", "--no-plots", "--out", str(out)],
-        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1])
+        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1], preexec_fn=default_sigint)
     deadline = time.monotonic() + 60
     while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.05)
