@@ -523,7 +523,7 @@ def test_curve90_is_a_20_m_right_turn_between_100_m_straights(maps):
     assert curve.k0 == pytest.approx(-1.0 / 20.0, rel=1e-12)
     assert ref_pose(road, road.length)[2] - ref_pose(road, 0.0)[2] == pytest.approx(-math.pi / 2, abs=1e-9)
     assert lane_ids(road) == [-1, 1] and driving_only(road)
-    # Lane centres (README): right lane 18 m, left lane 22 m from the curve centre.
+    # Lane centres (maps/README.md): right lane 18 m, left lane 22 m from the curve centre.
     centre = np.array([curve.x + 20.0 * math.sin(curve.hdg), curve.y - 20.0 * math.cos(curve.hdg)])
     for s in np.linspace(curve.s, curve.s + curve.length, 7):
         assert np.linalg.norm(world(road, s, -2.0) - centre) == pytest.approx(18.0, abs=1e-6)
