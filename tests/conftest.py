@@ -10,7 +10,7 @@ from pathlib import Path
 from types import ModuleType
 
 import pytest
-from hypothesis import settings
+from hypothesis import HealthCheck, settings
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 BUNDLED_MAPS_DIR = PROJECT_ROOT / "maps"
@@ -19,9 +19,11 @@ TEST_CACHE_DIR = PROJECT_ROOT / ".pytest_cache" / "cold-maps"
 
 # "ci" (chosen when $CI is set, as on the CI runner): the same examples on every run, no
 # example database; "dev" (otherwise): random examples, failures replayed from .hypothesis/.
-# Choose one with --hypothesis-profile.
-settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
-settings.register_profile("dev")
+# Neither depends on the machine's speed (no deadline, no too-slow health check: a loaded
+# machine made examples time out). Choose one with --hypothesis-profile.
+_UNTIMED = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow]}
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True, **_UNTIMED)
+settings.register_profile("dev", **_UNTIMED)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
 # Conversions go to a cache of the suite's own (removed by `make clean`), never the user's;
