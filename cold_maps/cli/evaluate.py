@@ -231,7 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                       startup_failure)
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
-    from cold_maps.evaluation.trust import run_warnings
+    from cold_maps.evaluation.trust import verdict
 
     configure_logging(args.verbose, args.quiet)
     try:
@@ -250,10 +250,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return fail(PROG, f"run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}")
     reduced = run.collector.reduced_maps
     fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
-    warnings = run_warnings(run.collector)
-    verdict = f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
     result_line(args, PROG, f"{len(run.results)} scenario records, {run.collector.frames_done} frames -> "
-                f"{args.out}{fitted}{verdict}")
+                f"{args.out}{fitted}{verdict(run.collector)}")
     return 0
 
 
