@@ -25,25 +25,29 @@ from typing import Any, Final, Sequence
 
 import numpy as np
 
-from cold_maps.cli.common import cli_entry, make_parser
+from cold_maps.cli.common import builds, cli_entry, finite_number, make_parser, validated
 
 PROG: Final[str] = "cold-fuse"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-fuse`` argument parser."""
+    from fusion import DEFAULT_PARAMS, FusionParams
+
     parser = make_parser(PROG, "Fuse recorded lane detections (cold.LaneDetection) again.", progress=True)
     parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap", help="recording to read")
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.mcap", help="recording to write")
     parser.add_argument("--ego", default="ego", help="sender id of the ego vehicle (default ego)")
     parser.add_argument("--mode", choices=("auto", "convoy", "spline"), default="auto", help="fusion mode")
     parser.add_argument("--interpolation", choices=("paper", "hermite"), default="paper", help="spline interpolation")
-    parser.add_argument("--max-gap", type=float, default=None, metavar="D_I",
-                        help="longest gap d_i bridged by spline fusion in m (default 50, the fusion default)")
+    parser.add_argument("--max-gap", type=validated(finite_number, builds(FusionParams, "d_i_m")), default=None,
+                        metavar="D_I", help="longest gap d_i bridged by spline fusion in m (default "
+                                            f"{DEFAULT_PARAMS.d_i_m:g}, the fusion default)")
     parser.add_argument("--map", type=Path, default=None, help="OpenDRIVE map for ground truth (default: the "
                         "recording's cold.run map when it names one readable file)")
     parser.add_argument("--no-gt", action="store_true", help="do not measure against ground truth")
-    parser.add_argument("--report", type=Path, default=None, help="folder for summary.md, metrics.json, frames.csv")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="folder for summary.md, metrics.json, frames.csv (default: none, no report)")
     return parser
 
 
