@@ -147,14 +147,17 @@ def test_a_method_named_on_the_command_line_is_evaluated_beside_the_builtins(tmp
         assert refused["fused_frames"] == 0 and refused["rejected"] == {"other": refused["frames"]}
 
 
-@pytest.mark.parametrize("name, message", [("nowhere_module:f", "cannot import nowhere_module"),
+@pytest.mark.parametrize("name, message", [("nowhere_module:f", "no module nowhere_module in the installed packages"),
                                            ("fusion_method_example:missing", "has no missing"),
                                            ("not_registered", "not registered")])
 def test_a_bad_method_name_is_one_line_on_stderr(tmp_path, capsys, name, message):
-    status = evaluate.main(["--map", str(BUNDLED_MAPS_DIR / "straight.xodr"), "--method", name,
-                            "--out", str(tmp_path / "out")])
+    """A method that does not resolve is a bad command line: exit 2, one line naming ``--method``."""
+    with pytest.raises(SystemExit) as usage:
+        evaluate.main(["--map", str(BUNDLED_MAPS_DIR / "straight.xodr"), "--method", name,
+                       "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
-    assert status == 1 and err.count("\n") == 0 and message in err and name in err
+    assert usage.value.code == 2 and err.count("\n") == 0 and message in err and name in err
+    assert err.startswith("cold-eval: error: argument --method: ") and err.endswith("(see cold-eval --help)")
     assert not (tmp_path / "out").exists()
 
 

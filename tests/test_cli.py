@@ -222,7 +222,7 @@ def test_failure_while_writing_leaves_the_old_file(
     "args, message",
     [
         (["export", "{map}", "--format", "xml", "-o", "x"], "invalid choice: 'xml'"),
-        (["export", "{map}", "--step", "nan", "-o", "x"], "step must be a finite length > 0 m"),
+        (["export", "{map}", "--step", "nan", "-o", "x"], "argument --step: expected a finite length > 0 m"),
         (["export", "{map}"], "required: -o/--output"),
         (["frobnicate"], "invalid choice: 'frobnicate'"),
         (["info", "{missing}"], "cannot read file"),

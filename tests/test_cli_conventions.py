@@ -1,13 +1,22 @@
 """One command-line convention for ``cold-maps``, ``cold-eval``, ``cold-eval sweep`` and
-``cold-fuse``: ``--version``, ``-v/-vv`` and ``-q``, defaults in the help, usage errors and
-runtime errors as ONE line ``PROG: error: [SUBCOMMAND: ]...`` (exit 2 and 1), and progress that never garbles the
-terminal: no stale characters, log records never glued onto a bar, ``--no-progress``."""
+``cold-fuse``: ``--version`` on every (sub)command, ``-v/-vv`` and ``-q``, every option's
+default in the help, help without markup, synopses that show metavars, usage errors and
+runtime errors as ONE line ``PROG: error: [SUBCOMMAND: ]...`` (exit 2 and 1; a bad value is a
+usage error whichever layer bounds it), and progress that never garbles the terminal: no
+stale characters, log records never glued onto a bar, ``--no-progress``.
+
+The checks walk every parser's actions, so an option added later is checked too; a
+(sub)command with options that take a value needs an entry in its ``Cli.inputs``."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import io
+import json
 import logging
+import os
+import re
 import subprocess
 import sys
 import time
@@ -20,8 +29,11 @@ from conftest import PROJECT_ROOT, bundled_map
 
 import cold_maps
 from cold_maps.cli import evaluate, fuse, maps, sweep
-from cold_maps.cli.common import MAX_GAP_M, DefaultsHelpFormatter, Terminated, cli_entry, configure_logging, gap_list
+from cold_maps.cli.common import (MAX_GAP_M, DefaultsHelpFormatter, Terminated, cli_entry, configure_logging, gap_list,
+                                  takes_value)
 from cold_maps.common.progress import ProgressBar, Spinner
+from cold_maps.simulation.drive import MAX_SPEED_MPS
+from cold_maps.simulation.sensor_errors import MAX_ANGLE_RAD, MAX_ERROR_M
 
 
 @dataclass(frozen=True)
@@ -34,6 +46,8 @@ class Cli:
         ok: arguments of a quick successful run, given a tmp folder and a recording.
         broken: arguments of a run that fails at run time (a missing input), given a tmp folder.
         parsers: its argument parsers (every subcommand's too).
+        inputs: per parser (its prog), arguments of a run that fails at its missing input
+            (``none.*`` in the tmp folder given), for every parser with options that take a value.
         command: arguments before every other (a subcommand with its own options).
     """
 
@@ -42,7 +56,16 @@ class Cli:
     ok: Callable[[Path, Path], list[str]]
     broken: Callable[[Path], list[str]]
     parsers: Callable[[], list[argparse.ArgumentParser]]
+    inputs: Callable[[Path], dict[str, list[str]]]
     command: tuple[str, ...] = ()
+
+    def status(self, *args: str) -> int:
+        """Runs the command in this process (its output is the caller's to capture); the exit
+        status, a usage error's ``SystemExit`` included."""
+        try:
+            return importlib.import_module(self.module).main([*self.command, *args])
+        except SystemExit as exc:
+            return int(exc.code or 0)
 
 
 def _maps_parsers() -> list[argparse.ArgumentParser]:
@@ -54,22 +77,49 @@ def _maps_parsers() -> list[argparse.ArgumentParser]:
     return found
 
 
+def _maps_inputs(tmp: Path) -> dict[str, list[str]]:
+    missing = str(tmp / "none.xodr")
+    return {"cold-maps info": ["info", missing], "cold-maps export": ["export", missing, "-o", str(tmp / "b.csv")],
+            "cold-maps convert": ["convert", missing, "-o", str(tmp / "b.osm")], "cold-maps check": ["check", missing]}
+
+
 STRAIGHT = str(bundled_map("straight"))
 CLIS = (
     Cli("cold-maps", "cold_maps.cli.maps", lambda tmp, rec: ["export", STRAIGHT, "-o", str(tmp / "b.csv")],
-        lambda tmp: ["info", str(tmp / "none.xodr")], _maps_parsers),
+        lambda tmp: ["info", str(tmp / "none.xodr")], _maps_parsers, _maps_inputs),
     Cli("cold-eval", "cold_maps.cli.evaluate",
         lambda tmp, rec: ["--map", STRAIGHT, "--frames", "2", "--routes", "1", "--gaps", "30", "--no-distractors",
                           "--no-plots", "--no-mcap", "--out", str(tmp / "out")],
-        lambda tmp: ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "out")], lambda: [evaluate.build_parser()]),
+        lambda tmp: ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "out")], lambda: [evaluate.build_parser()],
+        lambda tmp: {"cold-eval": ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "out")]}),
     Cli("cold-fuse", "cold_maps.cli.fuse", lambda tmp, rec: ["--input", str(rec), "-o", str(tmp / "re.mcap"), "--no-gt"],
-        lambda tmp: ["--input", str(tmp / "none.mcap"), "-o", str(tmp / "re.mcap")], lambda: [fuse.build_parser()]),
+        lambda tmp: ["--input", str(tmp / "none.mcap"), "-o", str(tmp / "re.mcap")], lambda: [fuse.build_parser()],
+        lambda tmp: {"cold-fuse": ["--input", str(tmp / "none.mcap"), "-o", str(tmp / "re.mcap")]}),
     Cli("cold-eval sweep", "cold_maps.cli.evaluate",
         lambda tmp, rec: ["--map", STRAIGHT, "--gaps", "30", "--interpolation", "paper", "--frames", "2", "--routes",
                           "1", "--workers", "1", "--no-plots", "--out", str(tmp / "sweep")],
         lambda tmp: ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "sweep")], lambda: [sweep.build_parser()],
+        lambda tmp: {"cold-eval sweep": ["--map", str(tmp / "none.xodr"), "--out", str(tmp / "sweep")]},
         command=("sweep",)),
 )
+
+
+def _value_options(parser: argparse.ArgumentParser) -> list[argparse.Action]:
+    """The options of ``parser`` that take a value."""
+    return [action for action in parser._actions if takes_value(action)]
+
+
+def _required(parser: argparse.ArgumentParser, action: argparse.Action) -> bool:
+    """Whether ``action`` must be given: required itself or in a required group of alternatives."""
+    return action.required or any(group.required and action in group._group_actions
+                                  for group in parser._mutually_exclusive_groups)
+
+
+def _all_parsers() -> list[tuple[Cli, argparse.ArgumentParser]]:
+    return [(cli, parser) for cli in CLIS for parser in cli.parsers()]
+
+
+PARSER_IDS = [parser.prog for _, parser in _all_parsers()]
 IDS = [cli.prog for cli in CLIS]
 
 
@@ -101,6 +151,14 @@ def test_version(cli: Cli) -> None:
     assert (result.returncode, result.stdout, result.stderr) == (0, f"{cli.prog} {cold_maps.__version__}\n", "")
 
 
+@pytest.mark.parametrize(("cli", "parser"), _all_parsers(), ids=PARSER_IDS)
+def test_every_command_and_subcommand_has_version(cli: Cli, parser: argparse.ArgumentParser,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``cold-maps info --version`` was a usage error (exit 2)."""
+    assert cli.status(*parser.prog.removeprefix(cli.prog).split(), "--version") == 0
+    assert capsys.readouterr() == (f"{cli.prog} {cold_maps.__version__}\n", "")
+
+
 @pytest.mark.parametrize("cli", CLIS, ids=IDS)
 def test_usage_errors_are_one_line_with_exit_2(cli: Cli, tmp_path: Path, recording: Path) -> None:
     for args in ([*cli.ok(tmp_path, recording), "--no-such-option"], ["-v", "-q", *cli.ok(tmp_path, recording)]):
@@ -129,24 +187,88 @@ def test_quiet_prints_nothing_and_verbose_logs_to_stderr(cli: Cli, tmp_path: Pat
         assert all(line.split(" ", 1)[0] in ("DEBUG", "INFO", "WARNING") for line in loud.stderr.splitlines())
 
 
-@pytest.mark.parametrize("cli", CLIS, ids=IDS)
-def test_help_shows_every_default(cli: Cli) -> None:
-    """Every option whose default is not "absent" or "off" names it in its help."""
-    checked, example = 0, None
-    for parser in cli.parsers():
-        assert parser.formatter_class is DefaultsHelpFormatter
-        formatter = DefaultsHelpFormatter(parser.prog)
-        for action in parser._actions:
-            if action.option_strings and action.default not in (None, False, argparse.SUPPRESS) \
-                    and action.help != argparse.SUPPRESS and not isinstance(action, argparse._HelpAction):
-                text = formatter._get_help_string(action) or ""
-                assert "default" in text, (parser.prog, action.option_strings, text)
-                checked += 1
-                if example is None and isinstance(action.default, (str, int, float, Path)):
-                    example = (parser.prog, action.default)  # shown as itself (a tuple is shown as written)
-    assert example is not None
-    shown = " ".join(_run(cli, *example[0].removeprefix(cli.prog).split(), "--help").stdout.split())
-    assert f"default: {example[1]})" in shown or f"default {example[1]}" in shown, shown
+@pytest.mark.parametrize(("cli", "parser"), _all_parsers(), ids=PARSER_IDS)
+def test_help_shows_every_default(cli: Cli, parser: argparse.ArgumentParser) -> None:
+    """Every option that takes a value and may be left out names its default in ``--help``
+    (an option whose default is None names the effective one: "default 0: off"), as shown."""
+    assert parser.formatter_class is DefaultsHelpFormatter
+    formatter = DefaultsHelpFormatter(parser.prog)
+    shown = " ".join(parser.format_help().split())
+    for action in _value_options(parser):
+        if _required(parser, action) or action.help == argparse.SUPPRESS:
+            continue
+        text = " ".join((formatter._expand_help(action) if action.help else "").split())
+        assert re.search(r"\bdefault\b", text) and "default: None" not in text, (action.option_strings, text)
+        assert text in shown, (action.option_strings, text)
+
+
+def test_the_error_options_show_their_effective_default() -> None:
+    """The eleven options that showed no default (default None or 0, taken for "off")."""
+    parser = evaluate.build_parser()
+    formatter = DefaultsHelpFormatter(parser.prog)
+    helps = {flag: formatter._expand_help(action) for action in parser._actions for flag in action.option_strings}
+    for flag in ("--noise", "--lateral-offset", "--heading-bias", "--range-jitter", "--drop", "--pose-xy", "--pose-yaw",
+                 "--drift-heading", "--drift-scale", "--loss", "--latency"):
+        assert "(default 0: " in helps[flag], (flag, helps[flag])
+
+
+MARKUP = re.compile(r"``|:[a-z]+(?::[a-z]+)?:`")
+"""reStructuredText in a help text: double back-quotes or a role (``:func:`x```)."""
+EXAMPLE_VALUE = re.compile(r"--[a-z][\w-]*[ =]\[?[-+]?\.?\d")
+"""An option followed by a number: an example value where a metavar belongs."""
+
+
+@pytest.mark.parametrize(("cli", "parser"), _all_parsers(), ids=PARSER_IDS)
+def test_help_has_no_markup_and_synopses_show_metavars(cli: Cli, parser: argparse.ArgumentParser) -> None:
+    """``cold-eval --help`` showed ``:mod:`...```; the sweep's synopsis ``--noise 0,0.02,0.05``
+    read as a default (it is 0)."""
+    text = parser.format_help()
+    assert not MARKUP.search(text), MARKUP.search(text)
+    synopsis = " ".join((parser.format_usage() + (parser.description or "")).split())
+    assert not EXAMPLE_VALUE.search(synopsis), EXAMPLE_VALUE.search(synopsis)
+
+
+def test_markup_patterns_catch_what_they_name() -> None:
+    from cold_maps.cli.common import plain
+
+    assert MARKUP.search("see :func:`fusion.fuse`") and MARKUP.search("``x``") and not MARKUP.search("a: b `c`")
+    assert EXAMPLE_VALUE.search("[--noise 0,0.02]") and not EXAMPLE_VALUE.search("[--noise SIGMA_M,...] [--frames N]")
+    assert plain("a ``b`` (:mod:`cold_maps.cli.sweep`), :func:`~x.y`\n z") == "a b (cold_maps.cli.sweep), x.y z"
+
+
+HOSTILE = ("nan", "inf", "-inf", "1e308", "-1e308", "-1", "0", "x")
+
+
+@pytest.mark.parametrize(("cli", "parser"), _all_parsers(), ids=PARSER_IDS)
+def test_every_bad_value_is_a_usage_error(cli: Cli, parser: argparse.ArgumentParser, tmp_path: Path,
+                                          monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                                          root_logging: None) -> None:
+    """Every option that takes a value, given each hostile value, is either refused as a
+    usage error (exit 2, one line naming the option, "(see PROG --help)") or accepted far
+    enough that the run fails at its missing input (exit 1, naming it): no other layer
+    refuses a command-line value later with exit 1 (``--noise 1e308`` did). The options
+    that name the input (and the output) are left out."""
+    options = [action for action in _value_options(parser) if action.help != argparse.SUPPRESS]
+    if not options:
+        return
+    monkeypatch.chdir(tmp_path)  # a relative path value lands here
+    base = cli.inputs(tmp_path)[parser.prog]
+    refused, tried = 0, 0
+    for action in options:
+        if set(action.option_strings) & set(base):
+            continue
+        flag = max(action.option_strings, key=len)
+        tried += 1
+        for value in HOSTILE:
+            status = cli.status(*base, f"{flag}={value}")
+            err = capsys.readouterr().err.splitlines()
+            assert len(err) == 1, (flag, value, err)
+            if status == 2:
+                refused += 1
+                assert flag in err[0] and err[0].endswith(f"(see {parser.prog} --help)"), (flag, value, err)
+            else:
+                assert status == 1 and "none." in err[0], (flag, value, status, err)
+    assert refused > 0 or tried == 0
 
 
 def visible(output: str) -> list[str]:
@@ -275,7 +397,7 @@ def test_a_gap_out_of_range_names_both_bounds(text: str) -> None:
     (["--history", "1e308"], "argument --history: expected a number >= 0 and < 1e+06, got 1e308"),
     (["sweep", "--seeds", "0,-2"], "sweep: argument --seeds: seeds must be >= 0, got '0,-2'"),
     (["sweep", "--routes", "5000"], "sweep: argument --routes: expected an integer from 1 to 1000, got 5000"),
-    (["sweep", "--noise", "0,1001"], "sweep: argument --noise: σ must be >= 0 and <= 1000 m, got '0,1001'"),
+    (["sweep", "--noise", "0,1001"], f"sweep: argument --noise: must be within ±{MAX_ERROR_M:g} m, got 1001.0"),
 ])
 def test_hostile_numbers_are_usage_errors_that_name_the_option(args: list[str], message: str, tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
@@ -291,17 +413,124 @@ def test_hostile_numbers_are_usage_errors_that_name_the_option(args: list[str], 
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--speed", "1e308"], "speed must be > 0 and <= 1000 m/s"),
-    (["--noise", "1e308"], "SensorErrorModel.noise_sigma_m: must be within ±1000 m"),
-    (["--pose-xy", "1e308"], "SensorErrorModel.pose_sigma_xy_m: must be within ±1000 m"),
-    (["--lateral-offset=-1e308"], "SensorErrorModel.lateral_offset_m: must be within ±1000 m"),
+    (["--speed", "1e308"], f"argument --speed: expected > 0 and <= {MAX_SPEED_MPS:g} m/s, got 1e+308"),
+    (["--speed", "0"], f"argument --speed: expected > 0 and <= {MAX_SPEED_MPS:g} m/s, got 0"),
+    (["--noise", "1e308"], f"argument --noise: must be within ±{MAX_ERROR_M:g} m, got 1e+308"),
+    (["--pose-xy", "1e308"], f"argument --pose-xy: must be within ±{MAX_ERROR_M:g} m, got 1e+308"),
+    (["--lateral-offset=-1e308"], f"argument --lateral-offset: must be within ±{MAX_ERROR_M:g} m, got -1e+308"),
+    (["--heading-bias", "4"], f"argument --heading-bias: must be within ±{MAX_ANGLE_RAD:g} rad, got 4.0"),
+    (["--drop", "1.5"], "argument --drop: must be <= 1, got 1.5"),
+    (["--noise", "nan"], "argument --noise: expected a finite number, got nan"),
+    (["--exchange", "sampled", "--loss", "2"], "argument --loss: must be <= 1, got 2.0"),
+    (["--exchange", "bezier", "--bezier-tolerance", "0"], "argument --bezier-tolerance: must be > 0"),
 ])
-def test_hostile_amounts_fail_before_the_run_with_nothing_written(args: list[str], message: str, tmp_path: Path,
-                                                                  capsys: pytest.CaptureFixture[str]) -> None:
-    """A σ or speed of 1e308 used to overflow mid-run (NaN detections, "run failed", a
-    partial report); now it is refused before anything is written."""
-    status = evaluate.main(["--map", str(bundled_map("straight")), "--out", str(tmp_path / "o"), "--frames", "3", *args])
-    assert status == 1
+def test_hostile_amounts_are_usage_errors_before_anything_runs(args: list[str], message: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A σ or speed of 1e308 used to overflow mid-run, then was refused by the error models
+    with exit 1; the option's type now asks the same model (one bound, in one place): exit 2."""
+    with pytest.raises(SystemExit) as usage:
+        evaluate.main(["--map", str(bundled_map("straight")), "--out", str(tmp_path / "o"), "--frames", "3", *args])
+    assert usage.value.code == 2
     lines = capsys.readouterr().err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("cold-eval: error: ") and message in lines[0], lines
+    assert lines == [f"cold-eval: error: {message} (see cold-eval --help)"], lines
     assert not (tmp_path / "o").exists()
+
+
+def test_the_documented_noise_overflow_exits_2() -> None:
+    result = _run(CLIS[1], "--map", str(bundled_map("junction")), "--noise", "1e308")
+    assert result.returncode == 2 and result.stdout == ""
+    assert _one_error_line(result, "cold-eval").endswith("(see cold-eval --help)")
+
+
+def _console_script(tmp_path: Path) -> Path:
+    """A script that runs ``cold-eval`` as an installed console script does: its own folder,
+    not the current one, is first on ``sys.path``."""
+    script = tmp_path / "bin" / "cold-eval-script.py"
+    script.parent.mkdir()
+    script.write_text("import sys\nfrom cold_maps.cli.evaluate import main\nif __name__ == '__main__':\n"
+                      "    sys.exit(main())\n")
+    return script
+
+
+def _run_script(script: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (str(PROJECT_ROOT), os.environ.get("PYTHONPATH"))))}
+    return subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True, cwd=cwd, env=env,
+                          timeout=300, check=False)
+
+
+@pytest.mark.parametrize("command", [[], ["sweep"]], ids=["cold-eval", "cold-eval sweep"])
+def test_method_resolves_from_the_current_folder(command: list[str], tmp_path: Path) -> None:
+    """The README's ``--method fusion_method_example:straight_bridge`` run from tests/ (where
+    the module is) works as an installed command too, in worker processes (a sweep spawns
+    them) as in the main one; the straight segment is exact on the straight road."""
+    method = "fusion_method_example:straight_bridge"
+    out = tmp_path / "out"
+    grid = ["--gaps", "20,30", "--interpolation", "paper", "--workers", "2"] if command else ["--gaps", "30"]
+    result = _run_script(_console_script(tmp_path), PROJECT_ROOT / "tests", *command, "--map", STRAIGHT,
+                         "--method", method, "--frames", "2", "--routes", "1", "--no-plots", "--out", str(out), *grid,
+                         *([] if command else ["--no-distractors", "--no-mcap", "--workers", "2"]))
+    assert result.returncode == 0, result.stderr
+    if command:
+        import csv
+
+        rows = [r for r in csv.DictReader((out / "results.csv").open()) if r["interpolation"] == method]
+        errors = [float(r["max_error_m"]) for r in rows]
+    else:
+        scenarios = json.loads((out / "metrics.json").read_text())["scenarios"]
+        errors = [s["max_error_m"] for s in scenarios if s["interpolation"] == method]
+    assert errors and max(errors) < 1e-6, errors
+
+
+def test_a_method_not_found_says_where_it_looked(tmp_path: Path) -> None:
+    result = _run_script(_console_script(tmp_path), tmp_path, "--map", STRAIGHT, "--method",
+                         "fusion_method_example:straight_bridge", "--out", str(tmp_path / "out"))
+    assert result.returncode == 2 and result.stdout == ""
+    line = _one_error_line(result, "cold-eval")
+    assert line.startswith("cold-eval: error: argument --method: fusion method 'fusion_method_example:straight_bridge'")
+    assert f"current folder {tmp_path}" in line and "run from the folder that holds fusion_method_example.py" in line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("interrupt_at", ["tables written", "first plot", "second plot"])
+def test_a_sweep_interrupted_while_writing_marks_what_it_leaves_partial(interrupt_at: str, tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str],
+                                                                        root_logging: None) -> None:
+    """Ctrl-C while the sweep writes its tables or plots left a summary.md not marked partial
+    beside an empty plots/: now only the summary stays, marked partial, and the same command
+    run again writes everything complete from the kept cells."""
+    from cold_maps.evaluation import sweep as sweep_module
+    from cold_maps.evaluation import sweep_report
+
+    out = tmp_path / "sweep"
+    args = ["sweep", "--map", STRAIGHT, "--gaps", "30", "--interpolation", "paper", "--frames", "2", "--routes", "1",
+            "--workers", "1", "-q", "--out", str(out)]
+    if interrupt_at == "tables written":
+        write_tables = sweep_module.write_tables
+
+        def interrupted_tables(*a: object) -> None:
+            write_tables(*a)
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(sweep_module, "write_tables", interrupted_tables)
+    else:
+        save, saved = sweep_report._save, []
+
+        def interrupted_save(figure: object, path: Path) -> Path:
+            if len(saved) == ("first plot", "second plot").index(interrupt_at):
+                raise KeyboardInterrupt
+            saved.append(save(figure, path))
+            return saved[-1]
+
+        monkeypatch.setattr(sweep_report, "_save", interrupted_save)
+    assert evaluate.main(args) == 130
+    err = capsys.readouterr().err
+    assert "interrupted while writing the tables" in err and "summary.md marked partial" in err
+    assert sorted(p.name for p in out.iterdir()) == ["cells", "summary.md"]
+    assert sweep_report.INTERRUPTED_WRITING in (out / "summary.md").read_text()
+    assert len(list((out / "cells").glob("*.json"))) == 1
+    monkeypatch.undo()
+    assert evaluate.main(args) == 0
+    assert "PARTIAL" not in (out / "summary.md").read_text()
+    assert sorted(p.name for p in (out / "plots").iterdir()) == ["safe_gap.png", "sweep_straight.png"]
+    assert (out / "results.csv").is_file() and (out / "results.parquet").is_file()

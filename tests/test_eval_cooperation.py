@@ -90,9 +90,11 @@ def test_cli_rejects_bad_cooperation_values(capsys):
 
 
 def test_cli_rejects_options_without_their_feature(tmp_path, capsys):
+    """Options that need another are a bad command line: exit 2, one line, nothing written."""
     map_path = str(bundled_map("straight"))
-    assert evaluate.main(["--map", map_path, "--drift", "--out", str(tmp_path / "a")]) == 1
+    assert evaluate.main(["--map", map_path, "--drift", "--out", str(tmp_path / "a")]) == 2
     assert "--history" in capsys.readouterr().err
-    assert evaluate.main(["--map", map_path, "--loss", "0.2", "--out", str(tmp_path / "b")]) == 1
+    assert evaluate.main(["--map", map_path, "--loss", "0.2", "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
-    assert "--exchange" in err and len(err.strip().splitlines()) == 1
+    assert "--exchange" in err and len(err.strip().splitlines()) == 1 and err.strip().endswith("(see cold-eval --help)")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -293,9 +293,9 @@ def test_two_maps_with_one_name_are_refused(tmp_path, capsys):
         path.parent.mkdir()
         path.write_text(ring())
     out = tmp_path / "out"
-    assert evaluate.main(["--map", str(paths[0]), "--map", str(paths[1]), "--out", str(out)]) == 1
+    assert evaluate.main(["--map", str(paths[0]), "--map", str(paths[1]), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "share the name 'ring'" in err[0]
+    assert len(err) == 1 and "share the name 'ring'" in err[0] and err[0].endswith("(see cold-eval --help)")
     assert not out.exists()
 
 

@@ -1,6 +1,9 @@
 """Conventions shared by the command-line tools ``cold-maps``, ``cold-eval`` (and ``cold-eval
 sweep``) and ``cold-fuse``: one parser factory (``--version``, ``-v/-vv``, ``-q``,
-``--no-progress``, defaults in the help, usage errors as one line with exit 2), logging to
+``--no-progress``, defaults in the help, help text without markup, usage errors as one line
+with exit 2), argparse types that check a value with the configuration's own validation (a
+bad value is a usage error whichever layer bounds it; :class:`UsageError` for options that
+contradict each other), logging to
 stderr around progress bars, one error prefix ``PROG: error: [SUBCOMMAND: ]message``, exit
 statuses, SIGTERM handled like Ctrl-C, and a reader that closes the pipe early ending the
 command quietly."""
@@ -11,11 +14,15 @@ import argparse
 import functools
 import io
 import logging
+import math
 import os
+import re
 import signal
 import sys
 from types import FrameType
-from typing import Callable, Final, Sequence, TextIO
+from typing import Callable, Final, Sequence, TextIO, TypeVar
+
+T = TypeVar("T")
 
 EXIT_FAILURE: Final[int] = 1
 EXIT_USAGE: Final[int] = 2
@@ -95,35 +102,66 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
     return wrap
 
 
+class UsageError(ValueError):
+    """A bad command line found after parsing (options that contradict each other): reported
+    like argparse's own usage errors, ``PROG: error: message (see PROG --help)``, exit 2."""
+
+
+def usage_failure(prog: str, exc: UsageError) -> int:
+    """One line on stderr for a :class:`UsageError`; ``EXIT_USAGE``."""
+    return fail(prog, f"{exc} (see {prog} --help)", EXIT_USAGE)
+
+
 class CliParser(argparse.ArgumentParser):
     """ArgumentParser that reports a usage error as ONE line on stderr,
     ``PROG: error: [SUBCOMMAND: ]message (see PROG [SUBCOMMAND] --help)``, and exits 2."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        sys.exit(fail(self.prog, f"{message} (see {self.prog} --help)", EXIT_USAGE))
+        sys.exit(usage_failure(self.prog, UsageError(message)))
+
+
+def takes_value(action: argparse.Action) -> bool:
+    """Whether an option reads a value from the command line (not a flag, a counter,
+    ``--help`` or ``--version``)."""
+    return bool(action.option_strings) and action.nargs != 0
 
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
-    """Appends ``(default: X)`` to an option's help unless the help already names its
-    default or there is nothing to show (no default, a flag that is off by default)."""
+    """Appends ``(default: X)`` to the help of an option that takes a value, unless the help
+    names its default already. An option whose default is None (computed, or off) must name
+    its effective default in its help text (tests/test_cli_conventions.py checks every one)."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help
-        if (not text or "default" in text or not action.option_strings
-                or action.default in (None, False, argparse.SUPPRESS)):
+        if not text or "default" in text or not takes_value(action) or action.default in (None, argparse.SUPPRESS):
             return text
         return f"{text} (default: %(default)s)"
 
 
+_ROLE = re.compile(r":[a-z]+(?::[a-z]+)?:`~?([^`<]*?)(?:\s*<[^>]*>)?`")
+
+
+def plain(text: str) -> str:
+    """``text`` (a docstring's paragraph) without reStructuredText markup, on one line:
+    ``:func:`name``` → name, double back-quotes dropped."""
+    return " ".join(_ROLE.sub(r"\1", text).replace("``", "").split())
+
+
 def make_parser(prog: str, description: str, *, progress: bool) -> CliParser:
     """The parser every command starts from: ``--version``, ``-v/--verbose`` (count),
-    ``-q/--quiet`` and, when the command draws progress bars, ``--no-progress``."""
-    from cold_maps import __version__
-
-    parser = CliParser(prog=prog, description=description, formatter_class=DefaultsHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"{prog} {__version__}")
+    ``-q/--quiet`` and, when the command draws progress bars, ``--no-progress``.
+    ``description`` may be a docstring's paragraph: its markup is dropped (:func:`plain`)."""
+    parser = CliParser(prog=prog, description=plain(description), formatter_class=DefaultsHelpFormatter)
+    add_version_option(parser, prog)
     add_output_options(parser, progress=progress)
     return parser
+
+
+def add_version_option(parser: argparse.ArgumentParser, prog: str) -> None:
+    """``--version``: prints ``PROG VERSION`` and exits 0 (on a subcommand too)."""
+    from cold_maps import __version__
+
+    parser.add_argument("--version", action="version", version=f"{prog} {__version__}")
 
 
 def add_output_options(parser: argparse.ArgumentParser, *, progress: bool, inherited: bool = False) -> None:
@@ -203,7 +241,10 @@ def fail(prog: str, message: str, status: int = EXIT_FAILURE) -> int:
 
 
 def startup_failure(prog: str, exc: BaseException) -> int:
-    """One line on stderr for a failure before any output was written; the exit status."""
+    """One line on stderr for a failure before any output was written; the exit status
+    (``EXIT_USAGE`` for a :class:`UsageError`)."""
+    if isinstance(exc, UsageError):
+        return usage_failure(prog, exc)
     if isinstance(exc, KeyboardInterrupt):
         what, status = interruption(exc)
         return fail(prog, f"{what} before the run started; nothing written", status)
@@ -228,6 +269,66 @@ def int_in(low: int, high: int | None = None) -> Callable[[str], int]:
 
 positive_int = int_in(1)
 """argparse type: an integer >= 1."""
+
+
+def finite_number(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text}")
+    return value
+
+
+_FIELD_PREFIX = re.compile(r"^[A-Za-z_]\w*\.[A-Za-z_]\w*:\s*")
+
+
+def validated(parse: Callable[[str], T], check: Callable[[T], object]) -> Callable[[str], T]:
+    """argparse type: ``parse``, then ``check`` the value with the validation of the
+    configuration it feeds (:func:`builds`, :func:`within`). A ValueError of ``check`` becomes
+    the usage error (exit 2, the option named by argparse), so each bound lives in one place."""
+
+    def parse_checked(text: str) -> T:
+        value = parse(text)
+        try:
+            check(value)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(_FIELD_PREFIX.sub("", one_line(exc))) from None
+        return value
+
+    return parse_checked
+
+
+def builds(model: Callable[..., object], field: str) -> Callable[[object], object]:
+    """A check for :func:`validated`: the configuration ``model(field=value)`` is built, and
+    refuses the value itself (e.g. ``builds(SensorErrorModel, "noise_sigma_m")``)."""
+    return lambda value: model(**{field: value})
+
+
+def within(low: float, high: float, unit: str, *, low_open: bool = False) -> Callable[[float], None]:
+    """A check for :func:`validated`: ``low <= value <= high`` (``low < value`` when
+    ``low_open``); pass the bound constants the configuration uses."""
+
+    def check(value: float) -> None:
+        if not (low < value if low_open else low <= value) or value > high:
+            raise ValueError(f"expected {'>' if low_open else '>='} {low:g} and <= {high:g} {unit}, got {value:g}")
+
+    return check
+
+
+def fusion_method(name: str) -> str:
+    """argparse type: a fusion method name that resolves (``cold_maps.evaluation.methods``:
+    a registered name or ``package.module:function``, looked up in the installed packages
+    and the current folder); the name as given."""
+    from cold_maps.evaluation.methods import MethodError, resolve_method
+
+    try:
+        resolve_method(name)
+    except MethodError as exc:
+        raise argparse.ArgumentTypeError(one_line(exc)) from None
+    return name
 
 
 MAX_GAP_M: Final[float] = 1e4

@@ -9,7 +9,7 @@ cores) with the same outputs for any number; ``--method`` adds your own fusion m
 Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
 1 with one line on stderr for bad input or a crash (partial outputs marked as such); 2 for
 a bad command line; 130 when interrupted, 143 on SIGTERM. ``cold-eval sweep ...``: a grid
-of evaluations (:mod:`cold_maps.cli.sweep`).
+of evaluations (see ``cold-eval sweep --help``).
 """
 
 from __future__ import annotations
@@ -20,14 +20,16 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry, gap_list, int_in, make_parser, positive_int
+from cold_maps.cli.common import (UsageError, builds, cli_entry, finite_number, fusion_method, gap_list, int_in,
+                                  make_parser, positive_int, validated, within)
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
-from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, PAPER_GAPS_M
+from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, MAX_SPEED_MPS, PAPER_GAPS_M
 from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
 from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 from fusion.bezier import DEFAULT_TOLERANCE_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
@@ -62,6 +64,12 @@ def _non_negative(text: str) -> float:
     return value
 
 
+def _message_option(field: str) -> Callable[[str], float]:
+    """argparse type of a ``MessageModel`` field: a number >= 0 and < ``MAX_OPTION_VALUE``
+    that the model accepts."""
+    return validated(_non_negative, builds(MessageModel, field))
+
+
 def _stamp_base(text: str) -> int:
     """Seconds since the Unix epoch (decimal, >= 0) as whole ns."""
     try:
@@ -89,9 +97,9 @@ def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
                             loss_probability=args.loss, latency_s=args.latency,
                             max_interval_s=args.max_interval, change_tolerance_m=args.change_tolerance)
     if args.history == 0 and (args.drift or args.drift_heading is not None or args.drift_scale is not None):
-        raise ValueError("--drift, --drift-heading and --drift-scale bend the lane history: add --history")
+        raise UsageError("--drift, --drift-heading and --drift-scale bend the lane history: add --history")
     if not messages.enabled and (args.loss or args.latency):
-        raise ValueError("--loss and --latency act on lane messages: add --exchange sampled|bezier")
+        raise UsageError("--loss and --latency act on lane messages: add --exchange sampled|bezier")
     if args.coops == 1 and args.history == 0 and not messages.enabled:
         return plan
     scenarios = extended_scenarios(plan.scenarios, coops=args.coops, history_m=args.history,
@@ -101,8 +109,7 @@ def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval`` argument parser."""
-    description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
-    parser = make_parser(PROG, description, progress=True)
+    parser = make_parser(PROG, __doc__.split("\n\n")[1], progress=True)
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--map", action="append", type=Path, metavar="MAP.xodr", help="OpenDRIVE map (repeatable)")
     what.add_argument("--paper", action="store_true", help="the paper's experiments on the bundled maps")
@@ -114,15 +121,16 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"frames per route (default {DEFAULT_FRAMES}, fewer on a map too short for them; "
                              "--paper: the whole route at 1 m per frame)")
     parser.add_argument("--seed", type=int_in(0), default=0, help="seed of routes and error models (default 0)")
-    parser.add_argument("--speed", type=float, default=DEFAULT_SPEED_MPS, help="ego speed in m/s (default 10)")
+    parser.add_argument("--speed", type=validated(finite_number, within(0.0, MAX_SPEED_MPS, "m/s", low_open=True)),
+                        default=DEFAULT_SPEED_MPS, help=f"ego speed in m/s (default {DEFAULT_SPEED_MPS:g})")
     parser.add_argument("--interpolation", choices=(*INTERPOLATIONS, "both"), default="both",
                         help="spline interpolation (default both)")
-    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
+    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M, metavar="D_S,...",
                         help="spline gaps d_s in m, comma-separated (default 20,30,50)")
-    parser.add_argument("--method", action="append", default=[], metavar="NAME",
+    parser.add_argument("--method", action="append", type=fusion_method, default=[], metavar="NAME",
                         help="also evaluate this fusion method across the gaps: a name registered in the "
-                             "cold_maps.fusion_methods entry points or package.module:function "
-                             "(repeatable; default: none)")
+                             "cold_maps.fusion_methods entry points or package.module:function, looked up in the "
+                             "installed packages and the current folder (repeatable; default: none)")
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
@@ -135,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
                              ("--drop", "drop_probability", "probability"),
                              ("--pose-xy", "pose_sigma_xy_m", "m, σ, coop poses"),
                              ("--pose-yaw", "pose_sigma_yaw_rad", "rad, σ, coop poses")):
-        errors.add_argument(flag, dest=name, type=float, default=0.0, help=f"({unit})")
+        errors.add_argument(flag, dest=name, type=validated(finite_number, builds(SensorErrorModel, name)),
+                            default=0.0, help=f"{unit} (default 0: off)")
     coop = parser.add_argument_group("chains, lane history and messages (all off by default, seeded)")
     coop.add_argument("--coops", type=positive_int, default=1,
                       help="coops per chain: K > 1 adds chains of 2..K coops ahead, spaced like the pair (default 1)")
@@ -144,18 +153,24 @@ def build_parser() -> argparse.ArgumentParser:
     coop.add_argument("--drift", action="store_true",
                       help=f"typical odometry drift: σ {TYPICAL_HEADING_DRIFT_RAD_PER_M:g} rad/m heading, "
                            f"{TYPICAL_SCALE_ERROR:g} scale")
-    coop.add_argument("--drift-heading", type=_non_negative, default=None, help="σ of the heading drift (rad/m)")
-    coop.add_argument("--drift-scale", type=_non_negative, default=None, help="σ of the odometry scale error")
+    coop.add_argument("--drift-heading", type=_non_negative, default=None,
+                      help=f"σ of the heading drift, rad/m (default 0: off; {TYPICAL_HEADING_DRIFT_RAD_PER_M:g} "
+                           "with --drift)")
+    coop.add_argument("--drift-scale", type=_non_negative, default=None,
+                      help=f"σ of the odometry scale error (default 0: off; {TYPICAL_SCALE_ERROR:g} with --drift)")
     coop.add_argument("--exchange", choices=("sampled", "bezier"), default=None,
                       help="lanes travel as messages in this format (default: detections fused directly)")
-    coop.add_argument("--bezier-tolerance", type=_non_negative, default=DEFAULT_TOLERANCE_M,
+    coop.add_argument("--bezier-tolerance", type=_message_option("bezier_tolerance_m"), default=DEFAULT_TOLERANCE_M,
                       help=f"fit tolerance of the Bézier encoding, m (default {DEFAULT_TOLERANCE_M:g}; with "
                            "detection noise σ use about 4σ, or the fit chases the noise)")
-    coop.add_argument("--loss", type=_non_negative, default=0.0, help="message loss probability")
-    coop.add_argument("--latency", type=_non_negative, default=0.0, help="message latency (s)")
-    coop.add_argument("--max-interval", type=_non_negative, default=DEFAULT_MAX_INTERVAL_S,
+    coop.add_argument("--loss", type=_message_option("loss_probability"), default=0.0,
+                      help="message loss probability (default 0: none lost)")
+    coop.add_argument("--latency", type=_message_option("latency_s"), default=0.0,
+                      help="message latency, s (default 0: none)")
+    coop.add_argument("--max-interval", type=_message_option("max_interval_s"), default=DEFAULT_MAX_INTERVAL_S,
                       help=f"longest time between messages (s, default {DEFAULT_MAX_INTERVAL_S:g})")
-    coop.add_argument("--change-tolerance", type=_non_negative, default=DEFAULT_CHANGE_TOLERANCE_M,
+    coop.add_argument("--change-tolerance", type=_message_option("change_tolerance_m"),
+                      default=DEFAULT_CHANGE_TOLERANCE_M,
                       help=f"lane change (RMS, m) that triggers a message (default {DEFAULT_CHANGE_TOLERANCE_M:g})")
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
@@ -188,7 +203,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
-            raise ValueError(f"--map {seen[path.stem]} and --map {path} share the name {path.stem!r}; the report "
+            raise UsageError(f"--map {seen[path.stem]} and --map {path} share the name {path.stem!r}; the report "
                              "keys results by map name: give every map its own file name")
         seen[path.stem] = path
     params = params_for_gaps(args.gaps)
@@ -231,7 +246,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                       startup_failure)
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
-    from cold_maps.evaluation.trust import run_warnings
+    from cold_maps.evaluation.trust import verdict
 
     configure_logging(args.verbose, args.quiet)
     try:
@@ -250,10 +265,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return fail(PROG, f"run failed ({type(run.error).__name__}: {run.error}); partial report in {args.out}")
     reduced = run.collector.reduced_maps
     fitted = f" ({', '.join(reduced)}: what did not fit the map is listed in summary.md)" if reduced else ""
-    warnings = run_warnings(run.collector)
-    verdict = f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
     result_line(args, PROG, f"{len(run.results)} scenario records, {run.collector.frames_done} frames -> "
-                f"{args.out}{fitted}{verdict}")
+                f"{args.out}{fitted}{verdict(run.collector)}")
     return 0
 
 

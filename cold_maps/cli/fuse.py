@@ -25,25 +25,29 @@ from typing import Any, Final, Sequence
 
 import numpy as np
 
-from cold_maps.cli.common import cli_entry, make_parser
+from cold_maps.cli.common import builds, cli_entry, finite_number, make_parser, validated
 
 PROG: Final[str] = "cold-fuse"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-fuse`` argument parser."""
+    from fusion import DEFAULT_PARAMS, FusionParams
+
     parser = make_parser(PROG, "Fuse recorded lane detections (cold.LaneDetection) again.", progress=True)
     parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap", help="recording to read")
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.mcap", help="recording to write")
     parser.add_argument("--ego", default="ego", help="sender id of the ego vehicle (default ego)")
     parser.add_argument("--mode", choices=("auto", "convoy", "spline"), default="auto", help="fusion mode")
     parser.add_argument("--interpolation", choices=("paper", "hermite"), default="paper", help="spline interpolation")
-    parser.add_argument("--max-gap", type=float, default=None, metavar="D_I",
-                        help="longest gap d_i bridged by spline fusion in m (default 50, the fusion default)")
+    parser.add_argument("--max-gap", type=validated(finite_number, builds(FusionParams, "d_i_m")), default=None,
+                        metavar="D_I", help="longest gap d_i bridged by spline fusion in m (default "
+                                            f"{DEFAULT_PARAMS.d_i_m:g}, the fusion default)")
     parser.add_argument("--map", type=Path, default=None, help="OpenDRIVE map for ground truth (default: the "
                         "recording's cold.run map when it names one readable file)")
     parser.add_argument("--no-gt", action="store_true", help="do not measure against ground truth")
-    parser.add_argument("--report", type=Path, default=None, help="folder for summary.md, metrics.json, frames.csv")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="folder for summary.md, metrics.json, frames.csv (default: none, no report)")
     return parser
 
 
@@ -127,7 +131,7 @@ class Refuser:
             reference = (np.vstack((ego_left, coop_left)), np.vstack((ego_right, coop_right)))
             measured = self._measure(result.left, result.right, pose, reference)
             self._add(kind, frame, stamp, sender, measured, runtime, "", True)
-            if hasattr(measured, "left_errors_m"):
+            if _scored(measured):
                 metrics[f"{sender}_left_max_error_m"] = float(np.max(measured.left_errors_m))
                 metrics[f"{sender}_right_max_error_m"] = float(np.max(measured.right_errors_m))
         recorder.write_fused(stamp, fused_lines)
@@ -135,12 +139,12 @@ class Refuser:
 
     def _measure(self, left: np.ndarray, right: np.ndarray, pose: tuple[float, float, float],
                  reference: tuple[np.ndarray, np.ndarray] | None = None) -> Any:
-        """The lane's ``Measurement``, or None without a map, or the reason it has none:
-        ``no_ground_truth`` (no lanelet at the pose) or ``gt_unmatched`` (the lanelets
-        matched to ``reference`` do not cover it: ``Measurement.gt_unmatched``; without the
-        drive's true path a spline across a junction may cut the corner by more than the matcher's 1.5 m and is then
-        not measured). ``reference`` defaults to the lane; for a fused lane it is the ego's
-        and the coop's detections."""
+        """The lane's ``Measurement`` (``gt_unmatched`` names why the lanelets matched to
+        ``reference`` do not cover it: without the drive's true path a spline across a
+        junction may cut the corner by more than the matcher's 1.5 m and is then not
+        measured), or None without a map, or ``no_ground_truth`` (no lanelet at the pose).
+        ``reference`` defaults to the lane; for a fused lane it is the ego's and the coop's
+        detections."""
         from gt_matching import MatchingError
 
         if self.meter is None:
@@ -149,27 +153,37 @@ class Refuser:
             measured = self.meter.measure(left, right, pose, reference=reference)
         except MatchingError:
             return "no_ground_truth"
-        return "gt_unmatched" if measured.gt_unmatched else measured
+        return measured
 
     def _add(self, fusion_name: str, frame: int, stamp: float, coop: str, measured: Any, runtime: float,
              rejected: str, predicted: bool | None) -> None:
         from cold_maps.evaluation.report import FrameRecord, ScenarioKey
-        from cold_maps.groundtruth.meter import Measurement
+        from cold_maps.evaluation.trust import GT_UNMATCHED
 
         interpolation = self.interpolation if fusion_name == "spline" else ""
+        why = ""
         if isinstance(measured, str):
             rejected = measured
+        elif measured is not None and measured.gt_unmatched:
+            rejected, why = GT_UNMATCHED, measured.gt_unmatched
         for boundary in ("left", "right"):
             key = ScenarioKey(self.map_name, fusion_name, interpolation, 0.0, boundary)
-            if isinstance(measured, Measurement):
+            if _scored(measured):
                 left = boundary == "left"
                 record = FrameRecord(frame, stamp, self.ego, coop, measured.left_errors_m if left else
                                      measured.right_errors_m, perception_range_m=measured.left_range_m if left
                                      else measured.right_range_m, runtime_ms=runtime, predicted_fusible=predicted)
             else:
                 record = FrameRecord(frame, stamp, self.ego, coop, np.empty(0), runtime_ms=runtime,
-                                     rejected=rejected or "not_measured", predicted_fusible=predicted)
+                                     rejected=rejected or "not_measured", predicted_fusible=predicted,
+                                     gt_unmatched=why)
             self.collector.add(key, record)
+
+
+def _scored(measured: Any) -> bool:
+    """Whether ``measured`` (what ``Refuser._measure`` returned) is a lane's score: a
+    ``Measurement`` whose ground truth covers the lane."""
+    return not isinstance(measured, str) and measured is not None and not measured.gt_unmatched
 
 
 def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -239,14 +253,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if report_dir is not None:
         from cold_maps.evaluation.run import write_outputs
 
-        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False)
+        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG)
     if isinstance(error, KeyboardInterrupt):
         what, status = interruption(error)
         return fail(PROG, f"{what} after {count} frames; {args.output} finalised as partial", status)
     if error is not None:
         return fail(PROG, f"{error}; {args.output} finalised as partial")
+    from cold_maps.evaluation.trust import verdict
+
     result_line(args, PROG, f"{count} frames fused -> {args.output}"
-                + (f" ({refuser.frames_without_ego} without ego '{args.ego}')" if refuser.frames_without_ego else ""))
+                + (f" ({refuser.frames_without_ego} without ego '{args.ego}')" if refuser.frames_without_ego else "")
+                + verdict(refuser.collector))
     return 0
 
 

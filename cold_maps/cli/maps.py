@@ -28,14 +28,16 @@ from typing import Callable, Final, Iterator, Sequence, TextIO
 import numpy as np
 
 from cold_maps.cli.common import (
-    EXIT_USAGE,
     DefaultsHelpFormatter,
+    UsageError,
     add_output_options,
+    add_version_option,
     cli_entry,
     fail,
     make_parser,
     one_line,
     result_line,
+    usage_failure,
 )
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap
@@ -140,19 +142,20 @@ def _counts(counter: Counter[str]) -> str:
     return ", ".join(f"{name} {count}" for name, count in sorted(counter.items())) or "-"
 
 
-def _positive_step(text: str) -> float:
+def _positive_length(text: str) -> float:
+    """argparse type: a finite length > 0 (m)."""
     try:
-        step = float(text)
+        length = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"step must be a number of metres, got {text!r}") from None
-    if not (math.isfinite(step) and step > 0):
-        raise argparse.ArgumentTypeError(f"step must be a finite length > 0 m, got {text!r}")
-    return step
+        raise argparse.ArgumentTypeError(f"expected a number of metres, got {text!r}") from None
+    if not (math.isfinite(length) and length > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite length > 0 m, got {text!r}")
+    return length
 
 
 def _configure_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE file")
-    parser.add_argument("--step", type=_positive_step, default=0.1, help="sampling step along s (m)")
+    parser.add_argument("--step", type=_positive_length, default=0.1, help="sampling step along s (m)")
     parser.add_argument("--format", choices=("csv", "geojson"), default="csv", help="file format")
     parser.add_argument(
         "--crs", choices=("wgs84", "local"), default=None,
@@ -254,8 +257,8 @@ def _write_geojson(
 
 def _run_export(args: argparse.Namespace) -> int:
     if args.format == "csv" and args.crs == "wgs84":
-        return fail(f"{PROG} export", "--crs wgs84 needs --format geojson: csv rows are in the OpenDRIVE inertial "
-                    "frame (x, y, z in m)", EXIT_USAGE)
+        raise UsageError("--crs wgs84 needs --format geojson: csv rows are in the OpenDRIVE inertial frame "
+                         "(x, y, z in m)")
     args.crs = args.crs or ("wgs84" if args.format == "geojson" else "local")
     odr_map = _load(args)
     written = Counter[str]()
@@ -316,8 +319,9 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
     from cold_maps.groundtruth.check import STEP_M, THRESHOLD_M
 
     parser.add_argument("map", metavar="MAP.xodr", help="OpenDRIVE map")
-    parser.add_argument("--threshold", type=float, default=THRESHOLD_M, help="largest allowed disagreement (m)")
-    parser.add_argument("--step", type=float, default=STEP_M, help="our border sampling step along s (m)")
+    parser.add_argument("--threshold", type=_positive_length, default=THRESHOLD_M,
+                        help="largest allowed disagreement (m)")
+    parser.add_argument("--step", type=_positive_length, default=STEP_M, help="our border sampling step along s (m)")
     parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only the vehicle lanes "
                         f"({', '.join(VEHICLE_LANE_TYPES)})")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
@@ -411,6 +415,7 @@ def build_parser(commands: Sequence[Command] = COMMANDS, selected: str | None = 
     for command in commands:
         configure = sub.add_parser(command.name, help=command.help, description=command.help,
                                    formatter_class=DefaultsHelpFormatter)
+        add_version_option(configure, PROG)
         if selected not in names or command.name == selected:
             command.configure(configure)
             add_output_options(configure, progress=command.progress, inherited=True)
@@ -431,6 +436,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.run(args))
     except BrokenPipeError:
         raise
+    except UsageError as exc:
+        return usage_failure(f"{PROG} {args.command}", exc)
     except KeyboardInterrupt as exc:
         what, status = interruption(exc)
         return fail(PROG, f"{what}; nothing written", status)

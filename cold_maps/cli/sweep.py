@@ -1,13 +1,14 @@
 """``cold-eval sweep``: a grid of evaluations (map × gap × method × error level × seed).
 
-``cold-eval sweep --map M [--map ...] --gaps 10,20,30,50 --interpolation paper,hermite
---noise 0,0.02,0.05 --pose-xy 0,0.1 --seeds 0,1,2 --frames N --out DIR`` runs every cell
-in ``--workers`` processes (default: the cores) or, with ``--scheduler tcp://HOST:PORT``,
-on a Dask cluster (maps shipped to the workers). Outputs in DIR: results.parquet,
-results.csv, summary.md, plots/*.png, cells/*.json (one per finished cell: run the same
-command again after an interrupt and only the missing cells are computed). Exit 0; 1 with
-one line on stderr for bad input or a failed cell; 2 for a bad command line; 130 when
-interrupted, 143 on SIGTERM.
+``cold-eval sweep --map MAP.xodr [--map ...] [--gaps D_S,...] [--interpolation NAME,...]
+[--noise SIGMA_M,...] [--pose-xy SIGMA_M,...] [--seeds SEED,...] [--frames N] --out DIR``
+runs every cell (each combination of the lists) in ``--workers`` processes (default: the
+cores) or, with ``--scheduler tcp://HOST:PORT``, on a Dask cluster (maps shipped to the
+workers). Outputs in DIR: results.parquet, results.csv, summary.md, plots/*.png,
+cells/*.json (one per finished cell: run the same command again after an interrupt and only
+the missing cells are computed; an interrupt while the tables are written leaves
+summary.md marked partial and no tables or plots). Exit 0; 1 with one line on stderr for
+bad input or a failed cell; 2 for a bad command line; 130 when interrupted, 143 on SIGTERM.
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ import argparse
 from pathlib import Path
 from typing import Callable, Final, Sequence, TypeVar
 
-from cold_maps.cli.common import gap_list, int_in, make_parser, positive_int
+from cold_maps.cli.common import builds, fusion_method, gap_list, int_in, make_parser, positive_int, validated
 from cold_maps.simulation.drive import MAX_COVER_ROUTES, PAPER_GAPS_M
-from cold_maps.simulation.sensor_errors import MAX_ERROR_M
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 PROG: Final[str] = "cold-eval sweep"
 DEFAULT_FRAMES: Final[int] = 100
@@ -40,11 +41,10 @@ def _list(kind: Callable[[str], T], what: str) -> Callable[[str], tuple[T, ...]]
     return parse
 
 
-def _sigmas(text: str) -> tuple[float, ...]:
-    values = _list(float, "σ in m")(text)
-    if any(not 0 <= v <= MAX_ERROR_M for v in values):
-        raise argparse.ArgumentTypeError(f"σ must be >= 0 and <= {MAX_ERROR_M:g} m, got {text!r}")
-    return values
+def _levels(field: str) -> Callable[[str], tuple[float, ...]]:
+    """argparse type: comma-separated values of a ``SensorErrorModel`` field, each one it accepts."""
+    check = builds(SensorErrorModel, field)
+    return validated(_list(float, "σ in m"), lambda values: [check(value) for value in values])
 
 
 def _seeds(text: str) -> tuple[int, ...]:
@@ -56,20 +56,22 @@ def _seeds(text: str) -> tuple[int, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``cold-eval sweep`` argument parser."""
-    description = __doc__.split("\n\n")[1].replace("\n", " ").replace("``", "")
-    parser = make_parser(PROG, description, progress=True)
+    parser = make_parser(PROG, __doc__.split("\n\n")[1], progress=True)
     parser.add_argument("--map", action="append", type=Path, required=True, metavar="MAP.xodr",
                         help="OpenDRIVE map (repeatable)")
-    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M,
+    parser.add_argument("--gaps", type=gap_list, default=PAPER_GAPS_M, metavar="D_S,...",
                         help="spline gaps d_s in m (default 20,30,50)")
-    parser.add_argument("--interpolation", type=_list(str, "method names"), default=("paper", "hermite"),
-                        help="spline methods: paper, hermite, registered names (default paper,hermite)")
-    parser.add_argument("--method", action="append", default=[], metavar="NAME",
-                        help="another fusion method: registered name or package.module:function "
-                             "(repeatable; default: none)")
-    parser.add_argument("--noise", type=_sigmas, default=(0.0,), help="sensor noise σ levels in m (default 0)")
-    parser.add_argument("--pose-xy", type=_sigmas, default=(0.0,), help="coop pose σ levels in m (default 0)")
-    parser.add_argument("--seeds", type=_seeds, default=(0,), help="seeds (default 0)")
+    parser.add_argument("--interpolation", type=_list(fusion_method, "method names"), default=("paper", "hermite"),
+                        metavar="NAME,...", help="spline methods: paper, hermite, registered names or "
+                                                 "package.module:function (default paper,hermite)")
+    parser.add_argument("--method", action="append", type=fusion_method, default=[], metavar="NAME",
+                        help="another fusion method: registered name or package.module:function, looked up in the "
+                             "installed packages and the current folder (repeatable; default: none)")
+    parser.add_argument("--noise", type=_levels("noise_sigma_m"), default=(0.0,), metavar="SIGMA_M,...",
+                        help="sensor noise σ levels in m (default 0: off)")
+    parser.add_argument("--pose-xy", type=_levels("pose_sigma_xy_m"), default=(0.0,), metavar="SIGMA_M,...",
+                        help="coop pose σ levels in m (default 0: off)")
+    parser.add_argument("--seeds", type=_seeds, default=(0,), metavar="SEED,...", help="seeds (default 0)")
     parser.add_argument("--frames", type=positive_int, default=DEFAULT_FRAMES,
                         help=f"frames per route (default {DEFAULT_FRAMES})")
     parser.add_argument("--routes", type=int_in(1, MAX_COVER_ROUTES), default=DEFAULT_ROUTES,
@@ -78,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes (default: this machine's cores); ignored with --scheduler")
     parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", default=None,
-                        help="run the cells on this Dask scheduler's workers")
+                        help="run the cells on this Dask scheduler's workers (default: none, local processes)")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     return parser
 
@@ -115,9 +117,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_tables(out, result.rows)
         write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=not args.no_plots)
     except KeyboardInterrupt as exc:
+        from cold_maps.common.signals import signals_ignored
+        from cold_maps.evaluation.sweep_report import discard_outputs
+
+        with signals_ignored():
+            discard_outputs(out)
+            write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=False,
+                         interrupted=True)
         what, status = interruption(exc)
-        return fail(PROG, f"{what} while writing the tables ({counts}; the finished cells are kept); run the same "
-                    f"command again to write them -> {args.out}", status)
+        return fail(PROG, f"{what} while writing the tables ({counts}; the finished cells are kept, summary.md "
+                    f"marked partial); run the same command again to write them -> {args.out}", status)
     if isinstance(result.error, KeyboardInterrupt):
         what, status = interruption(result.error)
         return fail(PROG, f"{what} ({counts}); run the same command again to finish -> {args.out}", status)

@@ -23,16 +23,21 @@ Naming a method
   (``[project.entry-points."cold_maps.fusion_methods"] mine = "my_pkg.fusion:mine"`` in
   your package's ``pyproject.toml``); the built-ins ``paper`` and ``hermite`` are
   registered so too, and also resolve without installed metadata;
-- ``package.module:function``: imported directly (``cold-eval --method my_pkg.fusion:mine``).
+- ``package.module:function``: imported directly (``cold-eval --method my_pkg.fusion:mine``),
+  from the installed packages or, as ``python -m`` would, the current folder (appended to
+  ``sys.path`` for the lookup and left there for the worker processes).
 
 The name (as given) is what ``metrics.json``, ``frames.csv`` and the sweep tables show,
-and what worker processes resolve again, so a ``module:function`` must be importable there.
+and what worker processes resolve again, so a ``module:function`` must be importable there
+(on a Dask cluster: installed on the workers).
 """
 
 from __future__ import annotations
 
 import functools
 import importlib
+import os
+import sys
 from importlib.metadata import entry_points
 from typing import Final, Protocol
 
@@ -70,10 +75,20 @@ def _import(spec: str) -> FusionMethod:
     module_name, _, attribute = spec.partition(":")
     if not module_name or not attribute:
         raise MethodError(f"fusion method {spec!r}: expected package.module:function")
+    folder = os.getcwd()
+    if not any(os.path.abspath(entry or os.curdir) == folder for entry in sys.path):
+        sys.path.append(folder)
     try:
         target = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise MethodError(f"fusion method {spec!r}: cannot import {module_name}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - whatever the module raises while it loads is named, not a traceback
+        missing = isinstance(exc, ModuleNotFoundError) and exc.name is not None and (
+            module_name == exc.name or module_name.startswith(f"{exc.name}."))
+        if not missing:
+            raise MethodError(f"fusion method {spec!r}: importing {module_name} failed: "
+                              f"{type(exc).__name__}: {exc}") from None
+        raise MethodError(f"fusion method {spec!r}: no module {exc.name} in the installed packages nor in the "
+                          f"current folder {folder}: run from the folder that holds "
+                          f"{module_name.replace('.', os.sep)}.py, or install its package") from None
     for part in attribute.split("."):
         if not hasattr(target, part):
             raise MethodError(f"fusion method {spec!r}: {module_name} has no {attribute}")

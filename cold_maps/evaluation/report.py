@@ -571,11 +571,12 @@ def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
 
 
 def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
-                     road_types: Mapping[str, str] | None = None, warnings: Sequence[str] = ()) -> str:
-    """``summary.md``: ``warnings`` on the ground truth first, one row per scenario (like
-    the paper's Table II), then, for maps named in ``road_types`` (map -> paper road
-    type), the side-by-side with the paper."""
-    parts = ["# cold-eval summary\n"]
+                     road_types: Mapping[str, str] | None = None, warnings: Sequence[str] = (),
+                     program: str = "cold-eval") -> str:
+    """``summary.md`` of the command ``program``: ``warnings`` on the ground truth first,
+    one row per scenario (like the paper's Table II), then, for maps named in
+    ``road_types`` (map -> paper road type), the side-by-side with the paper."""
+    parts = [f"# {program} summary\n"]
     if partial:
         parts.append("\n**PARTIAL RUN: interrupted; the figures cover only the frames evaluated.**\n")
     if warnings:

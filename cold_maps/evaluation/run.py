@@ -145,11 +145,19 @@ NO_FUSIONS: Final[str] = "None: no pair was fused.\n"
 """Body of a summary section that tabulates fused pairs when there are none."""
 
 
+UNKNOWN_RELATIONS: Final[str] = ("Not determined: {fused} fused pairs, none with a known true lane relation "
+                                  "(a recording carries none; cold-eval takes it from the drives' lane graph).\n")
+"""Body of the false-fusion section when pairs were fused but none can be judged."""
+
+
 def false_fusion_markdown(collector: Collector) -> str:
     """Per scenario with fusibility decisions: the fusions of pairs that are not on one lane
-    (their errors are in the main table) and the errors of the correct fusions alone; ""
+    (their errors are in the main table) and the errors of the correct fusions alone;
+    :data:`UNKNOWN_RELATIONS` when pairs were fused but none has a known true relation; ""
     when no pair was fused."""
     rows = []
+    fused_pairs = sum(1 for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
+                      if key.fusion != "local" and key.boundary == "left" for r in accumulator.records if r.fused)
     for key, accumulator in collector.accumulators.items():
         fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
         if not fused:
@@ -161,7 +169,7 @@ def false_fusion_markdown(collector: Collector) -> str:
         rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {key.boundary} | "
                     f"{len(fused)} | {wrong} | {stats} |")
     if not rows:
-        return ""
+        return UNKNOWN_RELATIONS.format(fused=fused_pairs) if fused_pairs else ""
     return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
             "false fusions; their errors are included in the table above. The last two columns pool the "
             "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | boundary | fused | false fusions | "
@@ -169,14 +177,15 @@ def false_fusion_markdown(collector: Collector) -> str:
 
 
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
-                  plots: bool = True, results: Sequence[ScenarioResult] | None = None) -> list[ScenarioResult]:
-    """``frames.csv``, ``summary.md`` (the per-scenario table, notes, then ``sections``:
-    (title, markdown)), ``metrics.json`` and the plots; returns the scenario results
-    (``results``: the collector's, when the caller has them already)."""
+                  plots: bool = True, results: Sequence[ScenarioResult] | None = None,
+                  program: str = "cold-eval") -> list[ScenarioResult]:
+    """``frames.csv``, ``summary.md`` of the command ``program`` (the per-scenario table,
+    notes, then ``sections``: (title, markdown)), ``metrics.json`` and the plots; returns the
+    scenario results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
-    text = summary_markdown(results, partial=partial, warnings=run_warnings(collector))
+    text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program)
     if collector.notes:
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
     sections = [*sections, ("False fusions", false_fusion_markdown(collector))]

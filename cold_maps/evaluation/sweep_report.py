@@ -18,6 +18,9 @@ SAFE_MAX_ERROR_M: Final[float] = 0.75
 """A gap is safe when the fused lane's largest error stays within this (m), as in the paper."""
 SUMMARY_NAME: Final[str] = "summary.md"
 PLOTS_DIR: Final[str] = "plots"
+MAP_PLOT: Final[str] = "sweep_{map}.png"
+"""File name (in ``PLOTS_DIR``) of a map's plot against the gap."""
+SAFE_GAP_PLOT: Final[str] = "safe_gap.png"
 
 
 @dataclass(frozen=True)
@@ -87,10 +90,18 @@ def _number(value: float | None, digits: int = 3) -> str:
     return "–" if value is None else f"{value:.{digits}f}"
 
 
-def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: int) -> str:
-    """The sweep's summary: the error and range table against d_s and the safe gaps."""
+INTERRUPTED_WRITING: Final[str] = ("**PARTIAL: interrupted while the tables were written; results.parquet, "
+                                    "results.csv and the plots are not written (the finished cells are kept): run "
+                                    "the same command again to write them.**\n\n")
+"""The status line of a summary whose tables an interrupt cut short."""
+
+
+def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: int, interrupted: bool = False) -> str:
+    """The sweep's summary: the error and range table against d_s and the safe gaps.
+    ``interrupted``: the tables and plots were not written (:data:`INTERRUPTED_WRITING`)."""
     points = gap_points(rows)
     status = "" if finished == cells else f"**PARTIAL SWEEP: {finished} of {cells} cells finished.**\n\n"
+    status += INTERRUPTED_WRITING if interrupted else ""
     lines = [f"# Sweep\n\n{status}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over seeds "
              "and both borders, the range their mean.\n\n## Spline fusion against the gap d_s\n\n"
              "| map | method | noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | range [m] | "
@@ -135,7 +146,7 @@ def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
             axis.grid(True, alpha=0.3)
         axes[0].axhline(SAFE_MAX_ERROR_M, color="grey", linestyle="--", linewidth=1)
         axes[0].legend(fontsize="small")
-        written.append(_save(figure, folder / f"sweep_{map_name}.png"))
+        written.append(_save(figure, folder / MAP_PLOT.format(map=map_name)))
     gaps = safe_gaps(points)
     if gaps:
         figure, axis = plt.subplots(figsize=(8, 4.5))
@@ -150,7 +161,7 @@ def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
         axis.set_ylabel(f"safe gap d_s [m] (max error <= {SAFE_MAX_ERROR_M:g} m; 0: none)")
         axis.grid(True, alpha=0.3)
         axis.legend(fontsize="small")
-        written.append(_save(figure, folder / "safe_gap.png"))
+        written.append(_save(figure, folder / SAFE_GAP_PLOT))
     return written
 
 
@@ -164,9 +175,27 @@ def _save(figure: Any, path: Path) -> Path:
     return path
 
 
-def write_report(out: Path, rows: Sequence[dict[str, Any]], *, cells: int, finished: int, plots: bool = True) -> None:
-    """``summary.md`` (atomically) and, unless ``plots`` is False, the plots."""
+def write_report(out: Path, rows: Sequence[dict[str, Any]], *, cells: int, finished: int, plots: bool = True,
+                 interrupted: bool = False) -> None:
+    """``summary.md`` (atomically) and, unless ``plots`` is False, the plots; ``interrupted``
+    marks the summary of a sweep whose tables were not written."""
     with atomic_output(out / SUMMARY_NAME) as stream:
-        stream.write(summary_markdown(rows, cells=cells, finished=finished))
+        stream.write(summary_markdown(rows, cells=cells, finished=finished, interrupted=interrupted))
     if plots and rows:
         write_plots(out, rows)
+
+
+def discard_outputs(out: Path) -> None:
+    """Removes the tables and plots of ``out`` (``atomic_output`` leaves no half-written
+    file), and ``plots/`` when nothing else is left in it: what an interrupt cut short must
+    not stand beside a partial summary as if complete, nor a previous run's as if current."""
+    from cold_maps.evaluation.sweep import RESULTS_CSV, RESULTS_PARQUET
+
+    for name in (RESULTS_PARQUET, RESULTS_CSV):
+        (out / name).unlink(missing_ok=True)
+    folder = out / PLOTS_DIR
+    if folder.is_dir():
+        for path in (*folder.glob(MAP_PLOT.format(map="*")), folder / SAFE_GAP_PLOT):
+            path.unlink(missing_ok=True)
+        if not any(folder.iterdir()):
+            folder.rmdir()

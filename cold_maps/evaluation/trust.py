@@ -83,3 +83,10 @@ def unmatched_warnings(collector: Collector) -> list[str]:
 def run_warnings(collector: Collector) -> Sequence[str]:
     """Every warning of the run: ``check`` flags on driven lanes, then GT coverage."""
     return [*collector.gt_warnings, *unmatched_warnings(collector)]
+
+
+def verdict(collector: Collector) -> str:
+    """The trust verdict a command's result line ends with: "" when the ground truth is
+    trustworthy on the run, else ``; GROUND TRUTH NOT TRUSTWORTHY: warning | ...``."""
+    warnings = run_warnings(collector)
+    return f"; GROUND TRUTH NOT TRUSTWORTHY: {' | '.join(warnings)}" if warnings else ""
