@@ -92,9 +92,10 @@ def lateral_sigmas(borders: tuple[NDArrayFloat, NDArrayFloat], errors: SensorErr
     noise = errors.noise_sigma_m
     if lane_error is None and noise == 0.0:
         return None, None
-    out = [np.hypot(np.zeros(len(border)) if lane_error is None else lane_error.sigma_m(border[:, 0]), noise)
-           for border in borders]
-    return out[0], out[1]
+    if lane_error is None:
+        return np.full(len(borders[0]), noise), np.full(len(borders[1]), noise)
+    out = [lane_error.sigma_m(border[:, 0]) for border in borders]
+    return (np.hypot(out[0], noise), np.hypot(out[1], noise)) if noise > 0.0 else (out[0], out[1])
 
 
 def pose_covariance(errors: SensorErrorModel, role: str) -> NDArrayFloat | None:
