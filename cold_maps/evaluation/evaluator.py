@@ -48,6 +48,7 @@ from cold_maps.simulation.drive import (
     require_driving_lanes,
     route_from_start,
 )
+from cold_maps.simulation.lane_model_error import LaneModelErrorSampler
 from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
 from cold_maps.simulation.sensor_errors import SensorErrorModel
@@ -83,6 +84,9 @@ class MapEvaluator:
         self.fit_notes: tuple[str, ...] = ()
         self.drives, self.coverage = self._drives()
         self.drive_rngs = self.rng.spawn(len(self.drives))
+        self.lane_errors = (None if plan.lane_error.is_zero else
+                            [LaneModelErrorSampler(plan.lane_error, plan.seed, i) for i in range(len(self.drives))])
+        """The lane-model error of each drive, or None when the plan has none."""
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
@@ -211,9 +215,9 @@ class MapEvaluator:
     @property
     def frames_independent(self) -> bool:
         """Whether a frame can be evaluated without the frames before it: the sensor error
-        models are off (nothing draws from the drive's generator) and no history or message
-        exchange carries state from frame to frame."""
-        return self.exchange is None and self.plan.errors == SensorErrorModel()
+        models are off (nothing draws from the drive's generator, no lane-model error
+        evolves) and no history or message exchange carries state from frame to frame."""
+        return self.exchange is None and self.plan.errors == SensorErrorModel() and self.lane_errors is None
 
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""
@@ -234,7 +238,9 @@ class MapEvaluator:
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
         self._relations.clear()
         self._true_lanes.clear()
-        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours)
+        lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
+        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours,
+                              lane_error=lane_error)
                   for name, state in drive.states(frame).items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:

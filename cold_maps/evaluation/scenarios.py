@@ -17,6 +17,7 @@ from cold_maps.evaluation.methods import MethodError, resolve_method
 from cold_maps.evaluation.report import ScenarioKey, scenario_label
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
+from cold_maps.simulation.lane_model_error import LaneModelErrorParams
 from cold_maps.simulation.messages import MessageModel
 from cold_maps.simulation.odometry import OdometryModel
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
@@ -147,6 +148,9 @@ class MapPlan:
         start_lane: the lane every route starts on, or None for routes spread over the map.
         distractors: add turning coops, adjacent/opposite-lane and behind vehicles.
         errors: sensor error models (all off by default).
+        lane_error: the correlated cubic lane-model error of every vehicle's own-lane
+            detection (``simulation.lane_model_error``; all zero by default: the ideal
+            sensor). The sensor profile sets it.
         params: fusion parameters.
         road_type: the paper's road type of this map (for the side-by-side), or None.
         history_m: lane history every vehicle keeps and sends (m; 0 = none, as the paper).
@@ -166,6 +170,7 @@ class MapPlan:
     start_lane: LaneKey | None = None
     distractors: bool = True
     errors: SensorErrorModel = SensorErrorModel()
+    lane_error: LaneModelErrorParams = LaneModelErrorParams()
     params: fusion.FusionParams = fusion.DEFAULT_PARAMS
     road_type: str | None = None
     history_m: float = 0.0

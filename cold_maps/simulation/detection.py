@@ -15,6 +15,7 @@ import numpy as np
 import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.drive import VehicleState
+from cold_maps.simulation.lane_model_error import LaneModelErrorParams, LaneModelErrorSampler
 from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import Detection, LaneSensor, vehicle_to_world, world_to_vehicle
 from cold_maps.simulation.sensor_errors import SensorErrorModel
@@ -39,18 +40,27 @@ class Sensed:
 
 
 def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
-          stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None) -> Sensed:
-    """The detection of a vehicle: the sensor on its track, then the error models, points
+          stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None,
+          lane_error: LaneModelErrorSampler | None = None) -> Sensed:
+    """The detection of a vehicle: the sensor on its track, then the error models
+    (``errors``, then the drive's ``lane_error`` on the borders of its own lane), points
     rounded to 1 µm; the ego's pose carries no localisation error (it is the reference).
-    With ``neighbours`` the lanes beside its own (same range and sampling, each through the
-    same error models, a dropped one left out) and the road edges come with it."""
+    With ``neighbours`` the lanes beside its own (same range and sampling, each through
+    ``errors``, a dropped one left out) and the road edges come with it.
+
+    The detection states its uncertainty when an error model has one: per-point lateral
+    1σ of both borders (:func:`lateral_sigmas`) and the pose covariance (:func:`pose_covariance`);
+    None when the model is off (the ideal sensor)."""
     raw = sensor.detect(state.track.strip, state.station)
     if raw is None:
         return Sensed(state, None)
     borders = errors.apply(raw.left, raw.right, rng)
     if borders is None:
         return Sensed(state, None)
+    if lane_error is not None:
+        borders = lane_error.perturb(state.name, stamp_s, *borders)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
+    sigmas = lateral_sigmas(borders, errors, None if lane_error is None else lane_error.params)
     lanes: list[fusion.NeighbourLane] = []
     branches: list[fusion.LaneBranch] = []
     edges = None
@@ -68,7 +78,35 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
-                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)))
+                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches),
+                                              left_sigma=sigmas[0], right_sigma=sigmas[1],
+                                              pose_cov=pose_covariance(errors, state.role)))
+
+
+def lateral_sigmas(borders: tuple[NDArrayFloat, NDArrayFloat], errors: SensorErrorModel,
+                   lane_error: LaneModelErrorParams | None) -> tuple[NDArrayFloat | None, NDArrayFloat | None]:
+    """Lateral 1σ (m) of every point of the ``(left, right)`` borders (vehicle frame, m):
+    the lane model's closed form at the point's x and the per-point noise σ, independent,
+    so their variances add; (None, None) when neither model is on. The constant offset and
+    heading bias are systematic and the range jitter is along the lane: none adds to σ."""
+    noise = errors.noise_sigma_m
+    if lane_error is None and noise == 0.0:
+        return None, None
+    if lane_error is None:
+        return np.full(len(borders[0]), noise), np.full(len(borders[1]), noise)
+    out = [lane_error.sigma_m(border[:, 0]) for border in borders]
+    return (np.hypot(out[0], noise), np.hypot(out[1], noise)) if noise > 0.0 else (out[0], out[1])
+
+
+def pose_covariance(errors: SensorErrorModel, role: str) -> NDArrayFloat | None:
+    """Covariance of the reported pose's error in (x m, y m, yaw rad), world frame, from the
+    localisation error model (diagonal: independent draws); zero for the ego, whose pose is
+    exact; None when the model is off."""
+    if errors.pose_sigma_xy_m == 0.0 and errors.pose_sigma_yaw_rad == 0.0:
+        return None
+    if role == "ego":
+        return np.zeros((3, 3))
+    return np.diag([errors.pose_sigma_xy_m**2, errors.pose_sigma_xy_m**2, errors.pose_sigma_yaw_rad**2])
 
 
 def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: SensorErrorModel,

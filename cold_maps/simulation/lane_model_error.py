@@ -9,15 +9,31 @@ to frame as AR(1) with time constant τ: δc(t + Δt) = ρ·δc(t) + √(1 − �
 
 Closed form of the lateral 1σ at distance x:
 σ(x)² = σ0² + σ1²·x² + σ2²·x⁴/4 + σ3²·x⁶/36 + σ_w².
+
+:class:`LaneModelErrorSampler` draws this error for the vehicles of one drive: x is each
+point's forward coordinate in the vehicle frame (m), e(x) moves the point along its
+border's left normal (vehicle frame; positive = to the left), and every vehicle has its own
+generator (seeded from the run's seed, the drive and the vehicle's name) and its own
+coefficients per border, evolved over the stamps at which it detects.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import zlib
+from dataclasses import dataclass, field
+from typing import Final
 
 import numpy as np
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.simulation.sensor_errors import left_normals
+
+LANE_MODEL_STREAM: Final[int] = 13
+"""Sub-stream of the run's seed that the lane-model errors draw from (the history and the
+messages use 11 and 12, ``simulation.exchange``): the other error models' draws do not
+depend on whether this one is on."""
+_BORDERS: Final[tuple[str, str]] = ("left", "right")
 
 
 @dataclass(frozen=True)
@@ -61,3 +77,83 @@ class LaneModelErrorParams:
         variance = (self.sigma_c0_m**2 + self.sigma_c1_rad**2 * x2 + self.sigma_c2_per_m**2 * x2 * x2 / 4.0
                     + self.sigma_c3_per_m2**2 * x2**3 / 36.0 + self.white_m**2)
         return np.sqrt(variance)
+
+    @property
+    def coefficient_sigmas(self) -> NDArrayFloat:
+        """1σ of (δc0 m, δc1 rad, δc2 1/m, δc3 1/m²), shape (4,)."""
+        return np.array([self.sigma_c0_m, self.sigma_c1_rad, self.sigma_c2_per_m, self.sigma_c3_per_m2])
+
+
+def evolve(coefficients: NDArrayFloat | None, params: LaneModelErrorParams, dt_s: float, rng: np.random.Generator,
+           chains: tuple[int, ...] = ()) -> NDArrayFloat:
+    """The coefficients ``dt_s`` (s, >= 0) after ``coefficients`` (shape ``chains + (4,)``):
+    the AR(1) step ρ·c + √(1 − ρ²)·σ·N(0, 1), ρ = exp(−dt_s/τ); None draws them from the
+    stationary N(0, σ²). Coefficients with σ 0 stay 0; no draw when every σ is 0."""
+    if not (math.isfinite(dt_s) and dt_s >= 0.0):
+        raise ValueError(f"lane model error: time step must be a finite value >= 0 s, got {dt_s!r}")
+    sigmas = params.coefficient_sigmas
+    shape = (*chains, 4) if coefficients is None else np.shape(coefficients)
+    if not sigmas.any():
+        return np.zeros(shape)
+    fresh = rng.standard_normal(shape) * sigmas
+    if coefficients is None:
+        return fresh
+    rho = math.exp(-dt_s / params.tau_s)
+    return rho * np.asarray(coefficients) + math.sqrt(1.0 - rho * rho) * fresh
+
+
+def lateral_error(coefficients: NDArrayFloat, x_m: NDArrayFloat, params: LaneModelErrorParams,
+                  rng: np.random.Generator) -> NDArrayFloat:
+    """e(x) (m) at distances ``x_m`` (shape (N,)) for coefficients of shape ``chains + (4,)``:
+    δc0 + δc1·x + δc2·x²/2 + δc3·x³/6 plus white noise N(0, σ_w²) per point (drawn only when
+    σ_w > 0); shape ``chains + (N,)``."""
+    c = np.asarray(coefficients)[..., None, :]
+    x = np.asarray(x_m, dtype=np.float64)
+    error = c[..., 0] + x * (c[..., 1] + x * (c[..., 2] / 2.0 + x * c[..., 3] / 6.0))
+    if params.white_m > 0.0:
+        error = error + rng.normal(0.0, params.white_m, error.shape)
+    return error
+
+
+@dataclass
+class _Chain:
+    """One vehicle's state: its generator, the coefficients of its (left, right) borders
+    (shape (2, 4)) and the stamp they belong to (s)."""
+
+    rng: np.random.Generator
+    coefficients: NDArrayFloat
+    stamp_s: float
+
+
+@dataclass
+class LaneModelErrorSampler:
+    """The lane-model errors of the vehicles of one drive (module docstring).
+
+    Fields:
+        params: the model (the ideal sensor, all zero, needs no sampler).
+        seed: the run's seed.
+        drive: the drive's index in its map's evaluation.
+    """
+
+    params: LaneModelErrorParams
+    seed: int
+    drive: int
+    _chains: dict[str, _Chain] = field(default_factory=dict, init=False, repr=False)
+
+    def perturb(self, vehicle: str, stamp_s: float, left: NDArrayFloat,
+                right: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """The ``(left, right)`` borders (vehicle frame, m) of ``vehicle``'s detection at
+        ``stamp_s`` (s) with the lane-model error; stamps of a vehicle must not decrease."""
+        chain = self._chains.get(vehicle)
+        if chain is None:
+            rng = np.random.default_rng([self.seed, LANE_MODEL_STREAM, self.drive, zlib.crc32(vehicle.encode())])
+            chain = self._chains[vehicle] = _Chain(rng, evolve(None, self.params, 0.0, rng, (2,)), stamp_s)
+        elif stamp_s < chain.stamp_s:
+            raise ValueError(f"lane model error: {vehicle} detects at {stamp_s!r} s, before its last detection at "
+                             f"{chain.stamp_s!r} s")
+        else:
+            chain.coefficients = evolve(chain.coefficients, self.params, stamp_s - chain.stamp_s, chain.rng)
+            chain.stamp_s = stamp_s
+        moved = [border + lateral_error(c, border[:, 0], self.params, chain.rng)[:, None] * left_normals(border, name)
+                 for name, border, c in zip(_BORDERS, (left, right), chain.coefficients)]
+        return moved[0], moved[1]

@@ -49,11 +49,14 @@ def left_normals(points: NDArrayFloat, name: str = "polyline") -> NDArrayFloat:
     Tangents are central differences (one-sided at the ends), so on a uniformly sampled
     circle the interior normals are exactly radial.
     """
-    tangents = np.gradient(points, axis=0)
+    tangents = np.empty_like(points)
+    tangents[1:-1] = (points[2:] - points[:-2]) / 2.0  # as np.gradient, at half its cost
+    tangents[0] = points[1] - points[0]
+    tangents[-1] = points[-1] - points[-2]
     norms = np.hypot(tangents[:, 0], tangents[:, 1])
     if np.any(norms == 0.0):
         raise ValueError(f"{name}: repeated or reversing points, normal undefined")
-    tangents = tangents / norms[:, None]
+    tangents /= norms[:, None]
     return np.column_stack((-tangents[:, 1], tangents[:, 0]))
 
 
