@@ -23,6 +23,15 @@ from typing import Callable, Final, Sequence
 from cold_maps.cli.common import cli_entry, gap_list, int_in, make_parser, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
+from cold_maps.evaluation.safety import (
+    DEFAULT_DECELERATION_MPS2,
+    DEFAULT_REACTION_TIME_S,
+    LANE_ACCURACY_M,
+    MAX_DECELERATION_MPS2,
+    MAX_REACTION_TIME_S,
+    STOPPING_FORMULA,
+    StoppingRule,
+)
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, PAPER_GAPS_M
@@ -60,6 +69,24 @@ def _non_negative(text: str) -> float:
     if not 0 <= value < MAX_OPTION_VALUE:
         raise argparse.ArgumentTypeError(f"expected a number >= 0 and < {MAX_OPTION_VALUE:g}, got {text}")
     return value
+
+
+def _reaction_time(text: str) -> float:
+    """argparse type: a reaction time t_r (s), 0 <= t_r < ``MAX_REACTION_TIME_S``."""
+    try:
+        return StoppingRule(reaction_time_s=float(text)).reaction_time_s
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a time >= 0 s and < {MAX_REACTION_TIME_S:g} s, "
+                                         f"got {text!r}") from None
+
+
+def _deceleration(text: str) -> float:
+    """argparse type: a deceleration a (m/s²), 0 < a <= ``MAX_DECELERATION_MPS2``."""
+    try:
+        return StoppingRule(deceleration_mps2=float(text)).deceleration_mps2
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a deceleration > 0 and <= {MAX_DECELERATION_MPS2:g} m/s², "
+                                         f"got {text!r}") from None
 
 
 def _stamp_base(text: str) -> int:
@@ -128,6 +155,15 @@ def build_parser() -> argparse.ArgumentParser:
                              "at forks (default 0: the vehicle's own lane only)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
+    safety = parser.add_argument_group(
+        f"stopping distance {STOPPING_FORMULA} to which the lane is known within "
+        f"{LANE_ACCURACY_M:g} m (v = --speed; docs/metrics.md)")
+    safety.add_argument("--reaction-time", type=_reaction_time, default=DEFAULT_REACTION_TIME_S, metavar="S",
+                        help=f"reaction time t_r in s (default {DEFAULT_REACTION_TIME_S:g}: AASHTO Green Book, "
+                             "stopping sight distance)")
+    safety.add_argument("--deceleration", type=_deceleration, default=DEFAULT_DECELERATION_MPS2, metavar="MPS2",
+                        help=f"deceleration a in m/s² (default {DEFAULT_DECELERATION_MPS2:g}: AASHTO Green Book, "
+                             "stopping sight distance)")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
     for flag, name, unit in (("--lateral-offset", "lateral_offset_m", "m"), ("--noise", "noise_sigma_m", "m, σ"),
                              ("--heading-bias", "heading_bias_rad", "rad"),
@@ -178,13 +214,15 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         "lateral_offset_m", "noise_sigma_m", "heading_bias_rad", "range_jitter_sigma_m", "drop_probability",
         "pose_sigma_xy_m", "pose_sigma_yaw_rad")})
     interpolations = _interpolations(args)
+    stopping = StoppingRule(args.reaction_time, args.deceleration)
     if args.paper:
         from dataclasses import replace
 
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes), args) for plan in plans]
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping), args)
+                for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -196,7 +234,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params, lanes=args.lanes), args)
+                                 params=params, lanes=args.lanes, stopping=stopping), args)
             for path in args.map]
 
 

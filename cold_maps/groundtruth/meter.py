@@ -15,12 +15,13 @@ does not continue would measure every point beyond to that end.
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
+from gt_matching.metrics import known_distance_m, near_count
 from gt_matching.polyline import arc_lengths
 
 if TYPE_CHECKING:
@@ -58,6 +59,20 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
     return total
 
 
+def chord_stations_m(border: NDArrayFloat) -> NDArrayFloat:
+    """Each point's distance (m) from the first along a border (``(N, 2)``, driving order),
+    measured like ``covered_length_m``: along chords of about ``RANGE_CHORD_M`` between
+    which the points are placed by their own arc length, so that detection noise does not
+    lengthen it. Non-decreasing, 0 at the first point; on a lane that starts at the ego, the
+    distance from the ego along the lane (``gt_matching.metrics`` splits errors by it)."""
+    arc = arc_lengths(border)
+    chunks = arc // RANGE_CHORD_M
+    ends = np.unique(np.concatenate(([0], 1 + np.flatnonzero(np.diff(chunks)), [arc.size - 1])))
+    chords = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(border[ends], axis=0).T))))
+    stations: NDArrayFloat = np.interp(arc, arc[ends], chords)
+    return stations
+
+
 GT_END_TOLERANCE_M: Final[float] = 0.1
 """A detected point more than this (m) past an end of its GT border, along the border's
 end direction, lies beyond the GT (one detection sample spacing)."""
@@ -82,6 +97,8 @@ class Measurement:
         matched: False when the lane does not follow the sender's lane (see gt_matching).
         gt_unmatched: "" when the GT covers the lane, else why not: ``OFF_LANE`` or
             ``PAST_GT_END``.
+        left_ahead_m, right_ahead_m: per detected point, its distance from the lane's
+            first point along the border (``chord_stations_m``, m).
     """
 
     left_errors_m: NDArrayFloat
@@ -92,6 +109,19 @@ class Measurement:
     right_gt: NDArrayFloat
     matched: bool
     gt_unmatched: str = ""
+    left_ahead_m: NDArrayFloat = field(default_factory=lambda: np.empty(0))
+    right_ahead_m: NDArrayFloat = field(default_factory=lambda: np.empty(0))
+
+    def known_to_m(self, threshold_m: float) -> float:
+        """How far from the ego both borders are known within ``threshold_m`` (m): the smaller
+        of their ``gt_matching.metrics.known_distance_m``."""
+        return min(known_distance_m(self.left_errors_m, self.left_ahead_m, threshold_m),
+                   known_distance_m(self.right_errors_m, self.right_ahead_m, threshold_m))
+
+    def near_points(self) -> tuple[int, int]:
+        """How many leading points of the left and the right border are near the ego
+        (``gt_matching.metrics.near_count``)."""
+        return near_count(self.left_ahead_m), near_count(self.right_ahead_m)
 
 
 #: Vertices next to an end of a GT border searched first for one farther than
@@ -160,10 +190,12 @@ class GroundTruthMeter:
         past = sum(points_past_ends(np.asarray(points, dtype=np.float64), gt, border.distances_m, self.step_m)
                    for points, gt, border in ((left, match.left_gt, found.left), (right, match.right_gt, found.right)))
         reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
+        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
         return Measurement(found.left.distances_m, found.right.distances_m,
-                           covered_length_m(np.asarray(left, dtype=np.float64), found.left.distances_m),
-                           covered_length_m(np.asarray(right, dtype=np.float64), found.right.distances_m),
-                           match.left_gt, match.right_gt, match.matched, reason)
+                           covered_length_m(left, found.left.distances_m),
+                           covered_length_m(right, found.right.distances_m),
+                           match.left_gt, match.right_gt, match.matched, reason,
+                           chord_stations_m(left), chord_stations_m(right))
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:

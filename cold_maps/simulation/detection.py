@@ -32,10 +32,13 @@ class Sensed:
         state: where the vehicle is.
         detection: what it sends (reported pose with localisation error, borders in its
             vehicle frame with the sensor errors), or None when the frame was dropped.
+        end_reason: why the sensor's detection ended (``sensor.Detection.end_reason``);
+            "" when unknown or dropped.
     """
 
     state: VehicleState
     detection: fusion.LaneDetection | None
+    end_reason: str = ""
 
 
 def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
@@ -68,7 +71,8 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
-                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)))
+                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)),
+                  raw.end_reason)
 
 
 def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: SensorErrorModel,
