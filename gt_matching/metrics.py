@@ -178,7 +178,7 @@ def near_count(ahead_m: NDArrayFloat, split_m: float = NEAR_FAR_SPLIT_M) -> int:
 
 def known_distance_m(distances_m: NDArrayFloat, ahead_m: NDArrayFloat, threshold_m: float) -> float:
     """How far from the ego a border is known within ``threshold_m``: the distance along it
-    (``ahead_m``, m, non-decreasing, 0 at the ego) of the last point before the first whose
+    (``ahead_m``, m, from the ego, non-decreasing) of the last point before the first whose
     error (``distances_m``, m) exceeds ``threshold_m``; of its last point when none does;
     0 when its first point does or it has none. So the result is >= D (> 0) exactly when
     the border has a point at D or beyond and every point up to the first such point is within

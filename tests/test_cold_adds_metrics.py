@@ -24,7 +24,7 @@ from cold_maps.evaluation.report import (
     write_report,
 )
 from cold_maps.evaluation.safety import LANE_ACCURACY_M, StoppingError, StoppingRule
-from cold_maps.groundtruth.meter import Measurement, chord_stations_m, covered_length_m
+from cold_maps.groundtruth.meter import Measurement, ahead_of_m, chord_stations_m, covered_length_m
 from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.simulation.sensor import END_MAP, END_RANGE, LaneSensor
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, ErrorStats, known_distance_m, near_count
@@ -242,3 +242,14 @@ def test_new_keys_round_trip_and_old_files_still_read(tmp_path):
 def test_invalid_new_fields_are_named(make, message):
     with pytest.raises(ReportError, match=message):
         make()
+
+
+def test_distance_from_the_ego_counts_a_minimum_range():
+    """A border whose first point lies 3 m ahead of the vehicle (a camera's minimum range),
+    the vehicle at (10, 5) heading 90°: its points are 3 m + their distance along it ahead."""
+    y = np.arange(8.0, 40.0, 0.1)
+    border = np.column_stack((np.full_like(y, 10.0 - 1.75), y))
+    assert ahead_of_m(border, (10.0, 5.0, math.pi / 2)) == pytest.approx(y - 5.0, abs=1e-9)
+    assert ahead_of_m(border, None) == pytest.approx(y - 8.0, abs=1e-9)
+    # a border that starts behind the vehicle counts from its first point
+    assert ahead_of_m(border, (10.0, 9.0, math.pi / 2))[0] == 0.0

@@ -14,6 +14,7 @@ does not continue would measure every point beyond to that end.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
@@ -63,14 +64,30 @@ def chord_stations_m(border: NDArrayFloat) -> NDArrayFloat:
     """Each point's distance (m) from the first along a border (``(N, 2)``, driving order),
     measured like ``covered_length_m``: along chords of about ``RANGE_CHORD_M`` between
     which the points are placed by their own arc length, so that detection noise does not
-    lengthen it. Non-decreasing, 0 at the first point; on a lane that starts at the ego, the
-    distance from the ego along the lane (``gt_matching.metrics`` splits errors by it)."""
+    lengthen it. Non-decreasing, 0 at the first point."""
     arc = arc_lengths(border)
     chunks = arc // RANGE_CHORD_M
-    ends = np.unique(np.concatenate(([0], 1 + np.flatnonzero(np.diff(chunks)), [arc.size - 1])))
+    ends = np.concatenate(([0], 1 + np.flatnonzero(chunks[1:] != chunks[:-1])))
+    if ends[-1] != arc.size - 1:
+        ends = np.append(ends, arc.size - 1)
     chords = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(border[ends], axis=0).T))))
     stations: NDArrayFloat = np.interp(arc, arc[ends], chords)
     return stations
+
+
+def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) -> NDArrayFloat:
+    """Each point's distance (m) from a vehicle at ``pose`` (x m, y m, yaw rad, world frame)
+    along a border (``(N, 2)``, world frame, driving order) that starts at or ahead of it:
+    how far ahead of the vehicle its first point lies (its longitudinal coordinate in the
+    vehicle frame, 0 when behind; 0 for a detection from the vehicle's own cross-section,
+    the minimum range for a sensor that has one) plus :func:`chord_stations_m`. Without a
+    pose, from the first point."""
+    stations = chord_stations_m(border)
+    if pose is None or not border.size:
+        return stations
+    x, y, yaw = pose
+    start = math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y)
+    return stations + max(start, 0.0)
 
 
 GT_END_TOLERANCE_M: Final[float] = 0.1
@@ -97,8 +114,8 @@ class Measurement:
         matched: False when the lane does not follow the sender's lane (see gt_matching).
         gt_unmatched: "" when the GT covers the lane, else why not: ``OFF_LANE`` or
             ``PAST_GT_END``.
-        left_ahead_m, right_ahead_m: per detected point, its distance from the lane's
-            first point along the border (``chord_stations_m``, m).
+        left_ahead_m, right_ahead_m: per detected point, its distance from the sender
+            along the border (``ahead_of_m``, m; from the lane's first point without a pose).
     """
 
     left_errors_m: NDArrayFloat
@@ -184,8 +201,11 @@ class GroundTruthMeter:
             self._matches.move_to_end(key)
         return found
 
-    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
-        """Closest-point errors and range of a lane against the GT borders of ``match``."""
+    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat,
+               pose: tuple[float, float, float] | None = None) -> Measurement:
+        """Closest-point errors and range of a lane against the GT borders of ``match``; the
+        points' distances from the sender at ``pose`` (x m, y m, yaw rad; None: from the
+        lane's first points) by :func:`ahead_of_m`."""
         found = self.ground_truth.errors(left, right, match, others=False)
         past = sum(points_past_ends(np.asarray(points, dtype=np.float64), gt, border.distances_m, self.step_m)
                    for points, gt, border in ((left, match.left_gt, found.left), (right, match.right_gt, found.right)))
@@ -195,7 +215,7 @@ class GroundTruthMeter:
                            covered_length_m(left, found.left.distances_m),
                            covered_length_m(right, found.right.distances_m),
                            match.left_gt, match.right_gt, match.matched, reason,
-                           chord_stations_m(left), chord_stations_m(right))
+                           ahead_of_m(left, pose), ahead_of_m(right, pose))
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
@@ -204,4 +224,4 @@ class GroundTruthMeter:
         ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
         or to the lane itself; the errors are always against Lanelet2's borders. Raises
         ``gt_matching.MatchingError``."""
-        return self.errors(self.match(*(reference or (left, right)), pose), left, right)
+        return self.errors(self.match(*(reference or (left, right)), pose), left, right, pose)
