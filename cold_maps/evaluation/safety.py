@@ -27,11 +27,11 @@ STOPPING_FORMULA: Final[str] = f"d = {STOPPING_MARGIN:g}·(v·t_r + v²/(2a))"
 """The stopping distance as the outputs state it."""
 DEFAULT_REACTION_TIME_S: Final[float] = 2.5
 """Brake reaction time t_r (s): AASHTO, *A Policy on Geometric Design of Highways and
-Streets* ("Green Book", 7th ed. 2018), sec. 3.2.2 stopping sight distance (2.5 s, covering
-about 90 % of drivers)."""
+Streets* ("Green Book", 7th ed. 2018), sec. 3.2.2 stopping sight distance (2.5 s, above the
+90th percentile of drivers' brake reaction times)."""
 DEFAULT_DECELERATION_MPS2: Final[float] = 3.4
-"""Deceleration a (m/s²): AASHTO Green Book sec. 3.2.2 (3.4 m/s², 11.2 ft/s², what about
-90 % of drivers exceed on a wet road)."""
+"""Deceleration a (m/s²): AASHTO Green Book sec. 3.2.2 (3.4 m/s², 11.2 ft/s²: about 90 % of
+drivers brake harder, and a driver keeps steering control at it on a wet road)."""
 MAX_REACTION_TIME_S: Final[float] = 60.0
 """Bound (exclusive) of the reaction time a rule accepts (s)."""
 MAX_DECELERATION_MPS2: Final[float] = 100.0
