@@ -3,6 +3,7 @@ summarised per border."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Final
 
@@ -13,6 +14,9 @@ from gt_matching.polyline import NDArrayBool, NDArrayFloat
 
 #: The percentile reported as ``p95_error_m``.
 P95: Final = 95.0
+#: Points up to this distance from the ego are *near*, beyond it *far* (m): OpenLane's
+#: split of its near / far errors (its evaluation scores 0-40 m and 40-100 m ahead apart).
+NEAR_FAR_SPLIT_M: Final = 40.0
 
 
 def _percentile(values: NDArrayFloat, percent: float) -> float:
@@ -139,3 +143,48 @@ class LaneErrors:
             exact=self.exact,
             step_m=self.step_m,
         )
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Pooled statistics of closest-point distances.
+
+    Fields:
+        points: number of distances.
+        mean_error_m, max_error_m, p95_error_m: their mean, maximum and 95th percentile
+            (linear interpolation), m; NaN when ``points`` is 0.
+    """
+
+    points: int
+    mean_error_m: float
+    max_error_m: float
+    p95_error_m: float
+
+    @classmethod
+    def of(cls, distances_m: NDArrayFloat) -> ErrorStats:
+        """The statistics of ``distances_m`` (1-D, m)."""
+        if not distances_m.size:
+            return cls(0, math.nan, math.nan, math.nan)
+        return cls(int(distances_m.size), float(np.mean(distances_m)), float(np.max(distances_m)),
+                   _percentile(distances_m, P95))
+
+
+def near_count(ahead_m: NDArrayFloat, split_m: float = NEAR_FAR_SPLIT_M) -> int:
+    """How many leading points of a border lie within ``split_m`` of the ego: ``ahead_m``
+    (``(N,)``, m, non-decreasing) is each point's distance from the ego along the border;
+    the points up to the count are near (<= ``split_m``), the rest far."""
+    return int(np.searchsorted(ahead_m, split_m, side="right"))
+
+
+def known_distance_m(distances_m: NDArrayFloat, ahead_m: NDArrayFloat, threshold_m: float) -> float:
+    """How far from the ego a border is known within ``threshold_m``: the distance along it
+    (``ahead_m``, m, from the ego, non-decreasing) of the last point before the first whose
+    error (``distances_m``, m) exceeds ``threshold_m``; of its last point when none does;
+    0 when its first point does or it has none. So the result is >= D (> 0) exactly when
+    the border has a point at D or beyond and every point up to the first such point is within
+    the threshold (the stretch between two points counts only when both are)."""
+    if distances_m.shape != ahead_m.shape:
+        raise ValueError(f"known_distance_m: {distances_m.shape} errors but {ahead_m.shape} distances")
+    bad = np.flatnonzero(distances_m > threshold_m)
+    last = int(bad[0]) - 1 if bad.size else distances_m.size - 1
+    return float(ahead_m[last]) if last >= 0 else 0.0

@@ -16,7 +16,8 @@ from cold_maps.evaluation.evaluator import MapEvaluator
 from cold_maps.recording.recorder import METADATA_STATUS, read_detections, read_metadata
 
 RECORD_KEYS = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_m", "rmse_m", "max_error_m",
-               "p95_error_m", "perception_range_m", "frames", "fused_frames", "runtime_ms", "rejected", "fusibility"}
+               "p95_error_m", "perception_range_m", "frames", "fused_frames", "runtime_ms", "rejected", "fusibility",
+               "perception_range_distribution_m", "by_distance", "stopping", "end_reasons"}
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +50,25 @@ def test_outputs_and_metrics_schema(straight_run):
     assert "| straight | spline | hermite | 30.0 | left |" in summary and "Runtime (Table I)" in summary
     plots = {p.name for p in (out / "plots").iterdir()}
     assert {"errors_straight_convoy.png", "overlay_straight_spline-paper-d30.png"} <= plots
+
+
+def test_what_cold_adds_on_the_straight_road(straight_run):
+    """Ideal sensor on a straight road at 10 m/s, default stopping distance d = 43.7 m: the
+    ego alone (30 m) never knows its lane out to d, the convoy (55 m) always does; the ego's
+    detections all end at the sensor's range; only the spline lane (90 m) has far points."""
+    _, out = straight_run
+    _, records = _records(out)
+    local, convoy = records[("straight", "local", "", 0.0, "left")], records[("straight", "convoy", "", 0.0, "left")]
+    spline = records[("straight", "spline", "paper", 30.0, "left")]
+    assert local["stopping"]["distance_m"] == pytest.approx(1.1 * (10 * 2.5 + 100 / 6.8))
+    assert (local["stopping"]["share"], convoy["stopping"]["share"]) == (0.0, 1.0)
+    assert local["stopping"]["frames"] == local["frames"] == 8
+    assert local["end_reasons"] == {"range": 8} and convoy["end_reasons"] == {}
+    assert local["perception_range_distribution_m"]["p50"] == pytest.approx(30.0, abs=0.01)
+    assert local["by_distance"]["far"]["points"] == 0
+    assert convoy["by_distance"]["far"]["points"] == pytest.approx(8 * 150, abs=8)
+    assert spline["by_distance"]["far"]["points"] > 0 and spline["by_distance"]["far"]["max_error_m"] < 0.05
+    assert "stopping distance d = 1.1·(v·t_r + v²/(2a)) = 43.7 m" in (out / "summary.md").read_text()
 
 
 def test_mcap_channels_and_detections(straight_run):

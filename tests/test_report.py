@@ -104,7 +104,7 @@ def test_report_files_schema_and_round_trip(tmp_path):
     assert document["schema_version"] == 1 and document["partial"] is False
     required = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_m", "rmse_m", "max_error_m",
                 "p95_error_m", "perception_range_m", "frames", "fused_frames", "runtime_ms", "rejected",
-                "fusibility"}
+                "fusibility", "perception_range_distribution_m", "by_distance", "stopping", "end_reasons"}
     for record in document["scenarios"]:
         assert required <= set(record)
     back, partial = read_metrics_json(tmp_path / "metrics.json")

@@ -24,6 +24,14 @@ from cold_maps.cli.common import (UsageError, builds, cli_entry, finite_number, 
                                   make_parser, positive_int, validated, within)
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
+from cold_maps.evaluation.safety import (
+    DEFAULT_DECELERATION_MPS2,
+    DEFAULT_REACTION_TIME_S,
+    LANE_ACCURACY_M,
+    STOPPING_FORMULA,
+    StoppingError,
+    StoppingRule,
+)
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
 from cold_maps.recording.recorder import MAX_STAMP_BASE_NS, NS_PER_S
 from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, MAX_SPEED_MPS, PAPER_GAPS_M
@@ -68,6 +76,21 @@ def _message_option(field: str) -> Callable[[str], float]:
     """argparse type of a ``MessageModel`` field: a number >= 0 and < ``MAX_OPTION_VALUE``
     that the model accepts."""
     return validated(_non_negative, builds(MessageModel, field))
+
+
+def _stopping_value(field: str) -> Callable[[str], float]:
+    """argparse type: a value of the :class:`StoppingRule` field ``field``, checked by the rule."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        try:
+            return float(getattr(StoppingRule(**{field: value}), field))
+        except StoppingError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
 
 
 def _stamp_base(text: str) -> int:
@@ -136,6 +159,17 @@ def build_parser() -> argparse.ArgumentParser:
                              "at forks (default 0: the vehicle's own lane only)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
+    safety = parser.add_argument_group(
+        f"stopping distance {STOPPING_FORMULA} to which the lane is known within "
+        f"{LANE_ACCURACY_M:g} m (v = --speed; docs/metrics.md)")
+    safety.add_argument("--reaction-time", type=_stopping_value("reaction_time_s"), default=DEFAULT_REACTION_TIME_S,
+                        metavar="S",
+                        help=f"reaction time t_r in s (default {DEFAULT_REACTION_TIME_S:g}: AASHTO Green Book, "
+                             "stopping sight distance)")
+    safety.add_argument("--deceleration", type=_stopping_value("deceleration_mps2"),
+                        default=DEFAULT_DECELERATION_MPS2, metavar="MPS2",
+                        help=f"deceleration a in m/s² (default {DEFAULT_DECELERATION_MPS2:g}: AASHTO Green Book, "
+                             "stopping sight distance)")
     errors = parser.add_argument_group("sensor error models (all off by default, seeded)")
     for flag, name, unit in (("--lateral-offset", "lateral_offset_m", "m"), ("--noise", "noise_sigma_m", "m, σ"),
                              ("--heading-bias", "heading_bias_rad", "rad"),
@@ -193,13 +227,15 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         "lateral_offset_m", "noise_sigma_m", "heading_bias_rad", "range_jitter_sigma_m", "drop_probability",
         "pose_sigma_xy_m", "pose_sigma_yaw_rad")})
     interpolations = _interpolations(args)
+    stopping = StoppingRule(args.reaction_time, args.deceleration)
     if args.paper:
         from dataclasses import replace
 
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes), args) for plan in plans]
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping), args)
+                for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -211,7 +247,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params, lanes=args.lanes), args)
+                                 params=params, lanes=args.lanes, stopping=stopping), args)
             for path in args.map]
 
 

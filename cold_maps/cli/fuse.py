@@ -159,6 +159,8 @@ class Refuser:
              rejected: str, predicted: bool | None) -> None:
         from cold_maps.evaluation.report import FrameRecord, ScenarioKey
         from cold_maps.evaluation.trust import GT_UNMATCHED
+        from cold_maps.evaluation.safety import LANE_ACCURACY_M
+        from cold_maps.groundtruth.meter import Measurement
 
         interpolation = self.interpolation if fusion_name == "spline" else ""
         why = ""
@@ -172,7 +174,9 @@ class Refuser:
                 left = boundary == "left"
                 record = FrameRecord(frame, stamp, self.ego, coop, measured.left_errors_m if left else
                                      measured.right_errors_m, perception_range_m=measured.left_range_m if left
-                                     else measured.right_range_m, runtime_ms=runtime, predicted_fusible=predicted)
+                                     else measured.right_range_m, runtime_ms=runtime, predicted_fusible=predicted,
+                                     near_points=measured.near_points()[0 if left else 1],
+                                     known_to_m=measured.known_to_m(LANE_ACCURACY_M))
             else:
                 record = FrameRecord(frame, stamp, self.ego, coop, np.empty(0), runtime_ms=runtime,
                                      rejected=rejected or "not_measured", predicted_fusible=predicted,

@@ -28,6 +28,7 @@ from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+from cold_maps.evaluation.safety import LANE_ACCURACY_M, STOPPING_FORMULA
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
 from cold_maps.evaluation.trust import GT_UNMATCHED, check_driven, driven_lanes
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
@@ -87,6 +88,7 @@ class MapEvaluator:
         self.lane_errors = (None if plan.lane_error.is_zero else
                             [LaneModelErrorSampler(plan.lane_error, plan.seed, i) for i in range(len(self.drives))])
         """The lane-model error of each drive, or None when the plan has none."""
+        self.stopping = self.plan.stopping.at(self.plan.speed_mps)
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
         self.sensor = LaneSensor()
@@ -183,6 +185,10 @@ class MapEvaluator:
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
             f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}")
+        rule = self.stopping.rule
+        collector.notes.append(
+            f"{plan.name}: stopping distance {STOPPING_FORMULA} = {self.stopping.distance_m:.1f} m at "
+            f"v {plan.speed_mps:g} m/s, t_r {rule.reaction_time_s:g} s, a {rule.deceleration_mps2:g} m/s²")
         loop_m = min(d.ego.shortest_loop_m for d in self.drives)
         farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
         if loop_m < farthest_m:
@@ -281,7 +287,8 @@ class MapEvaluator:
         keys = self._keys(scenario)
         if ego.detection is None:
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped"))
+                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped",
+                                               stopping=self.stopping))
             return {}
         left, right = world_borders(ego.detection)
         state = ego.state
@@ -291,9 +298,10 @@ class MapEvaluator:
             rejected, why = _rejection(measured)
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=rejected,
-                                               gt_unmatched=why))
+                                               gt_unmatched=why, end_reason=ego.end_reason, stopping=self.stopping))
             return {}
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
+        self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics,
+                     end_reason=ego.end_reason)
         self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
         shown = np.vstack((left, right))
         low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
@@ -323,7 +331,8 @@ class MapEvaluator:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               gt_unmatched=why, relation=relation, confidence=confidence))
+                                               gt_unmatched=why, relation=relation, confidence=confidence,
+                                               stopping=self.stopping))
 
         if ego.detection is None or other.detection is None:
             reject("ego_dropped" if ego.detection is None else "coop_dropped")
@@ -385,7 +394,8 @@ class MapEvaluator:
         def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan) -> None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", last, np.empty(0), runtime_ms=runtime,
-                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth))
+                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
+                                               stopping=self.stopping))
 
         if ego.detection is None or any(c.detection is None for c in coops):
             reject("ego_dropped" if ego.detection is None else "coop_dropped")
@@ -445,12 +455,14 @@ class MapEvaluator:
     def _record(self, collector: Collector, scenario: Scenario, keys: tuple[ScenarioKey, ...], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
-                confidence: float = math.nan) -> None:
+                confidence: float = math.nan, end_reason: str = "") -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
-        for key, (errors, length) in zip(keys, sides):
+        known = measured.known_to_m(LANE_ACCURACY_M)
+        for key, (errors, length), near in zip(keys, sides, measured.near_points()):
             collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
                                            runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
-                                           relation=relation, confidence=confidence))
+                                           relation=relation, confidence=confidence, end_reason=end_reason,
+                                           near_points=near, known_to_m=known, stopping=self.stopping))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))

@@ -38,8 +38,22 @@
           "exchange": "bezier",      # "sampled" | "bezier" | "" (detections fused directly)
           "bytes_per_message": 136.0,  # mean bytes on air per message of the scenario's coops
           "bytes_per_second": 340.0,   # their bytes on air per vehicle-second
-          "correct_only": {"mean_error_m": 0.02, "max_error_m": 0.3, "p95_error_m": 0.1}
+          "correct_only": {"mean_error_m": 0.02, "max_error_m": 0.3, "p95_error_m": 0.1},
                                      # the same over fusions whose partner truly continues the ego's lane
+          # always (added in the same schema version; a reader takes a file without them):
+          "perception_range_distribution_m": {"mean": 80.0, "p5": 70.1, "p50": 80.0, "p95": 83.1},
+                                     # the range over fused evaluations: mean and percentiles (linear)
+          "by_distance": {"split_m": 40.0,   # errors of the points near (<= 40 m along the border from
+                          "near": {"points": 400, "mean_error_m": 0.01, "max_error_m": 0.1, "p95_error_m": 0.02},
+                          "far": {"points": 0, "mean_error_m": null, "max_error_m": null, "p95_error_m": null}},
+                                     # the ego) and far (beyond), as OpenLane splits them; null: no point
+          "stopping": {"distance_m": 43.7,   # d = 1.1 (v t_r + v^2 / (2 a)); null when not measured
+                       "speed_mps": 10.0, "reaction_time_s": 2.5, "deceleration_mps2": 3.4,
+                       "accuracy_m": 0.75,   # the paper's sufficient accuracy
+                       "frames": 300,        # distinct frames evaluated
+                       "known_frames": 290,  # frames with an evaluation's lane known within accuracy_m out to d
+                       "share": 0.967},      # known_frames / frames (null without frames)
+          "end_reasons": {"range": 300}      # why the ego's own detections ended (local scenarios; {} elsewhere)
         }
       ]
     }
@@ -47,8 +61,10 @@
 The kinds of pairs are ``cold_maps.simulation.drive.RELATION_KINDS``; ``by_confidence`` counts
 a decision as fusible only when its association confidence reaches the threshold
 (:data:`CONFIDENCE_THRESHOLDS`); ``by_route`` pools the errors of the true fusions by where the
-coop drives (:data:`ROUTE_GROUPS`). Errors are pooled point distances (not averages of per-frame averages). A value that does
-not exist (no fused frame, no runtime measured, no fusibility decision) is ``null``.
+coop drives (:data:`ROUTE_GROUPS`). Errors are pooled point distances (not averages of
+per-frame averages). A value that does not exist (no fused frame, no runtime measured, no
+fusibility decision) is ``null``. ``by_distance``, ``stopping`` and ``end_reasons`` are
+defined in docs/metrics.md (``evaluation.safety``, ``gt_matching.metrics``).
 Every file is written to a temporary name and renamed, so none is ever half-written.
 """
 
@@ -66,8 +82,16 @@ from typing import Any, Final, Iterable, Literal, Mapping, Sequence
 
 import numpy as np
 
+from cold_maps.evaluation.safety import (
+    LANE_ACCURACY_M,
+    STOPPING_FORMULA,
+    StoppingDistance,
+    StoppingError,
+    StoppingRule,
+)
 from cold_maps.network.lane_strip import NDArrayFloat
 from converters.atomic_io import atomic_output
+from gt_matching.metrics import NEAR_FAR_SPLIT_M, ErrorStats
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -113,7 +137,10 @@ PAPER_TABLE_I_MS: Final[Mapping[str, tuple[float, float, float]]] = {
 FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
     "map", "fusion", "interpolation", "d_s", "boundary", "frame", "stamp_s", "ego", "coop", "fused",
     "rejected", "points", "mean_error_m", "max_error_m", "perception_range_m", "runtime_ms",
-    "predicted_fusible", "truly_fusible", "relation", "confidence")
+    "predicted_fusible", "truly_fusible", "relation", "confidence",
+    "end_reason", "near_points", "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_distance_m")
+RANGE_PERCENTS: Final[tuple[float, ...]] = (5.0, 50.0, 95.0)
+"""Percentiles (linear interpolation) of the perception range over fused evaluations."""
 
 
 class ReportError(ValueError):
@@ -199,6 +226,17 @@ class FrameRecord:
         relation: kind of pair (``cold_maps.simulation.drive.RELATION_KINDS``), "" when unknown.
         confidence: the association confidence in [0, 1] of a fused pair (0 rejected), NaN
             when not applicable.
+        end_reason: why the ego's own detection ended (``range``, ``map_end``; a camera
+            sensor adds ``field_of_view``, ``crest``, ``occlusion``, ``unmarked``); "" when
+            unknown or not a local evaluation.
+        near_points: how many leading ``errors_m`` lie within ``NEAR_FAR_SPLIT_M`` of the
+            ego along the border (the rest are far); None when the distances are unknown
+            (the points then count in neither split).
+        known_to_m: how far from the ego both borders of the lane are known within
+            ``LANE_ACCURACY_M`` (m, ``gt_matching.metrics.known_distance_m``, the smaller
+            of the two; the same on both borders' records); NaN when no lane was scored.
+        stopping: the stopping distance the lane is needed to (``evaluation.safety``), None
+            when not measured.
     """
 
     frame: int
@@ -214,6 +252,10 @@ class FrameRecord:
     gt_unmatched: str = ""
     relation: str = ""
     confidence: float = math.nan
+    end_reason: str = ""
+    near_points: int | None = None
+    known_to_m: float = math.nan
+    stopping: StoppingDistance | None = None
 
     def __post_init__(self) -> None:
         errors = np.asarray(self.errors_m, dtype=np.float64)
@@ -222,12 +264,27 @@ class FrameRecord:
             raise ReportError(f"frame {self.frame}: errors_m must be a 1-D array of finite distances >= 0")
         if errors.size and self.rejected:
             raise ReportError(f"frame {self.frame}: an evaluation with a lane cannot be rejected ({self.rejected!r})")
+        if self.near_points is not None and not 0 <= self.near_points <= errors.size:
+            raise ReportError(f"frame {self.frame}: near_points {self.near_points} outside 0 ... {errors.size}")
+        if not (math.isnan(self.known_to_m) or 0.0 <= self.known_to_m < math.inf):
+            raise ReportError(f"frame {self.frame}: known_to_m must be a distance >= 0 m or NaN, got {self.known_to_m}")
         object.__setattr__(self, "errors_m", errors)
 
     @property
     def fused(self) -> bool:
         """Whether this evaluation produced a lane (it has error samples)."""
         return len(self.errors_m) > 0
+
+    @property
+    def known_to_stop(self) -> bool:
+        """Whether the lane is known within ``LANE_ACCURACY_M`` out to the stopping distance."""
+        return self.stopping is not None and self.known_to_m >= self.stopping.distance_m
+
+    def split_errors(self) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """(near, far) errors (m); both empty when ``near_points`` is None."""
+        if self.near_points is None:
+            return np.empty(0), np.empty(0)
+        return self.errors_m[:self.near_points], self.errors_m[self.near_points:]
 
 
 @dataclass(frozen=True, slots=True)
@@ -291,6 +348,15 @@ class ScenarioResult:
             (NaN when undefined); empty when no decision carries a confidence.
         by_route: (group, :class:`RouteErrors`) per :data:`ROUTE_GROUPS` group; empty when
             no fusion of the scenario carries the kind of its pair.
+        range_percentiles_m: the perception range's percentiles :data:`RANGE_PERCENTS`
+            over fused evaluations (m; NaN without).
+        near, far: the pooled errors of the points within / beyond ``NEAR_FAR_SPLIT_M`` of
+            the ego along the border (``gt_matching.metrics.ErrorStats``, m).
+        stopping: the stopping distance the records were scored against, None when none was.
+        stopping_frames: distinct frames evaluated with a stopping distance.
+        stopping_known_frames: those in which an evaluation's lane was known within
+            ``LANE_ACCURACY_M`` out to the stopping distance (:attr:`FrameRecord.known_to_stop`).
+        end_reasons: (reason, count) of why the ego's own detections ended, sorted by reason.
     """
 
     key: ScenarioKey
@@ -317,6 +383,19 @@ class ScenarioResult:
     false_by_relation: tuple[tuple[str, int], ...] = ()
     by_confidence: tuple[tuple[float, float, float], ...] = ()
     by_route: tuple[tuple[str, RouteErrors], ...] = ()
+    range_percentiles_m: tuple[float, ...] = (math.nan,) * len(RANGE_PERCENTS)
+    near: ErrorStats = ErrorStats(0, math.nan, math.nan, math.nan)
+    far: ErrorStats = ErrorStats(0, math.nan, math.nan, math.nan)
+    stopping: StoppingDistance | None = None
+    stopping_frames: int = 0
+    stopping_known_frames: int = 0
+    end_reasons: tuple[tuple[str, int], ...] = ()
+
+    @property
+    def stopping_share(self) -> float:
+        """Share of :attr:`stopping_frames` with the lane known to the stopping distance
+        (NaN without such frames)."""
+        return _ratio(self.stopping_known_frames, self.stopping_frames)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
@@ -343,7 +422,50 @@ class ScenarioResult:
         } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {}) | (
             {"by_route": {group: {"fused": e.fused, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
                                   "p95_error_m": f(e.p95_error_m)} for group, e in self.by_route}}
-            if self.by_route else {})
+            if self.by_route else {}) | self._added_dict()
+
+    def _added_dict(self) -> dict[str, Any]:
+        """The keys of the range distribution, the near / far errors, the stopping distance
+        and the detection ends (see the module docstring)."""
+        f = _finite_or_none
+        stats = {name: {"points": e.points, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
+                        "p95_error_m": f(e.p95_error_m)} for name, e in (("near", self.near), ("far", self.far))}
+        stop = self.stopping
+        return {
+            "perception_range_distribution_m": {"mean": f(self.perception_range_m)} | {
+                f"p{q:g}": f(v) for q, v in zip(RANGE_PERCENTS, self.range_percentiles_m)},
+            "by_distance": {"split_m": NEAR_FAR_SPLIT_M} | stats,
+            "stopping": None if stop is None else {
+                "distance_m": stop.distance_m, "speed_mps": stop.speed_mps,
+                "reaction_time_s": stop.rule.reaction_time_s, "deceleration_mps2": stop.rule.deceleration_mps2,
+                "accuracy_m": LANE_ACCURACY_M, "frames": self.stopping_frames,
+                "known_frames": self.stopping_known_frames, "share": f(self.stopping_share)},
+            "end_reasons": dict(self.end_reasons),
+        }
+
+    @staticmethod
+    def _added_fields(record: Mapping[str, Any], where: str) -> dict[str, Any]:
+        """The fields :meth:`_added_dict` wrote (their defaults when a file predates them)."""
+        distribution = record.get("perception_range_distribution_m", {})
+        by_distance = record.get("by_distance", {})
+        split = {name: ErrorStats(int(by_distance[name]["points"]), *(
+            _none_to_nan(by_distance[name][stat], f"{where}.by_distance.{name}.{stat}")
+            for stat in ("mean_error_m", "max_error_m", "p95_error_m")))
+            for name in ("near", "far") if name in by_distance}
+        stop = record.get("stopping")
+        try:
+            stopping = None if stop is None else StoppingRule(
+                float(stop["reaction_time_s"]), float(stop["deceleration_mps2"])).at(float(stop["speed_mps"]))
+        except StoppingError as exc:
+            raise ReportError(f"{where}.stopping: {exc}") from exc
+        return split | {
+            "range_percentiles_m": tuple(_none_to_nan(distribution.get(f"p{q:g}"), f"{where}.perception_range_"
+                                                      f"distribution_m.p{q:g}") for q in RANGE_PERCENTS),
+            "stopping": stopping,
+            "stopping_frames": 0 if stop is None else int(stop["frames"]),
+            "stopping_known_frames": 0 if stop is None else int(stop["known_frames"]),
+            "end_reasons": tuple(sorted((str(k), int(v)) for k, v in record.get("end_reasons", {}).items())),
+        }
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
@@ -386,7 +508,7 @@ class ScenarioResult:
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
-                       by_route=by_route, **num)
+                       by_route=by_route, **num, **cls._added_fields(record, where))
         except ReportError:
             raise
         except KeyError as exc:
@@ -449,6 +571,7 @@ class ScenarioAccumulator:
              _ratio(sum(c >= t and truth for c, truth in scored), sum(truth for _, truth in scored)))
             for t in CONFIDENCE_THRESHOLDS) if any(math.isfinite(r.confidence) for r in self.records) else ()
         return ScenarioResult(
+            **self._added_result(fused, ranges),
             key=self.key,
             points=int(errors.size),
             mean_error_m=float(errors.mean()) if errors.size else nan,
@@ -480,6 +603,26 @@ class ScenarioAccumulator:
                            for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
         )
 
+    def _added_result(self, fused: Sequence[FrameRecord], ranges: Sequence[float]) -> dict[str, Any]:
+        """The :class:`ScenarioResult` fields of the range distribution, the near / far
+        errors, the stopping distance and the detection ends."""
+        splits = [r.split_errors() for r in fused]
+        measured = [r for r in self.records if r.stopping is not None]
+        stoppings = {r.stopping for r in measured}
+        if len(stoppings) > 1:
+            raise ReportError(f"{self.key.map} {self.key.label} {self.key.boundary}: records scored against "
+                              f"{len(stoppings)} different stopping distances")
+        return {
+            "range_percentiles_m": tuple(float(np.percentile(ranges, q)) for q in RANGE_PERCENTS) if ranges
+            else (math.nan,) * len(RANGE_PERCENTS),
+            "near": ErrorStats.of(np.concatenate([near for near, _ in splits]) if splits else np.empty(0)),
+            "far": ErrorStats.of(np.concatenate([far for _, far in splits]) if splits else np.empty(0)),
+            "stopping": stoppings.pop() if stoppings else None,
+            "stopping_frames": len({r.frame for r in measured}),
+            "stopping_known_frames": len({r.frame for r in measured if r.known_to_stop}),
+            "end_reasons": tuple(sorted(Counter(r.end_reason for r in self.records if r.end_reason).items())),
+        }
+
     def csv_rows(self) -> list[dict[str, Any]]:
         """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`)."""
         def flag(value: bool | None) -> str:
@@ -498,7 +641,12 @@ class ScenarioAccumulator:
             "perception_range_m": number(r.perception_range_m), "runtime_ms": number(r.runtime_ms),
             "predicted_fusible": flag(r.predicted_fusible), "truly_fusible": flag(r.truly_fusible),
             "relation": r.relation, "confidence": number(r.confidence),
-        } for r in self.records]
+            "end_reason": r.end_reason, "near_points": "" if r.near_points is None else r.near_points,
+            "near_max_error_m": number(float(np.max(near))) if near.size else "",
+            "far_max_error_m": number(float(np.max(far))) if far.size else "",
+            "known_to_m": number(r.known_to_m),
+            "stopping_distance_m": "" if r.stopping is None else number(r.stopping.distance_m),
+        } for r, (near, far) in ((r, r.split_errors()) for r in self.records)]
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
@@ -597,6 +745,7 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
                      _fmt(r.fusibility_recall), " / ".join(_fmt(v, 2) for v in
                                                           (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max))])
     parts += ["\n## Results per scenario\n\n", _table(header, rows)]
+    parts += ["\n## What CoLD adds\n\n", cold_adds_markdown(results)]
     if any(r.key.vehicles > 0 for r in results):
         parts += ["\n## Chains, history and exchange\n\n", extended_markdown(results)]
     association = association_markdown(results)
@@ -605,6 +754,50 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
     return "".join(parts)
+
+
+def _setup(key: ScenarioKey) -> str:
+    """A scenario's name with its history and exchange, when recorded."""
+    extra = [f"history {key.history_m:g} m"] if key.history_m else []
+    extra += [f"exchange {key.exchange}"] if key.exchange else []
+    return key.label + (f" ({', '.join(extra)})" if extra else "")
+
+
+def _split_cell(stats: ErrorStats) -> str:
+    if not stats.points:
+        return "no point"
+    return f"{stats.points} / " + " / ".join(_fmt(v) for v in (stats.mean_error_m, stats.max_error_m,
+                                                                 stats.p95_error_m))
+
+
+def cold_adds_markdown(results: Sequence[ScenarioResult]) -> str:
+    """The perception range's distribution and the errors near / far from the ego per
+    scenario and border; per scenario the share of frames with the lane known to the
+    stopping distance; per map why the ego's own detections ended."""
+    ordered = sorted(results, key=_sort_key)
+    split = f"{NEAR_FAR_SPLIT_M:g}"
+    ranges = [[r.key.map, _setup(r.key), r.key.boundary,
+               " / ".join(_fmt(v, 1) for v in (r.perception_range_m, *r.range_percentiles_m)),
+               _split_cell(r.near), _split_cell(r.far)] for r in ordered]
+    text = (f"Perception range over the fused evaluations; errors of the points within {split} m of the ego along "
+            f"the border (near) and beyond (far), as OpenLane splits them (points / mean / max / p95 [m]).\n\n"
+            + _table(["map", "scenario", "boundary", "range mean / p5 / p50 / p95 [m]", f"near ≤ {split} m",
+                      f"far > {split} m"], ranges))
+    stops = [[r.key.map, _setup(r.key), _fmt(r.stopping.speed_mps, 1), _fmt(r.stopping.rule.reaction_time_s, 2),
+              _fmt(r.stopping.rule.deceleration_mps2, 2), _fmt(r.stopping.distance_m, 1),
+              f"{r.stopping_known_frames} / {r.stopping_frames}", _fmt(r.stopping_share)]
+             for r in ordered if r.key.boundary == "left" and r.stopping is not None]
+    if stops:
+        text += (f"\nFrames in which the lane is known to the stopping distance {STOPPING_FORMULA}: an "
+                 f"evaluation's lane has both borders within {LANE_ACCURACY_M:g} m of the ground truth at every point "
+                 "from the ego out to d (docs/metrics.md).\n\n"
+                 + _table(["map", "scenario", "v [m/s]", "t_r [s]", "a [m/s²]", "d [m]", "known / frames", "share"],
+                          stops))
+    ends = [[r.key.map, ", ".join(f"{reason}: {count}" for reason, count in r.end_reasons) or "unknown"]
+            for r in ordered if r.key.fusion == "local" and r.key.boundary == "left"]
+    if ends:
+        text += "\nWhy the ego's own detections ended (local evaluations):\n\n" + _table(["map", "ended by"], ends)
+    return text
 
 
 def extended_markdown(results: Sequence[ScenarioResult]) -> str:

@@ -15,6 +15,7 @@ from typing import Final, Literal, Sequence
 import fusion
 from cold_maps.evaluation.methods import MethodError, resolve_method
 from cold_maps.evaluation.report import ScenarioKey, scenario_label
+from cold_maps.evaluation.safety import StoppingRule
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
 from cold_maps.simulation.lane_model_error import LaneModelErrorParams
@@ -158,6 +159,8 @@ class MapPlan:
         messages: how lanes are exchanged (default: detections fused directly).
         lanes: neighbour lanes the sensor detects on each side besides the vehicle's own
             (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
+        stopping: the stopping distance rule the lane is scored against at ``speed_mps``
+            (``evaluation.safety``).
     """
 
     path: Path
@@ -177,6 +180,7 @@ class MapPlan:
     odometry: OdometryModel = field(default_factory=OdometryModel)
     messages: MessageModel = field(default_factory=MessageModel)
     lanes: int = 0
+    stopping: StoppingRule = StoppingRule()
 
     @property
     def name(self) -> str:

@@ -14,13 +14,15 @@ does not continue would measure every point beyond to that end.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
+from gt_matching.metrics import known_distance_m, near_count
 from gt_matching.polyline import arc_lengths
 
 if TYPE_CHECKING:
@@ -58,6 +60,36 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
     return total
 
 
+def chord_stations_m(border: NDArrayFloat) -> NDArrayFloat:
+    """Each point's distance (m) from the first along a border (``(N, 2)``, driving order),
+    measured like ``covered_length_m``: along chords of about ``RANGE_CHORD_M`` between
+    which the points are placed by their own arc length, so that detection noise does not
+    lengthen it. Non-decreasing, 0 at the first point."""
+    arc = arc_lengths(border)
+    chunks = arc // RANGE_CHORD_M
+    ends = np.concatenate(([0], 1 + np.flatnonzero(chunks[1:] != chunks[:-1])))
+    if ends[-1] != arc.size - 1:
+        ends = np.append(ends, arc.size - 1)
+    chords = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(border[ends], axis=0).T))))
+    stations: NDArrayFloat = np.interp(arc, arc[ends], chords)
+    return stations
+
+
+def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) -> NDArrayFloat:
+    """Each point's distance (m) from a vehicle at ``pose`` (x m, y m, yaw rad, world frame)
+    along a border (``(N, 2)``, world frame, driving order) that starts at or ahead of it:
+    how far ahead of the vehicle its first point lies (its longitudinal coordinate in the
+    vehicle frame, 0 when behind; 0 for a detection from the vehicle's own cross-section,
+    the minimum range for a sensor that has one) plus :func:`chord_stations_m`. Without a
+    pose, from the first point."""
+    stations = chord_stations_m(border)
+    if pose is None or not border.size:
+        return stations
+    x, y, yaw = pose
+    start = math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y)
+    return stations + max(start, 0.0)
+
+
 GT_END_TOLERANCE_M: Final[float] = 0.1
 """A detected point more than this (m) past an end of its GT border, along the border's
 end direction, lies beyond the GT (one detection sample spacing)."""
@@ -82,6 +114,8 @@ class Measurement:
         matched: False when the lane does not follow the sender's lane (see gt_matching).
         gt_unmatched: "" when the GT covers the lane, else why not: ``OFF_LANE`` or
             ``PAST_GT_END``.
+        left_ahead_m, right_ahead_m: per detected point, its distance from the sender
+            along the border (``ahead_of_m``, m; from the lane's first point without a pose).
     """
 
     left_errors_m: NDArrayFloat
@@ -92,6 +126,19 @@ class Measurement:
     right_gt: NDArrayFloat
     matched: bool
     gt_unmatched: str = ""
+    left_ahead_m: NDArrayFloat = field(default_factory=lambda: np.empty(0))
+    right_ahead_m: NDArrayFloat = field(default_factory=lambda: np.empty(0))
+
+    def known_to_m(self, threshold_m: float) -> float:
+        """How far from the ego both borders are known within ``threshold_m`` (m): the smaller
+        of their ``gt_matching.metrics.known_distance_m``."""
+        return min(known_distance_m(self.left_errors_m, self.left_ahead_m, threshold_m),
+                   known_distance_m(self.right_errors_m, self.right_ahead_m, threshold_m))
+
+    def near_points(self) -> tuple[int, int]:
+        """How many leading points of the left and the right border are near the ego
+        (``gt_matching.metrics.near_count``)."""
+        return near_count(self.left_ahead_m), near_count(self.right_ahead_m)
 
 
 #: Vertices next to an end of a GT border searched first for one farther than
@@ -154,16 +201,21 @@ class GroundTruthMeter:
             self._matches.move_to_end(key)
         return found
 
-    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat) -> Measurement:
-        """Closest-point errors and range of a lane against the GT borders of ``match``."""
+    def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat,
+               pose: tuple[float, float, float] | None = None) -> Measurement:
+        """Closest-point errors and range of a lane against the GT borders of ``match``; the
+        points' distances from the sender at ``pose`` (x m, y m, yaw rad; None: from the
+        lane's first points) by :func:`ahead_of_m`."""
         found = self.ground_truth.errors(left, right, match, others=False)
         past = sum(points_past_ends(np.asarray(points, dtype=np.float64), gt, border.distances_m, self.step_m)
                    for points, gt, border in ((left, match.left_gt, found.left), (right, match.right_gt, found.right)))
         reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
+        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
         return Measurement(found.left.distances_m, found.right.distances_m,
-                           covered_length_m(np.asarray(left, dtype=np.float64), found.left.distances_m),
-                           covered_length_m(np.asarray(right, dtype=np.float64), found.right.distances_m),
-                           match.left_gt, match.right_gt, match.matched, reason)
+                           covered_length_m(left, found.left.distances_m),
+                           covered_length_m(right, found.right.distances_m),
+                           match.left_gt, match.right_gt, match.matched, reason,
+                           ahead_of_m(left, pose), ahead_of_m(right, pose))
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
@@ -172,4 +224,4 @@ class GroundTruthMeter:
         ``reference`` (the borders of the lane the vehicles truly drive, from the drive),
         or to the lane itself; the errors are always against Lanelet2's borders. Raises
         ``gt_matching.MatchingError``."""
-        return self.errors(self.match(*(reference or (left, right)), pose), left, right)
+        return self.errors(self.match(*(reference or (left, right)), pose), left, right, pose)

@@ -33,10 +33,13 @@ class Sensed:
         state: where the vehicle is.
         detection: what it sends (reported pose with localisation error, borders in its
             vehicle frame with the sensor errors), or None when the frame was dropped.
+        end_reason: why the sensor's detection ended (``sensor.Detection.end_reason``);
+            "" when unknown or dropped.
     """
 
     state: VehicleState
     detection: fusion.LaneDetection | None
+    end_reason: str = ""
 
 
 def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
@@ -80,7 +83,8 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
                                               neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches),
                                               left_sigma=sigmas[0], right_sigma=sigmas[1],
-                                              pose_cov=pose_covariance(errors, state.role)))
+                                              pose_cov=pose_covariance(errors, state.role)),
+                  raw.end_reason)
 
 
 def lateral_sigmas(borders: tuple[NDArrayFloat, NDArrayFloat], errors: SensorErrorModel,

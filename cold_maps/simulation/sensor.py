@@ -18,6 +18,11 @@ from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat, resample_polyl
 
 SENSOR_RANGE_M: Final[float] = 30.0
 SENSOR_STEP_M: Final[float] = 0.10
+END_RANGE: Final[str] = "range"
+"""``Detection.end_reason``: the detection reached the sensor's range."""
+END_MAP: Final[str] = "map_end"
+"""``Detection.end_reason``: the vehicle's track ended first (the drives' routes run on
+until the lanes end or past every detection, so: where the mapped lanes end)."""
 
 
 @dataclass(frozen=True)
@@ -28,6 +33,7 @@ class Detection:
         x, y, yaw: the sensor pose in the world frame (m, m, rad).
         left, right: (N, 2) borders in the vehicle frame (ISO 8855, m), driving order.
         start_station, end_station: the route stations the detection spans (m).
+        end_reason: why it ends: ``END_RANGE`` or ``END_MAP``; "" when unknown.
     """
 
     x: float
@@ -37,6 +43,7 @@ class Detection:
     right: NDArrayFloat
     start_station: float
     end_station: float
+    end_reason: str = ""
 
     def to_world(self) -> tuple[NDArrayFloat, NDArrayFloat]:
         """Left and right borders in the world frame (m)."""
@@ -81,4 +88,6 @@ class LaneSensor:
             start_d, end_d = np.interp(window, strip.station, distance)
             world = resample_polyline(points, distance, float(start_d), float(end_d), self.step_m)
             borders.append(world_to_vehicle(world, x, y, yaw))
-        return Detection(x=x, y=y, yaw=yaw, left=borders[0], right=borders[1], start_station=station, end_station=end)
+        reason = END_RANGE if station + self.range_m <= strip.length else END_MAP
+        return Detection(x=x, y=y, yaw=yaw, left=borders[0], right=borders[1], start_station=station, end_station=end,
+                         end_reason=reason)
