@@ -34,7 +34,7 @@ from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
-from cold_maps.simulation.detection import Sensed, detection_pose, sense, world_borders
+from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, detection_pose, sense, world_borders
 from cold_maps.simulation.exchange import LaneExchange
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
@@ -49,7 +49,8 @@ from cold_maps.simulation.drive import (
     route_from_start,
 )
 from cold_maps.simulation.neighbours import NeighbourSensor
-from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
+from cold_maps.simulation.camera import lane_sensor
+from cold_maps.simulation.sensor import SENSOR_RANGE_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 if TYPE_CHECKING:
@@ -85,7 +86,7 @@ class MapEvaluator:
         self.drive_rngs = self.rng.spawn(len(self.drives))
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
-        self.sensor = LaneSensor()
+        self.sensor = lane_sensor(plan.sensor, self.graph)
         self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
@@ -234,8 +235,11 @@ class MapEvaluator:
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
         self._relations.clear()
         self._true_lanes.clear()
-        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours)
-                  for name, state in drive.states(frame).items()}
+        states = drive.states(frame)
+        obstacles = _obstacles(states) if plan.sensor.kind == "camera" else {}
+        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours,
+                              obstacles=obstacles.get(name, NO_OBSTACLES))
+                  for name, state in states.items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:
             sensed, sent = self.exchange.apply(drive_index, sensed, stamp)
@@ -275,7 +279,8 @@ class MapEvaluator:
         keys = self._keys(scenario)
         if ego.detection is None:
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped"))
+                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=ego.missing("ego"),
+                                               end_reason=ego.end_reason))
             return {}
         left, right = world_borders(ego.detection)
         state = ego.state
@@ -285,9 +290,10 @@ class MapEvaluator:
             rejected, why = _rejection(measured)
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=rejected,
-                                               gt_unmatched=why))
+                                               gt_unmatched=why, end_reason=ego.end_reason))
             return {}
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics)
+        self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics,
+                     end_reason=ego.end_reason)
         self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
         shown = np.vstack((left, right))
         low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
@@ -320,7 +326,7 @@ class MapEvaluator:
                                                gt_unmatched=why, relation=relation, confidence=confidence))
 
         if ego.detection is None or other.detection is None:
-            reject("ego_dropped" if ego.detection is None else "coop_dropped")
+            reject(ego.missing("ego") if ego.detection is None else other.missing("coop"))
             return None
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
@@ -382,7 +388,8 @@ class MapEvaluator:
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth))
 
         if ego.detection is None or any(c.detection is None for c in coops):
-            reject("ego_dropped" if ego.detection is None else "coop_dropped")
+            reject(ego.missing("ego") if ego.detection is None
+                   else next(c for c in coops if c.detection is None).missing("coop"))
             return
         start = time.perf_counter()
         chain = fusion.fuse_chain(ego.detection, [c.detection for c in coops if c.detection is not None],
@@ -439,12 +446,12 @@ class MapEvaluator:
     def _record(self, collector: Collector, scenario: Scenario, keys: tuple[ScenarioKey, ...], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
-                confidence: float = math.nan) -> None:
+                confidence: float = math.nan, end_reason: str = "") -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
         for key, (errors, length) in zip(keys, sides):
             collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
                                            runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
-                                           relation=relation, confidence=confidence))
+                                           relation=relation, confidence=confidence, end_reason=end_reason))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))
@@ -464,6 +471,12 @@ class MapEvaluator:
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
+
+
+def _obstacles(states: dict[str, VehicleState]) -> dict[str, NDArrayFloat]:
+    """Per vehicle of the frame, the poses (x, y m, yaw rad; world) of all the others."""
+    poses = {name: state.track.strip.pose(state.station) for name, state in states.items()}
+    return {name: np.array([pose for other, pose in poses.items() if other != name]).reshape(-1, 3) for name in poses}
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:

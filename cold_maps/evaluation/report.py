@@ -114,6 +114,9 @@ FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
     "map", "fusion", "interpolation", "d_s", "boundary", "frame", "stamp_s", "ego", "coop", "fused",
     "rejected", "points", "mean_error_m", "max_error_m", "perception_range_m", "runtime_ms",
     "predicted_fusible", "truly_fusible", "relation", "confidence")
+END_REASON_COLUMN: Final[str] = "end_reason"
+"""The last ``frames.csv`` column, written only when some record has an end reason (a camera
+sensor's run; an ideal sensor's ``frames.csv`` stays as it was)."""
 
 
 class ReportError(ValueError):
@@ -199,6 +202,8 @@ class FrameRecord:
         relation: kind of pair (``cold_maps.simulation.drive.RELATION_KINDS``), "" when unknown.
         confidence: the association confidence in [0, 1] of a fused pair (0 rejected), NaN
             when not applicable.
+        end_reason: why the ego's own detection ended, for ``local`` evaluations with a
+            camera sensor (``simulation.camera.END_REASONS``); "" otherwise.
     """
 
     frame: int
@@ -214,6 +219,7 @@ class FrameRecord:
     gt_unmatched: str = ""
     relation: str = ""
     confidence: float = math.nan
+    end_reason: str = ""
 
     def __post_init__(self) -> None:
         errors = np.asarray(self.errors_m, dtype=np.float64)
@@ -481,7 +487,8 @@ class ScenarioAccumulator:
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
-        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`)."""
+        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS` and
+        :data:`END_REASON_COLUMN`)."""
         def flag(value: bool | None) -> str:
             return "" if value is None else str(int(value))
 
@@ -497,7 +504,7 @@ class ScenarioAccumulator:
             "max_error_m": number(float(np.max(r.errors_m))) if r.fused else "",
             "perception_range_m": number(r.perception_range_m), "runtime_ms": number(r.runtime_ms),
             "predicted_fusible": flag(r.predicted_fusible), "truly_fusible": flag(r.truly_fusible),
-            "relation": r.relation, "confidence": number(r.confidence),
+            "relation": r.relation, "confidence": number(r.confidence), END_REASON_COLUMN: r.end_reason,
         } for r in self.records]
 
 
@@ -546,8 +553,11 @@ def read_metrics_json(path: str | os.PathLike[str]) -> tuple[list[ScenarioResult
 
 def write_frames_csv(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
     """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) atomically."""
+    accumulators = list(accumulators)
+    reasons = any(r.end_reason for a in accumulators for r in a.records)
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS, lineterminator="\n")
+    writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS + ((END_REASON_COLUMN,) if reasons else ()),
+                            lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     for accumulator in accumulators:
         writer.writerows(accumulator.csv_rows())

@@ -21,6 +21,7 @@ from cold_maps.simulation.messages import MessageModel
 from cold_maps.simulation.odometry import OdometryModel
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 
 INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
 
@@ -154,6 +155,8 @@ class MapPlan:
         messages: how lanes are exchanged (default: detections fused directly).
         lanes: neighbour lanes the sensor detects on each side besides the vehicle's own
             (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
+        sensor: the lane sensor's profile (``simulation.sensor_profile``; default the
+            paper's ideal sensor).
     """
 
     path: Path
@@ -172,6 +175,7 @@ class MapPlan:
     odometry: OdometryModel = field(default_factory=OdometryModel)
     messages: MessageModel = field(default_factory=MessageModel)
     lanes: int = 0
+    sensor: SensorProfile = IDEAL
 
     @property
     def name(self) -> str:

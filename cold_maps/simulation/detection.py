@@ -14,6 +14,7 @@ import numpy as np
 
 import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.camera import CameraSensor
 from cold_maps.simulation.drive import VehicleState
 from cold_maps.simulation.neighbours import NeighbourSensor
 from cold_maps.simulation.sensor import Detection, LaneSensor, vehicle_to_world, world_to_vehicle
@@ -22,6 +23,8 @@ from cold_maps.simulation.sensor_errors import SensorErrorModel
 DETECTION_DECIMALS: Final[int] = 6
 """Detected border points are rounded to 1 µm (the sensor's resolution): the recorded
 ``cold.LaneDetection`` JSON is then short and exactly what was fused."""
+NO_OBSTACLES: Final[NDArrayFloat] = np.empty((0, 3))
+"""No other vehicle (x, y m, yaw rad rows)."""
 
 
 @dataclass(frozen=True)
@@ -31,25 +34,39 @@ class Sensed:
     Fields:
         state: where the vehicle is.
         detection: what it sends (reported pose with localisation error, borders in its
-            vehicle frame with the sensor errors), or None when the frame was dropped.
+            vehicle frame with the sensor errors), or None when the frame was dropped or
+            the sensor saw no lane.
+        end_reason: why the sensor's lane ended (``simulation.camera.END_REASONS``), ""
+            for the ideal sensor.
+        seen: False when the sensor saw no lane (the detection is None), True otherwise.
     """
 
     state: VehicleState
     detection: fusion.LaneDetection | None
+    end_reason: str = ""
+    seen: bool = True
+
+    def missing(self, who: str) -> str:
+        """Why ``who`` (``ego``/``coop``) sent no detection: ``WHO_not_seen`` (the sensor
+        saw no lane) or ``WHO_dropped`` (an error model dropped it)."""
+        return f"{who}_dropped" if self.seen else f"{who}_not_seen"
 
 
-def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
-          stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None) -> Sensed:
-    """The detection of a vehicle: the sensor on its track, then the error models, points
-    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference).
-    With ``neighbours`` the lanes beside its own (same range and sampling, each through the
-    same error models, a dropped one left out) and the road edges come with it."""
-    raw = sensor.detect(state.track.strip, state.station)
+def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: SensorErrorModel,
+          rng: np.random.Generator, *, stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None,
+          obstacles: NDArrayFloat = NO_OBSTACLES) -> Sensed:
+    """The detection of a vehicle: the sensor on its track (the other vehicles at
+    ``obstacles``, (M, 3) x, y m, yaw rad, world frame, may hide the lane from a camera),
+    then the error models, points rounded to 1 µm; the ego's pose carries no localisation
+    error (it is the reference). With ``neighbours`` the lanes beside its own (same range
+    and sampling, each through the same error models, a dropped one left out) and the road
+    edges come with it."""
+    raw, end_reason = sensor.read(state.track, state.station, obstacles)
     if raw is None:
-        return Sensed(state, None)
+        return Sensed(state, None, end_reason, seen=False)
     borders = errors.apply(raw.left, raw.right, rng)
     if borders is None:
-        return Sensed(state, None)
+        return Sensed(state, None, end_reason)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
     lanes: list[fusion.NeighbourLane] = []
     branches: list[fusion.LaneBranch] = []
@@ -68,7 +85,8 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
     x, y, yaw = (raw.x, raw.y, raw.yaw) if state.role == "ego" else errors.perturb_pose(raw.x, raw.y, raw.yaw, rng)
     pose = fusion.Pose2D(x, y, yaw)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
-                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)))
+                                              neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches)),
+                  end_reason)
 
 
 def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: SensorErrorModel,
