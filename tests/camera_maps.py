@@ -37,8 +37,8 @@ def one_road(length_m: float, lanes: tuple[Lane, ...], *, curvature: float = 0.0
     shape = "<line/>" if curvature == 0.0 else f'<arc curvature="{curvature!r}"/>'
     left = "".join(lane.xml() for lane in sorted((lane for lane in lanes if lane.id > 0), key=lambda lane: -lane.id))
     right = "".join(lane.xml() for lane in sorted((lane for lane in lanes if lane.id < 0), key=lambda lane: -lane.id))
-    sides = (f"<left>{left}</left>" if left else "") + ('<center><lane id="0" type="none" level="false"><link/>'
-                                                                 f'<roadMark sOffset="0.0" type="{centre_mark}"/></lane></center>')
+    centre = f'<lane id="0" type="none" level="false"><link/><roadMark sOffset="0.0" type="{centre_mark}"/></lane>'
+    sides = (f"<left>{left}</left>" if left else "") + f"<center>{centre}</center>"
     sides += f"<right>{right}</right>" if right else ""
     return ('<?xml version="1.0" encoding="UTF-8"?>\n<OpenDRIVE>'
             '<header revMajor="1" revMinor="6" name="camera" vendor="cold-maps tests"/>'

@@ -1,7 +1,8 @@
-"""``cold-eval sweep``: a grid of evaluations (map × gap × method × error level × seed).
+"""``cold-eval sweep``: a grid of evaluations (map × gap × method × sensor × error level ×
+seed).
 
 ``cold-eval sweep --map M [--map ...] --gaps 10,20,30,50 --interpolation paper,hermite
---noise 0,0.02,0.05 --pose-xy 0,0.1 --seeds 0,1,2 --frames N --out DIR`` runs every cell
+--sensor ideal,camera --noise 0,0.02,0.05 --pose-xy 0,0.1 --seeds 0,1,2 --frames N --out DIR`` runs every cell
 in ``--workers`` processes (default: the cores) or, with ``--scheduler tcp://HOST:PORT``,
 on a Dask cluster (maps shipped to the workers). Outputs in DIR: results.parquet,
 results.csv, summary.md, plots/*.png, cells/*.json (one per finished cell: run the same
@@ -19,6 +20,7 @@ from typing import Callable, Final, Sequence, TypeVar
 from cold_maps.cli.common import gap_list, int_in, make_parser, positive_int
 from cold_maps.simulation.drive import MAX_COVER_ROUTES, PAPER_GAPS_M
 from cold_maps.simulation.sensor_errors import MAX_ERROR_M
+from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 
 PROG: Final[str] = "cold-eval sweep"
 DEFAULT_FRAMES: Final[int] = 100
@@ -47,6 +49,19 @@ def _sigmas(text: str) -> tuple[float, ...]:
     return values
 
 
+def _sensors(text: str) -> tuple[SensorProfile, ...]:
+    """argparse type: comma-separated built-in sensor profile names or FILE.toml paths."""
+    from cold_maps.simulation.sensor_profile import load_profile
+
+    names = [part.strip() for part in dict.fromkeys(text.split(",")) if part.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected at least one sensor profile, got {text!r}")
+    try:
+        return tuple(load_profile(name) for name in names)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _seeds(text: str) -> tuple[int, ...]:
     values = _list(int, "integers")(text)
     if any(v < 0 for v in values):
@@ -67,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--method", action="append", default=[], metavar="NAME",
                         help="another fusion method: registered name or package.module:function "
                              "(repeatable; default: none)")
+    parser.add_argument("--sensor", type=_sensors, default=(IDEAL,), metavar="SENSOR[,SENSOR...]",
+                        help="lane sensor profiles: ideal, camera, camera-highway or FILE.toml (see cold-eval "
+                             "--help; default ideal)")
     parser.add_argument("--noise", type=_sigmas, default=(0.0,), help="sensor noise σ levels in m (default 0)")
     parser.add_argument("--pose-xy", type=_sigmas, default=(0.0,), help="coop pose σ levels in m (default 0)")
     parser.add_argument("--seeds", type=_seeds, default=(0,), help="seeds (default 0)")
@@ -96,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     configure_logging(args.verbose, args.quiet)
     spec = SweepSpec(tuple(args.map), args.gaps, tuple(dict.fromkeys((*args.interpolation, *args.method))),
-                     args.noise, args.pose_xy, args.seeds, args.frames, args.routes)
+                     args.noise, args.pose_xy, args.seeds, args.frames, args.routes, args.sensor)
     try:
         cells = spec.cells()
         out = prepare_out_dir(args.out)

@@ -1,7 +1,8 @@
 """Batch evaluation: drives on a map, lane detections, fusion per frame, errors against GT.
 
-For every frame of every drive each vehicle senses its lane (``LaneSensor`` on the
-OpenDRIVE map, optional seeded error models), the ego's detection is measured alone
+For every frame of every drive each vehicle senses its lane (the plan's sensor profile:
+the ideal ``LaneSensor`` or a ``CameraSensor`` that the other vehicles can hide the lane
+from, on the OpenDRIVE map; optional seeded error models), the ego's detection is measured alone
 (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
 ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
@@ -180,6 +181,8 @@ class MapEvaluator:
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
             f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}")
+        if plan.sensor.kind != "ideal":
+            collector.notes.append(f"{plan.name}: {plan.sensor.describe()}")
         loop_m = min(d.ego.shortest_loop_m for d in self.drives)
         farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
         if loop_m < farthest_m:

@@ -200,7 +200,8 @@ class CameraSensor:
 
     def __init__(self, profile: SensorProfile, graph: LaneGraph) -> None:
         if profile.kind != "camera":
-            raise ValueError(f"sensor profile {profile.name}: a camera sensor needs kind 'camera', got {profile.kind!r}")
+            raise ValueError(f"sensor profile {profile.name}: a camera sensor needs kind 'camera', "
+                             f"got {profile.kind!r}")
         self.profile = profile
         self.graph = graph
         self.range_m = profile.max_range_m
