@@ -3,6 +3,7 @@ built for it, the road-mark classification of borders, and the sensor profiles."
 
 from __future__ import annotations
 
+import csv
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -10,12 +11,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from camera_maps import LANE_WIDTH_M, Lane, one_road, write
+from conftest import bundled_map
 
+from cold_maps.cli import evaluate
+from cold_maps.evaluation.report import FRAMES_CSV_COLUMNS
 from cold_maps.network.lane_graph import LaneKey, load_graph
+from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
-from cold_maps.simulation.camera import CameraSensor, lane_sensor
-from cold_maps.simulation.drive import Track
+from cold_maps.simulation.camera import END_REASONS, CameraSensor, lane_sensor
+from cold_maps.simulation.detection import obstacles_of
+from cold_maps.simulation.drive import Track, VehicleState
 from cold_maps.simulation.sensor import LaneSensor
 from cold_maps.simulation.sensor_profile import (
     BUILTIN_PROFILES,
@@ -210,3 +216,38 @@ def test_unknown_profile_names_the_choices() -> None:
         load_profile("lidar")
     with pytest.raises(ValueError, match="sensor profile x: fov_half_angle_rad"):
         SensorProfile(name="x", fov_half_angle_rad=4.0)
+
+
+def test_cold_eval_with_a_camera_records_why_each_local_detection_ended(tmp_path) -> None:
+    """frames.csv gains ``end_reason`` (set on the local rows only, one of the six), the
+    summary lists the profile's parameters; without --sensor no such column exists."""
+    out = tmp_path / "camera"
+    args = ["--map", str(bundled_map("junction")), "--frames", "30", "--routes", "2", "--gaps", "30",
+            "--interpolation", "paper", "--no-mcap", "--no-plots", "--workers", "1"]
+    assert evaluate.main([*args, "--sensor", "camera", "--out", str(out)]) == 0
+    with open(out / "frames.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    local = [row for row in rows if row["fusion"] == "local"]
+    assert local and {row["end_reason"] for row in local} <= set(END_REASONS)
+    assert all(row["end_reason"] == "" for row in rows if row["fusion"] != "local")
+    assert f"junction: {CAMERA.describe()}" in (out / "summary.md").read_text()
+    assert evaluate.main([*args, "--frames", "2", "--out", str(tmp_path / "ideal")]) == 0
+    header = (tmp_path / "ideal" / "frames.csv").read_text().splitlines()[0]
+    assert header == ",".join(FRAMES_CSV_COLUMNS)
+
+
+@pytest.mark.parametrize("value, named", [("lidar", "unknown sensor 'lidar'"), ("nope.toml", "nope.toml: cannot read")])
+def test_a_bad_sensor_is_a_usage_error(value, named, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        evaluate.main(["--map", "x.xodr", "--sensor", value])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and named in err and "(see cold-eval --help)" in err and "\n" not in err
+
+
+def test_every_vehicle_sees_every_other_vehicle_but_itself() -> None:
+    strip = LaneStrip.from_borders(np.array([[0.0, 1.0], [100.0, 1.0]]), np.array([[0.0, -1.0], [100.0, -1.0]]))
+    track = Track((), strip, np.array([0.0, 100.0]))
+    states = {name: VehicleState(name, "coop", track, station, LaneKey("1", 0, -1), station)
+              for name, station in (("ego", 10.0), ("a", 30.0), ("b", 60.0))}
+    obstacles = obstacles_of(states)
+    assert obstacles["ego"][:, 0].tolist() == [30.0, 60.0] and obstacles["b"][:, 0].tolist() == [10.0, 30.0]

@@ -35,7 +35,7 @@ from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
-from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, detection_pose, sense, world_borders
+from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, detection_pose, obstacles_of, sense, world_borders
 from cold_maps.simulation.exchange import LaneExchange
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
@@ -239,7 +239,7 @@ class MapEvaluator:
         self._relations.clear()
         self._true_lanes.clear()
         states = drive.states(frame)
-        obstacles = _obstacles(states) if plan.sensor.kind == "camera" else {}
+        obstacles = obstacles_of(states) if plan.sensor.kind == "camera" else {}
         sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours,
                               obstacles=obstacles.get(name, NO_OBSTACLES))
                   for name, state in states.items()}
@@ -474,12 +474,6 @@ class MapEvaluator:
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
-
-
-def _obstacles(states: dict[str, VehicleState]) -> dict[str, NDArrayFloat]:
-    """Per vehicle of the frame, the poses (x, y m, yaw rad; world) of all the others."""
-    poses = {name: state.track.strip.pose(state.station) for name, state in states.items()}
-    return {name: np.array([pose for other, pose in poses.items() if other != name]).reshape(-1, 3) for name in poses}
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:

@@ -8,7 +8,7 @@ maps a detection back into the world frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Mapping
 
 import numpy as np
 
@@ -96,6 +96,13 @@ def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: Senso
     seen = errors.apply(world_to_vehicle(left, raw.x, raw.y, raw.yaw), world_to_vehicle(right, raw.x, raw.y, raw.yaw),
                         rng)
     return None if seen is None else (np.round(seen[0], DETECTION_DECIMALS), np.round(seen[1], DETECTION_DECIMALS))
+
+
+def obstacles_of(states: Mapping[str, VehicleState]) -> dict[str, NDArrayFloat]:
+    """Per vehicle of a frame, the poses of all the others: (M, 3) x, y (m), yaw (rad), world
+    frame, at their true positions on their tracks' centrelines."""
+    poses = {name: state.track.strip.pose(state.station) for name, state in states.items()}
+    return {name: np.array([pose for other, pose in poses.items() if other != name]).reshape(-1, 3) for name in poses}
 
 
 def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:
