@@ -134,28 +134,41 @@ def behind_footprints(points: NDArrayFloat, camera: NDArrayFloat, obstacles: NDA
                       width_m: float) -> NDArrayBool:
     """(K,) whether the segment from ``camera`` (2,) to each of ``points`` (K, 2) crosses
     a ``length_m`` × ``width_m`` footprint centred on one of ``obstacles`` (M, 3: x, y,
-    yaw), world frame, m (Liang–Barsky clipping in each footprint's frame). A footprint
-    that contains the camera is ignored (the vehicle's own)."""
+    yaw), world frame, m (Liang–Barsky clipping in each footprint's frame, vectorised over
+    footprints and points). A footprint that contains the camera is ignored (the vehicle's
+    own); footprints out of every segment's reach are skipped."""
     hidden = np.zeros(len(points), dtype=bool)
-    if len(obstacles) == 0 or length_m <= 0.0 or width_m <= 0.0:
+    if len(obstacles) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
         return hidden
     half = np.array([0.5 * length_m, 0.5 * width_m])
-    for ox, oy, oyaw in obstacles:
-        start = world_to_vehicle(camera[None, :], ox, oy, oyaw)[0]
-        if np.all(np.abs(start) <= half):
-            continue
-        direction = world_to_vehicle(points, ox, oy, oyaw) - start
-        enter, leave = np.zeros(len(points)), np.ones(len(points))
-        for axis in range(2):
-            d = direction[:, axis]
-            moving = np.abs(d) > 1e-12
-            safe = np.where(moving, d, 1.0)
-            t1, t2 = (-half[axis] - start[axis]) / safe, (half[axis] - start[axis]) / safe
-            inside = abs(start[axis]) <= half[axis]
-            enter = np.where(moving, np.maximum(enter, np.minimum(t1, t2)), enter if inside else np.inf)
-            leave = np.where(moving, np.minimum(leave, np.maximum(t1, t2)), leave)
-        hidden |= enter <= leave
-    return hidden
+    reach = float(np.hypot(*half))
+    rays = points - camera
+    centres = obstacles[:, :2] - camera
+    direction = rays.mean(axis=0)
+    direction = direction / max(float(np.hypot(*direction)), 1e-12)
+    near = np.hypot(centres[:, 0], centres[:, 1]) <= np.hypot(rays[:, 0], rays[:, 1]).max() + reach
+    ahead = centres @ direction + reach >= min(0.0, float((rays @ direction).min()))
+    kept = obstacles[near & ahead]
+    if len(kept) == 0:
+        return hidden
+    cos, sin = np.cos(kept[:, 2])[:, None], np.sin(kept[:, 2])[:, None]
+    offset = camera - kept[:, :2]  # camera relative to each footprint centre, world axes
+    start = np.stack((cos[:, 0] * offset[:, 0] + sin[:, 0] * offset[:, 1],
+                      -sin[:, 0] * offset[:, 0] + cos[:, 0] * offset[:, 1]), axis=-1)  # (M, 2)
+    outside = np.any(np.abs(start) > half, axis=1)
+    start, cos, sin = start[outside], cos[outside], sin[outside]
+    d = np.stack((cos * rays[:, 0] + sin * rays[:, 1], -sin * rays[:, 0] + cos * rays[:, 1]), axis=-1)  # (M, K, 2)
+    enter, leave = np.zeros(d.shape[:2]), np.ones(d.shape[:2])
+    for axis in range(2):
+        step = d[..., axis]
+        origin = start[:, axis: axis + 1]
+        moving = np.abs(step) > 1e-12
+        safe = np.where(moving, step, 1.0)
+        t1, t2 = (-half[axis] - origin) / safe, (half[axis] - origin) / safe
+        inside = np.abs(origin) <= half[axis]
+        enter = np.where(moving, np.maximum(enter, np.minimum(t1, t2)), np.where(inside, enter, np.inf))
+        leave = np.where(moving, np.minimum(leave, np.maximum(t1, t2)), leave)
+    return np.any(enter <= leave, axis=0) if len(start) else hidden
 
 
 def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_tolerance_m: float) -> tuple[int, int]:
