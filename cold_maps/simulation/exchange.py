@@ -66,5 +66,5 @@ class LaneExchange:
                 channel = self.channels.setdefault((drive, name), LaneChannel(self.messages))
                 sent[name] = channel.step(detection, stamp, message_rng)
                 detection = channel.received
-            out[name] = Sensed(item.state, detection)
+            out[name] = replace(item, detection=detection)
         return out, sent
