@@ -19,7 +19,7 @@ from cold_maps.network.lane_graph import LaneKey, load_graph
 from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
-from cold_maps.simulation.camera import END_REASONS, CameraSensor, lane_sensor
+from cold_maps.simulation.camera import END_REASONS, CameraSensor, detection_window, lane_sensor
 from cold_maps.simulation.detection import obstacles_of
 from cold_maps.simulation.drive import Track, VehicleState
 from cold_maps.simulation.sensor import LaneSensor
@@ -251,3 +251,30 @@ def test_every_vehicle_sees_every_other_vehicle_but_itself() -> None:
               for name, station in (("ego", 10.0), ("a", 30.0), ("b", 60.0))}
     obstacles = obstacles_of(states)
     assert obstacles["ego"][:, 0].tolist() == [30.0, 60.0] and obstacles["b"][:, 0].tolist() == [10.0, 30.0]
+
+
+def test_a_lane_hidden_behind_a_vehicle_shortly_before_the_range_ends_for_the_occlusion(tmp_path) -> None:
+    """Hidden from d·W/w = 44.2 m, out of range from 50 m: the gap's first 12 m are mostly
+    occluded (every point past 44.2 m is), so the lane ended for the occlusion."""
+    graph, track = _track(tmp_path, _two_lanes())
+    x, y, yaw = track.strip.pose(50.0)
+    rear_m = 22.75
+    vehicle = np.array([[x + rear_m + CAMERA.vehicle_length_m / 2, y, yaw]])
+    detection, reason = CameraSensor(CAMERA, graph).read(track, 50.0, vehicle)
+    assert reason == "occlusion" and detection.left[-1, 0] < rear_m * LANE_WIDTH_M / CAMERA.vehicle_width_m
+
+
+def test_the_detection_window_bridges_short_gaps_and_names_the_rule_that_hides_most() -> None:
+    """Masks along one border every 1 m: a 5 m gap is bridged, an 8 m one ends the lane at
+    the last visible point before it, for the rule set on most of its first 6 m."""
+    along = np.arange(40.0)[None, :]
+    range_bit, occlusion_bit, unmarked_bit = 1 << 0, 1 << 3, 1 << 4
+    mask = np.zeros((1, 40), dtype=np.int64)
+    mask[0, 5:9] = unmarked_bit  # gap from 4 to 9: 5 m
+    mask[0, 20:27] = occlusion_bit  # gap from 19 to 27: 8 m
+    mask[0, 23:27] |= range_bit
+    assert detection_window(mask, along, 0, 6.0) == (19, 3)
+    assert detection_window(mask, along, 0, 10.0) == (39, -1)
+    mask[0, 30:] = range_bit  # open to the end
+    assert detection_window(mask, along, 0, 10.0) == (29, 0)
+    assert detection_window(mask, along, 5, 3.0) == (4, 4)  # hidden from the start: nothing reported
