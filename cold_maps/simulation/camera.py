@@ -54,6 +54,7 @@ END_REASONS: Final[tuple[str, ...]] = ("range", "field_of_view", "crest", "occlu
 RULES: Final[int] = 5
 """The visibility rules: the first five :data:`END_REASONS`."""
 VISIBLE: Final[int] = 0
+"""The :func:`hidden_by` mask of a point that fails no rule."""
 SEARCH_MARGIN_M: Final[float] = 5.0
 """Centreline length (m) searched beyond the farthest station a point in range and view can
 have on a circle through the camera, for the lane's half width."""
