@@ -1,9 +1,9 @@
 """Batch evaluation: drives on a map, lane detections, fusion per frame, errors against GT.
 
-For every frame of every drive each vehicle senses its lane (the plan's sensor profile:
-the ideal ``LaneSensor`` or a ``CameraSensor`` that the other vehicles can hide the lane
-from, on the OpenDRIVE map; optional seeded error models), the ego's detection is measured alone
-(``local``) and fused with every other present vehicle for each scenario (``convoy``;
+For every frame of every drive each vehicle senses its lane on the OpenDRIVE map (the
+plan's sensor profile: the ideal ``LaneSensor``, or a ``CameraSensor`` the other vehicles
+can hide the lane from; optional seeded error models), the ego's detection is measured
+alone (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
 ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
