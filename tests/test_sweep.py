@@ -160,3 +160,10 @@ def test_a_missing_map_is_one_line_on_stderr(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert status == 1 and "nope.xodr" in err and err.count("\n") == 0
     assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_sweep_sensor_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        evaluate.main(["sweep", "--map", "m.xodr", "--sensor", "ideal,lidar", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "unknown sensor 'lidar'" in err and "\n" not in err
