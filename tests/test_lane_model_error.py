@@ -25,10 +25,11 @@ from cold_maps.simulation.lane_model_error import (
 )
 from cold_maps.simulation.sensor import LaneSensor
 from cold_maps.simulation.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor_profile import CAMERA as CAMERA_PROFILE
+from cold_maps.simulation.sensor_profile import IDEAL
 
-CAMERA = LaneModelErrorParams(sigma_c0_m=0.05, sigma_c1_rad=0.002, sigma_c2_per_m=4e-5, sigma_c3_per_m2=0.0,
-                              white_m=0.01, tau_s=0.5)
-"""The issue's urban camera values."""
+CAMERA = CAMERA_PROFILE.lane_error
+"""The urban camera profile's values."""
 WITH_C3 = replace(CAMERA, sigma_c3_per_m2=2e-6)
 """The same with a curvature-rate error, so that every term of the closed form counts."""
 CHAINS = 20_000
@@ -166,10 +167,10 @@ def test_the_evaluator_applies_the_seeded_lane_error_to_every_frame():
     # Only δc0 with τ far above the drive: each border of the ego sits δc0 off its GT.
     params = LaneModelErrorParams(sigma_c0_m=0.2, tau_s=1e9)
     plan = MapPlan(bundled_map("straight"), scenarios_for([30.0], ["paper"]), frames=5, routes=1, start_lane=LANE,
-                   distractors=False, seed=7, lane_error=params)
+                   distractors=False, seed=7, sensor=replace(IDEAL, lane_error=params))
     evaluator = MapEvaluator(plan)
     assert not evaluator.frames_independent
-    assert MapEvaluator(replace(plan, lane_error=LaneModelErrorParams()), graph=evaluator.graph).frames_independent
+    assert MapEvaluator(replace(plan, sensor=IDEAL), graph=evaluator.graph).frames_independent
     collector = Collector()
     evaluator.run(collector)
     # the ego's chain: its own generator, drawn from the stationary N(0, σ²) at its first frame

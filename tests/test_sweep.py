@@ -19,6 +19,7 @@ from conftest import bundled_map
 from cold_maps.cli import evaluate
 from cold_maps.evaluation.sweep import CELLS_DIR, Cell, load_cell
 from cold_maps.evaluation.sweep_report import gap_points, safe_gaps, summary_markdown
+from cold_maps.simulation.sensor_profile import CAMERA
 
 GRID = ("--gaps", "20,30,50", "--interpolation", "paper,hermite", "--seeds", "0,1", "--frames", "5", "--routes", "1")
 CELLS = 2 * 3 * 2 * 2
@@ -113,8 +114,9 @@ def test_a_method_from_the_test_suite_is_in_the_sweep_table(tmp_path):
     assert (out / "plots" / "sweep_straight.png").stat().st_size > 0 and (out / "plots" / "safe_gap.png").exists()
 
 
-def _row(d_s: float, max_error: float | None, noise: float = 0.0, boundary: str = "left") -> dict:
-    return {"map": "m", "fusion": "spline", "interpolation": "paper", "boundary": boundary, "max_error_m": max_error,
+def _row(d_s: float, max_error: float | None, noise: float = 0.0, boundary: str = "left", **sensor: str) -> dict:
+    return {**{f"cell_{k}": v for k, v in sensor.items()}, "map": "m", "fusion": "spline", "interpolation": "paper",
+            "boundary": boundary, "max_error_m": max_error,
             "p95_error_m": None if max_error is None else max_error / 2, "perception_range_m": 60.0 + d_s,
             "fused_frames": 0 if max_error is None else 1, "frames": 1, "cell_noise_sigma_m": noise,
             "cell_pose_sigma_xy_m": 0.0, "cell_d_s_m": d_s}
@@ -126,17 +128,28 @@ def test_the_safe_gap_is_the_longest_gap_within_0_75_m():
     points = gap_points(rows)
     assert [(p.d_s_m, p.max_error_m) for p in points if p.noise_sigma_m == 0] == [
         (10, 0.2), (20, 0.74), (30, 0.76), (50, None)]
-    assert safe_gaps(points) == {("m", "paper", 0.0, 0.0): 20.0, ("m", "paper", 0.05, 0.0): None}
+    assert safe_gaps(points) == {("m", "paper", "ideal", 0.0, 0.0): 20.0, ("m", "paper", "ideal", 0.05, 0.0): None}
     text = summary_markdown(rows, cells=3, finished=2)
     assert "| m | paper | 0 | 0 | 20 |" in text and "| m | paper | 0.05 | 0 | none |" in text
     assert "PARTIAL SWEEP: 2 of 3 cells finished" in text
+
+
+def test_a_sensor_axis_keeps_its_cells_apart_and_shows_in_the_summary():
+    """Rows of two sensors at one level are two points; the summary gains a sensor column."""
+    rows = [_row(20, 0.5, sensor="ideal"), _row(20, 0.9, sensor="camera"), _row(10, 0.6, sensor="camera")]
+    assert safe_gaps(gap_points(rows)) == {("m", "paper", "camera", 0.0, 0.0): 10.0,
+                                           ("m", "paper", "ideal", 0.0, 0.0): 20.0}
+    text = summary_markdown(rows, cells=2, finished=2)
+    assert "| m | paper | camera | 0 | 0 | 20 | 0.900 |" in text and "| m | paper | ideal | 0 | 0 | 20 |" in text
 
 
 def test_a_cell_is_keyed_by_its_parameters_and_the_map_bytes(tmp_path):
     cell = Cell("a/m.xodr", "m", "0" * 64, 20.0, "paper", 0.0, 0.0, 0, 5, 1)
     assert replace(cell, map_path="b/m.xodr").key == cell.key  # a moved map is the same cell
     assert len({cell.key, replace(cell, map_sha256="1" * 64).key, replace(cell, seed=1).key,
-                replace(cell, d_s_m=30.0).key}) == 4
+                replace(cell, d_s_m=30.0).key, replace(cell, sensor=CAMERA).key,
+                replace(cell, sensor=replace(CAMERA, max_range_m=60.0)).key}) == 6
+    assert replace(cell, sensor=CAMERA).params()["cell_sensor"] == "camera"
     (tmp_path / CELLS_DIR).mkdir()
     (tmp_path / CELLS_DIR / f"{cell.key}.json").write_text('{"cell": {}, "rows": []}')
     assert load_cell(tmp_path, cell) is None  # another cell's file under this key is not trusted
@@ -147,3 +160,10 @@ def test_a_missing_map_is_one_line_on_stderr(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert status == 1 and "nope.xodr" in err and err.count("\n") == 0
     assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_sweep_sensor_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        evaluate.main(["sweep", "--map", "m.xodr", "--sensor", "ideal,lidar", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "unknown sensor 'lidar'" in err and "\n" not in err

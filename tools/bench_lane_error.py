@@ -2,7 +2,7 @@
 none, side by side in one run.
 
 Two plans on one map share the lane graph and the ground truth: the ideal sensor and the
-same with the issue's urban camera error (σ(c0) 0.05 m, σ(c1) 2 mrad, σ(c2) 4e-5 1/m,
+same with the urban camera profile's lane-model error (σ(c0) 0.05 m, σ(c1) 2 mrad, σ(c2) 4e-5 1/m,
 σ(c3) 0, white 0.01 m, τ 0.5 s). Frame by frame, alternating which goes first, it times
 ``sense`` of every vehicle of the frame and the evaluator's whole frame (sense, fusion,
 ground-truth errors) of each plan.
@@ -32,12 +32,13 @@ from cold_maps.evaluation.collector import Collector  # noqa: E402
 from cold_maps.evaluation.evaluator import MapEvaluator  # noqa: E402
 from cold_maps.evaluation.scenarios import MapPlan, scenarios_for  # noqa: E402
 from cold_maps.simulation.detection import sense  # noqa: E402
-from cold_maps.simulation.lane_model_error import LaneModelErrorParams, LaneModelErrorSampler  # noqa: E402
+from cold_maps.simulation.lane_model_error import LaneModelErrorSampler  # noqa: E402
+from cold_maps.simulation.sensor_profile import CAMERA as CAMERA_PROFILE  # noqa: E402
+from cold_maps.simulation.sensor_profile import IDEAL  # noqa: E402
 
 DEFAULT_MAP = ROOT / "maps" / "junction.xodr"
-CAMERA = LaneModelErrorParams(sigma_c0_m=0.05, sigma_c1_rad=0.002, sigma_c2_per_m=4e-5, sigma_c3_per_m2=0.0,
-                              white_m=0.01, tau_s=0.5)
-"""The issue's urban camera values (issue 26, deliverable 3)."""
+CAMERA = CAMERA_PROFILE.lane_error
+"""The urban camera profile's lane-model error."""
 PLANS = ("ideal", "camera")
 STAGES = ("sense", "frame")
 
@@ -48,7 +49,7 @@ def bench(map_path: Path, frames: int, timer: Callable[[], float]) -> dict[tuple
     ideal = MapEvaluator(plan)
     ideal.prepare()
     assert ideal.meter is not None
-    camera = MapEvaluator(replace(plan, lane_error=CAMERA), graph=ideal.graph,
+    camera = MapEvaluator(replace(plan, sensor=replace(IDEAL, lane_error=CAMERA)), graph=ideal.graph,
                           ground_truth=ideal.meter.ground_truth)
     camera.prepare()
     evaluators = {"ideal": ideal, "camera": camera}

@@ -8,7 +8,8 @@ straight, curve90 and rural maps. The drives run in ``--workers`` processes (def
 cores) with the same outputs for any number; ``--method`` adds your own fusion method.
 Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
 1 with one line on stderr for bad input or a crash (partial outputs marked as such); 2 for
-a bad command line; 130 when interrupted, 143 on SIGTERM. ``cold-eval sweep ...``: a grid
+a bad command line; 130 when interrupted, 143 on SIGTERM. ``--sensor`` picks the lane
+sensor (``simulation.sensor_profile``). ``cold-eval sweep ...``: a grid
 of evaluations (see ``cold-eval sweep --help``).
 """
 
@@ -38,6 +39,7 @@ from cold_maps.simulation.drive import DEFAULT_SPEED_MPS, MAX_COVER_ROUTES, MAX_
 from cold_maps.simulation.messages import DEFAULT_CHANGE_TOLERANCE_M, DEFAULT_MAX_INTERVAL_S, MessageModel
 from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRIFT_RAD_PER_M, TYPICAL_SCALE_ERROR
 from cold_maps.simulation.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor_profile import BUILTIN_PROFILES, DEFAULT_PROFILE, SensorProfile, load_profile
 from fusion.bezier import DEFAULT_TOLERANCE_M
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
@@ -105,6 +107,14 @@ def _stamp_base(text: str) -> int:
     return int(seconds * NS_PER_S)
 
 
+def _sensor(text: str) -> SensorProfile:
+    """argparse type: a built-in sensor profile's name or a FILE.toml."""
+    try:
+        return load_profile(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
     """``plan`` with the chains, history and messages asked for (unchanged when none is)."""
     from dataclasses import replace
@@ -157,6 +167,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
+    parser.add_argument("--sensor", type=_sensor, default=DEFAULT_PROFILE, metavar="|".join((*BUILTIN_PROFILES,
+                                                                                           "FILE.toml")),
+                        help="lane sensor: ideal (the paper's: the lane 30 m ahead, never failing), camera (urban: "
+                             "3-50 m, ±25°, crests, vehicles ahead, unmarked borders), camera-highway (3-100 m) or a "
+                             "TOML file overriding a profile's fields (default ideal)")
     parser.add_argument("--no-distractors", action="store_true",
                         help="no turning, adjacent, opposite or behind vehicles")
     safety = parser.add_argument_group(
@@ -234,7 +249,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping), args)
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping, sensor=args.sensor), args)
                 for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
@@ -247,7 +262,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params, lanes=args.lanes, stopping=stopping), args)
+                                 params=params, lanes=args.lanes, stopping=stopping, sensor=args.sensor), args)
             for path in args.map]
 
 
@@ -289,7 +304,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots,
                              progress=progress_stream(args),
-                             run_params={k: str(v) for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
+                             run_params={k: v.describe() if isinstance(v, SensorProfile) else str(v)
+                                         for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
                              workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line

@@ -1,7 +1,8 @@
-"""``cold-eval sweep``: a grid of evaluations (map × gap × method × error level × seed).
+"""``cold-eval sweep``: a grid of evaluations (map × gap × method × sensor × error level ×
+seed).
 
 ``cold-eval sweep --map MAP.xodr [--map ...] [--gaps D_S,...] [--interpolation NAME,...]
-[--noise SIGMA_M,...] [--pose-xy SIGMA_M,...] [--seeds SEED,...] [--frames N] --out DIR``
+[--sensor SENSOR,...] [--noise SIGMA_M,...] [--pose-xy SIGMA_M,...] [--seeds SEED,...] [--frames N] --out DIR``
 runs every cell (each combination of the lists) in ``--workers`` processes (default: the
 cores) or, with ``--scheduler tcp://HOST:PORT``, on a Dask cluster (maps shipped to the
 workers). Outputs in DIR: results.parquet, results.csv, summary.md, plots/*.png,
@@ -20,6 +21,7 @@ from typing import Callable, Final, Sequence, TypeVar
 from cold_maps.cli.common import builds, fusion_method, gap_list, int_in, make_parser, positive_int, validated
 from cold_maps.simulation.drive import MAX_COVER_ROUTES, PAPER_GAPS_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 
 PROG: Final[str] = "cold-eval sweep"
 DEFAULT_FRAMES: Final[int] = 100
@@ -47,6 +49,19 @@ def _levels(field: str) -> Callable[[str], tuple[float, ...]]:
     return validated(_list(float, "σ in m"), lambda values: [check(value) for value in values])
 
 
+def _sensors(text: str) -> tuple[SensorProfile, ...]:
+    """argparse type: comma-separated built-in sensor profile names or FILE.toml paths."""
+    from cold_maps.simulation.sensor_profile import load_profile
+
+    names = [part.strip() for part in dict.fromkeys(text.split(",")) if part.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected at least one sensor profile, got {text!r}")
+    try:
+        return tuple(load_profile(name) for name in names)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _seeds(text: str) -> tuple[int, ...]:
     values = _list(int, "integers")(text)
     if any(v < 0 for v in values):
@@ -67,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--method", action="append", type=fusion_method, default=[], metavar="NAME",
                         help="another fusion method: registered name or package.module:function, looked up in the "
                              "installed packages and the current folder (repeatable; default: none)")
+    parser.add_argument("--sensor", type=_sensors, default=(IDEAL,), metavar="SENSOR,...",
+                        help="lane sensor profiles: ideal, camera, camera-highway or FILE.toml (see cold-eval "
+                             "--help; default ideal)")
     parser.add_argument("--noise", type=_levels("noise_sigma_m"), default=(0.0,), metavar="SIGMA_M,...",
                         help="sensor noise σ levels in m (default 0: off)")
     parser.add_argument("--pose-xy", type=_levels("pose_sigma_xy_m"), default=(0.0,), metavar="SIGMA_M,...",
@@ -98,7 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     configure_logging(args.verbose, args.quiet)
     spec = SweepSpec(tuple(args.map), args.gaps, tuple(dict.fromkeys((*args.interpolation, *args.method))),
-                     args.noise, args.pose_xy, args.seeds, args.frames, args.routes)
+                     args.noise, args.pose_xy, args.seeds, args.frames, args.routes, args.sensor)
     try:
         cells = spec.cells()
         out = prepare_out_dir(args.out)

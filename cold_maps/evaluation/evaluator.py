@@ -1,8 +1,9 @@
 """Batch evaluation: drives on a map, lane detections, fusion per frame, errors against GT.
 
-For every frame of every drive each vehicle senses its lane (``LaneSensor`` on the
-OpenDRIVE map, optional seeded error models), the ego's detection is measured alone
-(``local``) and fused with every other present vehicle for each scenario (``convoy``;
+For every frame of every drive each vehicle senses its lane on the OpenDRIVE map (the
+plan's sensor profile: the ideal ``LaneSensor``, or a ``CameraSensor`` the other vehicles
+can hide the lane from; optional seeded error models), the ego's detection is measured
+alone (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
 ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
@@ -35,7 +36,7 @@ from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
-from cold_maps.simulation.detection import Sensed, detection_pose, sense, world_borders
+from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, detection_pose, obstacles_of, sense, world_borders
 from cold_maps.simulation.exchange import LaneExchange
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
@@ -51,7 +52,8 @@ from cold_maps.simulation.drive import (
 )
 from cold_maps.simulation.lane_model_error import LaneModelErrorSampler
 from cold_maps.simulation.neighbours import NeighbourSensor
-from cold_maps.simulation.sensor import SENSOR_RANGE_M, LaneSensor
+from cold_maps.simulation.camera import lane_sensor
+from cold_maps.simulation.sensor import SENSOR_RANGE_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 
 if TYPE_CHECKING:
@@ -85,13 +87,14 @@ class MapEvaluator:
         self.fit_notes: tuple[str, ...] = ()
         self.drives, self.coverage = self._drives()
         self.drive_rngs = self.rng.spawn(len(self.drives))
-        self.lane_errors = (None if plan.lane_error.is_zero else
-                            [LaneModelErrorSampler(plan.lane_error, plan.seed, i) for i in range(len(self.drives))])
+        self.lane_errors = (None if plan.sensor.lane_error.is_zero else
+                            [LaneModelErrorSampler(plan.sensor.lane_error, plan.seed, i)
+                             for i in range(len(self.drives))])
         """The lane-model error of each drive, or None when the plan has none."""
         self.stopping = self.plan.stopping.at(self.plan.speed_mps)
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
-        self.sensor = LaneSensor()
+        self.sensor = lane_sensor(plan.sensor, self.graph)
         self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
@@ -189,6 +192,8 @@ class MapEvaluator:
         collector.notes.append(
             f"{plan.name}: stopping distance {STOPPING_FORMULA} = {self.stopping.distance_m:.1f} m at "
             f"v {plan.speed_mps:g} m/s, t_r {rule.reaction_time_s:g} s, a {rule.deceleration_mps2:g} m/s²")
+        if plan.sensor.kind != "ideal":
+            collector.notes.append(f"{plan.name}: {plan.sensor.describe()}")
         loop_m = min(d.ego.shortest_loop_m for d in self.drives)
         farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
         if loop_m < farthest_m:
@@ -244,10 +249,12 @@ class MapEvaluator:
         drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
         self._relations.clear()
         self._true_lanes.clear()
+        states = drive.states(frame)
+        obstacles = obstacles_of(states) if plan.sensor.kind == "camera" else {}
         lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
         sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours,
-                              lane_error=lane_error)
-                  for name, state in drive.states(frame).items()}
+                              obstacles=obstacles.get(name, NO_OBSTACLES), lane_error=lane_error)
+                  for name, state in states.items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:
             sensed, sent = self.exchange.apply(drive_index, sensed, stamp)
@@ -287,8 +294,8 @@ class MapEvaluator:
         keys = self._keys(scenario)
         if ego.detection is None:
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected="ego_dropped",
-                                               stopping=self.stopping))
+                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=ego.missing("ego"),
+                                               end_reason=ego.end_reason, stopping=self.stopping))
             return {}
         left, right = world_borders(ego.detection)
         state = ego.state
@@ -335,7 +342,7 @@ class MapEvaluator:
                                                stopping=self.stopping))
 
         if ego.detection is None or other.detection is None:
-            reject("ego_dropped" if ego.detection is None else "coop_dropped")
+            reject(ego.missing("ego") if ego.detection is None else other.missing("coop"))
             return None
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
@@ -398,7 +405,8 @@ class MapEvaluator:
                                                stopping=self.stopping))
 
         if ego.detection is None or any(c.detection is None for c in coops):
-            reject("ego_dropped" if ego.detection is None else "coop_dropped")
+            reject(ego.missing("ego") if ego.detection is None
+                   else next(c for c in coops if c.detection is None).missing("coop"))
             return
         start = time.perf_counter()
         chain = fusion.fuse_chain(ego.detection, [c.detection for c in coops if c.detection is not None],

@@ -227,7 +227,8 @@ class FrameRecord:
         confidence: the association confidence in [0, 1] of a fused pair (0 rejected), NaN
             when not applicable.
         end_reason: why the ego's own detection ended (``range``, ``map_end``; a camera
-            sensor adds ``field_of_view``, ``crest``, ``occlusion``, ``unmarked``); "" when
+            sensor adds ``field_of_view``, ``crest``, ``occlusion``, ``unmarked``:
+            ``simulation.camera.END_REASONS``); "" when
             unknown or not a local evaluation.
         near_points: how many leading ``errors_m`` lie within ``NEAR_FAR_SPLIT_M`` of the
             ego along the border (the rest are far); None when the distances are unknown

@@ -18,11 +18,11 @@ from cold_maps.evaluation.report import ScenarioKey, scenario_label
 from cold_maps.evaluation.safety import StoppingRule
 from cold_maps.network.lane_graph import LaneKey
 from cold_maps.simulation.drive import CONVOY_HEADWAY_M, DEFAULT_SPEED_MPS
-from cold_maps.simulation.lane_model_error import LaneModelErrorParams
 from cold_maps.simulation.messages import MessageModel
 from cold_maps.simulation.odometry import OdometryModel
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
 from cold_maps.simulation.sensor_errors import SensorErrorModel
+from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 
 INTERPOLATIONS: Final[tuple[str, ...]] = ("paper", "hermite")
 
@@ -149,9 +149,6 @@ class MapPlan:
         start_lane: the lane every route starts on, or None for routes spread over the map.
         distractors: add turning coops, adjacent/opposite-lane and behind vehicles.
         errors: sensor error models (all off by default).
-        lane_error: the correlated cubic lane-model error of every vehicle's own-lane
-            detection (``simulation.lane_model_error``; all zero by default: the ideal
-            sensor). The sensor profile sets it.
         params: fusion parameters.
         road_type: the paper's road type of this map (for the side-by-side), or None.
         history_m: lane history every vehicle keeps and sends (m; 0 = none, as the paper).
@@ -161,6 +158,8 @@ class MapPlan:
             (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
         stopping: the stopping distance rule the lane is scored against at ``speed_mps``
             (``evaluation.safety``).
+        sensor: the lane sensor's profile (``simulation.sensor_profile``; default the
+            paper's ideal sensor), its lane-model error (``sensor.lane_error``) included.
     """
 
     path: Path
@@ -173,7 +172,6 @@ class MapPlan:
     start_lane: LaneKey | None = None
     distractors: bool = True
     errors: SensorErrorModel = SensorErrorModel()
-    lane_error: LaneModelErrorParams = LaneModelErrorParams()
     params: fusion.FusionParams = fusion.DEFAULT_PARAMS
     road_type: str | None = None
     history_m: float = 0.0
@@ -181,6 +179,7 @@ class MapPlan:
     messages: MessageModel = field(default_factory=MessageModel)
     lanes: int = 0
     stopping: StoppingRule = StoppingRule()
+    sensor: SensorProfile = IDEAL
 
     @property
     def name(self) -> str:

@@ -1,10 +1,11 @@
-"""Parameter sweeps: a grid of cells (map × gap d_s × fusion method × error level × seed),
+"""Parameter sweeps: a grid of cells (map × gap d_s × fusion method × sensor × error level ×
+seed),
 each one independent evaluation, run in this process, in local worker processes or on a
 Dask cluster, stored cell by cell so that an interrupted sweep resumes.
 
 A cell evaluates ``local``, ``convoy`` and ``spline`` with its method at its gap d_s on
-its map (``routes`` drives of ``frames`` frames, seeded by its seed, sensor noise σ and
-coop pose σ from its error level). Its rows, one per fusion × boundary, are the
+its map (``routes`` drives of ``frames`` frames, seeded by its seed, its lane sensor
+profile, sensor noise σ and coop pose σ from its error level). Its rows, one per fusion × boundary, are the
 ``metrics.json`` records flattened (``runtime_ms_mean``, ``fusibility_precision``, …,
 ``rejected`` as JSON text) plus the cell's parameters (``cell_*`` columns). Each finished
 cell is written atomically to ``DIR/cells/<key>.json``; the key is a hash of the cell's
@@ -21,16 +22,18 @@ import logging
 import tempfile
 from concurrent.futures import Executor, Future, as_completed
 from contextlib import AbstractContextManager, contextmanager, nullcontext
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
 from pathlib import Path
 from typing import Any, Callable, Final, Iterator, Sequence
 
+from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 from converters.atomic_io import atomic_output
 
 LOG = logging.getLogger("cold_maps.evaluation.sweep")
 
-CELL_FORMAT_VERSION: Final[int] = 1
-"""Version of the stored cell files; part of every cell key."""
+CELL_FORMAT_VERSION: Final[int] = 2
+"""Version of the stored cell files; part of every cell key (2: cells have a sensor)."""
 CELLS_DIR: Final[str] = "cells"
 RESULTS_PARQUET: Final[str] = "results.parquet"
 RESULTS_CSV: Final[str] = "results.csv"
@@ -57,6 +60,7 @@ class Cell:
         seed: seed of routes and error models.
         frames: frames per drive.
         routes: drives on the map.
+        sensor: the lane sensor's profile (``simulation.sensor_profile``).
     """
 
     map_path: str
@@ -69,18 +73,21 @@ class Cell:
     seed: int
     frames: int
     routes: int
+    sensor: SensorProfile = IDEAL
 
     def params(self) -> dict[str, Any]:
         """The cell's parameters as ``cell_*`` columns (the map path left out: a moved file
-        with the same bytes is the same cell)."""
-        fields = asdict(self)
-        del fields["map_path"]
+        with the same bytes is the same cell; the sensor by its profile's name)."""
+        fields = {f.name: getattr(self, f.name) for f in dataclass_fields(self) if f.name != "map_path"}
+        fields["sensor"] = self.sensor.name
         return {f"cell_{name}": value for name, value in fields.items()}
 
     @property
     def key(self) -> str:
-        """Hex sha256 of the parameters, the map's sha256 and the cell format (64 chars)."""
-        text = json.dumps({"format": CELL_FORMAT_VERSION, **self.params()}, sort_keys=True)
+        """Hex sha256 of the parameters, every parameter of the sensor profile, the map's
+        sha256 and the cell format (64 chars)."""
+        text = json.dumps({"format": CELL_FORMAT_VERSION, **self.params(), "sensor_profile": self.sensor.describe()},
+                          sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -92,6 +99,7 @@ class SweepSpec:
         maps: map files.
         gaps_m: spline gaps d_s (m).
         interpolations: fusion method names.
+        sensors: lane sensor profiles.
         noise_sigmas_m: sensor noise levels σ (m).
         pose_sigmas_xy_m: coop pose error levels σ (m).
         seeds: seeds.
@@ -107,10 +115,15 @@ class SweepSpec:
     seeds: tuple[int, ...]
     frames: int
     routes: int
+    sensors: tuple[SensorProfile, ...] = (IDEAL,)
 
     def cells(self) -> list[Cell]:
         """Every cell, maps read (and hashed) once; raises :class:`SweepError` for a map
-        that cannot be read or two maps with one name."""
+        that cannot be read, two maps or two sensor profiles with one name."""
+        sensors = [sensor.name for sensor in self.sensors]
+        if len(set(sensors)) < len(sensors):
+            raise SweepError(f"--sensor: two profiles share a name ({', '.join(sensors)}); the report keys results "
+                             "by sensor name: give every TOML file its own name")
         names: dict[str, Path] = {}
         digests = []
         for path in self.maps:
@@ -122,9 +135,9 @@ class SweepSpec:
             except OSError as exc:
                 raise SweepError(f"{path}: cannot read the map: {exc.strerror or exc}") from None
         return [Cell(str(path), path.stem, digest, float(gap), method, float(noise), float(pose), int(seed),
-                     self.frames, self.routes)
-                for (path, digest), gap, method, noise, pose, seed in itertools.product(
-                    zip(self.maps, digests), self.gaps_m, self.interpolations, self.noise_sigmas_m,
+                     self.frames, self.routes, sensor)
+                for (path, digest), gap, method, sensor, noise, pose, seed in itertools.product(
+                    zip(self.maps, digests), self.gaps_m, self.interpolations, self.sensors, self.noise_sigmas_m,
                     self.pose_sigmas_xy_m, self.seeds)]
 
 
@@ -135,7 +148,7 @@ def cell_plan(cell: Cell, path: Path) -> Any:
 
     errors = SensorErrorModel(noise_sigma_m=cell.noise_sigma_m, pose_sigma_xy_m=cell.pose_sigma_xy_m)
     return MapPlan(path, scenarios_for([cell.d_s_m], [cell.interpolation]), frames=cell.frames, routes=cell.routes,
-                   seed=cell.seed, errors=errors, params=params_for_gaps([cell.d_s_m]))
+                   seed=cell.seed, errors=errors, params=params_for_gaps([cell.d_s_m]), sensor=cell.sensor)
 
 
 def _shipped_map(cell: Cell, data: bytes) -> Path:

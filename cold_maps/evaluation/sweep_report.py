@@ -1,6 +1,7 @@
 """The report of a sweep: ``summary.md`` and plots over the rows of its finished cells.
 
-Per map, spline method and error level (sensor noise σ, coop pose σ), against the gap d_s:
+Per map, spline method and level (lane sensor, sensor noise σ, coop pose σ), against the gap d_s
+(the sensor shown only when some cell's is not the default ``ideal``):
 the largest error (max over seeds and both borders), the 95th percentile (likewise the
 worst), the mean perception range, and the safe gap: the longest d_s whose largest error
 stays within ``SAFE_MAX_ERROR_M`` (the paper's criterion).
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, Sequence
 
+from cold_maps.simulation.sensor_profile import DEFAULT_PROFILE
 from converters.atomic_io import atomic_output
 
 SAFE_MAX_ERROR_M: Final[float] = 0.75
@@ -25,10 +27,11 @@ SAFE_GAP_PLOT: Final[str] = "safe_gap.png"
 
 @dataclass(frozen=True)
 class GapPoint:
-    """One map, method, error level and gap, over its seeds and both borders.
+    """One map, method, sensor, error level and gap, over its seeds and both borders.
 
     Fields:
-        map: map name; interpolation: the spline method; noise_sigma_m, pose_sigma_xy_m:
+        map: map name; interpolation: the spline method; sensor: the lane sensor
+        profile's name; noise_sigma_m, pose_sigma_xy_m:
         the error level (m); d_s_m: the gap (m); max_error_m, p95_error_m: the worst over
         seeds and borders (m, None when nothing was fused); range_m: mean perception range
         (m, None when nothing was fused); fused_frames, frames: summed.
@@ -36,6 +39,7 @@ class GapPoint:
 
     map: str
     interpolation: str
+    sensor: str
     noise_sigma_m: float
     pose_sigma_xy_m: float
     d_s_m: float
@@ -47,8 +51,9 @@ class GapPoint:
 
     @property
     def level(self) -> str:
-        """The error level as a label."""
-        return f"noise {self.noise_sigma_m:g} m, pose {self.pose_sigma_xy_m:g} m"
+        """The error level as a label, after the sensor's name unless it is the default."""
+        sensor = "" if self.sensor == DEFAULT_PROFILE else f"{self.sensor}, "
+        return f"{sensor}noise {self.noise_sigma_m:g} m, pose {self.pose_sigma_xy_m:g} m"
 
 
 def _worst(values: list[Any]) -> float | None:
@@ -57,12 +62,13 @@ def _worst(values: list[Any]) -> float | None:
 
 
 def gap_points(rows: Sequence[dict[str, Any]]) -> list[GapPoint]:
-    """The spline rows aggregated per map, method, error level and gap, sorted."""
-    groups: dict[tuple[str, str, float, float, float], list[dict[str, Any]]] = {}
+    """The spline rows aggregated per map, method, sensor (rows without one: the default),
+    error level and gap, sorted."""
+    groups: dict[tuple[str, str, str, float, float, float], list[dict[str, Any]]] = {}
     for row in rows:
         if row["fusion"] == "spline":
-            key = (row["map"], row["interpolation"], row["cell_noise_sigma_m"], row["cell_pose_sigma_xy_m"],
-                   row["cell_d_s_m"])
+            key = (row["map"], row["interpolation"], row.get("cell_sensor", DEFAULT_PROFILE), row["cell_noise_sigma_m"],
+                   row["cell_pose_sigma_xy_m"], row["cell_d_s_m"])
             groups.setdefault(key, []).append(row)
     points = []
     for key, group in sorted(groups.items()):
@@ -74,12 +80,12 @@ def gap_points(rows: Sequence[dict[str, Any]]) -> list[GapPoint]:
     return points
 
 
-def safe_gaps(points: Sequence[GapPoint]) -> dict[tuple[str, str, float, float], float | None]:
-    """(map, method, noise σ, pose σ) → the longest d_s (m) whose largest error is within
-    ``SAFE_MAX_ERROR_M``, None when no gap is."""
-    found: dict[tuple[str, str, float, float], float | None] = {}
+def safe_gaps(points: Sequence[GapPoint]) -> dict[tuple[str, str, str, float, float], float | None]:
+    """(map, method, sensor, noise σ, pose σ) → the longest d_s (m) whose largest error is
+    within ``SAFE_MAX_ERROR_M``, None when no gap is."""
+    found: dict[tuple[str, str, str, float, float], float | None] = {}
     for p in points:
-        key = (p.map, p.interpolation, p.noise_sigma_m, p.pose_sigma_xy_m)
+        key = (p.map, p.interpolation, p.sensor, p.noise_sigma_m, p.pose_sigma_xy_m)
         found.setdefault(key, None)
         if p.max_error_m is not None and p.max_error_m <= SAFE_MAX_ERROR_M:
             found[key] = max(found[key] or 0.0, p.d_s_m)
@@ -100,19 +106,27 @@ def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: in
     """The sweep's summary: the error and range table against d_s and the safe gaps.
     ``interrupted``: the tables and plots were not written (:data:`INTERRUPTED_WRITING`)."""
     points = gap_points(rows)
+    sensors = any(p.sensor != DEFAULT_PROFILE for p in points)
+    sensor_head, sensor_rule = ("sensor | ", "---|") if sensors else ("", "")
+
+    def column(sensor: str) -> str:
+        return f"{sensor} | " if sensors else ""
+
     status = "" if finished == cells else f"**PARTIAL SWEEP: {finished} of {cells} cells finished.**\n\n"
     status += INTERRUPTED_WRITING if interrupted else ""
     lines = [f"# Sweep\n\n{status}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over seeds "
              "and both borders, the range their mean.\n\n## Spline fusion against the gap d_s\n\n"
-             "| map | method | noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | range [m] | "
-             "fused / evaluated |\n|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {p.map} | {p.interpolation} | {p.noise_sigma_m:g} | {p.pose_sigma_xy_m:g} | {p.d_s_m:g} | "
+             f"| map | method | {sensor_head}noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | "
+             f"range [m] | fused / evaluated |\n|---|---|{sensor_rule}---|---|---|---|---|---|---|"]
+    lines += [f"| {p.map} | {p.interpolation} | {column(p.sensor)}{p.noise_sigma_m:g} | {p.pose_sigma_xy_m:g} | "
+              f"{p.d_s_m:g} | "
               f"{_number(p.max_error_m)} | {_number(p.p95_error_m)} | {_number(p.range_m, 1)} | "
               f"{p.fused_frames} / {p.frames} |" for p in points]
     lines.append(f"\n## Safe gap (longest d_s with max error <= {SAFE_MAX_ERROR_M:g} m)\n\n"
-                 "| map | method | noise σ [m] | pose σ [m] | safe d_s [m] |\n|---|---|---|---|---|")
-    lines += [f"| {m} | {method} | {noise:g} | {pose:g} | {'none' if gap is None else f'{gap:g}'} |"
-              for (m, method, noise, pose), gap in sorted(safe_gaps(points).items())]
+                 f"| map | method | {sensor_head}noise σ [m] | pose σ [m] | safe d_s [m] |\n"
+                 f"|---|---|{sensor_rule}---|---|---|")
+    lines += [f"| {m} | {method} | {column(sensor)}{noise:g} | {pose:g} | {'none' if gap is None else f'{gap:g}'} |"
+              for (m, method, sensor, noise, pose), gap in sorted(safe_gaps(points).items())]
     return "\n".join(lines) + "\n"
 
 
@@ -150,13 +164,13 @@ def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
     gaps = safe_gaps(points)
     if gaps:
         figure, axis = plt.subplots(figsize=(8, 4.5))
-        levels = list(dict.fromkeys(f"{noise:g} / {pose:g}" for (_, _, noise, pose) in gaps))
-        series: dict[tuple[str, str], dict[str, float]] = {}
-        for (map_name, method, noise, pose), gap in gaps.items():
-            series.setdefault((map_name, method), {})[f"{noise:g} / {pose:g}"] = 0.0 if gap is None else gap
-        for (map_name, method), values in series.items():
+        levels = list(dict.fromkeys(f"{noise:g} / {pose:g}" for (_, _, _, noise, pose) in gaps))
+        series: dict[tuple[str, str, str], dict[str, float]] = {}
+        for (map_name, method, sensor, noise, pose), gap in gaps.items():
+            series.setdefault((map_name, method, sensor), {})[f"{noise:g} / {pose:g}"] = 0.0 if gap is None else gap
+        for (map_name, method, sensor), values in series.items():
             axis.plot(levels, [values.get(level, float("nan")) for level in levels], marker="o",
-                      label=f"{map_name}, {method}")
+                      label=f"{map_name}, {method}" + ("" if sensor == DEFAULT_PROFILE else f", {sensor}"))
         axis.set_xlabel("noise σ / pose σ [m]")
         axis.set_ylabel(f"safe gap d_s [m] (max error <= {SAFE_MAX_ERROR_M:g} m; 0: none)")
         axis.grid(True, alpha=0.3)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Final, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
@@ -53,6 +54,9 @@ class Route:
         left: (N, 2) left border seen in driving direction (m), index-aligned with centre.
         right: (N, 2) right border seen in driving direction (m), index-aligned.
         distance: (N,) arc length along the centreline from its first point (m).
+        piece: (N,) index into ``pieces`` of the lane each cross-section lies in.
+        s: (N,) road s (m) of each cross-section on its piece's road.
+        left_z, right_z: (N,) height (m, inertial frame) of each border point.
     """
 
     pieces: tuple[RoutePiece, ...]
@@ -60,6 +64,10 @@ class Route:
     left: NDArrayFloat
     right: NDArrayFloat
     distance: NDArrayFloat
+    piece: npt.NDArray[np.int64]
+    s: NDArrayFloat
+    left_z: NDArrayFloat
+    right_z: NDArrayFloat
 
     @property
     def length(self) -> float:
@@ -97,21 +105,25 @@ def route_from_lanes(graph: LaneGraph, lanes: Sequence[LaneKey], *, step: float 
     centres: list[NDArrayFloat] = []
     lefts: list[NDArrayFloat] = []
     rights: list[NDArrayFloat] = []
+    stations: list[NDArrayFloat] = []
     for lane in lanes:
         road = graph.odr_map.roads[lane.road_id]
         samples = sample_lane_borders(road, lane.section, lane.lane_id, step=step)
-        _, left, right = borders_in_driving_direction(road, samples)
-        left, right = left[:, :2], right[:, :2]
-        centre = 0.5 * (left + right)
+        s, left, right = borders_in_driving_direction(road, samples)
+        centre = 0.5 * (left[:, :2] + right[:, :2])
         if centres and np.hypot(*(centre[0] - centres[-1][-1])) < JOIN_TOLERANCE_M:
-            centre, left, right = centre[1:], left[1:], right[1:]
+            s, centre, left, right = s[1:], centre[1:], left[1:], right[1:]
         centres.append(centre)
         lefts.append(left)
         rights.append(right)
+        stations.append(s)
     centre = np.concatenate(centres)
+    left, right = np.concatenate(lefts), np.concatenate(rights)
+    piece = np.repeat(np.arange(len(lanes), dtype=np.int64), [len(s) for s in stations])
     pieces = tuple(
         RoutePiece(lane.road_id, lane.section, lane.lane_id, graph.entry_s(lane), graph.exit_s(lane))
         for lane in lanes
     )
     distance = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(centre, axis=0).T))))
-    return Route(pieces, centre, np.concatenate(lefts), np.concatenate(rights), distance)
+    return Route(pieces, centre, np.ascontiguousarray(left[:, :2]), np.ascontiguousarray(right[:, :2]), distance,
+                 piece, np.concatenate(stations), left[:, 2].copy(), right[:, 2].copy())

@@ -8,12 +8,13 @@ maps a detection back into the world frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Mapping
 
 import numpy as np
 
 import fusion
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.simulation.camera import CameraSensor
 from cold_maps.simulation.drive import VehicleState
 from cold_maps.simulation.lane_model_error import LaneModelErrorParams, LaneModelErrorSampler
 from cold_maps.simulation.neighbours import NeighbourSensor
@@ -23,6 +24,8 @@ from cold_maps.simulation.sensor_errors import SensorErrorModel
 DETECTION_DECIMALS: Final[int] = 6
 """Detected border points are rounded to 1 µm (the sensor's resolution): the recorded
 ``cold.LaneDetection`` JSON is then short and exactly what was fused."""
+NO_OBSTACLES: Final[NDArrayFloat] = np.empty((0, 3))
+"""No other vehicle (x, y m, yaw rad rows)."""
 
 
 @dataclass(frozen=True)
@@ -32,34 +35,43 @@ class Sensed:
     Fields:
         state: where the vehicle is.
         detection: what it sends (reported pose with localisation error, borders in its
-            vehicle frame with the sensor errors), or None when the frame was dropped.
-        end_reason: why the sensor's detection ended (``sensor.Detection.end_reason``);
-            "" when unknown or dropped.
+            vehicle frame with the sensor errors), or None when the frame was dropped or
+            the sensor saw no lane.
+        end_reason: why the sensor's lane ended (``sensor.Detection.end_reason``); ""
+            when unknown.
+        seen: False when the sensor saw no lane (the detection is None), True otherwise.
     """
 
     state: VehicleState
     detection: fusion.LaneDetection | None
     end_reason: str = ""
+    seen: bool = True
+
+    def missing(self, who: str) -> str:
+        """Why ``who`` (``ego``/``coop``) sent no detection: ``WHO_not_seen`` (the sensor
+        saw no lane) or ``WHO_dropped`` (an error model dropped it)."""
+        return f"{who}_dropped" if self.seen else f"{who}_not_seen"
 
 
-def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng: np.random.Generator, *,
-          stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None,
-          lane_error: LaneModelErrorSampler | None = None) -> Sensed:
-    """The detection of a vehicle: the sensor on its track, then the error models
-    (``errors``, then the drive's ``lane_error`` on the borders of its own lane), points
-    rounded to 1 µm; the ego's pose carries no localisation error (it is the reference).
-    With ``neighbours`` the lanes beside its own (same range and sampling, each through
-    ``errors``, a dropped one left out) and the road edges come with it.
+def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: SensorErrorModel,
+          rng: np.random.Generator, *, stamp_s: float = 0.0, neighbours: NeighbourSensor | None = None,
+          obstacles: NDArrayFloat = NO_OBSTACLES, lane_error: LaneModelErrorSampler | None = None) -> Sensed:
+    """The detection of a vehicle: the sensor on its track (the other vehicles at
+    ``obstacles``, (M, 3) x, y m, yaw rad, world frame, may hide the lane from a camera),
+    then the error models (``errors``, then the drive's ``lane_error`` on the borders of its
+    own lane), points rounded to 1 µm; the ego's pose carries no localisation error (it is
+    the reference). With ``neighbours`` the lanes beside its own (same range and sampling,
+    each through ``errors``, a dropped one left out) and the road edges come with it.
 
     The detection states its uncertainty when an error model has one: per-point lateral
     1σ of both borders (:func:`lateral_sigmas`) and the pose covariance (:func:`pose_covariance`);
     None when the model is off (the ideal sensor)."""
-    raw = sensor.detect(state.track.strip, state.station)
+    raw, end_reason = sensor.read(state.track, state.station, obstacles)
     if raw is None:
-        return Sensed(state, None)
+        return Sensed(state, None, end_reason, seen=False)
     borders = errors.apply(raw.left, raw.right, rng)
     if borders is None:
-        return Sensed(state, None)
+        return Sensed(state, None, end_reason)
     if lane_error is not None:
         borders = lane_error.perturb(state.name, stamp_s, *borders)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
@@ -84,7 +96,7 @@ def sense(state: VehicleState, sensor: LaneSensor, errors: SensorErrorModel, rng
                                               neighbours=tuple(lanes), road_edges=edges, branches=tuple(branches),
                                               left_sigma=sigmas[0], right_sigma=sigmas[1],
                                               pose_cov=pose_covariance(errors, state.role)),
-                  raw.end_reason)
+                  end_reason)
 
 
 def lateral_sigmas(borders: tuple[NDArrayFloat, NDArrayFloat], errors: SensorErrorModel,
@@ -120,6 +132,13 @@ def _seen(left: NDArrayFloat, right: NDArrayFloat, raw: Detection, errors: Senso
     seen = errors.apply(world_to_vehicle(left, raw.x, raw.y, raw.yaw), world_to_vehicle(right, raw.x, raw.y, raw.yaw),
                         rng)
     return None if seen is None else (np.round(seen[0], DETECTION_DECIMALS), np.round(seen[1], DETECTION_DECIMALS))
+
+
+def obstacles_of(states: Mapping[str, VehicleState]) -> dict[str, NDArrayFloat]:
+    """Per vehicle of a frame, the poses of all the others: (M, 3) x, y (m), yaw (rad), world
+    frame, at their true positions on their tracks' centrelines."""
+    poses = {name: state.track.strip.pose(state.station) for name, state in states.items()}
+    return {name: np.array([pose for other, pose in poses.items() if other != name]).reshape(-1, 3) for name in poses}
 
 
 def world_borders(detection: fusion.LaneDetection) -> tuple[NDArrayFloat, NDArrayFloat]:

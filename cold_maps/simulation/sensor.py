@@ -10,11 +10,18 @@ vehicle frame (ISO 8855: x forward, y left).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Protocol
 
 import numpy as np
 
 from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat, resample_polyline
+
+
+class OnStrip(Protocol):
+    """Anything driven along a lane strip (a ``drive.Track``)."""
+
+    @property
+    def strip(self) -> LaneStrip: ...
 
 SENSOR_RANGE_M: Final[float] = 30.0
 SENSOR_STEP_M: Final[float] = 0.10
@@ -33,7 +40,8 @@ class Detection:
         x, y, yaw: the sensor pose in the world frame (m, m, rad).
         left, right: (N, 2) borders in the vehicle frame (ISO 8855, m), driving order.
         start_station, end_station: the route stations the detection spans (m).
-        end_reason: why it ends: ``END_RANGE`` or ``END_MAP``; "" when unknown.
+        end_reason: why it ended (``END_RANGE``, ``END_MAP`` or one of
+            ``simulation.camera.END_REASONS``); "" when unknown.
     """
 
     x: float
@@ -82,12 +90,25 @@ class LaneSensor:
         if end - station < self.step_m:
             return None
         x, y, yaw = strip.pose(station)
-        window = np.array([station, end])
-        borders = []
-        for points, distance in ((strip.left, strip.left_distance), (strip.right, strip.right_distance)):
-            start_d, end_d = np.interp(window, strip.station, distance)
-            world = resample_polyline(points, distance, float(start_d), float(end_d), self.step_m)
-            borders.append(world_to_vehicle(world, x, y, yaw))
         reason = END_RANGE if station + self.range_m <= strip.length else END_MAP
-        return Detection(x=x, y=y, yaw=yaw, left=borders[0], right=borders[1], start_station=station, end_station=end,
-                         end_reason=reason)
+        return detection_between(strip, x, y, yaw, station, end, self.step_m, reason)
+
+    def read(self, track: OnStrip, station: float, obstacles: NDArrayFloat) -> tuple[Detection | None, str]:
+        """:meth:`detect` on the track's strip (the other vehicles ``obstacles`` hide
+        nothing from the ideal sensor) and its end reason ("" when it sees nothing)."""
+        detection = self.detect(track.strip, station)
+        return detection, "" if detection is None else detection.end_reason
+
+
+def detection_between(strip: LaneStrip, x: float, y: float, yaw: float, start: float, end: float, step_m: float,
+                      end_reason: str = "") -> Detection:
+    """The strip's borders from station ``start`` to ``end`` (m), each sampled every
+    ``step_m`` of its own arc length, in the frame of a vehicle at (x, y, yaw)."""
+    window = np.array([start, end])
+    borders = []
+    for points, distance in ((strip.left, strip.left_distance), (strip.right, strip.right_distance)):
+        start_d, end_d = np.interp(window, strip.station, distance)
+        world = resample_polyline(points, distance, float(start_d), float(end_d), step_m)
+        borders.append(world_to_vehicle(world, x, y, yaw))
+    return Detection(x=x, y=y, yaw=yaw, left=borders[0], right=borders[1], start_station=start, end_station=end,
+                     end_reason=end_reason)

@@ -1,0 +1,271 @@
+"""The camera lane sensor: the current lane's borders as far as a camera sees them.
+
+The candidate border points are the lane's two borders on cross-sections every
+``step_m`` of centreline station from the vehicle on (as the ideal sensor's). The camera
+sits at the vehicle's pose on its lane centreline, ``camera_height_m`` above the road. A
+border point is *visible* (:func:`hidden_by`, vectorised over points) when it is
+
+1. between ``min_range_m`` and ``max_range_m`` from the camera (plane distance);
+2. inside the horizontal field of view: the angle between the heading and the line of
+   sight at most ``fov_half_angle_rad``;
+3. over the road surface: its elevation angle seen from the camera is at least that of
+   every nearer point of the same border (a viewshed along the border's own height
+   profile; crests hide what lies behind them, dips what lies in them);
+4. not behind another vehicle: the line of sight in the plane does not cross the
+   footprint (``vehicle_length_m`` × ``vehicle_width_m``, centred on its pose, taller than
+   the camera) of another vehicle of the drive;
+5. painted or a physical edge (``opendrive.road_marks.classify_border``).
+
+A hidden point records every rule it fails. The reported lane (:func:`detection_window`)
+starts at the first cross-section whose two points are both at least ``min_range_m`` away
+and ends where either border is hidden over more than ``gap_tolerance_m`` along it
+(measured between the visible points around the gap), or hidden up to the last
+candidate: at the last visible cross-section before that gap. Shorter gaps are bridged (a
+dashed mark is detectable over its whole length, so dashes never end it). The lane ended
+for the rule that hides most points of the gap's first ``gap_tolerance_m`` (ties: the
+earlier rule above), so a border that leaves the view behind an occluding vehicle ends
+for the occlusion, not for the range a few metres farther. A lane whose candidates run
+out first ends for ``map_end`` (the track ends) or ``range`` (the search window ends).
+The reported borders are the map's between the start and the end, sampled like the ideal
+sensor's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from cold_maps.network.lane_graph import LaneGraph, LaneKey
+from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.opendrive.road_marks import classify_border
+from cold_maps.simulation.drive import Track
+from cold_maps.simulation.sensor import Detection, LaneSensor, detection_between, world_to_vehicle
+from cold_maps.simulation.sensor_profile import SensorProfile
+
+NDArrayBool = npt.NDArray[np.bool_]
+NDArrayInt = npt.NDArray[np.int64]
+
+END_REASONS: Final[tuple[str, ...]] = ("range", "field_of_view", "crest", "occlusion", "unmarked", "map_end")
+"""Why a camera detection ended; bit i of a :func:`hidden_by` mask is rule END_REASONS[i]."""
+RULES: Final[int] = 5
+"""The visibility rules: the first five :data:`END_REASONS`."""
+VISIBLE: Final[int] = 0
+"""The :func:`hidden_by` mask of a point that fails no rule."""
+SEARCH_MARGIN_M: Final[float] = 5.0
+"""Centreline length (m) searched beyond the farthest station a point in range and view can
+have on a circle through the camera, for the lane's half width."""
+ANGLE_TOLERANCE_RAD: Final[float] = 1e-9
+"""A point this much below the horizon of the nearer points still counts as over it."""
+
+
+@dataclass(frozen=True)
+class BorderSurface:
+    """A track's two borders at the cross-sections of its route (index-aligned with
+    ``Track.route``).
+
+    Fields:
+        station: (N,) centreline station (m), non-decreasing.
+        z: (2, N) height (m, inertial frame) of the left and right border points.
+        detectable: (2, N) whether the left and right border is painted or a physical
+            edge there (``classify_border``).
+    """
+
+    station: NDArrayFloat
+    z: NDArrayFloat
+    detectable: NDArrayBool
+
+    def at(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayBool]:
+        """(2, K) heights (interpolated) and detectability (of the cross-section at or
+        before) at ``stations`` (m)."""
+        z = np.stack([np.interp(stations, self.station, side) for side in self.z])
+        index = np.clip(np.searchsorted(self.station, stations, side="right") - 1, 0, len(self.station) - 1)
+        return z, self.detectable[:, index]
+
+
+def border_surface(graph: LaneGraph, track: Track) -> BorderSurface:
+    """The :class:`BorderSurface` of ``track`` (ValueError when it has no route)."""
+    route = track.route
+    if route is None:
+        raise ValueError("the camera sensor needs a track built from lanes (Track.build)")
+    detectable = np.zeros((2, len(route.s)), dtype=bool)
+    for index, piece in enumerate(route.pieces):
+        road = graph.odr_map.roads[piece.road_id]
+        here = route.piece == index
+        # Seen in driving direction the left border is the inner one in right-hand traffic.
+        sides = ("inner", "outer") if road.rule == "RHT" else ("outer", "inner")
+        for row, side in enumerate(sides):
+            marking = classify_border(road, piece.section, piece.lane_id, side, route.s[here])
+            detectable[row, here] = marking.detectable
+    return BorderSurface(route.distance, np.stack((route.left_z, route.right_z)), detectable)
+
+
+def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, camera: NDArrayFloat,
+              obstacles: NDArrayFloat, profile: SensorProfile) -> NDArrayInt:
+    """Why each border point is hidden: a mask of the rules it fails (bit i: rule
+    ``END_REASONS[i]``; ``VISIBLE`` when none), shape (..., K).
+
+    Args:
+        points: (..., K, 2) world x, y (m) of each border's points, nearest first.
+        z: (..., K) their heights (m).
+        detectable: (..., K) painted or a physical edge.
+        camera: (4,) camera x, y (m), yaw (rad) and height z (m), world frame.
+        obstacles: (M, 3) x, y (m), yaw (rad) of the other vehicles.
+    """
+    x, y, yaw, camera_z = camera
+    flat = points.reshape(-1, 2)
+    local = world_to_vehicle(flat, x, y, yaw).reshape(points.shape)
+    distance = np.hypot(local[..., 0], local[..., 1])
+    bearing = np.abs(np.arctan2(local[..., 1], local[..., 0]))
+    elevation = np.arctan2(z - camera_z, distance)
+    horizon = np.maximum.accumulate(elevation, axis=-1)
+    below = np.zeros(points.shape[:-1], dtype=bool)
+    below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
+    occluded = behind_footprints(flat, np.array([x, y]), obstacles, profile.vehicle_length_m,
+                                 profile.vehicle_width_m).reshape(points.shape[:-1])
+    failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
+              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
+    return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
+
+
+def behind_footprints(points: NDArrayFloat, camera: NDArrayFloat, obstacles: NDArrayFloat, length_m: float,
+                      width_m: float) -> NDArrayBool:
+    """(K,) whether the segment from ``camera`` (2,) to each of ``points`` (K, 2) crosses
+    a ``length_m`` × ``width_m`` footprint centred on one of ``obstacles`` (M, 3: x, y,
+    yaw), world frame, m (Liang–Barsky clipping in each footprint's frame, vectorised over
+    footprints and points). A footprint that contains the camera is ignored (the vehicle's
+    own); footprints out of every segment's reach are skipped."""
+    hidden = np.zeros(len(points), dtype=bool)
+    if len(obstacles) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
+        return hidden
+    half = np.array([0.5 * length_m, 0.5 * width_m])
+    reach = float(np.hypot(*half))
+    rays = points - camera
+    centres = obstacles[:, :2] - camera
+    direction = rays.mean(axis=0)
+    direction = direction / max(float(np.hypot(*direction)), 1e-12)
+    near = np.hypot(centres[:, 0], centres[:, 1]) <= np.hypot(rays[:, 0], rays[:, 1]).max() + reach
+    ahead = centres @ direction + reach >= min(0.0, float((rays @ direction).min()))
+    kept = obstacles[near & ahead]
+    if len(kept) == 0:
+        return hidden
+    cos, sin = np.cos(kept[:, 2])[:, None], np.sin(kept[:, 2])[:, None]
+    offset = camera - kept[:, :2]  # camera relative to each footprint centre, world axes
+    start = np.stack((cos[:, 0] * offset[:, 0] + sin[:, 0] * offset[:, 1],
+                      -sin[:, 0] * offset[:, 0] + cos[:, 0] * offset[:, 1]), axis=-1)  # (M, 2)
+    outside = np.any(np.abs(start) > half, axis=1)
+    start, cos, sin = start[outside], cos[outside], sin[outside]
+    d = np.stack((cos * rays[:, 0] + sin * rays[:, 1], -sin * rays[:, 0] + cos * rays[:, 1]), axis=-1)  # (M, K, 2)
+    enter, leave = np.zeros(d.shape[:2]), np.ones(d.shape[:2])
+    for axis in range(2):
+        step = d[..., axis]
+        origin = start[:, axis: axis + 1]
+        moving = np.abs(step) > 1e-12
+        safe = np.where(moving, step, 1.0)
+        t1, t2 = (-half[axis] - origin) / safe, (half[axis] - origin) / safe
+        inside = np.abs(origin) <= half[axis]
+        enter = np.where(moving, np.maximum(enter, np.minimum(t1, t2)), np.where(inside, enter, np.inf))
+        leave = np.where(moving, np.minimum(leave, np.maximum(t1, t2)), leave)
+    return np.any(enter <= leave, axis=0) if len(start) else hidden
+
+
+def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_tolerance_m: float) -> tuple[int, int]:
+    """(last candidate reported, index into :data:`END_REASONS` of why the lane ended) from
+    candidate ``start`` on (see the module).
+
+    ``hidden``: (B, K) :func:`hidden_by` masks; ``along``: (B, K) arc length (m) along each
+    border. The reason is -1 when no gap ends the lane (the candidates run out). The last
+    candidate is ``start - 1`` when a border is hidden from ``start`` on.
+    """
+    count = hidden.shape[1]
+    end, why = count - 1, -1
+    for mask, position in zip(hidden, along):
+        off = mask[start:] != VISIBLE
+        if not off.any():
+            continue
+        edges = np.diff(np.concatenate(([False], off, [False])).astype(np.int8))
+        first = np.flatnonzero(edges == 1) + start
+        after = np.flatnonzero(edges == -1) + start  # first visible candidate after each gap
+        before = np.maximum(first - 1, start)
+        span = position[np.minimum(after, count - 1)] - position[before]
+        ending = np.flatnonzero((after >= count) | (span > gap_tolerance_m))
+        if ending.size == 0 or first[ending[0]] - 1 >= end:
+            continue
+        gap = ending[0]
+        reach = int(np.searchsorted(position, position[before[gap]] + gap_tolerance_m, side="right"))
+        window = mask[first[gap]: max(min(reach, after[gap]), first[gap] + 1)]
+        counts = [int(np.count_nonzero(window & (1 << bit))) for bit in range(RULES)]
+        end, why = int(first[gap]) - 1, int(np.argmax(counts))
+    return end, why
+
+
+class CameraSensor:
+    """A lane sensor of kind ``camera`` (see the module) on one lane graph; caches each
+    track's :class:`BorderSurface`.
+
+    Attributes:
+        profile: its parameters.
+        range_m: the farthest a detection reaches (m, plane distance).
+        step_m: spacing of the reported border points (m).
+    """
+
+    def __init__(self, profile: SensorProfile, graph: LaneGraph) -> None:
+        if profile.kind != "camera":
+            raise ValueError(f"sensor profile {profile.name}: a camera sensor needs kind 'camera', "
+                             f"got {profile.kind!r}")
+        self.profile = profile
+        self.graph = graph
+        self.range_m = profile.max_range_m
+        self.step_m = profile.step_m
+        angle = min(profile.fov_half_angle_rad, 0.5 * math.pi)
+        self.search_m = profile.max_range_m * angle / math.sin(angle) + SEARCH_MARGIN_M
+        self._surfaces: dict[tuple[LaneKey, ...], BorderSurface] = {}
+
+    def surface(self, track: Track) -> BorderSurface:
+        """The track's :class:`BorderSurface`, computed once per lane sequence."""
+        found = self._surfaces.get(track.lanes)
+        if found is None:
+            found = self._surfaces[track.lanes] = border_surface(self.graph, track)
+        return found
+
+    def read(self, track: Track, station: float, obstacles: NDArrayFloat) -> tuple[Detection | None, str]:
+        """The detection of a vehicle centred in its lane at ``station`` (m) with the other
+        vehicles at ``obstacles`` (M, 3: x, y m, yaw rad, world), or None when nothing is
+        seen, and why it ended (:data:`END_REASONS`)."""
+        strip = track.strip
+        profile = self.profile
+        last_station = min(station + self.search_m, strip.length)
+        count = max(int(math.ceil((last_station - station) / self.step_m - 1e-9)), 1)
+        stations = np.minimum(station + self.step_m * np.arange(count + 1), last_station)
+        _, left, right = strip.interpolate(stations)
+        points = np.stack((left, right))
+        surface = self.surface(track)
+        z, detectable = surface.at(stations)
+        x, y, yaw = strip.pose(station)
+        camera_z = float(np.interp(station, surface.station, 0.5 * (surface.z[0] + surface.z[1])))
+        camera = np.array([x, y, yaw, camera_z + profile.camera_height_m])
+        hidden = hidden_by(points, z, detectable, camera, np.asarray(obstacles, dtype=np.float64).reshape(-1, 3),
+                            profile)
+        near = np.hypot(points[..., 0] - x, points[..., 1] - y) >= profile.min_range_m
+        started = np.flatnonzero(near.all(axis=0))
+        if started.size == 0:
+            return None, "map_end" if last_station >= strip.length else "range"
+        start = int(started[0])
+        along = np.stack([np.interp(stations, strip.station, d) for d in (strip.left_distance, strip.right_distance)])
+        end, why = detection_window(hidden, along, start, profile.gap_tolerance_m)
+        reason = END_REASONS[why] if why >= 0 else "map_end" if last_station >= strip.length else "range"
+        if end <= start or stations[end] - stations[start] < self.step_m:
+            return None, reason
+        return detection_between(strip, x, y, yaw, float(stations[start]), float(stations[end]), self.step_m,
+                                 reason), reason
+
+
+def lane_sensor(profile: SensorProfile, graph: LaneGraph) -> LaneSensor | CameraSensor:
+    """The sensor of ``profile``: the ideal ``LaneSensor`` (range and step of the profile)
+    or a :class:`CameraSensor` on ``graph``."""
+    if profile.kind == "ideal":
+        return LaneSensor(range_m=profile.max_range_m, step_m=profile.step_m)
+    return CameraSensor(profile, graph)
