@@ -85,7 +85,7 @@ def test_hermite_reproduces_straight_then_arc() -> None:
 def test_paper_90_degree_curve_reproduces_the_papers_error(right_curve: AnalyticRoad) -> None:
     apex = 60.0 + math.pi / 4 * R_REF
     left, right = gap_errors(right_curve, apex - 10.0, apex + 10.0, "paper")
-    # paper, Table II: 0.693 / 0.707 m; this set-up gives 0.74 / 0.60 m (see docs/fusion.md)
+    # paper, Table II: 0.693 / 0.707 m; this set-up gives 0.74 / 0.60 m (see docs/fusion/spline.md)
     assert 0.5 <= right <= 0.8
     assert 0.6 <= left <= 0.9
     # the paper's Fig. 4a (about 2.4 m without apex) needs a knot-index parameter: then the
