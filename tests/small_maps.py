@@ -98,3 +98,36 @@ def contradicting_links(*, contradict: bool = True) -> str:
     junction = (f'<junction id="9" name="j"><connection id="0" incomingRoad="2" connectingRoad="3" '
                 f'contactPoint="{contact}"><laneLink from="1" to="-1"/></connection></junction>')
     return document(roads, junctions=junction, name="contradicting-links")
+
+
+REVERSED_ROAD_M: Final[float] = 300.0
+"""Length (m) of the road of :func:`reversed_lane_road` (along +x from the origin)."""
+REVERSED_LEFT_WIDTH_M: Final[float] = 4.0
+"""Width (m) of lane 1 of :func:`reversed_lane_road`."""
+REVERSED_RIGHT_WIDTH_M: Final[float] = 3.0
+"""Width (m) of lane -1 (``direction="reversed"``) of :func:`reversed_lane_road`."""
+
+
+def reversed_lane_road(*, lht_predecessor: bool = False) -> str:
+    """One straight RHT road 1 (x 0..300 along +x): lane 1 driving (4 m, y 0..4), lane -1
+    driving with ``direction="reversed"`` (3 m, y -3..0), so both are driven along -x.
+
+    With ``lht_predecessor`` an LHT road 2 (x -300..0 along +x) precedes it: its lane -1
+    (3 m, y -3..0) is driven along -x by its rule and continues lane -1 of road 1, whose
+    borders meet it exactly.
+    """
+    length = REVERSED_ROAD_M
+    widths = {1: REVERSED_LEFT_WIDTH_M, -1: REVERSED_RIGHT_WIDTH_M}
+    lanes = (
+        LaneSpec(1, widths=((0.0, widths[1], 0.0, 0.0, 0.0),)),
+        LaneSpec(-1, widths=((0.0, widths[-1], 0.0, 0.0, 0.0),), direction="reversed",
+                 predecessor=-1 if lht_predecessor else None),
+    )
+    link = road_link("predecessor", "road", "2", "end") if lht_predecessor else ""
+    roads = [RoadSpec("1", (geometry(0.0, 0.0, 0.0, 0.0, length, "<line/>"),), length, (SectionSpec(0.0, lanes),),
+                      predecessor=link)]
+    if lht_predecessor:
+        before = SectionSpec(0.0, (LaneSpec(-1, widths=((0.0, widths[-1], 0.0, 0.0, 0.0),), successor=-1),))
+        roads.append(RoadSpec("2", (geometry(0.0, -length, 0.0, 0.0, length, "<line/>"),), length, (before,),
+                              rule="LHT", successor=road_link("successor", "road", "1", "start")))
+    return document(roads, name="reversed-lane")
