@@ -13,9 +13,11 @@ kind, a road without geometry or lane section or with two ``<planView>``/``<lane
 ``<link>``/``<elevationProfile>`` or two predecessors/successors, lane ids that are not
 consecutive from the reference line, a centre that is not exactly lane 0, a lane
 section starting before 0 or after the road end, duplicate road or junction ids, road
-links, road ``junction`` attributes and junction connections to ids that do not exist.
-Tolerated: a geometry ``s`` that differs from the running sum of lengths, a road length
-that differs from the sum of its geometry lengths, records and sections out of order
+links, road ``junction`` attributes and junction connections to ids that do not exist
+when ``strict`` (else dropped with one warning per map, as libOpenDRIVE reads them; a
+road's ``junction`` attribute is kept). Tolerated: a geometry ``s`` that differs from
+the running sum of lengths, a road length that differs from the sum of its geometry
+lengths, records and sections out of order
 (sorted by s, stably), zero-length geometry records (dropped: they cover no s),
 zero-length lane sections, ``contactPoint`` on a link to a
 junction (dropped: the model has none for junctions), a missing road ``junction``
@@ -121,7 +123,8 @@ def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> Ope
     ``strict``: refuse records that omit a coefficient, curvature or start (else they
     are 0 with a warning, see the module docstring), and road links and junction
     connections whose ``contactPoint`` contradicts the geometry (else repaired with a
-    warning each, ``links.repair_contact_points``).
+    warning each, ``links.repair_contact_points``), and links to roads or junctions not in
+    the file (else dropped with one warning).
     """
     root = parse_xml(data, path=path)
     return repair_contact_points(_Reader(path, strict).read_map(root), strict=strict)
@@ -147,6 +150,8 @@ class _Reader:
         """Roads (in file order) with a centre lane that has no type."""
         self.odd_marks: dict[str, str] = {}
         """Roads (in file order) with a ``<roadMark>`` type read leniently → the first such type."""
+        self.no_contact: list[tuple[str, etree._Element]] = []
+        """Road links without ``contactPoint`` (refused unless the road they name is missing)."""
 
     # -- attribute access -------------------------------------------------------------
 
@@ -302,12 +307,47 @@ class _Reader:
         for road in roads.values():
             validate_road(road, self.path)
             self.warn_wrong_side(road)
-        for element_type, element_id, element in links:
-            known = roads if element_type == "road" else junctions
-            if element_id not in known:
-                raise self.error(f"links to {element_type} {element_id!r}, which does not exist", element)
+        dangling = [link for link in links if link[1] not in (roads if link[0] == "road" else junctions)]
+        if dangling:
+            roads, junctions = self.drop_dangling(dangling, roads, junctions)
+        for element_id, element in self.no_contact:
+            if element_id in roads:
+                raise self.error("missing required attribute 'contactPoint'", element)
         self.warn_defaults()
         return OpenDriveMap(path=self.path, header=header, roads=roads, junctions=junctions)
+
+    def drop_dangling(
+        self, dangling: list[tuple[str, str, etree._Element]], roads: dict[str, Road], junctions: dict[str, Junction]
+    ) -> tuple[dict[str, Road], dict[str, Junction]]:
+        """Road links and junction connections that name a road or junction not in the
+        file, dropped with one warning (libOpenDRIVE reads such maps); a road's
+        ``junction`` attribute naming a missing junction is kept (nothing resolves it).
+        Strict: refused at the first."""
+        element_type, element_id, element = dangling[0]
+        reason = f"links to {element_type} {element_id!r}, which does not exist"
+        if self.strict:
+            raise self.error(f"{reason} (strict mode refuses links to elements not in the file)", element)
+        missing = {(kind, name) for kind, name, _ in dangling}
+
+        def kept(link: RoadLink | None) -> RoadLink | None:
+            return None if link is not None and (link.element_type, link.element_id) in missing else link
+
+        roads = {
+            road_id: road if kept(road.predecessor) is road.predecessor and kept(road.successor) is road.successor
+            else replace(road, predecessor=kept(road.predecessor), successor=kept(road.successor))
+            for road_id, road in roads.items()
+        }
+        junctions = {
+            junction_id: replace(junction, connections=tuple(
+                c for c in junction.connections if c.incoming_road in roads and c.connecting_road in roads))
+            for junction_id, junction in junctions.items()
+        }
+        _LOG.warning(
+            "%s: %d link(s) name a road or junction that is not in the file (first: %s, line %s, %s): road links "
+            "and junction connections dropped, a road's junction attribute kept (strict mode refuses them)",
+            self.path or "<input>", len(dangling), _link_owner(element), element.sourceline, reason,
+        )
+        return roads, junctions
 
     def header(self, element: etree._Element) -> Header:
         rev_major = self.integer(element, "revMajor")
@@ -399,6 +439,9 @@ class _Reader:
         links.append((element_type, element_id, element))
         if element_type == "junction":
             return RoadLink("junction", element_id, None)
+        if element.get("contactPoint") is None:
+            self.no_contact.append((element_id, element))
+            return RoadLink("road", element_id, None)
         return RoadLink("road", element_id, self.choice(element, "contactPoint", _CONTACT_POINTS))
 
     def geometry(self, element: etree._Element) -> Geometry | None:
@@ -584,6 +627,18 @@ class _Reader:
             connections=tuple(connections),
             type=self.choice(element, "type", _JUNCTION_TYPES, "default"),
         )
+
+
+def _link_owner(element: etree._Element) -> str:
+    """Who writes a link: ``road 1 predecessor``, ``junction 7 connection 3`` or ``road 1``."""
+    tag = str(element.tag)
+    if tag == "road":
+        return f"road {element.get('id')} junction attribute"
+    parent = element.getparent()
+    if tag == "connection":
+        return f"junction {parent.get('id') if parent is not None else '?'} connection {element.get('id')}"
+    road = parent.getparent() if parent is not None else None
+    return f"road {road.get('id') if road is not None else '?'} {tag}"
 
 
 def _by_s0(record: CubicPoly) -> float:
