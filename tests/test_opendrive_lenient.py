@@ -274,3 +274,44 @@ def test_strict_mode_refuses_a_link_to_a_missing_road(tmp_path: Path, capsys: py
     assert main(["info", "-q", str(source)]) == 0
     assert main(["info", "-q", "--strict", str(source)]) == 1
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def single_point_map(*, last: bool = True, sections: tuple[float, ...] = (0.0,)) -> bytes:
+    """Road 1: a 100 m line along +x and RoadRunner's empty ``<paramPoly3/>`` of 23.6 m
+    (a single point at x = 100), as its last record or followed by another 50 m line."""
+    records = ('<geometry s="0" x="0" y="0" hdg="0" length="100"><line/></geometry>'
+               '<geometry s="100" x="100" y="0" hdg="0" length="23.6"><paramPoly3/></geometry>')
+    length = 123.6
+    if not last:
+        records += '<geometry s="123.6" x="100" y="0" hdg="0" length="50"><line/></geometry>'
+        length += 50.0
+    text = road("1", records, length=length)
+    section = text[text.index('<laneSection s="0">'):text.index("</laneSection>") + len("</laneSection>")]
+    text = text.replace(section, "".join(section.replace('s="0"', f's="{s!r}"', 1) for s in sections))
+    return xodr(text)
+
+
+def test_a_last_record_that_draws_a_single_point_ends_the_road(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
+        odr_map = parse_opendrive(single_point_map(sections=(0.0, 60.0, 110.0)), path="rr.xodr")
+    assert caplog.records[-1].getMessage() == (
+        "rr.xodr: 1 road(s) end in <paramPoly3> records that draw a single point (first: road 1, 1 record(s) from "
+        "s=100 m): read as absent, the road and its lanes end there (strict mode refuses them)")
+    road_1 = odr_map.roads["1"]
+    assert road_1.length == 100.0 and [g.kind for g in road_1.plan_view] == ["line"]
+    assert [(section.s, section.s_end) for section in road_1.lane_sections] == [(0.0, 60.0), (60.0, 100.0)]
+    last = sample_road(road_1, step=1.0)[-1]
+    np.testing.assert_allclose(last.outer[-1, :2], [100.0, -6.5])
+    graph = build_lane_graph(odr_map)
+    assert graph.lengths[LaneKey("1", 1, -1)] == pytest.approx(40.0)
+    written = single_point_map().replace(b"<paramPoly3/>", b'<paramPoly3 aU="0" bU="0" cU="0" dU="0" aV="0" bV="0" '
+                                                           b'cV="0" dV="0"/>')
+    with pytest.raises(OpenDriveError, match="the <geometry> at s=100 is a <paramPoly3> that draws a single point"):
+        parse_opendrive(written, path="rr.xodr", strict=True)
+
+
+def test_a_single_point_record_inside_a_road_is_refused_naming_it() -> None:
+    with pytest.raises(OpenDriveError) as info:
+        parse_opendrive(single_point_map(last=False), path="rr.xodr")
+    assert info.value.element == "paramPoly3"
+    assert "the <geometry> at s=100: paramPoly3 at s=100.0: u(p), v(p) describe a single point" in str(info.value)

@@ -34,7 +34,10 @@ record stands for (and ``pRange`` defaults to "normalized" as in the schema); on
 per element kind and road names the attributes taken as 0. ``strict=True`` refuses them
 ("missing required attribute"). So is a centre lane without a ``type`` (taken as "none",
 one warning per map), and a ``<roadMark>`` without a ``type`` or with one the schema does
-not know (taken as "none" when absent, "custom" when unknown; one warning per map).
+not know (taken as "none" when absent, "custom" when unknown; one warning per map). A
+road's last ``<paramPoly3>`` records that draw a single point (RoadRunner's empty
+``<paramPoly3/>``) are read as absent, the road and its lanes ending where they start (one
+warning per map; refused when strict, and anywhere but at the road's end).
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from typing import Final, Iterable
 from lxml import etree
 
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.geometry.param_poly3 import is_single_point
 from cold_maps.opendrive.lanes import wrong_side_lanes
 from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
@@ -150,6 +154,9 @@ class _Reader:
         """Roads (in file order) with a centre lane that has no type."""
         self.odd_marks: dict[str, str] = {}
         """Roads (in file order) with a ``<roadMark>`` type read leniently → the first such type."""
+        self.single_points: dict[str, tuple[float, int]] = {}
+        """Roads (in file order) cut before their last records that draw a single point →
+        (s where the road now ends in m, how many records)."""
         self.no_contact: list[tuple[str, etree._Element]] = []
         """Road links without ``contactPoint`` (refused unless the road they name is missing)."""
 
@@ -213,6 +220,13 @@ class _Reader:
                 "%s: the centre <lane> of %d road(s) has no type (first: road %s): taken as \"%s\" (strict mode "
                 "refuses it)", self.path or "<input>", len(self.untyped_centres), next(iter(self.untyped_centres)),
                 CENTRE_LANE_TYPE,
+            )
+        if self.single_points:
+            road_id, (end, count) = next(iter(self.single_points.items()))
+            _LOG.warning(
+                "%s: %d road(s) end in <paramPoly3> records that draw a single point (first: road %s, %d record(s) "
+                "from s=%.6g m): read as absent, the road and its lanes end there (strict mode refuses them)",
+                self.path or "<input>", len(self.single_points), road_id, count, end,
             )
         if self.odd_marks:
             road_id, mark_type = next(iter(self.odd_marks.items()))
@@ -417,6 +431,8 @@ class _Reader:
         if not sections:
             raise self.error(f"road {road_id!r} has no <laneSection>", element)
         plan_view.sort(key=_by_s)
+        if is_single_point(plan_view[-1]):
+            plan_view, sections, length = self.end_before_points(element, plan_view, sections)
         return Road(
             id=road_id,
             name=element.get("name", ""),
@@ -432,6 +448,28 @@ class _Reader:
             line=element.sourceline or 0,
             superelevation=superelevation,
         )
+
+    def end_before_points(
+        self, element: etree._Element, plan_view: list[Geometry], sections: list[LaneSection]
+    ) -> tuple[list[Geometry], list[LaneSection], float]:
+        """The road without its last ``<geometry>`` records that draw a single point
+        (``param_poly3.is_single_point``): it and its lanes end where the first of them
+        starts (recorded for one warning per map); refused when strict or when no record
+        is left."""
+        kept = len(plan_view)
+        while kept and is_single_point(plan_view[kept - 1]):
+            kept -= 1
+        first = plan_view[kept] if kept < len(plan_view) else plan_view[0]
+        if self.strict or kept == 0:
+            which = "every <geometry> record" if kept == 0 else f"the <geometry> at s={first.s:.6g}"
+            mode = "; strict mode refuses it" if kept else ""
+            raise self.error(f"road {self.road_id!r}: {which} is a <paramPoly3> that draws a single point (every "
+                             f"coefficient but aU, aV is 0){mode}", element)
+        end = first.s
+        ended = [section for section in sections if section.s < end] or sections[:1]
+        ended[-1] = replace(ended[-1], s_end=end)
+        self.single_points.setdefault(self.road_id, (end, len(plan_view) - kept))
+        return plan_view[:kept], ended, end
 
     def road_link(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> RoadLink:
         element_type = self.choice(element, "elementType", ("road", "junction"))

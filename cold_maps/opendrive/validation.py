@@ -192,17 +192,23 @@ class _RoadCheck:
         except ValueError as exc:
             raise self.refuse("geometry", "a, b, c, d", f"of a cubic <geometry>: {exc}") from None
         for before, after in zip(road.plan_view, road.plan_view[1:]):
-            try:
-                with np.errstate(all="ignore"):  # a non-finite end is refused just below
-                    end_x, end_y, _ = evaluate_record(before, np.array([before.length]))
-                    start_x, start_y, _ = evaluate_record(after, np.array([0.0]))
-            except ValueError as exc:
-                raise self.refuse(before.kind, "length", f"of the <geometry> at s={before.s:.6g}: {exc}") from None
-            jump = float(np.hypot(end_x[0] - start_x[0], end_y[0] - start_y[0]))
+            end_x, end_y = self.point(before, before.length)
+            start_x, start_y = self.point(after, 0.0)
+            jump = float(np.hypot(end_x - start_x, end_y - start_y))
             if not jump <= limit:
                 raise self.refuse("geometry", "x, y", f"of the <geometry> at s={after.s:.6g} are {jump:.6g} m from "
                                   f"the end of the record before it, more than the {limit:g} m a reference line "
                                   "may jump (the length its records draw)")
+
+    def point(self, record: Geometry, ds: float) -> tuple[float, float]:
+        """x, y (m) of ``record`` ds m from its start; refused when it cannot be evaluated
+        (a paramPoly3 that draws a single point)."""
+        try:
+            with np.errstate(all="ignore"):  # a non-finite point is refused by the jump bound
+                x, y, _ = evaluate_record(record, np.array([ds]))
+        except ValueError as exc:
+            raise self.refuse(record.kind, "length", f"of the <geometry> at s={record.s:.6g}: {exc}") from None
+        return float(x[0]), float(y[0])
 
     def record(self, geometry: Geometry) -> None:
         where = f"of the <geometry> at s={geometry.s:.6g}"
