@@ -56,6 +56,10 @@ BAD_CASES: dict[str, tuple[str, ...]] = {
     "missing geometry hdg": (LINE_GEOMETRY, LINE_GEOMETRY.replace(' hdg="0.5"', ""), "", "geometry", "missing required attribute 'hdg'"),
     "non-numeric length": ('length="5"><line/>', 'length="abc"><line/>', "", "geometry", "'length' is not a finite number: 'abc'"),
     "NaN x": ('x="1" y="2"', 'x="NaN" y="2"', "", "geometry", "'x' is not a finite number: 'NaN'"),
+    "digit underscore hdg": ('hdg="0.4"', 'hdg="1_0"', "", "geometry", "'hdg' is not a number in the XML Schema form: '1_0'"),
+    "full-width width": ('sOffset="9" a="3.5"', 'sOffset="9" a="\uff13.\uff15"', "", "width", "'a' is not a number in the XML Schema form: '３.５'"),
+    "Arabic-Indic spiral curvEnd": ('curvEnd="0.04"', 'curvEnd="\u0660.\u0660\u0664"', "", "spiral", "'curvEnd' is not a number in the XML Schema form"),
+    "digit underscore laneLink": ('<laneLink from="1" to="2"/>', '<laneLink from="1" to="2_0"/>', "", "laneLink", "'to' is not an integer in the XML Schema form: '2_0'"),
     "inf curvature": ('curvature="-0.02"', 'curvature="inf"', "", "arc", "'curvature' is not a finite number: 'inf'"),
     "-INF elevation": ('a="1.5"', 'a="-INF"', "", "elevation", "'a' is not a finite number"),
     "overflow width": ('sOffset="9" a="3.5"', 'sOffset="9" a="1e999"', "", "width", "'a' is not a finite number"),
@@ -343,3 +347,19 @@ def test_tree_mutations_raise_only_opendrive_error(edits: list[tuple[str, int, s
         elif operation == "rename":
             element.tag = ["line", "arc", "lane", "road", "left", "right", "center", "width", "geometry"][len(value) % 9]
     parses_or_opendrive_error(etree.tostring(root))
+
+
+@pytest.mark.parametrize(("text", "value"), [("10", 10.0), ("+1.", 1.0), (".5", 0.5), ("-1.5E-3", -1.5e-3),
+                                             (" 2 ", 2.0), ("1e2", 100.0)])
+def test_numbers_in_the_xml_schema_double_form_are_read(text: str, value: float) -> None:
+    data, _ = mutate('hdg="0.4"', f'hdg="{text}"')
+    road = parse_opendrive(data, path=NAME).roads["1"]
+    assert [g.hdg for g in road.plan_view if g.s == 10.0] == [value]
+
+
+@pytest.mark.parametrize("text", ["1_0", "\uff11\uff10", "1\u00a0"])
+def test_python_only_number_forms_are_refused_without_strict(text: str) -> None:
+    data, line = mutate('hdg="0.4"', f'hdg="{text}"')
+    with pytest.raises(OpenDriveError) as info:
+        parse_opendrive(data, path=NAME)
+    assert str(info.value) == f"{NAME}:{line}: <geometry>: attribute 'hdg' is not a number in the XML Schema form: {text!r}"

@@ -25,7 +25,8 @@ attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``La
 a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor. Repaired with a
 warning (refused when ``strict``): a road link or junction connection whose
 ``contactPoint`` names the far end of a road whose other end touches (``links``).
-Numbers use Python ``float`` syntax.
+Numbers follow the XML Schema lexical form of a double or an integer (Python's digit
+underscores and non-ASCII digits are refused; "INF" and "NaN" are refused as not finite).
 
 Lenient by default, like mainstream readers (libOpenDRIVE): a polynomial coefficient,
 curvature or record start that a record omits (RoadRunner writes ``<spiral curvEnd=".."/>``,
@@ -179,6 +180,7 @@ class _Reader:
             if default is None:
                 raise self.error(f"missing required attribute '{name}'", element)
             return default
+        self.lexical_form(element, name, text, "a number")
         try:
             value = float(text)
         except ValueError:
@@ -189,14 +191,23 @@ class _Reader:
 
     def numbers(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
         """Several required finite float attributes (fast path; errors from ``number``)."""
-        get = element.get
+        texts = list(map(element.get, names))
         try:
-            values = tuple([float(get(name)) for name in names])  # type: ignore[arg-type]
+            values = tuple(map(float, texts))  # type: ignore[arg-type]
         except (TypeError, ValueError):
             values = (math.nan,)
         if math.isfinite(sum(values)):  # any NaN or inf makes the sum non-finite
-            return values
+            joined = "".join(texts)  # type: ignore[arg-type]
+            if joined.isascii() and "_" not in joined:  # the XML Schema form, see ``lexical_form``
+                return values
         return tuple(self.number(element, name) for name in names)
+
+    def lexical_form(self, element: etree._Element, name: str, text: str, kind: str) -> None:
+        """Refuse what Python's ``float``/``int`` read beyond the XML Schema lexical form of a
+        double or an integer: digit-group underscores ("1_0") and non-ASCII digits or spaces
+        (full-width "１０"); for ASCII text without "_" the two forms agree."""
+        if not text.isascii() or "_" in text:
+            raise self.error(f"attribute '{name}' is not {kind} in the XML Schema form: {text[:40]!r}", element)
 
     def coefficients(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
         """Finite float attributes that are 0 when absent, recorded for one warning per
@@ -254,6 +265,7 @@ class _Reader:
 
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
+        self.lexical_form(element, name, text, "an integer")
         try:
             return int(text)
         except ValueError:
