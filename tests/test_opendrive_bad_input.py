@@ -363,3 +363,26 @@ def test_python_only_number_forms_are_refused_without_strict(text: str) -> None:
     with pytest.raises(OpenDriveError) as info:
         parse_opendrive(data, path=NAME)
     assert str(info.value) == f"{NAME}:{line}: <geometry>: attribute 'hdg' is not a number in the XML Schema form: {text!r}"
+
+
+def past_line_cap(text: str) -> str:
+    """``text`` with blank lines after the header, so that every road starts past line 70000."""
+    end = text.index("</header>") + len("</header>")
+    return text[:end] + "\n" * 70000 + text[end:]
+
+
+def test_element_lines_past_lxmls_cap_are_omitted_and_the_road_named() -> None:
+    """lxml keeps element lines in 16 bits: from 65535 on its sourceline is capped or an
+    estimate, so the error names no line (and the road the element is in) rather than a wrong one."""
+    data, line = mutate('hdg="0.4"', 'hdg="abc"')
+    assert parse_error(data).line == line < 65535
+    error = parse_error(past_line_cap(data.decode()).encode())
+    assert error.line is None
+    assert str(error) == f"{NAME}: <geometry>: attribute 'hdg' is not a finite number: 'abc' (in road '1')"
+
+
+def test_malformed_xml_lines_past_65535_are_right() -> None:
+    text = past_line_cap(SMALL_TEXT)
+    at = text.index('<junction id="7" name="crossing">')
+    bad = text[:at] + '<junction id="7" name="crossing" id="8">' + text[at + len('<junction id="7" name="crossing">'):]
+    assert parse_error(bad.encode()).line == bad.count("\n", 0, at) + 1 > 70000

@@ -51,7 +51,7 @@ from typing import Final, Iterable
 
 from lxml import etree
 
-from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.errors import OpenDriveError, source_line
 from cold_maps.opendrive.geometry.param_poly3 import is_single_point
 from cold_maps.opendrive.lanes import wrong_side_lanes
 from cold_maps.opendrive.links import repair_contact_points
@@ -165,7 +165,10 @@ class _Reader:
 
     def error(self, reason: str, element: etree._Element) -> OpenDriveError:
         tag = element.tag if isinstance(element.tag, str) else ""
-        return OpenDriveError(reason, path=self.path, element=tag, line=element.sourceline)
+        line = source_line(element)
+        if line is None and self.road_id and f"road {self.road_id!r}" not in reason:
+            reason += f" (in road {self.road_id!r})"
+        return OpenDriveError(reason, path=self.path, element=tag, line=line)
 
     def required(self, element: etree._Element, name: str) -> str:
         value = element.get(name)
@@ -312,6 +315,7 @@ class _Reader:
         links: list[tuple[str, str, etree._Element]] = []
         for child in root:
             tag = child.tag
+            self.road_id = ""
             if tag == "road":
                 road = self.road(child, links)
                 if road.id in roads:
@@ -371,7 +375,7 @@ class _Reader:
         _LOG.warning(
             "%s: %d link(s) name a road or junction that is not in the file (first: %s, line %s, %s): road links "
             "and junction connections dropped, a road's junction attribute kept (strict mode refuses them)",
-            self.path or "<input>", len(dangling), _link_owner(element), element.sourceline, reason,
+            self.path or "<input>", len(dangling), _link_owner(element), source_line(element) or "unknown", reason,
         )
         return roads, junctions
 
@@ -457,7 +461,7 @@ class _Reader:
             elevation=elevation,
             lane_offsets=lane_offsets,
             lane_sections=tuple(sections),
-            line=element.sourceline or 0,
+            line=source_line(element) or 0,
             superelevation=superelevation,
         )
 
