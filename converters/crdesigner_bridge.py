@@ -295,13 +295,17 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     moved to the nearer road end; a junction connection naming only a ``linkedRoad``
     (direct junction) names it as ``connectingRoad`` too; line, arc and spiral records are
     lengthened or shortened to end where the next record (or the road) starts
-    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
+    (``_align_records``). A file in another encoding than UTF-8 (UTF-16, Latin-1) is
+    written as UTF-8: crdesigner opens the file as text in the locale's encoding
+    (``UnicodeDecodeError`` on a UTF-16 byte-order mark). ``data`` has been checked by
+    ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
+    encoding = (root.getroottree().docinfo.encoding or "UTF-8").upper().replace("_", "-")
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _header_it_reads(root)
                 + _lane_types_it_knows(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
-                + _align_records(root))
+                + _align_records(root) + (encoding not in ("UTF-8", "UTF8")))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
