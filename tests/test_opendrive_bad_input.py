@@ -237,13 +237,13 @@ def test_lxml_alone_expands_attribute_entities_hence_the_declaration_check() -> 
     """Why entity declarations are rejected before parsing: libxml2 expands internal
     entities in attribute values despite resolve_entities=False, bounded only by its
     amplification limit. External entities in text stay unresolved."""
-    from cold_maps.opendrive.xml_safety import _hardened_parser
+    from cold_maps.opendrive.xml_safety import _HARDENED
 
-    root = etree.fromstring(billion_laughs(3), _hardened_parser())
+    root = etree.fromstring(billion_laughs(3), etree.XMLParser(**_HARDENED))
     assert root[0].get("name") == "lol" * 1000
     with pytest.raises(etree.XMLSyntaxError, match="amplification"):
-        etree.fromstring(billion_laughs(9), _hardened_parser())
-    root = etree.fromstring(XXE_TEXT, _hardened_parser())
+        etree.fromstring(billion_laughs(9), etree.XMLParser(**_HARDENED))
+    root = etree.fromstring(XXE_TEXT, etree.XMLParser(**_HARDENED))
     assert "root:" not in etree.tostring(root, encoding="unicode")
 
 

@@ -429,7 +429,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.verbose, args.quiet)
     try:
         return int(args.run(args))
-    except BrokenPipeError:
+    except (BrokenPipeError, MemoryError):
         raise
     except KeyboardInterrupt as exc:
         what, status = interruption(exc)

@@ -47,7 +47,7 @@ import logging
 import math
 import os
 from dataclasses import replace
-from typing import Final, Iterable
+from typing import Final, Iterable, Iterator, NamedTuple
 
 from lxml import etree
 
@@ -73,7 +73,7 @@ from cold_maps.opendrive.model import (
     ROAD_MARK_TYPES,
 )
 from cold_maps.opendrive.validation import validate_road
-from cold_maps.opendrive.xml_safety import parse_xml
+from cold_maps.opendrive.xml_safety import iter_xml
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
 """Default input size limit (bytes) of ``load_opendrive``."""
@@ -131,8 +131,8 @@ def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> Ope
     warning each, ``links.repair_contact_points``), and links to roads or junctions not in
     the file (else dropped with one warning).
     """
-    root = parse_xml(data, path=path)
-    return repair_contact_points(_Reader(path, strict).read_map(root), strict=strict)
+    elements = iter_xml(data, ("header", "road", "junction"), path=path)
+    return repair_contact_points(_Reader(path, strict).read_map(elements), strict=strict)
 
 
 def _strip_namespaces(root: etree._Element) -> None:
@@ -158,14 +158,17 @@ class _Reader:
         self.single_points: dict[str, tuple[float, int]] = {}
         """Roads (in file order) cut before their last records that draw a single point →
         (s where the road now ends in m, how many records)."""
-        self.no_contact: list[tuple[str, etree._Element]] = []
+        self.no_contact: list[_Link] = []
         """Road links without ``contactPoint`` (refused unless the road they name is missing)."""
 
     # -- attribute access -------------------------------------------------------------
 
     def error(self, reason: str, element: etree._Element) -> OpenDriveError:
         tag = element.tag if isinstance(element.tag, str) else ""
-        line = source_line(element)
+        return self.error_at(reason, tag, source_line(element))
+
+    def error_at(self, reason: str, tag: str, line: int | None) -> OpenDriveError:
+        """The error for element ``tag`` at ``line``; names the road when the line is unknown."""
         if line is None and self.road_id and f"road {self.road_id!r}" not in reason:
             reason += f" (in road {self.road_id!r})"
         return OpenDriveError(reason, path=self.path, element=tag, line=line)
@@ -304,16 +307,21 @@ class _Reader:
 
     # -- elements -----------------------------------------------------------------------
 
-    def read_map(self, root: etree._Element) -> OpenDriveMap:
-        if isinstance(root.tag, str) and root.tag.startswith("{"):
+    def read_map(self, elements: Iterator[etree._Element]) -> OpenDriveMap:
+        """The map from ``xml_safety.iter_xml``'s stream: the root, then its children."""
+        root = next(elements)
+        namespaced = isinstance(root.tag, str) and root.tag.startswith("{")
+        if namespaced:
             _strip_namespaces(root)
         if root.tag != "OpenDRIVE":
             raise self.error("root element is not <OpenDRIVE>", root)
         header: Header | None = None
         roads: dict[str, Road] = {}
         junctions: dict[str, Junction] = {}
-        links: list[tuple[str, str, etree._Element]] = []
-        for child in root:
+        links: list[_Link] = []
+        for child in elements:
+            if namespaced:
+                _strip_namespaces(child)
             tag = child.tag
             self.road_id = ""
             if tag == "road":
@@ -337,27 +345,28 @@ class _Reader:
         for road in roads.values():
             validate_road(road, self.path)
             self.warn_wrong_side(road)
-        dangling = [link for link in links if link[1] not in (roads if link[0] == "road" else junctions)]
+        dangling = [link for link in links if link.element_id not in (roads if link.element_type == "road" else junctions)]
         if dangling:
             roads, junctions = self.drop_dangling(dangling, roads, junctions)
-        for element_id, element in self.no_contact:
-            if element_id in roads:
-                raise self.error("missing required attribute 'contactPoint'", element)
+        for link in self.no_contact:
+            if link.element_id in roads:
+                raise self.error_at("missing required attribute 'contactPoint'", link.tag, link.line)
         self.warn_defaults()
         return OpenDriveMap(path=self.path, header=header, roads=roads, junctions=junctions)
 
     def drop_dangling(
-        self, dangling: list[tuple[str, str, etree._Element]], roads: dict[str, Road], junctions: dict[str, Junction]
+        self, dangling: list[_Link], roads: dict[str, Road], junctions: dict[str, Junction]
     ) -> tuple[dict[str, Road], dict[str, Junction]]:
         """Road links and junction connections that name a road or junction not in the
         file, dropped with one warning (libOpenDRIVE reads such maps); a road's
         ``junction`` attribute naming a missing junction is kept (nothing resolves it).
         Strict: refused at the first."""
-        element_type, element_id, element = dangling[0]
-        reason = f"links to {element_type} {element_id!r}, which does not exist"
+        first = dangling[0]
+        reason = f"links to {first.element_type} {first.element_id!r}, which does not exist"
         if self.strict:
-            raise self.error(f"{reason} (strict mode refuses links to elements not in the file)", element)
-        missing = {(kind, name) for kind, name, _ in dangling}
+            raise self.error_at(f"{reason} (strict mode refuses links to elements not in the file)", first.tag,
+                                first.line)
+        missing = {(link.element_type, link.element_id) for link in dangling}
 
         def kept(link: RoadLink | None) -> RoadLink | None:
             return None if link is not None and (link.element_type, link.element_id) in missing else link
@@ -375,7 +384,7 @@ class _Reader:
         _LOG.warning(
             "%s: %d link(s) name a road or junction that is not in the file (first: %s, line %s, %s): road links "
             "and junction connections dropped, a road's junction attribute kept (strict mode refuses them)",
-            self.path or "<input>", len(dangling), _link_owner(element), source_line(element) or "unknown", reason,
+            self.path or "<input>", len(dangling), first.owner, first.line or "unknown", reason,
         )
         return roads, junctions
 
@@ -404,7 +413,7 @@ class _Reader:
             geo_reference=GeoReference(proj, *offset),
         )
 
-    def road(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Road:
+    def road(self, element: etree._Element, links: list[_Link]) -> Road:
         road_id = self.required(element, "id")
         self.road_id = road_id
         length = self.number(element, "length")
@@ -412,7 +421,7 @@ class _Reader:
             raise self.error(f"road {road_id!r} has negative length {length}", element)
         junction = element.get("junction", "-1")
         if junction != "-1":
-            links.append(("junction", junction, element))
+            links.append(_link("junction", junction, element, f"road {road_id} junction attribute"))
         ends: dict[str, RoadLink | None] = {"predecessor": None, "successor": None}
         plan_view: list[Geometry] = []
         elevation: tuple[CubicPoly, ...] = ()
@@ -441,7 +450,7 @@ class _Reader:
                     if end in ends:
                         if ends[end] is not None:
                             raise self.error(f"more than one road {end}", link)
-                        ends[end] = self.road_link(link, links)
+                        ends[end] = self.road_link(link, links, f"road {road_id} {end}")
         if not plan_view:
             raise self.error(f"road {road_id!r} has no <planView> geometry", element)
         if not sections:
@@ -487,14 +496,14 @@ class _Reader:
         self.single_points.setdefault(self.road_id, (end, len(plan_view) - kept))
         return plan_view[:kept], ended, end
 
-    def road_link(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> RoadLink:
+    def road_link(self, element: etree._Element, links: list[_Link], owner: str) -> RoadLink:
         element_type = self.choice(element, "elementType", ("road", "junction"))
         element_id = self.required(element, "elementId")
-        links.append((element_type, element_id, element))
+        links.append(_link(element_type, element_id, element, owner))
         if element_type == "junction":
             return RoadLink("junction", element_id, None)
         if element.get("contactPoint") is None:
-            self.no_contact.append((element_id, element))
+            self.no_contact.append(links[-1])
             return RoadLink("road", element_id, None)
         return RoadLink("road", element_id, self.choice(element, "contactPoint", _CONTACT_POINTS))
 
@@ -650,7 +659,7 @@ class _Reader:
         """A finite float attribute, None when absent."""
         return None if element.get(name) is None else self.number(element, name)
 
-    def junction(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Junction:
+    def junction(self, element: etree._Element, links: list[_Link]) -> Junction:
         connections = []
         for child in element:
             if child.tag != "connection":
@@ -659,8 +668,9 @@ class _Reader:
             connecting = child.get("connectingRoad") or child.get("linkedRoad")
             if connecting is None:
                 raise self.error("missing required attribute 'connectingRoad'", child)
-            links.append(("road", incoming, child))
-            links.append(("road", connecting, child))
+            owner = f"junction {element.get('id')} connection {child.get('id')}"
+            links.append(_link("road", incoming, child, owner))
+            links.append(_link("road", connecting, child, owner))
             lane_links = tuple(
                 LaneLink(self.integer(link, "from"), self.integer(link, "to"))
                 for link in child
@@ -683,16 +693,26 @@ class _Reader:
         )
 
 
-def _link_owner(element: etree._Element) -> str:
-    """Who writes a link: ``road 1 predecessor``, ``junction 7 connection 3`` or ``road 1``."""
-    tag = str(element.tag)
-    if tag == "road":
-        return f"road {element.get('id')} junction attribute"
-    parent = element.getparent()
-    if tag == "connection":
-        return f"junction {parent.get('id') if parent is not None else '?'} connection {element.get('id')}"
-    road = parent.getparent() if parent is not None else None
-    return f"road {road.get('id') if road is not None else '?'} {tag}"
+class _Link(NamedTuple):
+    """A reference to a road or junction by id, and where the file makes it (no element:
+    the streamed tree drops each road once read).
+
+    Fields:
+        element_type: "road" or "junction".
+        element_id: the id it names.
+        tag, line: the element that names it and its source line (None when unknown).
+        owner: who names it, e.g. ``road 1 predecessor``, ``junction 7 connection 3``.
+    """
+
+    element_type: str
+    element_id: str
+    tag: str
+    line: int | None
+    owner: str
+
+
+def _link(element_type: str, element_id: str, element: etree._Element, owner: str) -> _Link:
+    return _Link(element_type, element_id, str(element.tag), source_line(element), owner)
 
 
 def _by_s0(record: CubicPoly) -> float:
