@@ -54,3 +54,30 @@ def test_a_map_in_another_encoding_is_handed_over_as_utf8(tmp_path: Path, encodi
 
 def test_a_utf8_map_is_not_rewritten() -> None:
     assert crdesigner_copy(_straight_text().encode("utf-8")) is None
+
+
+def _with_crosswalk(corner: str) -> str:
+    """The straight road with a 4 m × 7 m crosswalk across it at s = 30 m, outlined by four
+    ``corner`` elements (``cornerRoad`` in road s, t; ``cornerLocal`` in u, v)."""
+    if corner == "cornerRoad":
+        corners = [(28.0, -3.5), (32.0, -3.5), (32.0, 3.5), (28.0, 3.5)]
+        outline = "".join(f'<cornerRoad s="{s}" t="{t}" dz="0" height="0"/>' for s, t in corners)
+    else:
+        corners = [(-2.0, -3.5), (2.0, -3.5), (2.0, 3.5), (-2.0, 3.5)]
+        outline = "".join(f'<cornerLocal u="{u}" v="{v}" z="0" height="0"/>' for u, v in corners)
+    crosswalk = (f'<objects><object type="crosswalk" id="7" s="30" t="0" zOffset="0" hdg="0" roll="0" pitch="0" '
+                 f'orientation="none" length="4" width="7"><outlines><outline id="0">{outline}</outline></outlines>'
+                 "</object></objects>")
+    return _straight_text().replace("</lanes>", "</lanes>" + crosswalk, 1)
+
+
+@pytest.mark.parametrize(("corner", "crosswalks"), [("cornerRoad", 0), ("cornerLocal", 1)])
+def test_crosswalks_outlined_with_corner_road_are_dropped(tmp_path: Path, corner: str, crosswalks: int) -> None:
+    """crdesigner reads only ``<cornerLocal>`` (shapely NotImplementedError on a
+    ``<cornerRoad>`` outline); the crosswalk it can read stays."""
+    path = tmp_path / "crosswalk.xodr"
+    path.write_text(_with_crosswalk(corner))
+    lanelets, _ = odr_to_lanelets(path)
+    lanes = [lanelet for lanelet in lanelets if "crosswalk" not in lanelet.types]
+    assert len(lanelets) - len(lanes) == crosswalks
+    assert _lane_borders_y(lanes) == [(0.0, -LANE_WIDTH_M), (0.0, LANE_WIDTH_M)]
