@@ -64,3 +64,11 @@ def test_no_link_gap_where_a_reversed_lane_meets_a_standard_one() -> None:
     graph = _graph(lht_predecessor=True)
     assert list(graph.edges()) == [(LaneKey("1", 0, -1), LaneKey("2", 0, -1))]
     assert link_gaps(graph, tolerance_m=1e-6) == []
+
+
+def test_lanes_driven_the_same_way_across_the_centre_lane_are_adjacent() -> None:
+    from cold_maps.simulation.drive import lanes_beside
+
+    graph = _graph()
+    assert lanes_beside(graph, LaneKey("1", 0, -1)) == [("adjacent", LaneKey("1", 0, 1))]
+    assert lanes_beside(graph, LaneKey("1", 0, 1)) == [("adjacent", LaneKey("1", 0, -1))]
