@@ -128,8 +128,8 @@ def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNeares
     mid-lines of ``lanelets`` (negative when it runs against them). When they close into a
     loop (the last ends within ``join_m`` of where the first starts: a ring road) each step
     between samples is taken the short way round, so crossing the loop's seam is no
-    reversal. When a step still jumps (differs from the samples' spacing by more than the
-    spacing plus ``cap_m``: the mid-lines pass over themselves, a helical ramp whose turns
+    reversal. When a step still jumps (longer than twice the samples' spacing plus
+    ``cap_m``, either way: the mid-lines pass over themselves, a helical ramp whose turns
     lie on one another in 2-D), the samples are walked along the mid-lines instead
     (``_walked_arc``), so no sample jumps to the other turn."""
     steps = np.diff(_sequence_arc(lanelets, centre_nearest))
@@ -137,7 +137,7 @@ def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNeares
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
     spacing = np.hypot(*np.diff(samples, axis=0).T)
-    if np.any(np.abs(steps - spacing) > spacing + cap_m):
+    if np.any(np.abs(steps) > 2.0 * spacing + cap_m):
         steps = np.diff(_walked_arc(lanelets, samples, spacing, cap_m))
     return float(np.sum(steps))
 

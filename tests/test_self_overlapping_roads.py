@@ -55,3 +55,21 @@ def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> No
         assert measured.gt_unmatched == "", f"station {station} m"
         worst.append(max(measured.left_errors_m.max(), measured.right_errors_m.max()))
     assert len(worst) > 50 and max(worst) <= 0.02
+
+
+def test_a_detection_run_backwards_on_the_ramp_is_still_refused(tmp_path: Path) -> None:
+    from converters import load_lanelet2
+    from gt_matching import GroundTruth
+
+    path = tmp_path / "ramp.xodr"
+    path.write_text(helical_ramp())
+    graph = build_lane_graph(parse_opendrive(path.read_bytes()))
+    lanes = [LaneKey(road, 0, -1) for road in ["1", *(str(10 + k) for k in range(8)), "2"]]
+    route = route_from_lanes(graph, lanes)
+    strip = LaneStrip.from_borders(route.left, route.right)
+    ground_truth = GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache"))
+    for station in (140.0, 280.0):  # on the first and on the second turn
+        detection = LaneSensor().detect(strip, station)
+        left, right = detection.to_world()
+        match = ground_truth.match(left[::-1], right[::-1], (detection.x, detection.y, detection.yaw))
+        assert not match.matched and "against the driving direction" in match.mismatch
