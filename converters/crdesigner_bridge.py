@@ -295,13 +295,18 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     moved to the nearer road end; a junction connection naming only a ``linkedRoad``
     (direct junction) names it as ``connectingRoad`` too; line, arc and spiral records are
     lengthened or shortened to end where the next record (or the road) starts
-    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
+    (``_align_records``); crosswalks it cannot outline are dropped (``_crosswalks_it_reads``).
+    A file in another encoding than UTF-8 (UTF-16, Latin-1) is
+    written as UTF-8: crdesigner opens the file as text in the locale's encoding
+    (``UnicodeDecodeError`` on a UTF-16 byte-order mark). ``data`` has been checked by
+    ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
+    encoding = (root.getroottree().docinfo.encoding or "UTF-8").upper().replace("_", "-")
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _header_it_reads(root)
                 + _lane_types_it_knows(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
-                + _align_records(root))
+                + _align_records(root) + _crosswalks_it_reads(root) + (encoding not in ("UTF-8", "UTF8")))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -446,6 +451,27 @@ has driving, entry, exit, onRamp, offRamp but not the ramp between two motorways
 ALIGN_TOLERANCE_M: Final[float] = 1e-6
 """A ``<geometry>`` record ending farther than this (m) from where the next record (or
 the road) starts is lengthened or shortened to end there."""
+
+
+CROSSWALK_CORNERS_MIN: Final[int] = 4
+"""Fewest ``<cornerLocal>`` corners of a crosswalk outline crdesigner converts."""
+
+
+def _crosswalks_it_reads(root: etree._Element) -> int:
+    """Remove each crosswalk ``<object>`` whose first outline has fewer than
+    ``CROSSWALK_CORNERS_MIN`` ``<cornerLocal>`` corners (an outline of ``<cornerRoad>``s, or
+    none): crdesigner reads only ``cornerLocal`` and fits a rectangle over the corners it
+    finds (shapely ``NotImplementedError`` on none). Crosswalks are no lanes of the ground
+    truth; the number removed."""
+    removed = 0
+    for crosswalk in [o for o in root.iter("{*}object") if o.get("type") == "crosswalk"]:
+        outline = crosswalk.find("{*}outlines/{*}outline")
+        if outline is None:
+            outline = crosswalk.find("{*}outline")
+        if outline is None or len(outline.findall("{*}cornerLocal")) < CROSSWALK_CORNERS_MIN:
+            crosswalk.getparent().remove(crosswalk)
+            removed += 1
+    return removed
 
 
 def _linked_as_connecting(root: etree._Element) -> int:

@@ -122,16 +122,53 @@ def _sequence_arc(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNea
     return arc
 
 
-def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNearest, join_m: float) -> float:
-    """How far (m) the detection's mid-line advances along the joined mid-lines of
-    ``lanelets`` (negative when it runs against them). When they close into a loop (the
-    last ends within ``join_m`` of where the first starts: a ring road) each step between
-    samples is taken the short way round, so crossing the loop's seam is no reversal."""
+def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNearest, join_m: float,
+               samples: NDArrayFloat, cap_m: float) -> float:
+    """How far (m) the detection's mid-line (``samples``) advances along the joined
+    mid-lines of ``lanelets`` (negative when it runs against them). When they close into a
+    loop (the last ends within ``join_m`` of where the first starts: a ring road) each step
+    between samples is taken the short way round, so crossing the loop's seam is no
+    reversal. When a step still jumps (longer than twice the samples' spacing plus
+    ``cap_m``, either way: the mid-lines pass over themselves, a helical ramp whose turns
+    lie on one another in 2-D), the samples are walked along the mid-lines instead
+    (``_walked_arc``), so no sample jumps to the other turn."""
     steps = np.diff(_sequence_arc(lanelets, centre_nearest))
     loop_m = float(sum(g.length_m for g in lanelets))
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
+    spacing = np.hypot(*np.diff(samples, axis=0).T)
+    if np.any(np.abs(steps) > 2.0 * spacing + cap_m):
+        steps = np.diff(_walked_arc(lanelets, samples, spacing, cap_m))
     return float(np.sum(steps))
+
+
+def _walked_arc(lanelets: Sequence[LaneletGeometry], samples: NDArrayFloat, spacing: NDArrayFloat,
+                cap_m: float) -> NDArrayFloat:
+    """Arc length (m) along the joined mid-lines of ``lanelets`` of each sample, walked: of
+    the mid-line vertices within ``cap_m`` of a sample's nearest distance, it takes the one
+    whose arc lies nearest the previous sample's arc plus the ``spacing`` (m) between them.
+    Walks start at each place the first sample lies near (one per ``cap_m`` of arc); the
+    walk that departs least from the steps the samples take is kept."""
+    from scipy.spatial import cKDTree
+
+    offsets = np.cumsum([0.0] + [g.length_m for g in lanelets[:-1]])
+    arcs = np.concatenate([offset + g.centre_arc_m for offset, g in zip(offsets, lanelets)])
+    tree = cKDTree(np.vstack([g.centre for g in lanelets]))
+    nearest, _ = tree.query(samples)
+    options = [np.sort(arcs[near]) for near in tree.query_ball_point(samples, nearest + cap_m)]
+    first = options[0]
+    starts = first[np.concatenate(([True], np.diff(first) > cap_m))]
+
+    def walk(start: float) -> tuple[float, NDArrayFloat]:
+        walked, departure = [start], 0.0
+        for step, choices in zip(spacing, options[1:]):
+            target = walked[-1] + float(step)
+            chosen = float(choices[np.argmin(np.abs(choices - target))])
+            departure += abs(chosen - target)
+            walked.append(chosen)
+        return departure, np.array(walked)
+
+    return min((walk(float(start)) for start in starts), key=lambda found: found[0])[1]
 
 
 def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float) -> float:
@@ -373,7 +410,7 @@ class GroundTruth:
                 f"{_ids(own.lanelets)}"
             )
         else:
-            if _advance_m(own.lanelets, centre_nearest, self.config.step_m) < 0:
+            if _advance_m(own.lanelets, centre_nearest, config.step_m, centre, config.max_distance_m) < 0:
                 mismatch = f"detection runs against the driving direction of lanelets {_ids(own.lanelets)}"
         return own, pose_ids, mismatch
 

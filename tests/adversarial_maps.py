@@ -28,7 +28,8 @@ UTM_SOUTH: Final[str] = "+proj=utm +zone=33 +south +ellps=WGS84 +datum=WGS84 +un
 
 @dataclass(frozen=True)
 class LaneSpec:
-    """One lane: id, type, width or border records (sOffset relative to the section), links."""
+    """One lane: id, type, width or border records (sOffset relative to the section), links,
+    OpenDRIVE 1.7 ``direction`` ("" omits it)."""
 
     id: int
     widths: tuple[Cubic, ...] = ((0.0, LANE_WIDTH_M, 0.0, 0.0, 0.0),)
@@ -36,6 +37,7 @@ class LaneSpec:
     type: str = "driving"
     predecessor: int | None = None
     successor: int | None = None
+    direction: str = ""
 
     def xml(self) -> str:
         link = ""
@@ -48,7 +50,9 @@ class LaneSpec:
             for tag, rows in (("width", self.widths if not self.borders else ()), ("border", self.borders))
             for r in rows
         )
-        return f'<lane id="{self.id}" type="{self.type}" level="false"><link>{link}</link>{records}</lane>'
+        direction = f' direction="{self.direction}"' if self.direction else ""
+        return (f'<lane id="{self.id}" type="{self.type}"{direction} level="false"><link>{link}</link>'
+                f"{records}</lane>")
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,10 @@ BAD_CASES: dict[str, tuple[str, ...]] = {
     "missing geometry hdg": (LINE_GEOMETRY, LINE_GEOMETRY.replace(' hdg="0.5"', ""), "", "geometry", "missing required attribute 'hdg'"),
     "non-numeric length": ('length="5"><line/>', 'length="abc"><line/>', "", "geometry", "'length' is not a finite number: 'abc'"),
     "NaN x": ('x="1" y="2"', 'x="NaN" y="2"', "", "geometry", "'x' is not a finite number: 'NaN'"),
+    "digit underscore hdg": ('hdg="0.4"', 'hdg="1_0"', "", "geometry", "'hdg' is not a number in the XML Schema form: '1_0'"),
+    "full-width width": ('sOffset="9" a="3.5"', 'sOffset="9" a="\uff13.\uff15"', "", "width", "'a' is not a number in the XML Schema form: '３.５'"),
+    "Arabic-Indic spiral curvEnd": ('curvEnd="0.04"', 'curvEnd="\u0660.\u0660\u0664"', "", "spiral", "'curvEnd' is not a number in the XML Schema form"),
+    "digit underscore laneLink": ('<laneLink from="1" to="2"/>', '<laneLink from="1" to="2_0"/>', "", "laneLink", "'to' is not an integer in the XML Schema form: '2_0'"),
     "inf curvature": ('curvature="-0.02"', 'curvature="inf"', "", "arc", "'curvature' is not a finite number: 'inf'"),
     "-INF elevation": ('a="1.5"', 'a="-INF"', "", "elevation", "'a' is not a finite number"),
     "overflow width": ('sOffset="9" a="3.5"', 'sOffset="9" a="1e999"', "", "width", "'a' is not a finite number"),
@@ -233,13 +237,13 @@ def test_lxml_alone_expands_attribute_entities_hence_the_declaration_check() -> 
     """Why entity declarations are rejected before parsing: libxml2 expands internal
     entities in attribute values despite resolve_entities=False, bounded only by its
     amplification limit. External entities in text stay unresolved."""
-    from cold_maps.opendrive.xml_safety import _hardened_parser
+    from cold_maps.opendrive.xml_safety import _HARDENED
 
-    root = etree.fromstring(billion_laughs(3), _hardened_parser())
+    root = etree.fromstring(billion_laughs(3), etree.XMLParser(**_HARDENED))
     assert root[0].get("name") == "lol" * 1000
     with pytest.raises(etree.XMLSyntaxError, match="amplification"):
-        etree.fromstring(billion_laughs(9), _hardened_parser())
-    root = etree.fromstring(XXE_TEXT, _hardened_parser())
+        etree.fromstring(billion_laughs(9), etree.XMLParser(**_HARDENED))
+    root = etree.fromstring(XXE_TEXT, etree.XMLParser(**_HARDENED))
     assert "root:" not in etree.tostring(root, encoding="unicode")
 
 
@@ -343,3 +347,42 @@ def test_tree_mutations_raise_only_opendrive_error(edits: list[tuple[str, int, s
         elif operation == "rename":
             element.tag = ["line", "arc", "lane", "road", "left", "right", "center", "width", "geometry"][len(value) % 9]
     parses_or_opendrive_error(etree.tostring(root))
+
+
+@pytest.mark.parametrize(("text", "value"), [("10", 10.0), ("+1.", 1.0), (".5", 0.5), ("-1.5E-3", -1.5e-3),
+                                             (" 2 ", 2.0), ("1e2", 100.0)])
+def test_numbers_in_the_xml_schema_double_form_are_read(text: str, value: float) -> None:
+    data, _ = mutate('hdg="0.4"', f'hdg="{text}"')
+    road = parse_opendrive(data, path=NAME).roads["1"]
+    assert [g.hdg for g in road.plan_view if g.s == 10.0] == [value]
+
+
+@pytest.mark.parametrize("text", ["1_0", "\uff11\uff10", "1\u00a0"])
+def test_python_only_number_forms_are_refused_without_strict(text: str) -> None:
+    data, line = mutate('hdg="0.4"', f'hdg="{text}"')
+    with pytest.raises(OpenDriveError) as info:
+        parse_opendrive(data, path=NAME)
+    assert str(info.value) == f"{NAME}:{line}: <geometry>: attribute 'hdg' is not a number in the XML Schema form: {text!r}"
+
+
+def past_line_cap(text: str) -> str:
+    """``text`` with blank lines after the header, so that every road starts past line 70000."""
+    end = text.index("</header>") + len("</header>")
+    return text[:end] + "\n" * 70000 + text[end:]
+
+
+def test_element_lines_past_lxmls_cap_are_omitted_and_the_road_named() -> None:
+    """lxml keeps element lines in 16 bits: from 65535 on its sourceline is capped or an
+    estimate, so the error names no line (and the road the element is in) rather than a wrong one."""
+    data, line = mutate('hdg="0.4"', 'hdg="abc"')
+    assert parse_error(data).line == line < 65535
+    error = parse_error(past_line_cap(data.decode()).encode())
+    assert error.line is None
+    assert str(error) == f"{NAME}: <geometry>: attribute 'hdg' is not a finite number: 'abc' (in road '1')"
+
+
+def test_malformed_xml_lines_past_65535_are_right() -> None:
+    text = past_line_cap(SMALL_TEXT)
+    at = text.index('<junction id="7" name="crossing">')
+    bad = text[:at] + '<junction id="7" name="crossing" id="8">' + text[at + len('<junction id="7" name="crossing">'):]
+    assert parse_error(bad.encode()).line == bad.count("\n", 0, at) + 1 > 70000

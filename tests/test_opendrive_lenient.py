@@ -15,6 +15,7 @@ from cold_maps.cli.maps import main
 from cold_maps.network.continuity import link_gaps, record_joints, reference_line_defects
 from cold_maps.network.lane_graph import LaneKey, build_lane_graph
 from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.model import RoadLink
 from cold_maps.opendrive.parser import parse_opendrive
 from cold_maps.opendrive.sampling import sample_road
 from cold_maps.simulation.neighbours import neighbour_key
@@ -228,3 +229,89 @@ def test_records_whose_length_disagrees_with_the_next_s_are_listed() -> None:
     found = [(joint.s, joint.gap_m) for joint in record_length_mismatches(odr_map)]
     assert found == [(10.0, -2.0), (15.0, 3.0), (20.0, -1.0)]
     assert reference_line_defects(odr_map) == []
+
+
+def dangling_links_map() -> bytes:
+    """Road 1 names a predecessor road 99 (not in the file, no contactPoint) and leads into junction 7, whose
+    connecting road 2 names a successor junction 70 (not in the file); junction 7's
+    connection 0 comes from road 55 (not in the file), connection 1 from road 1."""
+    geometry = '<geometry s="0" x="0" y="0" hdg="0" length="20"><line/></geometry>'
+    links = ('<link><predecessor elementType="road" elementId="99"/>'
+             '<successor elementType="junction" elementId="7"/></link>')
+    connecting_links = ('<link><predecessor elementType="road" elementId="1" contactPoint="end"/>'
+                        '<successor elementType="junction" elementId="70"/></link>')
+    junction = ('<junction id="7"><connection id="0" incomingRoad="55" connectingRoad="2" contactPoint="start">'
+                '<laneLink from="-1" to="-1"/></connection>'
+                '<connection id="1" incomingRoad="1" connectingRoad="2" contactPoint="start">'
+                '<laneLink from="-1" to="-1"/><laneLink from="-2" to="-2"/></connection></junction>')
+    connecting = road("2", geometry.replace('x="0"', 'x="20"'), connecting_links).replace('junction="-1"', 'junction="7"')
+    return xodr(road("1", geometry, links) + "\n" + connecting + junction)
+
+
+def test_links_to_missing_roads_and_junctions_are_dropped_with_one_warning(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
+        odr_map = parse_opendrive(dangling_links_map(), path="dangling.xodr")
+    assert [r.getMessage() for r in caplog.records] == [
+        "dangling.xodr: 3 link(s) name a road or junction that is not in the file (first: road 1 predecessor, "
+        "line 1, links to road '99', which does not exist): road links and junction connections dropped, a road's "
+        "junction attribute kept (strict mode refuses them)"
+    ]
+    first, connecting = odr_map.roads["1"], odr_map.roads["2"]
+    assert (first.predecessor, first.successor) == (None, RoadLink("junction", "7"))
+    assert (connecting.predecessor, connecting.successor) == (RoadLink("road", "1", "end"), None)
+    assert [c.id for c in odr_map.junctions["7"].connections] == ["1"]
+    graph = build_lane_graph(odr_map)
+    assert graph.issues == ()
+    assert set(graph.edges()) == {(LaneKey("1", 0, lane), LaneKey("2", 0, lane)) for lane in (-1, -2)}
+
+
+def test_strict_mode_refuses_a_link_to_a_missing_road(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(OpenDriveError, match="links to road '99', which does not exist") as info:
+        parse_opendrive(dangling_links_map(), path="dangling.xodr", strict=True)
+    assert (info.value.element, info.value.line) == ("predecessor", 1)
+    source = tmp_path / "dangling.xodr"
+    source.write_bytes(dangling_links_map())
+    assert main(["info", "-q", str(source)]) == 0
+    assert main(["info", "-q", "--strict", str(source)]) == 1
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def single_point_map(*, last: bool = True, sections: tuple[float, ...] = (0.0,)) -> bytes:
+    """Road 1: a 100 m line along +x and RoadRunner's empty ``<paramPoly3/>`` of 23.6 m
+    (a single point at x = 100), as its last record or followed by another 50 m line."""
+    records = ('<geometry s="0" x="0" y="0" hdg="0" length="100"><line/></geometry>'
+               '<geometry s="100" x="100" y="0" hdg="0" length="23.6"><paramPoly3/></geometry>')
+    length = 123.6
+    if not last:
+        records += '<geometry s="123.6" x="100" y="0" hdg="0" length="50"><line/></geometry>'
+        length += 50.0
+    text = road("1", records, length=length)
+    section = text[text.index('<laneSection s="0">'):text.index("</laneSection>") + len("</laneSection>")]
+    text = text.replace(section, "".join(section.replace('s="0"', f's="{s!r}"', 1) for s in sections))
+    return xodr(text)
+
+
+def test_a_last_record_that_draws_a_single_point_ends_the_road(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="cold_maps.opendrive.parser"):
+        odr_map = parse_opendrive(single_point_map(sections=(0.0, 60.0, 110.0)), path="rr.xodr")
+    assert caplog.records[-1].getMessage() == (
+        "rr.xodr: 1 road(s) end in <paramPoly3> records that draw a single point (first: road 1, 1 record(s) from "
+        "s=100 m): read as absent, the road and its lanes end there (strict mode refuses them)")
+    road_1 = odr_map.roads["1"]
+    assert road_1.length == 100.0 and [g.kind for g in road_1.plan_view] == ["line"]
+    assert [(section.s, section.s_end) for section in road_1.lane_sections] == [(0.0, 60.0), (60.0, 100.0)]
+    last = sample_road(road_1, step=1.0)[-1]
+    np.testing.assert_allclose(last.outer[-1, :2], [100.0, -6.5])
+    graph = build_lane_graph(odr_map)
+    assert graph.lengths[LaneKey("1", 1, -1)] == pytest.approx(40.0)
+    written = single_point_map().replace(b"<paramPoly3/>", b'<paramPoly3 aU="0" bU="0" cU="0" dU="0" aV="0" bV="0" '
+                                                           b'cV="0" dV="0"/>')
+    with pytest.raises(OpenDriveError, match="the <geometry> at s=100 is a <paramPoly3> that draws a single point"):
+        parse_opendrive(written, path="rr.xodr", strict=True)
+
+
+def test_a_single_point_record_inside_a_road_is_refused_naming_it() -> None:
+    with pytest.raises(OpenDriveError) as info:
+        parse_opendrive(single_point_map(last=False), path="rr.xodr")
+    assert info.value.element == "paramPoly3"
+    assert "the <geometry> at s=100: paramPoly3 at s=100.0: u(p), v(p) describe a single point" in str(info.value)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from adversarial_maps import LANE_WIDTH_M, LaneSpec, RoadSpec, SectionSpec, document, geometry
 from conftest import bundled_map, load_tool
 
 from cold_maps.cli import evaluate as cold_eval
@@ -93,14 +94,40 @@ def test_cubic_geometry_coefficients_bounded(old: str, new: str, element: str) -
     assert error.element == element and "road '1'" in str(error) and "more than 1e+08 m" in str(error)
 
 
+CURVE90_ARC_M = 31.4159265359
+"""Length (m) of curve90's arc record (curvature 0.05 1/m), between two 150 m lines."""
+
+
 def test_border_length_bound() -> None:
-    """curve90: 331.4 m, arc curvature 0.05 1/m. Lanes 4 m wide draw up to (1 + 4 * 0.05) *
-    331.4 m; a 6000 m wide lane would draw (1 + 6000 * 0.05) * 331.4 = 99756 m (accepted),
-    a 6100 m wide one 101413 m (refused, more than MAX_ROAD_LENGTH_M)."""
+    """curve90: two 150 m lines around a 31.4 m arc of curvature 0.05 1/m. A border W m
+    from the reference line draws at most 300 + (1 + 0.05 W) · 31.4 m (each record by its
+    own length): 99 990 m at W = 63 000 (accepted), 100 775 m at W = 63 500 (refused)."""
     width = '<width sOffset="0" a="4" b="0" c="0" d="0"/>'
-    parse_opendrive(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="6000"')), path=NAME)
-    error = refused(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="6100"')))
-    assert error.element == "lane" and "up to 6100 m" in str(error) and "101413 m long" in str(error)
+
+    def bound_m(reach: float) -> float:
+        return 300.0 + (1.0 + 0.05 * reach) * CURVE90_ARC_M
+
+    assert bound_m(63000.0) < MAX_ROAD_LENGTH_M < bound_m(63500.0)
+    parse_opendrive(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="63000"')), path=NAME)
+    error = refused(variant(bundled_map("curve90"), width, width.replace('a="4"', 'a="63500"')))
+    assert error.element == "lane" and "up to 63500 m" in str(error)
+    assert f"{bound_m(63500.0):.6g} m long" in str(error)
+
+
+def test_a_tiny_sharp_last_record_is_bounded_by_its_own_length() -> None:
+    """A 300 m straight road ending in a 65 µm spiral of curvature -247 1/m (a public map):
+    with borders 3.5 m out each record draws at most (1 + 3.5 · k) times its length, 300.056 m
+    in all; the whole road's length times the largest curvature (259 650 m) was refused."""
+    tiny_m, curvature = 65e-6, -247.0
+    records = (geometry(0.0, 0.0, 0.0, 0.0, 300.0, "<line/>"),
+               geometry(300.0, 300.0, 0.0, 0.0, tiny_m, f'<spiral curvStart="0" curvEnd="{curvature!r}"/>'))
+    section = SectionSpec(0.0, (LaneSpec(1), LaneSpec(-1)))
+    text = document([RoadSpec("1", records, 300.0 + tiny_m, (section,))])
+    odr_map = parse_opendrive(text.encode(), path=NAME)
+    samples = sample_road(odr_map.roads["1"], step=1.0)[0]
+    border = np.sum(np.hypot(*np.diff(samples.outer[:, :2], axis=0).T))
+    assert 300.0 < border <= 300.0 + (1.0 + LANE_WIDTH_M * abs(curvature)) * tiny_m
+    assert (1.0 + LANE_WIDTH_M * abs(curvature)) * (300.0 + tiny_m) > MAX_ROAD_LENGTH_M
 
 
 def test_cubic_bound_is_the_sum_of_magnitudes_times_powers_of_the_span() -> None:

@@ -75,12 +75,15 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
     and 130 / 143 instead of a traceback; a closed standard output ends it quietly with
     ``EXIT_BROKEN_PIPE`` instead of an error and a traceback at exit. Run as the program
     (``argv`` None), an interrupted command exits at once after its outputs are written
-    (:func:`_exit_now`); called with ``argv`` (tests, other Python code) it returns."""
+    (:func:`_exit_now`); called with ``argv`` (tests, other Python code) it returns. Running
+    out of memory ends it with one line naming the memory limit (:func:`memory_limit`),
+    written once the failed work's data is freed."""
 
     def wrap(body: CliBody) -> CliBody:
         @functools.wraps(body)
         def main(argv: Sequence[str] | None = None) -> int:
             previous = signal.signal(signal.SIGTERM, _raise_terminated)
+            out_of_memory = False
             try:
                 status = body(argv)
                 sys.stdout.flush()
@@ -91,8 +94,12 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
             except KeyboardInterrupt as exc:
                 what, status = interruption(exc)
                 status = fail(prog, what, status)
+            except MemoryError:
+                out_of_memory = True  # reported below: here its traceback still holds the data that filled memory
             finally:
                 signal.signal(signal.SIGTERM, previous)
+            if out_of_memory:
+                status = fail(prog, f"out of memory ({memory_limit()})")
             if argv is None and status in (EXIT_INTERRUPTED, EXIT_TERMINATED):
                 _exit_now(status)
             return status
@@ -240,9 +247,32 @@ def fail(prog: str, message: str, status: int = EXIT_FAILURE) -> int:
     return status
 
 
+def memory_limit() -> str:
+    """The memory the process may use, in words: ``ulimit -v``/``-d``, the cgroup's
+    ``memory.max``, else the machine's memory."""
+    import resource
+
+    gib = 2.0**30
+    for which, name in ((resource.RLIMIT_AS, "address space, ulimit -v"), (resource.RLIMIT_DATA, "data, ulimit -d")):
+        soft, _ = resource.getrlimit(which)
+        if soft != resource.RLIM_INFINITY:
+            return f"limit {soft / gib:.3g} GiB of {name}"
+    try:
+        with open("/sys/fs/cgroup/memory.max", encoding="ascii") as stream:
+            cgroup = stream.read().strip()
+    except OSError:
+        cgroup = "max"
+    if cgroup.isdigit():
+        return f"limit {int(cgroup) / gib:.3g} GiB, cgroup memory.max"
+    return f"the machine has {os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / gib:.3g} GiB"
+
+
 def startup_failure(prog: str, exc: BaseException) -> int:
     """One line on stderr for a failure before any output was written; the exit status
-    (``EXIT_USAGE`` for a :class:`UsageError`)."""
+    (``EXIT_USAGE`` for a :class:`UsageError`; a ``MemoryError`` is raised again, for
+    :func:`cli_entry` to report once freed)."""
+    if isinstance(exc, MemoryError):
+        raise exc
     if isinstance(exc, UsageError):
         return usage_failure(prog, exc)
     if isinstance(exc, KeyboardInterrupt):

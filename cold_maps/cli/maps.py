@@ -80,12 +80,14 @@ def _load(args: argparse.Namespace) -> OpenDriveMap:
 
 
 def add_strict_option(parser: argparse.ArgumentParser) -> None:
-    """``--strict``: refuse records that omit coefficients and links whose ``contactPoint``
-    contradicts the geometry (read as 0 / repaired, with a warning, otherwise)."""
+    """``--strict``: refuse what is read leniently with a warning otherwise (records that
+    omit coefficients, links whose ``contactPoint`` contradicts the geometry or that name a
+    road or junction not in the file, a road's last records that draw a single point)."""
     parser.add_argument(
         "--strict", action="store_true",
-        help="refuse geometry and profile records that omit coefficients and links whose contactPoint contradicts "
-             "the geometry (default: 0 / repaired, with a warning)",
+        help="refuse geometry and profile records that omit coefficients, links whose contactPoint contradicts "
+             "the geometry or that name a road or junction not in the file, and last paramPoly3 records that "
+             "draw a single point (default: 0 / repaired / dropped / the road ends there, with a warning)",
     )
 
 
@@ -434,7 +436,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.verbose, args.quiet)
     try:
         return int(args.run(args))
-    except BrokenPipeError:
+    except (BrokenPipeError, MemoryError):
         raise
     except UsageError as exc:
         return usage_failure(f"{PROG} {args.command}", exc)

@@ -4,8 +4,9 @@ Built from a sequence of lanes that follow each other in the lane graph. Every l
 sampled on its section's s grid (``sampling.sample_lane_borders``), put in driving order,
 and appended; the first point of a lane is dropped when it coincides with the last point
 of the previous lane (within ``JOIN_TOLERANCE_M``). Seen in the driving direction the
-left border is the lane's inner border in right-hand traffic and its outer border in
-left-hand traffic.
+left border is the lane's border on the +t side (left of the reference line) when the lane
+is driven along s and the one on the -t side when driven against s; the traffic rule and
+the lane's ``direction`` ("reversed") both enter only through ``Road.drives_along_s``.
 """
 
 from __future__ import annotations
@@ -80,12 +81,14 @@ def borders_in_driving_direction(
 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """s (N,), left (N, 3) and right (N, 3) borders of a sampled lane in driving order.
 
-    Left is the inner border in right-hand traffic and the outer one in left-hand traffic.
+    Left is the driver's left: the +t border (outer for lanes > 0, inner for lanes < 0)
+    when the lane is driven along s, the -t border when driven against s (by the road's
+    rule and the lane's ``direction``).
     """
-    left, right = (samples.inner, samples.outer) if road.rule == "RHT" else (samples.outer, samples.inner)
+    plus_t, minus_t = (samples.outer, samples.inner) if samples.lane_id > 0 else (samples.inner, samples.outer)
     if road.drives_along_s(samples.lane_id, samples.section):
-        return samples.s, left, right
-    return samples.s[::-1], left[::-1], right[::-1]
+        return samples.s, plus_t, minus_t
+    return samples.s[::-1], minus_t[::-1], plus_t[::-1]
 
 
 def route_from_lanes(graph: LaneGraph, lanes: Sequence[LaneKey], *, step: float = 0.1) -> Route:

@@ -2,6 +2,19 @@
 
 from __future__ import annotations
 
+from typing import Any, Final
+
+LXML_LINE_CAP: Final[int] = 65535
+"""libxml2 keeps an element's source line in 16 bits: from this line on, lxml's
+``sourceline`` is this value or an estimate from a nearby text node."""
+
+
+def source_line(element: Any) -> int | None:
+    """The 1-based source line of an lxml element, None when unknown or past
+    ``LXML_LINE_CAP`` (where it cannot be trusted)."""
+    line = element.sourceline
+    return line if line is not None and 0 < line < LXML_LINE_CAP else None
+
 
 class OpenDriveError(ValueError):
     """An OpenDRIVE file that cannot be read or is invalid.

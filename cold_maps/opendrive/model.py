@@ -285,7 +285,8 @@ class Road:
         elevation: elevationProfile records (z in m), s0 absolute.
         lane_offsets: laneOffset records (t shift of lane 0 in m), s0 absolute.
         lane_sections: ordered by s; each knows its end.
-        line: source line of the ``<road>`` element (for error messages).
+        line: source line of the ``<road>`` element (for error messages; 0 when unknown or
+            past ``errors.LXML_LINE_CAP``, where lxml cannot tell it).
         superelevation: ``<lateralProfile><superelevation>`` records (roll angle of the
             cross section in rad, positive = the left side (+t) higher), s0 absolute.
     """

@@ -13,9 +13,11 @@ kind, a road without geometry or lane section or with two ``<planView>``/``<lane
 ``<link>``/``<elevationProfile>`` or two predecessors/successors, lane ids that are not
 consecutive from the reference line, a centre that is not exactly lane 0, a lane
 section starting before 0 or after the road end, duplicate road or junction ids, road
-links, road ``junction`` attributes and junction connections to ids that do not exist.
-Tolerated: a geometry ``s`` that differs from the running sum of lengths, a road length
-that differs from the sum of its geometry lengths, records and sections out of order
+links, road ``junction`` attributes and junction connections to ids that do not exist
+when ``strict`` (else dropped with one warning per map, as libOpenDRIVE reads them; a
+road's ``junction`` attribute is kept). Tolerated: a geometry ``s`` that differs from
+the running sum of lengths, a road length that differs from the sum of its geometry
+lengths, records and sections out of order
 (sorted by s, stably), zero-length geometry records (dropped: they cover no s),
 zero-length lane sections, ``contactPoint`` on a link to a
 junction (dropped: the model has none for junctions), a missing road ``junction``
@@ -23,7 +25,8 @@ attribute ("-1"), ``<border>`` next to ``<width>`` records (widths win, see ``La
 a plain ``<!DOCTYPE OpenDRIVE>``, a default XML namespace, any revMinor. Repaired with a
 warning (refused when ``strict``): a road link or junction connection whose
 ``contactPoint`` names the far end of a road whose other end touches (``links``).
-Numbers use Python ``float`` syntax.
+Numbers follow the XML Schema lexical form of a double or an integer (Python's digit
+underscores and non-ASCII digits are refused; "INF" and "NaN" are refused as not finite).
 
 Lenient by default, like mainstream readers (libOpenDRIVE): a polynomial coefficient,
 curvature or record start that a record omits (RoadRunner writes ``<spiral curvEnd=".."/>``,
@@ -32,7 +35,10 @@ record stands for (and ``pRange`` defaults to "normalized" as in the schema); on
 per element kind and road names the attributes taken as 0. ``strict=True`` refuses them
 ("missing required attribute"). So is a centre lane without a ``type`` (taken as "none",
 one warning per map), and a ``<roadMark>`` without a ``type`` or with one the schema does
-not know (taken as "none" when absent, "custom" when unknown; one warning per map).
+not know (taken as "none" when absent, "custom" when unknown; one warning per map). A
+road's last ``<paramPoly3>`` records that draw a single point (RoadRunner's empty
+``<paramPoly3/>``) are read as absent, the road and its lanes ending where they start (one
+warning per map; refused when strict, and anywhere but at the road's end).
 """
 
 from __future__ import annotations
@@ -41,11 +47,12 @@ import logging
 import math
 import os
 from dataclasses import replace
-from typing import Final, Iterable
+from typing import Final, Iterable, Iterator, NamedTuple
 
 from lxml import etree
 
-from cold_maps.opendrive.errors import OpenDriveError
+from cold_maps.opendrive.errors import OpenDriveError, source_line
+from cold_maps.opendrive.geometry.param_poly3 import is_single_point
 from cold_maps.opendrive.lanes import wrong_side_lanes
 from cold_maps.opendrive.links import repair_contact_points
 from cold_maps.opendrive.model import (
@@ -66,7 +73,7 @@ from cold_maps.opendrive.model import (
     ROAD_MARK_TYPES,
 )
 from cold_maps.opendrive.validation import validate_road
-from cold_maps.opendrive.xml_safety import parse_xml
+from cold_maps.opendrive.xml_safety import iter_xml
 
 MAX_FILE_BYTES: Final[int] = 256 * 1024 * 1024
 """Default input size limit (bytes) of ``load_opendrive``."""
@@ -121,10 +128,11 @@ def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> Ope
     ``strict``: refuse records that omit a coefficient, curvature or start (else they
     are 0 with a warning, see the module docstring), and road links and junction
     connections whose ``contactPoint`` contradicts the geometry (else repaired with a
-    warning each, ``links.repair_contact_points``).
+    warning each, ``links.repair_contact_points``), and links to roads or junctions not in
+    the file (else dropped with one warning).
     """
-    root = parse_xml(data, path=path)
-    return repair_contact_points(_Reader(path, strict).read_map(root), strict=strict)
+    elements = iter_xml(data, ("header", "road", "junction"), path=path)
+    return repair_contact_points(_Reader(path, strict).read_map(elements), strict=strict)
 
 
 def _strip_namespaces(root: etree._Element) -> None:
@@ -147,12 +155,23 @@ class _Reader:
         """Roads (in file order) with a centre lane that has no type."""
         self.odd_marks: dict[str, str] = {}
         """Roads (in file order) with a ``<roadMark>`` type read leniently → the first such type."""
+        self.single_points: dict[str, tuple[float, int]] = {}
+        """Roads (in file order) cut before their last records that draw a single point →
+        (s where the road now ends in m, how many records)."""
+        self.no_contact: list[_Link] = []
+        """Road links without ``contactPoint`` (refused unless the road they name is missing)."""
 
     # -- attribute access -------------------------------------------------------------
 
     def error(self, reason: str, element: etree._Element) -> OpenDriveError:
         tag = element.tag if isinstance(element.tag, str) else ""
-        return OpenDriveError(reason, path=self.path, element=tag, line=element.sourceline)
+        return self.error_at(reason, tag, source_line(element))
+
+    def error_at(self, reason: str, tag: str, line: int | None) -> OpenDriveError:
+        """The error for element ``tag`` at ``line``; names the road when the line is unknown."""
+        if line is None and self.road_id and f"road {self.road_id!r}" not in reason:
+            reason += f" (in road {self.road_id!r})"
+        return OpenDriveError(reason, path=self.path, element=tag, line=line)
 
     def required(self, element: etree._Element, name: str) -> str:
         value = element.get(name)
@@ -167,6 +186,7 @@ class _Reader:
             if default is None:
                 raise self.error(f"missing required attribute '{name}'", element)
             return default
+        self.lexical_form(element, name, text, "a number")
         try:
             value = float(text)
         except ValueError:
@@ -177,14 +197,23 @@ class _Reader:
 
     def numbers(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
         """Several required finite float attributes (fast path; errors from ``number``)."""
-        get = element.get
+        texts = list(map(element.get, names))
         try:
-            values = tuple([float(get(name)) for name in names])  # type: ignore[arg-type]
+            values = tuple(map(float, texts))  # type: ignore[arg-type]
         except (TypeError, ValueError):
             values = (math.nan,)
         if math.isfinite(sum(values)):  # any NaN or inf makes the sum non-finite
-            return values
+            joined = "".join(texts)  # type: ignore[arg-type]
+            if joined.isascii() and "_" not in joined:  # the XML Schema form, see ``lexical_form``
+                return values
         return tuple(self.number(element, name) for name in names)
+
+    def lexical_form(self, element: etree._Element, name: str, text: str, kind: str) -> None:
+        """Refuse what Python's ``float``/``int`` read beyond the XML Schema lexical form of a
+        double or an integer: digit-group underscores ("1_0") and non-ASCII digits or spaces
+        (full-width "１０"); for ASCII text without "_" the two forms agree."""
+        if not text.isascii() or "_" in text:
+            raise self.error(f"attribute '{name}' is not {kind} in the XML Schema form: {text[:40]!r}", element)
 
     def coefficients(self, element: etree._Element, names: tuple[str, ...]) -> tuple[float, ...]:
         """Finite float attributes that are 0 when absent, recorded for one warning per
@@ -208,6 +237,13 @@ class _Reader:
                 "%s: the centre <lane> of %d road(s) has no type (first: road %s): taken as \"%s\" (strict mode "
                 "refuses it)", self.path or "<input>", len(self.untyped_centres), next(iter(self.untyped_centres)),
                 CENTRE_LANE_TYPE,
+            )
+        if self.single_points:
+            road_id, (end, count) = next(iter(self.single_points.items()))
+            _LOG.warning(
+                "%s: %d road(s) end in <paramPoly3> records that draw a single point (first: road %s, %d record(s) "
+                "from s=%.6g m): read as absent, the road and its lanes end there (strict mode refuses them)",
+                self.path or "<input>", len(self.single_points), road_id, count, end,
             )
         if self.odd_marks:
             road_id, mark_type = next(iter(self.odd_marks.items()))
@@ -235,6 +271,7 @@ class _Reader:
 
     def integer(self, element: etree._Element, name: str) -> int:
         text = self.required(element, name)
+        self.lexical_form(element, name, text, "an integer")
         try:
             return int(text)
         except ValueError:
@@ -270,17 +307,23 @@ class _Reader:
 
     # -- elements -----------------------------------------------------------------------
 
-    def read_map(self, root: etree._Element) -> OpenDriveMap:
-        if isinstance(root.tag, str) and root.tag.startswith("{"):
+    def read_map(self, elements: Iterator[etree._Element]) -> OpenDriveMap:
+        """The map from ``xml_safety.iter_xml``'s stream: the root, then its children."""
+        root = next(elements)
+        namespaced = isinstance(root.tag, str) and root.tag.startswith("{")
+        if namespaced:
             _strip_namespaces(root)
         if root.tag != "OpenDRIVE":
             raise self.error("root element is not <OpenDRIVE>", root)
         header: Header | None = None
         roads: dict[str, Road] = {}
         junctions: dict[str, Junction] = {}
-        links: list[tuple[str, str, etree._Element]] = []
-        for child in root:
+        links: list[_Link] = []
+        for child in elements:
+            if namespaced:
+                _strip_namespaces(child)
             tag = child.tag
+            self.road_id = ""
             if tag == "road":
                 road = self.road(child, links)
                 if road.id in roads:
@@ -302,12 +345,48 @@ class _Reader:
         for road in roads.values():
             validate_road(road, self.path)
             self.warn_wrong_side(road)
-        for element_type, element_id, element in links:
-            known = roads if element_type == "road" else junctions
-            if element_id not in known:
-                raise self.error(f"links to {element_type} {element_id!r}, which does not exist", element)
+        dangling = [link for link in links if link.element_id not in (roads if link.element_type == "road" else junctions)]
+        if dangling:
+            roads, junctions = self.drop_dangling(dangling, roads, junctions)
+        for link in self.no_contact:
+            if link.element_id in roads:
+                raise self.error_at("missing required attribute 'contactPoint'", link.tag, link.line)
         self.warn_defaults()
         return OpenDriveMap(path=self.path, header=header, roads=roads, junctions=junctions)
+
+    def drop_dangling(
+        self, dangling: list[_Link], roads: dict[str, Road], junctions: dict[str, Junction]
+    ) -> tuple[dict[str, Road], dict[str, Junction]]:
+        """Road links and junction connections that name a road or junction not in the
+        file, dropped with one warning (libOpenDRIVE reads such maps); a road's
+        ``junction`` attribute naming a missing junction is kept (nothing resolves it).
+        Strict: refused at the first."""
+        first = dangling[0]
+        reason = f"links to {first.element_type} {first.element_id!r}, which does not exist"
+        if self.strict:
+            raise self.error_at(f"{reason} (strict mode refuses links to elements not in the file)", first.tag,
+                                first.line)
+        missing = {(link.element_type, link.element_id) for link in dangling}
+
+        def kept(link: RoadLink | None) -> RoadLink | None:
+            return None if link is not None and (link.element_type, link.element_id) in missing else link
+
+        roads = {
+            road_id: road if kept(road.predecessor) is road.predecessor and kept(road.successor) is road.successor
+            else replace(road, predecessor=kept(road.predecessor), successor=kept(road.successor))
+            for road_id, road in roads.items()
+        }
+        junctions = {
+            junction_id: replace(junction, connections=tuple(
+                c for c in junction.connections if c.incoming_road in roads and c.connecting_road in roads))
+            for junction_id, junction in junctions.items()
+        }
+        _LOG.warning(
+            "%s: %d link(s) name a road or junction that is not in the file (first: %s, line %s, %s): road links "
+            "and junction connections dropped, a road's junction attribute kept (strict mode refuses them)",
+            self.path or "<input>", len(dangling), first.owner, first.line or "unknown", reason,
+        )
+        return roads, junctions
 
     def header(self, element: etree._Element) -> Header:
         rev_major = self.integer(element, "revMajor")
@@ -334,7 +413,7 @@ class _Reader:
             geo_reference=GeoReference(proj, *offset),
         )
 
-    def road(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Road:
+    def road(self, element: etree._Element, links: list[_Link]) -> Road:
         road_id = self.required(element, "id")
         self.road_id = road_id
         length = self.number(element, "length")
@@ -342,7 +421,7 @@ class _Reader:
             raise self.error(f"road {road_id!r} has negative length {length}", element)
         junction = element.get("junction", "-1")
         if junction != "-1":
-            links.append(("junction", junction, element))
+            links.append(_link("junction", junction, element, f"road {road_id} junction attribute"))
         ends: dict[str, RoadLink | None] = {"predecessor": None, "successor": None}
         plan_view: list[Geometry] = []
         elevation: tuple[CubicPoly, ...] = ()
@@ -371,12 +450,14 @@ class _Reader:
                     if end in ends:
                         if ends[end] is not None:
                             raise self.error(f"more than one road {end}", link)
-                        ends[end] = self.road_link(link, links)
+                        ends[end] = self.road_link(link, links, f"road {road_id} {end}")
         if not plan_view:
             raise self.error(f"road {road_id!r} has no <planView> geometry", element)
         if not sections:
             raise self.error(f"road {road_id!r} has no <laneSection>", element)
         plan_view.sort(key=_by_s)
+        if is_single_point(plan_view[-1]):
+            plan_view, sections, length = self.end_before_points(element, plan_view, sections)
         return Road(
             id=road_id,
             name=element.get("name", ""),
@@ -389,16 +470,41 @@ class _Reader:
             elevation=elevation,
             lane_offsets=lane_offsets,
             lane_sections=tuple(sections),
-            line=element.sourceline or 0,
+            line=source_line(element) or 0,
             superelevation=superelevation,
         )
 
-    def road_link(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> RoadLink:
+    def end_before_points(
+        self, element: etree._Element, plan_view: list[Geometry], sections: list[LaneSection]
+    ) -> tuple[list[Geometry], list[LaneSection], float]:
+        """The road without its last ``<geometry>`` records that draw a single point
+        (``param_poly3.is_single_point``): it and its lanes end where the first of them
+        starts (recorded for one warning per map); refused when strict or when no record
+        is left."""
+        kept = len(plan_view)
+        while kept and is_single_point(plan_view[kept - 1]):
+            kept -= 1
+        first = plan_view[kept] if kept < len(plan_view) else plan_view[0]
+        if self.strict or kept == 0:
+            which = "every <geometry> record" if kept == 0 else f"the <geometry> at s={first.s:.6g}"
+            mode = "; strict mode refuses it" if kept else ""
+            raise self.error(f"road {self.road_id!r}: {which} is a <paramPoly3> that draws a single point (every "
+                             f"coefficient but aU, aV is 0){mode}", element)
+        end = first.s
+        ended = [section for section in sections if section.s < end] or sections[:1]
+        ended[-1] = replace(ended[-1], s_end=end)
+        self.single_points.setdefault(self.road_id, (end, len(plan_view) - kept))
+        return plan_view[:kept], ended, end
+
+    def road_link(self, element: etree._Element, links: list[_Link], owner: str) -> RoadLink:
         element_type = self.choice(element, "elementType", ("road", "junction"))
         element_id = self.required(element, "elementId")
-        links.append((element_type, element_id, element))
+        links.append(_link(element_type, element_id, element, owner))
         if element_type == "junction":
             return RoadLink("junction", element_id, None)
+        if element.get("contactPoint") is None:
+            self.no_contact.append(links[-1])
+            return RoadLink("road", element_id, None)
         return RoadLink("road", element_id, self.choice(element, "contactPoint", _CONTACT_POINTS))
 
     def geometry(self, element: etree._Element) -> Geometry | None:
@@ -553,7 +659,7 @@ class _Reader:
         """A finite float attribute, None when absent."""
         return None if element.get(name) is None else self.number(element, name)
 
-    def junction(self, element: etree._Element, links: list[tuple[str, str, etree._Element]]) -> Junction:
+    def junction(self, element: etree._Element, links: list[_Link]) -> Junction:
         connections = []
         for child in element:
             if child.tag != "connection":
@@ -562,8 +668,9 @@ class _Reader:
             connecting = child.get("connectingRoad") or child.get("linkedRoad")
             if connecting is None:
                 raise self.error("missing required attribute 'connectingRoad'", child)
-            links.append(("road", incoming, child))
-            links.append(("road", connecting, child))
+            owner = f"junction {element.get('id')} connection {child.get('id')}"
+            links.append(_link("road", incoming, child, owner))
+            links.append(_link("road", connecting, child, owner))
             lane_links = tuple(
                 LaneLink(self.integer(link, "from"), self.integer(link, "to"))
                 for link in child
@@ -584,6 +691,28 @@ class _Reader:
             connections=tuple(connections),
             type=self.choice(element, "type", _JUNCTION_TYPES, "default"),
         )
+
+
+class _Link(NamedTuple):
+    """A reference to a road or junction by id, and where the file makes it (no element:
+    the streamed tree drops each road once read).
+
+    Fields:
+        element_type: "road" or "junction".
+        element_id: the id it names.
+        tag, line: the element that names it and its source line (None when unknown).
+        owner: who names it, e.g. ``road 1 predecessor``, ``junction 7 connection 3``.
+    """
+
+    element_type: str
+    element_id: str
+    tag: str
+    line: int | None
+    owner: str
+
+
+def _link(element_type: str, element_id: str, element: etree._Element, owner: str) -> _Link:
+    return _Link(element_type, element_id, str(element.tag), source_line(element), owner)
 
 
 def _by_s0(record: CubicPoly) -> float:

@@ -39,11 +39,13 @@ rad (borders rise by tan(roll) · t, without bound towards π/2). A cubic record
 coefficients' magnitudes times the powers of that span, so a coefficient of 1e308 or a
 width that reaches 1e9 m within its section is refused, while a large coefficient on a
 record that ends a few centimetres later is not. A border that lies t m from a reference
-line of curvature k is up to (1 + |t|·|k|) times as long as the road, so the bound of |t|
-(laneOffset plus the widths outwards, or a border record) times the largest arc or spiral
-curvature must keep that within ``MAX_ROAD_LENGTH_M``: a 1e7 m wide lane on a 20 m
-radius is refused; in the CARLA, esmini and bundled maps borders reach at most 53 m and
-that bound is at most 1.9 km.
+line of curvature k is up to (1 + |t|·|k|) times as long as the reference line there, so
+with the bound of |t| (laneOffset plus the widths outwards, or a border record) the sum
+over the geometry records of (1 + |t|·k) times the s the record covers, k its largest
+arc or spiral curvature, must stay within ``MAX_ROAD_LENGTH_M``: a 1e7 m wide lane on a
+20 m radius is refused, a 65 µm spiral of curvature 247 1/m at a road's end is not; in
+the CARLA, esmini and bundled maps borders reach at most 53 m and that bound is at most
+1.9 km.
 """
 
 from __future__ import annotations
@@ -152,14 +154,17 @@ class _RoadCheck:
         return reach
 
     def border_length(self, reach: float) -> None:
-        """A border ``reach`` m from a reference line curving at k is up to (1 + reach·k)
-        times as long; it may be no longer than the longest road."""
+        """A border ``reach`` m from a record curving at k is up to (1 + reach·k) times as
+        long as the s the record covers (to the next record's s, the first from 0); summed
+        over the records, it may be no longer than the longest road."""
         road = self.road
-        curvature = max((max(abs(g.curvature), abs(g.curv_start), abs(g.curv_end)) for g in road.plan_view))
-        longest = (1.0 + reach * curvature) * road.length
+        curvatures = [max(abs(g.curvature), abs(g.curv_start), abs(g.curv_end)) for g in road.plan_view]
+        starts = [0.0] + [g.s for g in road.plan_view[1:]] + [road.length]
+        spans = [max(end - start, 0.0) for start, end in zip(starts, starts[1:])]
+        longest = sum((1.0 + reach * k) * span for span, k in zip(spans, curvatures))
         if longest > MAX_ROAD_LENGTH_M:
             raise self.refuse("lane", "width, border, laneOffset", f"put borders up to {reach:.6g} m from a "
-                              f"reference line curving at up to {curvature:.6g} 1/m: a border could be "
+                              f"reference line curving at up to {max(curvatures):.6g} 1/m: a border could be "
                               f"{longest:.6g} m long, more than the {MAX_ROAD_LENGTH_M:g} m a road may be")
 
     def coverage(self) -> None:
@@ -187,17 +192,23 @@ class _RoadCheck:
         except ValueError as exc:
             raise self.refuse("geometry", "a, b, c, d", f"of a cubic <geometry>: {exc}") from None
         for before, after in zip(road.plan_view, road.plan_view[1:]):
-            try:
-                with np.errstate(all="ignore"):  # a non-finite end is refused just below
-                    end_x, end_y, _ = evaluate_record(before, np.array([before.length]))
-                    start_x, start_y, _ = evaluate_record(after, np.array([0.0]))
-            except ValueError as exc:
-                raise self.refuse(before.kind, "length", f"of the <geometry> at s={before.s:.6g}: {exc}") from None
-            jump = float(np.hypot(end_x[0] - start_x[0], end_y[0] - start_y[0]))
+            end_x, end_y = self.point(before, before.length)
+            start_x, start_y = self.point(after, 0.0)
+            jump = float(np.hypot(end_x - start_x, end_y - start_y))
             if not jump <= limit:
                 raise self.refuse("geometry", "x, y", f"of the <geometry> at s={after.s:.6g} are {jump:.6g} m from "
                                   f"the end of the record before it, more than the {limit:g} m a reference line "
                                   "may jump (the length its records draw)")
+
+    def point(self, record: Geometry, ds: float) -> tuple[float, float]:
+        """x, y (m) of ``record`` ds m from its start; refused when it cannot be evaluated
+        (a paramPoly3 that draws a single point)."""
+        try:
+            with np.errstate(all="ignore"):  # a non-finite point is refused by the jump bound
+                x, y, _ = evaluate_record(record, np.array([ds]))
+        except ValueError as exc:
+            raise self.refuse(record.kind, "length", f"of the <geometry> at s={record.s:.6g}: {exc}") from None
+        return float(x[0]), float(y[0])
 
     def record(self, geometry: Geometry) -> None:
         where = f"of the <geometry> at s={geometry.s:.6g}"

@@ -4,13 +4,15 @@ No external entity, DTD or network resource is loaded, entity references in text
 unresolved, comments and processing instructions are dropped, and libxml2's size limits
 stay on (``huge_tree=False``). A DOCTYPE that declares entities (billion laughs,
 external entities) or names an external DTD is rejected outright: before parsing when
-the bytes show it, else from the parsed DTD.
+the bytes show it, else from the parsed DTD. The tree is streamed (``iter_xml``): one
+child of the root at a time.
 """
 
 from __future__ import annotations
 
+import io
 import re
-from typing import Final
+from typing import Final, Iterable, Iterator
 
 from lxml import etree
 
@@ -19,16 +21,18 @@ from cold_maps.opendrive.errors import OpenDriveError
 _ENTITY_DECLARATION: Final[re.Pattern[bytes]] = re.compile(rb"<!ENTITY\s+(?:%\s+)?([^\s\"'>]+)")
 
 
-def _hardened_parser() -> etree.XMLParser:
-    return etree.XMLParser(
-        resolve_entities=False,
-        no_network=True,
-        load_dtd=False,
-        dtd_validation=False,
-        huge_tree=False,
-        remove_comments=True,
-        remove_pis=True,
-    )
+_HARDENED: Final[dict[str, bool]] = {
+    "resolve_entities": False,
+    "no_network": True,
+    "load_dtd": False,
+    "dtd_validation": False,
+    "huge_tree": False,
+    "remove_comments": True,
+    "remove_pis": True,
+}
+"""Options of every parse: no entity, DTD or network, libxml2's size limits on."""
+_XML_ERR_NO_MEMORY: Final[int] = 2
+"""libxml2's error code for a failed allocation (reported as a syntax error)."""
 
 
 def _reject_entity_declarations(data: bytes, doctype: int, path: str) -> None:
@@ -50,11 +54,17 @@ def _entities_reason(names: list[str]) -> str:
     return f"DOCTYPE declares entities ({', '.join(names[:5])}); entities are not allowed"
 
 
-def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
-    """Parse ``data`` with the hardened parser and return the root element.
+def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[etree._Element]:
+    """Parse ``data`` with the hardened parser, streaming: first the root element, then
+    each child of the root named one of ``tags`` (local names, any namespace) once it is
+    complete. A child is cleared and dropped from the tree when the next one is asked for,
+    with the other children before it, so the tree holds at most what libxml2 parsed ahead
+    (one read of 32 KiB) instead of the whole map (lxml's tree takes about 16 times the
+    file's size); keep no reference to the children's elements.
 
     Raises ``OpenDriveError`` naming ``path`` and the line for malformed XML and for a
-    DOCTYPE that declares entities or references an external DTD.
+    DOCTYPE that declares entities or references an external DTD; ``MemoryError`` when
+    libxml2 runs out of memory.
     """
     if not isinstance(data, bytes):
         raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
@@ -62,11 +72,33 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
     if doctype >= 0:
         _reject_entity_declarations(data, doctype, path)
+    events = etree.iterparse(io.BytesIO(data), events=("end",), tag=[f"{{*}}{tag}" for tag in tags], **_HARDENED)
+    root: etree._Element | None = None
     try:
-        root = etree.fromstring(data, _hardened_parser())
+        for _, element in events:
+            if root is None:
+                root = element.getroottree().getroot()
+                _check_doctype(root, path, line)
+                yield root
+            if element.getparent() is not root:
+                continue  # the root itself, or nested in another child: dropped with that
+            while element.getprevious() is not None:
+                del root[0]
+            yield element
+            element.clear()
+            root.remove(element)
+        if root is None:
+            _check_doctype(events.root, path, line)
+            yield events.root
     except etree.XMLSyntaxError as exc:
+        if exc.code == _XML_ERR_NO_MEMORY:
+            raise MemoryError("libxml2 ran out of memory parsing the XML") from None
         reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
-        raise OpenDriveError(reason, path=path, line=exc.lineno or None) from None
+        raise OpenDriveError(reason, path=path, line=exc.lineno or 1) from None  # 0: before the first line ended
+
+
+def _check_doctype(root: etree._Element, path: str, line: int | None) -> None:
+    """Refuse an external DTD and entity declarations the byte check missed (UTF-16)."""
     docinfo = root.getroottree().docinfo
     if docinfo.system_url or docinfo.public_id:
         external = docinfo.system_url or docinfo.public_id
@@ -76,4 +108,3 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
         names = [entity.name for entity in dtd.iterentities()]
         if names:
             raise OpenDriveError(_entities_reason(names), path=path, line=line)
-    return root

@@ -336,14 +336,15 @@ def route_from_start(graph: LaneGraph, start: LaneKey, length_m: float,
 
 def lanes_beside(graph: LaneGraph, lane: LaneKey) -> list[tuple[str, LaneKey]]:
     """The graph lanes next to ``lane`` in its lane section: ``adjacent`` (same direction,
-    neighbouring id) and ``opposite`` (the nearest lane driven the other way)."""
+    the next lane outwards or inwards, across the centre lane too: lanes 1 and -1 when one
+    has ``direction="reversed"``) and ``opposite`` (the nearest lane driven the other way)."""
     road = graph.odr_map.roads[lane.road_id]
     own = road.drives_along_s(lane.lane_id, lane.section)
     same_section = [k for k in graph.lanes if k.road_id == lane.road_id and k.section == lane.section and k != lane]
+    beside_ids = {lane.lane_id + 1 or 1, lane.lane_id - 1 or -1}
     found: list[tuple[str, LaneKey]] = []
     for other in same_section:
-        if road.drives_along_s(other.lane_id, other.section) == own and abs(other.lane_id - lane.lane_id) == 1 \
-                and (other.lane_id > 0) == (lane.lane_id > 0):
+        if road.drives_along_s(other.lane_id, other.section) == own and other.lane_id in beside_ids:
             found.append(("adjacent", other))
     opposite = [k for k in same_section if road.drives_along_s(k.lane_id, k.section) != own]
     if opposite:

@@ -24,6 +24,12 @@ def curve_of(geom: Geometry) -> CubicCurve:
     )
 
 
+def is_single_point(geom: Geometry) -> bool:
+    """True for a paramPoly3 whose u(p), v(p) are constant (every coefficient but aU, aV
+    is 0: RoadRunner's empty ``<paramPoly3/>``): the record draws one point."""
+    return geom.kind == "paramPoly3" and not any((geom.bu, geom.cu, geom.du, geom.bv, geom.cv, geom.dv))
+
+
 def evaluate(geom: Geometry, ds: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """Inertial x, y (m) and heading (rad) at arc length ds (m) from the record start."""
     curve = curve_of(geom)
