@@ -45,7 +45,7 @@ per interpolation: k = sqrt(Σe² / Σd²) over every gap point of 40 noise-free
 of the four analytic road families (:data:`fusion.analytic.FAMILIES`: corners with and
 without clothoids, arcs, S-bends), e the point's true error, d its distance from the nearer
 end; ``tools/calibrate_bridge_sigma.py`` reproduces it (k·d covers 83 % / 98 % of those
-errors within 1σ / 2σ for ``paper``, 89 % / 98 % for ``hermite``; an exact straight road
+errors within 1σ / 2σ for ``paper``, 88.5 % / 98 % for ``hermite``; an exact straight road
 has no interpolation error, so the term is conservative there)."""
 
 
