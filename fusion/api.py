@@ -18,8 +18,8 @@ from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_c
 from fusion.geometry import to_world, transform
 from fusion.spline import EndFits, hermite_lane, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
-from fusion.uncertainty import (BRIDGE_SIGMA_PER_M, PairUncertainty, bridge_end, bridge_variance, own_variances,
-                                pair_uncertainty)
+from fusion.uncertainty import (BRIDGE_SIGMA_PER_M, PairUncertainty, bridge_end, bridge_variance, has_sigma,
+                                own_variances, pair_uncertainty)
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
@@ -41,6 +41,14 @@ def ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders,
     coop_points = transform(coop.points, *relative)
     n_left = coop.left.shape[0]
     return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), relative
+
+
+def end_fits(ego: LaneDetection, coop: LaneDetection, borders: Borders, params: FusionParams) -> EndFits:
+    """The :class:`fusion.spline.EndFits` of a pair's ego-frame ``borders``, weighted by 1/σ²
+    where both detections state σ."""
+    if has_sigma(ego) and has_sigma(coop):
+        return EndFits(borders, params, (ego.left_sigma, ego.right_sigma, coop.left_sigma, coop.right_sigma))
+    return EndFits(borders, params)
 
 
 def _overlap_starts(borders: Borders, ego_arclength: NDArrayFloat) -> tuple[OverlapStart, OverlapStart]:
@@ -114,7 +122,7 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
     :func:`ego_frame_borders` of the pair and ``ends`` its :func:`fusion.fusibility.lane_ends`
     when the caller has them already."""
     borders, (x_rel, _, _) = framed or ego_frame_borders(ego, coop)
-    return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params), ends)[1]
+    return _decide(ego, coop, mode, params, borders, x_rel, end_fits(ego, coop, borders, params), ends)[1]
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
@@ -160,7 +168,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
     borders, (x_rel, y_rel, _) = ego_frame_borders(ego, coop)
-    fits = EndFits(borders, params)
+    fits = end_fits(ego, coop, borders, params)
     kind, association, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, _, _ = borders
     if association.reason:

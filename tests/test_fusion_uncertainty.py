@@ -244,3 +244,35 @@ def test_fusion_result_refuses_sigma_of_another_length() -> None:
     result = fusion.fuse(*(detect(road, s, 30.0, 1.75, -1.75) for s in (10.0, 35.0)))
     with pytest.raises(InvalidParameterError, match="left_sigma"):
         replace(result, left_sigma=np.zeros(result.left.shape[0] - 1))
+
+
+def test_end_fits_weight_points_by_inverse_variance() -> None:
+    """The last 1.5 m of the ego borders hook 0.3 m aside with a stated σ of 10 m (2 cm
+    elsewhere): weighted by 1/σ² the end fit extrapolates the good points (the true end and
+    heading); unweighted it follows the hook."""
+    road = AnalyticRoad([Segment(200.0)])
+    ego, coop = detect(road, 10.0, 30.0, 1.75, -1.75), detect(road, 70.0, 30.0, 1.75, -1.75)
+
+    def hooked(border: np.ndarray) -> np.ndarray:
+        out = border.copy()
+        tail = out[:, 0] > 28.5
+        out[tail, 1] += 0.3 * (out[tail, 0] - 28.5) / 1.5
+        return out
+
+    el, er = hooked(ego.left), hooked(ego.right)
+    sigmas = [np.where(b[:, 0] > 28.5, 10.0, 0.02) for b in (el, er)] + [np.full(len(b), 0.02)
+                                                                          for b in (coop.left, coop.right)]
+    from fusion.spline import lane_end_fits
+
+    plain, weighted = (lane_end_fits((el, er), (coop.left, coop.right), None, s)[0] for s in (None, sigmas))
+    assert abs(weighted.point[1] - 1.75) < 1e-3 and abs(weighted.direction[1]) < 1e-3
+    assert abs(plain.point[1] - 1.75) > 0.1 and abs(plain.direction[1]) > 0.1
+    deviation = {}
+    for stated in (None, sigmas):
+        pair = [LaneDetection(d.pose, left, right, left_sigma=None if stated is None else stated[i],
+                              right_sigma=None if stated is None else stated[i + 1])
+                for i, (d, left, right) in zip((0, 2), ((ego, el, er), (coop, coop.left, coop.right)))]
+        bridged = fusion.fuse(*pair, interpolation="hermite")
+        gap = bridged.left[bridged.left_source == Source.INTERPOLATED]
+        deviation[stated is None] = float(np.abs(gap[:, 1] - 1.75).max())
+    assert deviation[False] < 1e-3 < 1.0 < deviation[True]  # the bridge follows the fits: the hook or the line
