@@ -139,3 +139,34 @@ class LaneErrors:
             exact=self.exact,
             step_m=self.step_m,
         )
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How honest a lane's stated uncertainty is: its points' errors against their stated σ.
+
+    Fields:
+        points: error samples with a stated σ.
+        within_1sigma, within_2sigma: share of them whose error is at most 1σ / 2σ of their
+            stated lateral σ (68.3 % / 95.4 % for calibrated Gaussian errors; a closest-point
+            distance is the absolute lateral error).
+        mean_sigma_m: mean stated σ, m.
+        mean_error_m: mean error of the same points, m.
+    """
+
+    points: int
+    within_1sigma: float
+    within_2sigma: float
+    mean_sigma_m: float
+    mean_error_m: float
+
+    @classmethod
+    def from_errors(cls, distances_m: NDArrayFloat, sigmas_m: NDArrayFloat) -> Calibration:
+        """Calibration of per-point distances (m) against their stated 1σ (m), same shape, not empty."""
+        if distances_m.shape != sigmas_m.shape or distances_m.size == 0:
+            raise ValueError(f"calibration needs as many σ as errors, at least one: got {sigmas_m.shape} σ "
+                             f"for {distances_m.shape} errors")
+        return cls(points=int(distances_m.size),
+                   within_1sigma=float(np.mean(distances_m <= sigmas_m)),
+                   within_2sigma=float(np.mean(distances_m <= 2.0 * sigmas_m)),
+                   mean_sigma_m=float(np.mean(sigmas_m)), mean_error_m=float(np.mean(distances_m)))

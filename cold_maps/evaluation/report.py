@@ -38,8 +38,13 @@
           "exchange": "bezier",      # "sampled" | "bezier" | "" (detections fused directly)
           "bytes_per_message": 136.0,  # mean bytes on air per message of the scenario's coops
           "bytes_per_second": 340.0,   # their bytes on air per vehicle-second
-          "correct_only": {"mean_error_m": 0.02, "max_error_m": 0.3, "p95_error_m": 0.1}
+          "correct_only": {"mean_error_m": 0.02, "max_error_m": 0.3, "p95_error_m": 0.1},
                                      # the same over fusions whose partner truly continues the ego's lane
+          # only when the lanes evaluated state their σ (fusion.FusionResult.left_sigma):
+          "calibration": {"points": 12000, "within_1sigma": 0.69, "within_2sigma": 0.95,
+                          "mean_sigma_m": 0.08, "mean_error_m": 0.06}
+                                     # share of points whose error is within 1σ / 2σ of their stated σ
+                                     # (68 % / 95 % when calibrated), mean stated σ beside the mean error
         }
       ]
     }
@@ -68,6 +73,7 @@ import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from converters.atomic_io import atomic_output
+from gt_matching.metrics import Calibration
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -199,6 +205,8 @@ class FrameRecord:
         relation: kind of pair (``cold_maps.simulation.drive.RELATION_KINDS``), "" when unknown.
         confidence: the association confidence in [0, 1] of a fused pair (0 rejected), NaN
             when not applicable.
+        sigma_m: the stated lateral 1σ (m) of the point of each of ``errors_m``, same shape;
+            None when the lane states no σ.
     """
 
     frame: int
@@ -214,8 +222,15 @@ class FrameRecord:
     gt_unmatched: str = ""
     relation: str = ""
     confidence: float = math.nan
+    sigma_m: NDArrayFloat | None = None
 
     def __post_init__(self) -> None:
+        if self.sigma_m is not None:
+            sigma = np.asarray(self.sigma_m, dtype=np.float64)
+            if sigma.shape != np.shape(self.errors_m) or sigma.size and not (sigma.min() >= 0.0
+                                                                             and sigma.max() < math.inf):
+                raise ReportError(f"frame {self.frame}: sigma_m must be finite σ >= 0, one per error sample")
+            object.__setattr__(self, "sigma_m", sigma)
         errors = np.asarray(self.errors_m, dtype=np.float64)
         # min >= 0 and max < inf: every distance finite and >= 0 (a NaN fails the first)
         if errors.ndim != 1 or errors.size and not (errors.min() >= 0.0 and errors.max() < math.inf):
@@ -291,6 +306,8 @@ class ScenarioResult:
             (NaN when undefined); empty when no decision carries a confidence.
         by_route: (group, :class:`RouteErrors`) per :data:`ROUTE_GROUPS` group; empty when
             no fusion of the scenario carries the kind of its pair.
+        calibration: the errors of the fused points that state a σ against it
+            (:class:`gt_matching.metrics.Calibration`), None when none does.
     """
 
     key: ScenarioKey
@@ -317,6 +334,7 @@ class ScenarioResult:
     false_by_relation: tuple[tuple[str, int], ...] = ()
     by_confidence: tuple[tuple[float, float, float], ...] = ()
     by_route: tuple[tuple[str, RouteErrors], ...] = ()
+    calibration: Calibration | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``metrics.json`` record (NaN as null); the :data:`EXTENDED_KEYS` only when
@@ -343,7 +361,10 @@ class ScenarioResult:
         } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {}) | (
             {"by_route": {group: {"fused": e.fused, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
                                   "p95_error_m": f(e.p95_error_m)} for group, e in self.by_route}}
-            if self.by_route else {})
+            if self.by_route else {}) | ({"calibration": {
+                "points": self.calibration.points, "within_1sigma": self.calibration.within_1sigma,
+                "within_2sigma": self.calibration.within_2sigma, "mean_sigma_m": self.calibration.mean_sigma_m,
+                "mean_error_m": self.calibration.mean_error_m}} if self.calibration is not None else {})
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any], where: str = "scenario") -> ScenarioResult:
@@ -380,19 +401,34 @@ class ScenarioResult:
                 _none_to_nan(errors[name], f"{where}.by_route.{group}.{name}")
                 for name in ("mean_error_m", "max_error_m", "p95_error_m"))))
                 for group, errors in record.get("by_route", {}).items())
+            calibration = None
+            if "calibration" in record:
+                found = record["calibration"]
+                calibration = Calibration(int(found["points"]), *(
+                    _none_to_nan(found[name], f"{where}.calibration.{name}")
+                    for name in ("within_1sigma", "within_2sigma", "mean_sigma_m", "mean_error_m")))
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
-                       by_route=by_route, **num)
+                       by_route=by_route, calibration=calibration, **num)
         except ReportError:
             raise
         except KeyError as exc:
             raise ReportError(f"{where}: missing key {exc.args[0]!r}") from exc
         except (TypeError, AttributeError, ValueError) as exc:
             raise ReportError(f"{where}: malformed record: {exc}") from exc
+
+
+def _calibration(fused: Sequence[FrameRecord]) -> Calibration | None:
+    """:class:`Calibration` of the pooled points of the ``fused`` records that state a σ."""
+    stated = [r for r in fused if r.sigma_m is not None]
+    if not stated:
+        return None
+    return Calibration.from_errors(np.concatenate([r.errors_m for r in stated]),
+                                   np.concatenate([r.sigma_m for r in stated if r.sigma_m is not None]))
 
 
 def _ratio(numerator: int, denominator: int) -> float:
@@ -478,6 +514,7 @@ class ScenarioAccumulator:
             by_route=tuple((group, RouteErrors.of([r for r in fused_pairs if r.fused and r.truly_fusible
                                                    and r.relation == kind]))
                            for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
+            calibration=_calibration(fused),
         )
 
     def csv_rows(self) -> list[dict[str, Any]]:
@@ -601,9 +638,27 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     association = association_markdown(results)
     if association:
         parts += ["\n## Lane association\n\n", association]
+    calibration = calibration_markdown(results)
+    if calibration:
+        parts += ["\n## Calibration of the stated σ\n\n", calibration]
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
     return "".join(parts)
+
+
+def calibration_markdown(results: Sequence[ScenarioResult]) -> str:
+    """The scenarios whose lanes state σ: share of points within 1σ / 2σ (68 % / 95 % when
+    calibrated), mean stated σ beside the mean error; "" when none does."""
+    rows = [[r.key.map, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,
+             str(c.points), _fmt(100.0 * c.within_1sigma, 1), _fmt(100.0 * c.within_2sigma, 1), _fmt(c.mean_sigma_m),
+             _fmt(c.mean_error_m)]
+            for r in sorted(results, key=_sort_key) if (c := r.calibration) is not None]
+    if not rows:
+        return ""
+    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "points", "within 1σ [%]", "within 2σ [%]",
+              "mean σ [m]", "mean error [m]"]
+    return "Errors of the points against the lateral 1σ the fusion states for them (68 % / 95 % when calibrated).\n\n" + \
+        _table(header, rows)
 
 
 def extended_markdown(results: Sequence[ScenarioResult]) -> str:
