@@ -48,7 +48,7 @@ def _rejected(ego: fusion.LaneDetection, reason: str) -> fusion.FusionResult:
 
 
 STATED_SIGMA_M = 0.05
-"""The lateral 1σ :func:`stated_sigma` lets both detections state (m), as ``--noise`` 0.05 makes it."""
+"""The lateral 1σ :func:`stated_sigma` lets both detections state on every point (m)."""
 
 
 def stated_sigma(ego: fusion.LaneDetection, coop: fusion.LaneDetection,
