@@ -63,7 +63,7 @@ def test_a_scenario_pools_the_points_that_state_sigma() -> None:
 def test_cold_eval_reports_calibration_only_for_lanes_that_state_sigma(tmp_path) -> None:
     out = tmp_path / "out"
     status = evaluate.main(["--map", str(bundled_map("straight")), "--frames", "4", "--routes", "1", "--gaps", "30",
-                            "--interpolation", "paper", "--method", METHOD, "--workers", "1", "--no-mcap", "--no-plots", "--out", str(out), "-q"])
+                            "--interpolation", "paper", "--method", METHOD, "--workers", "1", "--no-mcap", "--out", str(out), "-q"])
     assert status == 0
     records = json.loads((out / "metrics.json").read_text())["scenarios"]
     stated = [r for r in records if r["interpolation"] == METHOD]
@@ -80,3 +80,17 @@ def test_cold_eval_reports_calibration_only_for_lanes_that_state_sigma(tmp_path)
     summary = (out / "summary.md").read_text()
     assert "## Calibration of the stated σ" in summary and f"| straight | spline | {METHOD} | 30.0 | left |" in summary
     assert "`--convoy-weights paper`" in summary
+    assert (out / "plots" / "reliability_straight.png").is_file()  # only the lanes that state σ have one
+
+
+def test_reliability_points_compare_observed_with_gaussian_coverage() -> None:
+    from cold_maps.evaluation.plots import RELIABILITY_SIGMAS, reliability_points
+
+    accumulator = ScenarioAccumulator(ScenarioKey("m", "convoy", "", 0.0, "left"))
+    errors = np.abs(np.random.default_rng(3).normal(0.0, 0.1, 20000))  # calibrated: σ 0.1 stated
+    accumulator.add(FrameRecord(0, 0.0, "ego", "c", errors, sigma_m=np.full(errors.size, 0.1)))
+    accumulator.add(FrameRecord(1, 0.1, "ego", "c", np.array([0.3])))  # no σ: not in the curve
+    curve = reliability_points([accumulator])["convoy"]
+    assert curve.shape == (RELIABILITY_SIGMAS.size, 2)
+    np.testing.assert_allclose(curve[:, 1], curve[:, 0], atol=0.01)  # observed = stated for Gaussian errors
+    assert reliability_points([ScenarioAccumulator(ScenarioKey("m", "convoy", "", 0.0, "left"))]) == {}
