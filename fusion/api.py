@@ -18,6 +18,8 @@ from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_c
 from fusion.geometry import to_world, transform
 from fusion.spline import EndFits, hermite_lane, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+from fusion.uncertainty import (BRIDGE_SIGMA_PER_M, PairUncertainty, bridge_end, bridge_variance, has_sigma,
+                                own_variances, pair_uncertainty)
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
@@ -39,6 +41,14 @@ def ego_frame_borders(ego: LaneDetection, coop: LaneDetection) -> tuple[Borders,
     coop_points = transform(coop.points, *relative)
     n_left = coop.left.shape[0]
     return (ego.left, ego.right, coop_points[:n_left], coop_points[n_left:]), relative
+
+
+def end_fits(ego: LaneDetection, coop: LaneDetection, borders: Borders, params: FusionParams) -> EndFits:
+    """The :class:`fusion.spline.EndFits` of a pair's ego-frame ``borders``, weighted by 1/σ²
+    where both detections state σ."""
+    if has_sigma(ego) and has_sigma(coop):
+        return EndFits(borders, params, (ego.left_sigma, ego.right_sigma, coop.left_sigma, coop.right_sigma))
+    return EndFits(borders, params)
 
 
 def _overlap_starts(borders: Borders, ego_arclength: NDArrayFloat) -> tuple[OverlapStart, OverlapStart]:
@@ -112,21 +122,36 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
     :func:`ego_frame_borders` of the pair and ``ends`` its :func:`fusion.fusibility.lane_ends`
     when the caller has them already."""
     borders, (x_rel, _, _) = framed or ego_frame_borders(ego, coop)
-    return _decide(ego, coop, mode, params, borders, x_rel, EndFits(borders, params), ends)[1]
+    return _decide(ego, coop, mode, params, borders, x_rel, end_fits(ego, coop, borders, params), ends)[1]
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
                      gap_m: float, reason: str = "", confidence: float = 0.0,
-                     lanes: tuple[tuple[int, NDArrayFloat, NDArrayFloat], ...] = ()) -> FusionResult:
+                     lanes: tuple[tuple[int, NDArrayFloat, NDArrayFloat], ...] = (),
+                     variances: Sequence[NDArrayFloat] | None = None) -> FusionResult:
     """Result from ego-frame ``parts``, the left border's then as many of the right border's, with
     one :class:`Source` per part: one concatenation and one transform to the world frame (the
-    other fields as :class:`FusionResult`)."""
+    other fields as :class:`FusionResult`); ``variances``, one per part (lateral world
+    variances [m²]), give the result's σ."""
     counts = [points.shape[0] for points in parts]
     world = to_world(np.concatenate(parts), ego.pose, in_place=True)
     labels = sources.repeat(counts)
     n_left = sum(counts[: len(parts) // 2])
+    left_sigma = right_sigma = None
+    if variances is not None:
+        sigma = np.sqrt(np.concatenate(variances))
+        left_sigma, right_sigma = sigma[:n_left], sigma[n_left:]
     return FusionResult(world[:n_left], world[n_left:], labels[:n_left], labels[n_left:], kind, gap_m, reason,
-                        confidence, lanes)
+                        confidence, lanes, left_sigma, right_sigma)
+
+
+def ego_result(ego: LaneDetection, borders: tuple[NDArrayFloat, NDArrayFloat], gap_m: float,
+               reason: str) -> FusionResult:
+    """The ego lane alone (``kind="none"``, ego-frame ``borders``: the ego's, maybe trimmed at
+    their ends) with its ``reason`` and, when the ego states σ, its own σ."""
+    own = own_variances(ego)
+    variances = None if own is None else [v.world[: b.shape[0]] for v, b in zip(own, borders)]
+    return ego_frame_result(ego, borders, EGO_SOURCES, "none", gap_m, reason, variances=variances)
 
 
 def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpolation: str = "paper",
@@ -142,30 +167,39 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     """
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    borders, (x_rel, _, _) = ego_frame_borders(ego, coop)
-    fits = EndFits(borders, params)
+    borders, (x_rel, y_rel, _) = ego_frame_borders(ego, coop)
+    fits = end_fits(ego, coop, borders, params)
     kind, association, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
     el, er, _, _ = borders
     if association.reason:
-        return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
-    parts, sources = _fused(coop, borders, fits, kind, starts, interpolation, params)
+        return ego_result(ego, (el, er), ends.gap_m, association.reason)
+    uncertainty = pair_uncertainty(ego, coop, borders, (x_rel, y_rel))
+    parts, sources, variances = _fused(coop, borders, fits, kind, starts, interpolation, params, uncertainty)
     lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
-    return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes)
+    return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes, variances)
 
 
 def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKind,
-           starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str,
-           params: FusionParams) -> tuple[Sequence[NDArrayFloat], NDArrayInt8]:
-    """The ego-frame parts and their sources (:func:`ego_frame_result`) of the fused lane of a
-    pair found fusible (``kind``, the convoy overlap ``starts``)."""
+           starts: tuple[OverlapStart, OverlapStart] | None, interpolation: str, params: FusionParams,
+           uncertainty: PairUncertainty | None = None
+           ) -> tuple[Sequence[NDArrayFloat], NDArrayInt8, Sequence[NDArrayFloat] | None]:
+    """The ego-frame parts, their sources and, with ``uncertainty``, their world variances
+    (:func:`ego_frame_result`) of the fused lane of a pair found fusible (``kind``, the convoy
+    overlap ``starts``)."""
     el, er, cl, cr = borders
     if kind == "convoy":
         assert starts is not None
         w, blend = params.coop_weight, params.convoy_blend_offset_m
+        inverse = params.convoy_weights == "inverse-variance"
         n_left = cl.shape[0]
-        parts, sources = zip(*convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend),
-                             *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend))
-        return parts, np.array(sources, dtype=np.int8)
+        pairs = (None, None) if uncertainty is None else ((uncertainty.borders[0], uncertainty.borders[2]),
+                                                          (uncertainty.borders[1], uncertainty.borders[3]))
+        parts, sources, variances = zip(
+            *convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend, pairs[0], inverse,
+                           params.convoy_end_blend_m),
+            *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend, pairs[1], inverse,
+                           params.convoy_end_blend_m))
+        return parts, np.array(sources, dtype=np.int8), None if uncertainty is None else variances
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"
         gap_left, gap_right = sample_pieces(
@@ -173,7 +207,24 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
             params.spacing_m)
     else:
         gap_left, gap_right = hermite_lane(fits(), params.spacing_m)
-    return (el, gap_left, cl, er, gap_right, cr), _SPLINE_SOURCES
+    parts = (el, gap_left, cl, er, gap_right, cr)
+    if uncertainty is None:
+        return parts, _SPLINE_SOURCES, None
+    return parts, _SPLINE_SOURCES, _spline_variances(parts, uncertainty, BRIDGE_SIGMA_PER_M[interpolation])
+
+
+def _spline_variances(parts: Sequence[NDArrayFloat], uncertainty: PairUncertainty,
+                      sigma_per_m: float) -> list[NDArrayFloat]:
+    """World variances of the parts (ego, gap, coop per border) of a spline fusion: the
+    detections' own, and :func:`fusion.uncertainty.bridge_variance` across the gap."""
+    out = []
+    for side in (0, 1):
+        ego, gap, coop = parts[3 * side: 3 * side + 3]
+        ego_var, coop_var = uncertainty.borders[side], uncertainty.borders[2 + side]
+        ends = (bridge_end(ego, ego_var, True, (0.0, 0.0), uncertainty.ego_cov),
+                bridge_end(coop, coop_var, False, uncertainty.coop_xy, uncertainty.coop_cov))
+        out += [ego_var.world, bridge_variance(gap, ego[-1], coop[0], *ends, sigma_per_m), coop_var.world]
+    return out
 
 
 def matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: FusionKind, interpolation: str,
@@ -185,6 +236,6 @@ def matched_lane(ego: LaneDetection, coop: LaneDetection, index: int, kind: Fusi
     starts = None
     if kind == "convoy":
         starts = _overlap_starts(borders, lanes[0].arclength)
-    parts, sources = _fused(lanes[1], borders, EndFits(borders, params), kind, starts, interpolation, params)
+    parts, sources, _ = _fused(lanes[1], borders, EndFits(borders, params), kind, starts, interpolation, params)
     fused = ego_frame_result(lanes[0], parts, sources, kind, 0.0)
     return index, fused.left, fused.right

@@ -11,12 +11,16 @@ ego), and the link's result replaces them. A link whose check
 fails ends the chain there: the lane built so far is the result and the link's reason is
 the chain's reason. Per-point sources follow the points through every link. A chain
 costs its links' fusions and one concatenation per link after the first (whose result is
-the lane so far as it is).
+the lane so far as it is). Uncertainty (σ, :mod:`fusion.uncertainty`) follows the points
+the same way, link by link: points a link leaves unchanged (the lane so far before its ego
+prefix, and the prefix's ``EGO`` runs) keep their σ, the points it creates get the link's
+σ (computed in the link's ego frame from the two detections it fuses); the chain has σ when
+every link had.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Final, Sequence
 
 import numpy as np
@@ -26,6 +30,7 @@ from fusion.errors import InvalidDetectionError
 from fusion.geometry import to_world
 from fusion.history import fuse_history
 from fusion.types import FusionKind, FusionParams, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+from fusion.uncertainty import own_variances
 
 _EGO: Final[int] = int(Source.EGO)
 _EGO_BYTE: Final[bytes] = bytes([_EGO])
@@ -56,6 +61,8 @@ class ChainResult:
         links: the links tried, in order (the failing one last, if any).
         vehicles: vehicles whose lanes the result holds (1 + fused links).
         reason: why the chain ended before its last coop ("" when every link fused).
+        left_sigma, right_sigma: lateral 1σ [m] per point of ``left`` / ``right`` (world
+            frame, see the module docstring), or None when a detection fused states no σ.
     """
 
     left: NDArrayFloat
@@ -65,16 +72,21 @@ class ChainResult:
     links: tuple[ChainLink, ...]
     vehicles: int
     reason: str = ""
+    left_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
+    right_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for array in (self.left, self.right, self.left_source, self.right_source):
-            array.setflags(write=False)
+        for array in (self.left, self.right, self.left_source, self.right_source, self.left_sigma, self.right_sigma):
+            if array is not None:
+                array.setflags(write=False)
 
 
-def _carried(previous: NDArrayInt8, new: NDArrayInt8) -> NDArrayInt8:
-    """Labels of a link's result: its leading (and, for a coop ending inside the lane, trailing)
-    ``EGO`` run is the lane built so far, unchanged, so it keeps that lane's labels."""
-    raw = new.tobytes()  # int8 labels as bytes: the runs are what strip() removes
+def _carried(previous: NDArrayFloat | NDArrayInt8, new: NDArrayFloat | NDArrayInt8,
+             labels: NDArrayInt8) -> NDArrayFloat | NDArrayInt8:
+    """Labels (or σ) of a link's result: where its ``labels`` lead (and, for a coop ending
+    inside the lane, trail) with an ``EGO`` run, that is the lane built so far, unchanged, so
+    it keeps that lane's ``previous`` values; ``new`` elsewhere."""
+    raw = labels.tobytes()  # int8 labels as bytes: the runs are what strip() removes
     lead = len(raw) - len(raw.lstrip(_EGO_BYTE))
     if lead == len(raw):
         return previous.copy()
@@ -84,6 +96,13 @@ def _carried(previous: NDArrayInt8, new: NDArrayInt8) -> NDArrayInt8:
     if trail:
         out[-trail:] = previous[-trail:]
     return out
+
+
+def _joined(lane: NDArrayFloat | NDArrayInt8, n: int, link: NDArrayFloat | NDArrayInt8,
+            labels: NDArrayInt8) -> NDArrayFloat | NDArrayInt8:
+    """The lane so far without its last ``n`` values, then the ``link``'s values carried
+    (:func:`_carried`)."""
+    return np.concatenate((lane[:-n], _carried(lane[-n:], link, labels)))
 
 
 def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str = "auto",
@@ -100,29 +119,44 @@ def fuse_chain(ego: LaneDetection, coops: Sequence[LaneDetection], *, mode: str 
             raise InvalidDetectionError(f"coops[{i}] must be a LaneDetection, got {type(coop).__name__}")
     end = ego  # the detection whose last points end the lane built so far
     parts: list[tuple[NDArrayFloat, NDArrayInt8]] = []  # the lane built so far per border; none yet: the ego's
+    sigmas: list[NDArrayFloat] | None = []  # its σ per border; None once a link has none
     links: list[ChainLink] = []
     for coop in coops:
         step = fuse_history(end, coop, mode=mode, interpolation=interpolation, params=params)
         links.append(ChainLink(coop.sender, step.kind, step.gap_m, step.reason))
         if step.kind == "none":
+            if not parts:
+                sigmas = None if step.left_sigma is None else [step.left_sigma, step.right_sigma]
             break
         borders = ((step.left, step.left_source), (step.right, step.right_source))
+        step_sigmas = None if step.left_sigma is None or step.right_sigma is None else (step.left_sigma,
+                                                                                      step.right_sigma)
+        counts = (end.left.shape[0], end.right.shape[0])
         if parts:  # the lane so far ends with the n points of ``end``: the link's ego prefix copies them
-            parts = [(np.concatenate((points[:-n], border)),
-                      np.concatenate((labels[:-n], _carried(labels[-n:], source))))
-                     for (points, labels), n, (border, source) in zip(parts, (end.left.shape[0], end.right.shape[0]),
-                                                                        borders)]
+            if sigmas is not None and step_sigmas is not None:
+                sigmas = [_joined(sigma, n, new, source) for sigma, n, new, (_, source)
+                          in zip(sigmas, counts, step_sigmas, borders)]
+            else:
+                sigmas = None
+            parts = [(np.concatenate((points[:-n], border)), _joined(labels, n, source, source))
+                     for (points, labels), n, (border, source) in zip(parts, counts, borders)]
         else:  # the first link's ego is the lane so far
             parts = list(borders)
+            sigmas = None if step_sigmas is None else list(step_sigmas)
         (label, n_left), (_, n_right) = _trailing(step.left_source), _trailing(step.right_source)
         end = _last_points(coop if label != _EGO else end, n_left, n_right)
     if not parts:
         parts = [(to_world(b, ego.pose), np.full(b.shape[0], _EGO, np.int8)) for b in (ego.left, ego.right)]
+        if not links:
+            own = own_variances(ego)
+            sigmas = None if own is None else [np.sqrt(v.world) for v in own]
     failed = bool(links) and links[-1].kind == "none"
     reason = links[-1].reason if failed else ""
     (left, left_source), (right, right_source) = parts
     fused = len(links) - failed
-    return ChainResult(left, right, left_source, right_source, tuple(links), 1 + fused, reason)
+    left_sigma, right_sigma = (None, None) if not sigmas else sigmas
+    return ChainResult(left, right, left_source, right_source, tuple(links), 1 + fused, reason, left_sigma,
+                       right_sigma)
 
 
 def _trailing(source: NDArrayInt8) -> tuple[int, int]:
@@ -137,4 +171,6 @@ def _last_points(detection: LaneDetection, n_left: int, n_right: int) -> LaneDet
     n_left, n_right = max(n_left, 2), max(n_right, 2)
     if n_left >= detection.left.shape[0] and n_right >= detection.right.shape[0]:
         return detection
-    return replace(detection, left=detection.left[-n_left:], right=detection.right[-n_right:])
+    return replace(detection, left=detection.left[-n_left:], right=detection.right[-n_right:],
+                   left_sigma=None if detection.left_sigma is None else detection.left_sigma[-n_left:],
+                   right_sigma=None if detection.right_sigma is None else detection.right_sigma[-n_right:])

@@ -10,6 +10,7 @@ import numpy as np
 
 from fusion.geometry import project_point
 from fusion.types import NDArrayFloat, Source
+from fusion.uncertainty import BorderVariance, fused_variance, inverse_variance_weight, smoothstep
 
 _HEADING_HALF_WINDOW: Final[int] = 5
 
@@ -42,7 +43,10 @@ def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat, s_ego: NDArrayFloat) ->
 
 
 def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
-                  coop_weight: float, blend_offset_m: float) -> list[tuple[NDArrayFloat, Source]]:
+                  coop_weight: float, blend_offset_m: float,
+                  variances: tuple[BorderVariance, BorderVariance] | None = None,
+                  inverse_variance: bool = False,
+                  end_blend_m: float = 0.0) -> list[tuple[NDArrayFloat, Source, NDArrayFloat | None]]:
     """Fuse one ego border with the coop border that starts inside it.
 
     The coop start projects onto the ego border at arc length s0 (``start``); ``s_coop`` are
@@ -52,25 +56,48 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     index) and replaced by (1 − w)·P_ego + w·P_coop with w = ``coop_weight``; the rest of the
     coop border is appended. When the borders are more than ``blend_offset_m`` apart at s0,
     w instead rises linearly from 0 at the overlap start to 1 at its end, so the result has
-    no jump. Returns the parts in order with their :class:`Source` labels.
+    no jump. Returns the parts in order with their :class:`Source` labels and, with
+    ``variances`` (ego's, coop's: :class:`fusion.uncertainty.BorderVariance`), their world
+    variances [m²] (else None). ``inverse_variance`` (needs ``variances``) weights each pair
+    by :func:`fusion.uncertainty.inverse_variance_weight` of their ego-frame variances,
+    blended by a smoothstep over ``end_blend_m`` (at most half the overlap) from 0 at the
+    overlap start and to the weight of the detection that continues (1 coop, 0 ego) at its end.
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
     first = int(s_ego.searchsorted(s0))
     overlap_end = min(s_ego.item(-1) - s0, s_coop.item(-1))
     stop = int(s_ego.searchsorted(s0 + overlap_end, side="right"))
+    coop_continues = stop >= ego.shape[0]
     u = s_ego[first:stop] - s0
     paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])
     overlap = np.ascontiguousarray(ego[first:stop]).view(np.complex128)[:, 0]
-    if offset > blend_offset_m and overlap_end > 0.0:
-        paired -= overlap
-        paired *= u / overlap_end
+    ramp = offset > blend_offset_m and overlap_end > 0.0
+    if ramp:
+        w: NDArrayFloat | float = u / overlap_end
+    elif inverse_variance and variances is not None:
+        e, c = variances
+        paired_var = np.interp(u, s_coop, c.sensor + c.pose + c.relative)
+        w = inverse_variance_weight(e.sensor[first:stop], paired_var)
+        length = min(end_blend_m, 0.5 * overlap_end)
+        if length > 0.0:
+            into, out_of = smoothstep(u / length), smoothstep((overlap_end - u) / length)
+            w = w * into * out_of + (1.0 - out_of) * float(coop_continues)
     else:
-        paired -= overlap
-        paired *= coop_weight
+        w = coop_weight
+    paired -= overlap
+    paired *= w
     paired += overlap
-    parts = [(ego[:first], Source.EGO), (paired.view(np.float64).reshape(-1, 2), Source.FUSED)]
-    if stop < ego.shape[0]:
-        parts.append((ego[stop:], Source.EGO))
+    ego_var = coop_var = None
+    if variances is not None:
+        ego_var, coop_var = variances[0].world, variances[1].world
+        fused_var: NDArrayFloat | None = fused_variance(w, ego_var[first:stop], np.interp(u, s_coop, coop_var))
     else:
-        parts.append((coop[int(s_coop.searchsorted(overlap_end, side="right")):], Source.COOP))
+        fused_var = None
+    parts = [(ego[:first], Source.EGO, None if ego_var is None else ego_var[:first]),
+             (paired.view(np.float64).reshape(-1, 2), Source.FUSED, fused_var)]
+    if not coop_continues:
+        parts.append((ego[stop:], Source.EGO, None if ego_var is None else ego_var[stop:]))
+    else:
+        tail = int(s_coop.searchsorted(overlap_end, side="right"))
+        parts.append((coop[tail:], Source.COOP, None if coop_var is None else coop_var[tail:]))
     return parts

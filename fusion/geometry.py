@@ -173,38 +173,51 @@ _DESIGNS: dict[tuple[tuple[int, ...], int], _EndDesign] = {}
 _MAX_DESIGNS: Final[int] = 256
 
 
-def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
+def _end_design(counts: tuple[int, ...], n_noise: int, weights: NDArrayFloat | None = None) -> _EndDesign:
     """The filters of windows of ``counts`` points and of the noise over ``n_noise`` points
-    (memoised: they depend on the sizes only)."""
-    design = _DESIGNS.get((counts, n_noise))
-    if design is not None:
-        return design
+    (memoised: they depend on the sizes only); with ``weights`` (one per point from the end
+    inward, at least ``counts[-1]``) the fits are weighted least squares (not memoised)."""
+    if weights is None:
+        design = _DESIGNS.get((counts, n_noise))
+        if design is not None:
+            return design
     n_windows = len(counts)
     rows = np.zeros((3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
     gains, cubic_leaks, quartic_leaks = [], [], []
     for w, count in enumerate(counts):
         t = np.arange(count, dtype=np.float64)
-        pinv = np.linalg.pinv(np.vander(t, 3, increasing=True))
+        pinv = _pinv(np.vander(t, 3, increasing=True), weights)
         rows[3 * w: 3 * w + 3, :count] = pinv
         gains.append(np.linalg.norm(pinv, axis=1))
         cubic_leaks.append(tuple((pinv @ t ** 3).tolist()))
         quartic_leaks.append(tuple((pinv @ t ** 4).tolist()))
     t = np.arange(counts[-1], dtype=np.float64)
-    p3 = np.linalg.pinv(np.vander(t, 4, increasing=True))[3] if counts[-1] >= 4 else np.zeros(counts[-1])
+    p3 = _pinv(np.vander(t, 4, increasing=True), weights)[3] if counts[-1] >= 4 else np.zeros(counts[-1])
     rows[3 * n_windows, : counts[-1]] = p3
     for i in range(n_noise - 2):
         rows[3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
     gain = np.array(gains)
     if len(_DESIGNS) >= _MAX_DESIGNS:
         _DESIGNS.clear()
-    design = _DESIGNS[counts, n_noise] = _EndDesign(
+    design = _EndDesign(
         rows, counts[0] >= 4, tuple(gain[:, 1].tolist()), tuple(gain[:, 2].tolist()), float(np.linalg.norm(p3)),
         tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
+    if weights is None:
+        _DESIGNS[counts, n_noise] = design
     return design
 
 
+def _pinv(vander: NDArrayFloat, weights: NDArrayFloat | None) -> NDArrayFloat:
+    """Least-squares filter of a Vandermonde design: pinv(V), or with ``weights`` (per row)
+    pinv(√W·V)·√W, the weighted least squares."""
+    if weights is None:
+        return np.linalg.pinv(vander)
+    root = np.sqrt(weights[: vander.shape[0]])
+    return np.linalg.pinv(vander * root[:, None]) * root
+
+
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
-             noise_window_m: float) -> list[EndFit]:
+             noise_window_m: float, sigmas: Sequence[NDArrayFloat | None] | None = None) -> list[EndFit]:
     """Least-squares end point, tangent and curvature of several borders at once.
 
     Each border is read from its last (``at_end``) or first point inward and fitted, in each
@@ -228,9 +241,11 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
     chosen κ) by more than 3σ plus 5 % of that leak; a clothoid or a junction of line and
     arc inside the window fails that test. A border whose shortest window holds fewer than
     four points gets its end point, the chord direction and zero curvature of infinite
-    uncertainty.
+    uncertainty. ``sigmas`` (per border its points' lateral 1σ [m], or None) weight each
+    border's fits by 1/σ² (weighted least squares; a border with a σ of 0 is fitted unweighted).
     """
-    groups: dict[tuple[int, ...], list[int]] = {}
+    weights = [_fit_weights(sigma, end) for sigma, end in zip(sigmas, at_end)] if sigmas else [None] * len(borders)
+    groups: dict[tuple[tuple[int, ...], int], list[int]] = {}
     n_min = math.inf
     for e, points in enumerate(borders):
         n = points.shape[0]
@@ -241,11 +256,11 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         counts = [int(w * per_point + 0.5) + 1 for w in windows_m]  # round(w / spacing) + 1 points
         if counts[-1] > n:
             counts = [min(n, count) for count in counts]
-        groups.setdefault(tuple(counts), []).append(e)
+        groups.setdefault((tuple(counts), -1 if weights[e] is None else e), []).append(e)
     n_noise = min(n_min, max(3, int(round(noise_window_m / 0.1))))
     filtered, squares, n_squares = [], 0.0, 0
-    for counts, members in groups.items():
-        design = _end_design(counts, min(n_noise, counts[-1]))
+    for (counts, weighted), members in groups.items():
+        design = _end_design(counts, min(n_noise, counts[-1]), None if weighted < 0 else weights[weighted])
         k = design.rows.shape[1]
         window = np.concatenate([borders[e][:-k - 1:-1] if at_end[e] else borders[e][:k] for e in members])
         values = (design.rows @ window.reshape(len(members), k, 2)).view(np.complex128)[..., 0]
@@ -261,6 +276,15 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             w = _chosen_window(row, design, sigma)
             fits[e] = _end_fit(row, design, w, at_end[e], sigma) if w >= 0 else _chord_fit(borders[e], at_end[e])
     return fits
+
+
+def _fit_weights(sigma: NDArrayFloat | None, at_end: bool) -> NDArrayFloat | None:
+    """Relative weights 1/σ² of a border's points from the fitted end inward (max 1); None
+    without σ or with a σ of 0 (an exact point: equal weights)."""
+    if sigma is None or not (sigma > 0.0).all():
+        return None
+    inverse = 1.0 / (sigma[::-1] if at_end else sigma) ** 2
+    return inverse / inverse.max()
 
 
 def _chosen_window(row: list[complex], design: _EndDesign, sigma: float) -> int:

@@ -56,10 +56,11 @@ from typing import Final, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from fusion.api import DEFAULT_PARAMS, EGO_SOURCES, assess, ego_frame_borders, ego_frame_result, fuse, matched_lane
+from fusion.api import DEFAULT_PARAMS, assess, ego_frame_borders, ego_frame_result, ego_result, fuse, matched_lane
 from fusion.fusibility import lane_ends, relative_pose
 from fusion.geometry import cumulative_length, end_direction, foot_near_vertex, transform
 from fusion.types import FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
+from fusion.uncertainty import PairUncertainty, pair_uncertainty, seam_sigma
 
 NDArrayComplex = npt.NDArray[np.complex128]
 
@@ -83,16 +84,21 @@ def _heading(points: NDArrayFloat, at: int) -> tuple[float, float]:
     return end_direction(points[lo: hi + 1], True, _HEADING_WINDOW_M)
 
 
+def _seam_weights(s_history: NDArrayFloat, s_from: float, keep_first: bool) -> tuple[int, NDArrayFloat]:
+    """Index of the first history point :func:`seam_blend` moves, and the fade w of each
+    point it moves (0 at arc length ``s_from``, 1 at the history's end)."""
+    first = int(s_history.searchsorted(s_from if keep_first else s_from + _MIN_COVER_M,
+                                       side="left" if keep_first else "right"))
+    return first, (s_history[first:-1] - s_from) / (s_history[-1] - s_from)
+
+
 def seam_blend(history: NDArrayFloat, s_history: NDArrayFloat, s_from: float, ego_offset: complex,
                coop_offset: complex, *, keep_first: bool = False) -> NDArrayFloat:
     """History points after arc length ``s_from`` (from it with ``keep_first``) and before the
     last one, each moved by the seam offsets faded linearly in arc length (see the module
     docstring): ``ego_offset`` (m, x + iy) at ``s_from``, ``coop_offset`` at the history's end."""
-    first = int(s_history.searchsorted(s_from if keep_first else s_from + _MIN_COVER_M,
-                                       side="left" if keep_first else "right"))
-    last = s_history.shape[0] - 1
-    w = (s_history[first:last] - s_from) / (s_history[-1] - s_from)
-    z = history[first:last].view(np.complex128)[:, 0] + ego_offset + w * (coop_offset - ego_offset)
+    first, w = _seam_weights(s_history, s_from, keep_first)
+    z = history[first:-1].view(np.complex128)[:, 0] + ego_offset + w * (coop_offset - ego_offset)
     return z.view(np.float64).reshape(-1, 2)
 
 
@@ -320,7 +326,7 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
         return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
     association = assess(ego, coop, params, mode=mode, framed=framed, ends=ends)
     if association.reason:
-        return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, association.reason)
+        return ego_result(ego, (el, er), ends.gap_m, association.reason)
     # the history stays in the coop frame; the ego's border probes go there
     to_coop = relative_pose(coop.pose, ego.pose)
     rotation = complex(math.cos(to_coop[2]), math.sin(to_coop[2]))
@@ -337,7 +343,7 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     for side, cover in zip(("left", "right"), covers):
         reason = _reason(side, cover, ends.width_m, params)
         if reason:
-            return ego_frame_result(ego, (el, er), EGO_SOURCES, "none", ends.gap_m, reason)
+            return ego_result(ego, (el, er), ends.gap_m, reason)
     # only a history the checks accept at the ego's real end may replace the ego's last points
     (el, covers[0]), (er, covers[1]) = (_fork_trimmed(own, s, side, cover, to_coop, rotation)
                                         for (own, s, side), cover in zip(borders, covers))
@@ -346,8 +352,25 @@ def fuse_history(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto",
     n_gap = gaps[0].shape[0]
     gap = transform(np.concatenate(gaps), x_rel, y_rel, psi_rel)
     lanes = tuple(matched_lane(ego, coop, index, "spline", interpolation, params) for index in association.matched)
+    uncertainty = pair_uncertainty(ego, coop, framed[0], (x_rel, y_rel))
+    variances = None if uncertainty is None else _history_variances(uncertainty, covers, (el, er))
     return replace(ego_frame_result(ego, (el, gap[:n_gap], cl, er, gap[n_gap:], cr), _HISTORY_SOURCES, "history",
-                                    ends.gap_m), confidence=association.confidence, lanes=lanes)
+                                    ends.gap_m, variances=variances), confidence=association.confidence, lanes=lanes)
+
+
+def _history_variances(uncertainty: PairUncertainty, covers: list[_Cover],
+                       ego_borders: tuple[NDArrayFloat, NDArrayFloat]) -> list[NDArrayFloat]:
+    """World variances of the parts (ego, history, coop per border) of a history fusion: the
+    detections' own (the ego borders maybe cut at a fork), and across the gap
+    :func:`fusion.uncertainty.seam_sigma` between the ego end's σ and the coop start's."""
+    out = []
+    for side, (cover, own) in enumerate(zip(covers, ego_borders)):
+        ego_var = uncertainty.borders[side].world[: own.shape[0]]
+        coop_var = uncertainty.borders[2 + side].world
+        _, w = _seam_weights(cover.s_rest, cover.s_e, False)
+        sigma = seam_sigma(math.sqrt(ego_var[-1]), math.sqrt(coop_var[0]), w)
+        out += [ego_var, sigma * sigma, coop_var]
+    return out
 
 
 def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end: tuple[float, float], mode: str,
@@ -364,7 +387,10 @@ def _partial(ego: LaneDetection, coop: LaneDetection, p_end: NDArrayFloat, t_end
             return fuse(ego, coop, mode=mode, interpolation=interpolation, params=params)
         joined = seam_blend(ahead, cumulative_length(ahead), 0.0, 0j, _coop_offset(ahead, first), keep_first=True)
         extended.append(np.concatenate((joined, first)))
-    longer = replace(coop, left=extended[0], right=extended[1], history=None)
+    sigmas = [None if sigma is None else np.concatenate((np.full(joined.shape[0] - own.shape[0], sigma[0]), sigma))
+              for joined, own, sigma in zip(extended, (coop.left, coop.right), (coop.left_sigma, coop.right_sigma))]
+    longer = replace(coop, left=extended[0], right=extended[1], history=None, left_sigma=sigmas[0],
+                     right_sigma=sigmas[1])
     result = fuse(ego, longer, mode=mode, interpolation=interpolation, params=params)
     if result.kind == "none":
         return result

@@ -252,32 +252,35 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
-                  window_m: float | None) -> tuple[EndFit, EndFit, EndFit, EndFit]:
+                  window_m: float | None, sigmas: Sequence[NDArrayFloat | None] | None = None,
+                  ) -> tuple[EndFit, EndFit, EndFit, EndFit]:
     """End fits of (ego left, ego right) at their ends and (coop left, coop right) at their starts.
 
     Windows: ``window_m``, or with ``None`` adaptive among 2–6 m from the noise σ estimated
-    on the last/first 5 m of the four borders (:func:`fusion.geometry.fit_ends`).
+    on the last/first 5 m of the four borders (:func:`fusion.geometry.fit_ends`); ``sigmas``
+    (the four borders' per-point σ, or None) weight the fits by 1/σ².
     """
     windows = _WINDOWS_M if window_m is None else (window_m,)
-    fits = fit_ends((ego[0], ego[1], coop[0], coop[1]), (True, True, False, False), windows, _NOISE_SAMPLE_M)
+    fits = fit_ends((ego[0], ego[1], coop[0], coop[1]), (True, True, False, False), windows, _NOISE_SAMPLE_M, sigmas)
     return fits[0], fits[1], fits[2], fits[3]
 
 
 class EndFits:
     """:func:`lane_end_fits` of four ego-frame borders (ego left, ego right, coop left, coop
-    right) with ``params.heading_window_m``, computed once on the first call; :meth:`arcs`
+    right) with ``params.heading_window_m`` (weighted by 1/σ² with ``sigmas``, their per-point
+    σ), computed once on the first call; :meth:`arcs`
     the same with the curvature of the whole detection where that is one arc."""
 
     def __init__(self, borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
-                 params: FusionParams):
-        self._borders, self._params = borders, params
+                 params: FusionParams, sigmas: Sequence[NDArrayFloat | None] | None = None):
+        self._borders, self._params, self._sigmas = borders, params, sigmas
         self._fits: tuple[EndFit, EndFit, EndFit, EndFit] | None = None
         self._arcs: tuple[EndFit, ...] | None = None
 
     def __call__(self) -> tuple[EndFit, EndFit, EndFit, EndFit]:
         if self._fits is None:
             el, er, cl, cr = self._borders
-            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m)
+            self._fits = lane_end_fits((el, er), (cl, cr), self._params.heading_window_m, self._sigmas)
         return self._fits
 
     def arcs(self) -> tuple[EndFit, ...]:
@@ -297,7 +300,8 @@ class EndFits:
         if self._arcs is None:
             fits = self._arcs = self()
             if _whole_fit_helps(fits, self._borders):
-                whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M)
+                whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M,
+                                 self._sigmas)
                 self._arcs = tuple(_better_arc(end, fit) for end, fit in zip(fits, whole))
         return self._arcs
 

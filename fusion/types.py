@@ -24,6 +24,8 @@ FusionMode = Literal["auto", "convoy", "spline"]
 Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
 ConvoyStrategy = Literal["weighted", "mean", "nearest"]
+ConvoyWeights = Literal["paper", "mean", "inverse-variance"]
+CONVOY_WEIGHTS: Final[tuple[str, ...]] = ("paper", "mean", "inverse-variance")
 SplineParameter = Literal["chord", "uniform"]
 
 MIN_BORDER_POINTS: Final[int] = 2
@@ -326,8 +328,18 @@ class FusionParams:
         w_coop: weight of the cooperative detection in the weighted convoy fusion (paper: 0.75).
         convoy_strategy: ``"weighted"`` (paper, ``w_coop``), ``"mean"`` (0.5) or ``"nearest"``
             (the coop detection, nearest to its sensor, replaces the ego one in the overlap).
+        convoy_weights: the weights of the convoy overlap: ``"paper"`` (default: the fixed
+            weights of ``convoy_strategy``, the paper's 0.75 coop / 0.25 ego), ``"mean"`` (0.5
+            each) or ``"inverse-variance"`` (point by point from both detections' σ and pose
+            covariances, :mod:`fusion.uncertainty`; blended in from the ego at the overlap
+            start and out to the detection that continues at its end over
+            ``convoy_end_blend_m``; the weights of ``"mean"`` when a detection states no σ).
+            ``"mean"`` and ``"inverse-variance"`` need ``convoy_strategy="weighted"``.
+        convoy_end_blend_m: length over which inverse-variance weights blend smoothly
+            (smoothstep) from the ego at the overlap start and to the continuing detection
+            at its end, at most half the overlap each [m] (default 5).
         convoy_blend_offset_m: offset of the two borders at the overlap start above which the
-            overlap blends linearly from ego to coop instead of the fixed weights [m].
+            overlap blends linearly from ego to coop instead of the weights [m].
         convoy_max_offset_m: largest lateral distance of the coop border start from the ego
             border for a convoy overlap [m]; a lane width away is the adjacent lane.
         convoy_max_heading_rad: largest heading difference of the two borders at the
@@ -349,6 +361,8 @@ class FusionParams:
     spacing_m: float = 0.10
     w_coop: float = 0.75
     convoy_strategy: ConvoyStrategy = "weighted"
+    convoy_weights: ConvoyWeights = "paper"
+    convoy_end_blend_m: float = 5.0
     convoy_blend_offset_m: float = 0.20
     convoy_max_offset_m: float = 1.0
     convoy_max_heading_rad: float = math.radians(30.0)
@@ -364,7 +378,7 @@ class FusionParams:
             value = getattr(self, name)
             if not math.isfinite(value) or value <= 0.0:
                 raise InvalidParameterError(f"FusionParams.{name} must be finite and > 0, got {value!r}")
-        for name in ("apex_min_turn_rad", "convoy_blend_offset_m"):
+        for name in ("apex_min_turn_rad", "convoy_blend_offset_m", "convoy_end_blend_m"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0.0:
                 raise InvalidParameterError(f"FusionParams.{name} must be finite and >= 0, got {value!r}")
@@ -374,6 +388,12 @@ class FusionParams:
                 raise InvalidParameterError(f"FusionParams.{name} must be in [0, 1], got {value!r}")
         if self.convoy_strategy not in ("weighted", "mean", "nearest"):
             raise InvalidParameterError(f"FusionParams.convoy_strategy unknown: {self.convoy_strategy!r}")
+        if self.convoy_weights not in CONVOY_WEIGHTS:
+            raise InvalidParameterError(f"FusionParams.convoy_weights must be one of {CONVOY_WEIGHTS}, "
+                                        f"got {self.convoy_weights!r}")
+        if self.convoy_weights != "paper" and self.convoy_strategy != "weighted":
+            raise InvalidParameterError(f"FusionParams.convoy_weights {self.convoy_weights!r} sets the weights: "
+                                        f"it needs convoy_strategy 'weighted', got {self.convoy_strategy!r}")
         if self.spline_parameter not in ("chord", "uniform"):
             raise InvalidParameterError(f"FusionParams.spline_parameter unknown: {self.spline_parameter!r}")
         if self.fusibility not in ("geometric", "paper"):
@@ -381,7 +401,10 @@ class FusionParams:
 
     @property
     def coop_weight(self) -> float:
-        """Weight of the coop point in the convoy overlap for ``convoy_strategy``."""
+        """Fixed weight of the coop point in the convoy overlap: ``convoy_strategy``'s with
+        ``convoy_weights="paper"``, else 0.5 (``"mean"``, and ``"inverse-variance"`` without σ)."""
+        if self.convoy_weights != "paper":
+            return 0.5
         return {"weighted": self.w_coop, "mean": 0.5, "nearest": 1.0}[self.convoy_strategy]
 
 
@@ -403,6 +426,9 @@ class FusionResult:
         lanes: the neighbour lanes fused as well (both detections carry them and they
             match), ``(index, left, right)`` world frame [m], index as
             :attr:`NeighbourLane.index`; empty without neighbours.
+        left_sigma, right_sigma: lateral 1σ [m] of every point of ``left`` / ``right`` in the
+            world frame (:mod:`fusion.uncertainty`), ``(N,)`` finite and >= 0; None when a
+            detection fused states no σ (the default).
     """
 
     left: NDArrayFloat
@@ -414,7 +440,15 @@ class FusionResult:
     reason: str = ""
     confidence: float = 0.0
     lanes: tuple[tuple[int, NDArrayFloat, NDArrayFloat], ...] = ()
+    left_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
+    right_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for array in (self.left, self.right, self.left_source, self.right_source):
-            array.setflags(write=False)
+        for name, border in (("left_sigma", self.left), ("right_sigma", self.right)):
+            sigma = getattr(self, name)
+            if sigma is not None and sigma.shape != (border.shape[0],):
+                raise InvalidParameterError(f"FusionResult.{name} must have shape ({border.shape[0]},), one per "
+                                            f"border point, got {sigma.shape}")
+        for array in (self.left, self.right, self.left_source, self.right_source, self.left_sigma, self.right_sigma):
+            if array is not None:
+                array.setflags(write=False)

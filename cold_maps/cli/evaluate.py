@@ -41,6 +41,7 @@ from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRI
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 from cold_maps.simulation.sensor_profile import BUILTIN_PROFILES, DEFAULT_PROFILE, SensorProfile, load_profile
 from fusion.bezier import DEFAULT_TOLERANCE_M
+from fusion.types import CONVOY_WEIGHTS
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
@@ -164,6 +165,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="also evaluate this fusion method across the gaps: a name registered in the "
                              "cold_maps.fusion_methods entry points or package.module:function, looked up in the "
                              "installed packages and the current folder (repeatable; default: none)")
+    parser.add_argument("--convoy-weights", choices=CONVOY_WEIGHTS, default="paper",
+                        help="weights of the convoy overlap: the paper's fixed 0.75 coop / 0.25 ego, 0.5 each, or "
+                             "inverse-variance point by point from the detections' σ and pose covariances (the "
+                             "weights of mean when the detections state no σ) (default paper)")
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
@@ -249,7 +254,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping, sensor=args.sensor), args)
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping, sensor=args.sensor,
+                                     params=replace(plan.params, convoy_weights=args.convoy_weights)), args)
                 for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
@@ -257,7 +263,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
             raise UsageError(f"--map {seen[path.stem]} and --map {path} share the name {path.stem!r}; the report "
                              "keys results by map name: give every map its own file name")
         seen[path.stem] = path
-    params = params_for_gaps(args.gaps)
+    params = params_for_gaps(args.gaps, args.convoy_weights)
     scenarios = scenarios_for(args.gaps, interpolations)
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
@@ -266,9 +272,9 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
             for path in args.map]
 
 
-def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
+def _sections(paper: bool, interpolations: Sequence[str], convoy_weights: str) -> SectionsCallback:
     """The extra summary sections: Table II per interpolation and the longest gap for
-    ``--paper``, the runtime table (Table I) always."""
+    ``--paper``, the runtime table (Table I) and the convoy weights always."""
     from cold_maps.evaluation.paper import gap_limit_markdown, runtime_markdown, table_ii_markdown
 
     def sections(collector: Collector, results: list[ScenarioResult]) -> list[tuple[str, str]]:
@@ -278,6 +284,7 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
                       for name in interpolations]
             found.append(("Longest gap", gap_limit_markdown(results)))
         found.append(("Runtime (Table I)", runtime_markdown(collector)))
+        found.append(("Convoy weights", f"`--convoy-weights {convoy_weights}`\n"))
         return found
 
     return sections
@@ -307,7 +314,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                              run_params={k: v.describe() if isinstance(v, SensorProfile) else str(v)
                                          for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
                              workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base)
-        run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args)))
+        run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args),
+                                                                            args.convoy_weights))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line
         return startup_failure(PROG, exc)
     if isinstance(run.error, KeyboardInterrupt):

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Callable, Final
 import numpy as np
 
 import fusion
+from fusion.uncertainty import own_variances
 from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
@@ -307,8 +308,10 @@ class MapEvaluator:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=rejected,
                                                gt_unmatched=why, end_reason=ego.end_reason, stopping=self.stopping))
             return {}
+        own = own_variances(ego.detection)
         self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics,
-                     end_reason=ego.end_reason)
+                     end_reason=ego.end_reason,
+                     sigmas=(None, None) if own is None else (np.sqrt(own[0].world), np.sqrt(own[1].world)))
         self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
         shown = np.vstack((left, right))
         low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
@@ -371,7 +374,8 @@ class MapEvaluator:
             reject(rejected, True, runtime, result.confidence, why)
             return None
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
-                     truth, metrics if main else None, relation=relation, confidence=result.confidence)
+                     truth, metrics if main else None, relation=relation, confidence=result.confidence,
+                     sigmas=(result.left_sigma, result.right_sigma))
         if main:
             self._keep_overlay(collector, scenario, index, measured,
                                {"ego": ego.detection, other.state.name: other.detection},
@@ -422,7 +426,8 @@ class MapEvaluator:
         if isinstance(measured, str):
             reject(measured, True, runtime)
             return
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None)
+        self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None,
+                     sigmas=(chain.left_sigma, chain.right_sigma))
         detections = {c.state.name: c.detection for c in coops if c.detection is not None}
         self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection, **detections},
                            {"left": chain.left, "right": chain.right})
@@ -463,14 +468,16 @@ class MapEvaluator:
     def _record(self, collector: Collector, scenario: Scenario, keys: tuple[ScenarioKey, ...], measured: Measurement,
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
-                confidence: float = math.nan, end_reason: str = "") -> None:
+                confidence: float = math.nan, end_reason: str = "",
+                sigmas: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None)) -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
         known = measured.known_to_m(LANE_ACCURACY_M)
-        for key, (errors, length), near in zip(keys, sides, measured.near_points()):
+        for key, (errors, length), near, sigma in zip(keys, sides, measured.near_points(), sigmas):
             collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
                                            runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
                                            relation=relation, confidence=confidence, end_reason=end_reason,
-                                           near_points=near, known_to_m=known, stopping=self.stopping))
+                                           near_points=near, known_to_m=known, stopping=self.stopping,
+                                           sigma_m=sigma))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))

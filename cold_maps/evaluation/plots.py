@@ -5,6 +5,8 @@
   chain length.
 - :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
   frame in the world frame, equal aspect (the paper's Fig. 8).
+- :func:`plot_reliability`: observed against stated coverage of the lanes' stated σ (only
+  where they state one).
 
 Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 """
@@ -12,6 +14,7 @@ Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 from __future__ import annotations
 
 import io
+import math
 import os
 from dataclasses import dataclass
 from typing import Any, Final, Mapping, Sequence
@@ -31,6 +34,10 @@ PNG_COMPRESS_LEVEL: Final[int] = 1
 AXES_BOX: Final[tuple[float, float, float, float]] = (0.09, 0.11, 0.98, 0.92)
 """Left, bottom, right, top edge of the axes area (figure fractions): room for the tick
 labels, axis labels and title, fixed instead of measuring the text (``tight_layout``)."""
+
+
+RELIABILITY_SIGMAS: Final[NDArrayFloat] = np.linspace(0.1, 3.0, 30)
+"""The multiples k of the stated σ at which the reliability plot compares coverages."""
 
 
 _AXES: dict[str, Any] = {}
@@ -196,5 +203,46 @@ def plot_error_vs_range(path: str | os.PathLike[str], groups: Mapping[int, NDArr
     axes.set_ylabel("max error per fusion [m]")
     axes.set_title(title)
     axes.legend(fontsize="small")
+    axes.grid(True, alpha=0.3)
+    _save(figure, path)
+
+
+def reliability_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[str, NDArrayFloat]:
+    """Per scenario label (boundaries pooled): ``(K, 2)`` stated coverage of ±kσ for Gaussian
+    errors, erf(k/√2), and the observed share of the points whose error is at most kσ, for k
+    in :data:`RELIABILITY_SIGMAS`; only scenarios whose fused records state σ."""
+    pooled: dict[str, tuple[list[NDArrayFloat], list[NDArrayFloat]]] = {}
+    for scenario in scenarios:
+        for record in scenario.records:
+            if record.fused and record.sigma_m is not None:
+                errors, sigmas = pooled.setdefault(scenario.key.label, ([], []))
+                errors.append(record.errors_m)
+                sigmas.append(record.sigma_m)
+    stated = np.array([math.erf(k / math.sqrt(2.0)) for k in RELIABILITY_SIGMAS])
+    out = {}
+    for label, (errors, sigmas) in pooled.items():
+        e, s = np.concatenate(errors), np.concatenate(sigmas)
+        observed = np.array([np.mean(e <= k * s) for k in RELIABILITY_SIGMAS])
+        out[label] = np.column_stack((stated, observed))
+    return out
+
+
+def plot_reliability(path: str | os.PathLike[str], curves: Mapping[str, NDArrayFloat], title: str = "") -> None:
+    """Reliability of the stated σ: observed against stated coverage of ±kσ, one line per
+    scenario (``curves``: :func:`reliability_points`), the diagonal where they are calibrated
+    (above it: the σ is conservative, below: overconfident)."""
+    if not curves:
+        raise ValueError("plot_reliability: no scenario states σ")
+    figure = _figure(boxed=False)
+    axes = figure.add_subplot()
+    axes.plot([0.0, 1.0], [0.0, 1.0], color="0.5", linestyle=":", label="calibrated")
+    for index, (label, points) in enumerate(sorted(curves.items())):
+        axes.plot(points[:, 0], points[:, 1], color=f"C{index}", marker=".", label=label)
+    axes.set_xlabel("stated coverage of ±kσ (Gaussian)")
+    axes.set_ylabel("observed share within kσ")
+    axes.set_xlim(0.0, 1.0)
+    axes.set_ylim(0.0, 1.0)
+    axes.set_title(title)
+    axes.legend(fontsize="small", loc="lower right")
     axes.grid(True, alpha=0.3)
     _save(figure, path)

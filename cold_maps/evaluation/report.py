@@ -53,7 +53,12 @@
                        "frames": 300,        # distinct frames evaluated
                        "known_frames": 290,  # frames with an evaluation's lane known within accuracy_m out to d
                        "share": 0.967},      # known_frames / frames (null without frames)
-          "end_reasons": {"range": 300}      # why the ego's own detections ended (local scenarios; {} elsewhere)
+          "end_reasons": {"range": 300},     # why the ego's own detections ended (local scenarios; {} elsewhere)
+          # only when the lanes evaluated state their σ (fusion.FusionResult.left_sigma):
+          "calibration": {"points": 12000, "within_1sigma": 0.69, "within_2sigma": 0.95,
+                          "mean_sigma_m": 0.08, "mean_error_m": 0.06}
+                                     # share of points whose error is within 1σ / 2σ of their stated σ
+                                     # (68 % / 95 % when calibrated), mean stated σ beside the mean error
         }
       ]
     }
@@ -91,7 +96,7 @@ from cold_maps.evaluation.safety import (
 )
 from cold_maps.network.lane_strip import NDArrayFloat
 from converters.atomic_io import atomic_output
-from gt_matching.metrics import NEAR_FAR_SPLIT_M, ErrorStats
+from gt_matching.metrics import NEAR_FAR_SPLIT_M, Calibration, ErrorStats
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -238,6 +243,8 @@ class FrameRecord:
             of the two; the same on both borders' records); NaN when no lane was scored.
         stopping: the stopping distance the lane is needed to (``evaluation.safety``), None
             when not measured.
+        sigma_m: the stated lateral 1σ (m) of the point of each of ``errors_m``, same shape;
+            None when the lane states no σ.
     """
 
     frame: int
@@ -257,8 +264,15 @@ class FrameRecord:
     near_points: int | None = None
     known_to_m: float = math.nan
     stopping: StoppingDistance | None = None
+    sigma_m: NDArrayFloat | None = None
 
     def __post_init__(self) -> None:
+        if self.sigma_m is not None:
+            sigma = np.asarray(self.sigma_m, dtype=np.float64)
+            if sigma.shape != np.shape(self.errors_m) or sigma.size and not (sigma.min() >= 0.0
+                                                                             and sigma.max() < math.inf):
+                raise ReportError(f"frame {self.frame}: sigma_m must be finite σ >= 0, one per error sample")
+            object.__setattr__(self, "sigma_m", sigma)
         errors = np.asarray(self.errors_m, dtype=np.float64)
         # min >= 0 and max < inf: every distance finite and >= 0 (a NaN fails the first)
         if errors.ndim != 1 or errors.size and not (errors.min() >= 0.0 and errors.max() < math.inf):
@@ -358,6 +372,8 @@ class ScenarioResult:
         stopping_known_frames: those in which an evaluation's lane was known within
             ``LANE_ACCURACY_M`` out to the stopping distance (:attr:`FrameRecord.known_to_stop`).
         end_reasons: (reason, count) of why the ego's own detections ended, sorted by reason.
+        calibration: the errors of the fused points that state a σ against it
+            (:class:`gt_matching.metrics.Calibration`), None when none does.
     """
 
     key: ScenarioKey
@@ -391,6 +407,7 @@ class ScenarioResult:
     stopping_frames: int = 0
     stopping_known_frames: int = 0
     end_reasons: tuple[tuple[str, int], ...] = ()
+    calibration: Calibration | None = None
 
     @property
     def stopping_share(self) -> float:
@@ -423,7 +440,10 @@ class ScenarioResult:
         } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {}) | (
             {"by_route": {group: {"fused": e.fused, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
                                   "p95_error_m": f(e.p95_error_m)} for group, e in self.by_route}}
-            if self.by_route else {}) | self._added_dict()
+            if self.by_route else {}) | self._added_dict() | ({"calibration": {
+                "points": self.calibration.points, "within_1sigma": self.calibration.within_1sigma,
+                "within_2sigma": self.calibration.within_2sigma, "mean_sigma_m": self.calibration.mean_sigma_m,
+                "mean_error_m": self.calibration.mean_error_m}} if self.calibration is not None else {})
 
     def _added_dict(self) -> dict[str, Any]:
         """The keys of the range distribution, the near / far errors, the stopping distance
@@ -503,19 +523,34 @@ class ScenarioResult:
                 _none_to_nan(errors[name], f"{where}.by_route.{group}.{name}")
                 for name in ("mean_error_m", "max_error_m", "p95_error_m"))))
                 for group, errors in record.get("by_route", {}).items())
+            calibration = None
+            if "calibration" in record:
+                found = record["calibration"]
+                calibration = Calibration(int(found["points"]), *(
+                    _none_to_nan(found[name], f"{where}.calibration.{name}")
+                    for name in ("within_1sigma", "within_2sigma", "mean_sigma_m", "mean_error_m")))
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
-                       by_route=by_route, **num, **cls._added_fields(record, where))
+                       by_route=by_route, calibration=calibration, **num, **cls._added_fields(record, where))
         except ReportError:
             raise
         except KeyError as exc:
             raise ReportError(f"{where}: missing key {exc.args[0]!r}") from exc
         except (TypeError, AttributeError, ValueError) as exc:
             raise ReportError(f"{where}: malformed record: {exc}") from exc
+
+
+def _calibration(fused: Sequence[FrameRecord]) -> Calibration | None:
+    """:class:`Calibration` of the pooled points of the ``fused`` records that state a σ."""
+    stated = [r for r in fused if r.sigma_m is not None]
+    if not stated:
+        return None
+    return Calibration.from_errors(np.concatenate([r.errors_m for r in stated]),
+                                   np.concatenate([r.sigma_m for r in stated if r.sigma_m is not None]))
 
 
 def _ratio(numerator: int, denominator: int) -> float:
@@ -602,6 +637,7 @@ class ScenarioAccumulator:
             by_route=tuple((group, RouteErrors.of([r for r in fused_pairs if r.fused and r.truly_fusible
                                                    and r.relation == kind]))
                            for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
+            calibration=_calibration(fused),
         )
 
     def _added_result(self, fused: Sequence[FrameRecord], ranges: Sequence[float]) -> dict[str, Any]:
@@ -752,6 +788,9 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     association = association_markdown(results)
     if association:
         parts += ["\n## Lane association\n\n", association]
+    calibration = calibration_markdown(results)
+    if calibration:
+        parts += ["\n## Calibration of the stated σ\n\n", calibration]
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
     return "".join(parts)
@@ -799,6 +838,21 @@ def cold_adds_markdown(results: Sequence[ScenarioResult]) -> str:
     if ends:
         text += "\nWhy the ego's own detections ended (local evaluations):\n\n" + _table(["map", "ended by"], ends)
     return text
+
+
+def calibration_markdown(results: Sequence[ScenarioResult]) -> str:
+    """The scenarios whose lanes state σ: share of points within 1σ / 2σ (68 % / 95 % when
+    calibrated), mean stated σ beside the mean error; "" when none does."""
+    rows = [[r.key.map, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,
+             str(c.points), _fmt(100.0 * c.within_1sigma, 1), _fmt(100.0 * c.within_2sigma, 1), _fmt(c.mean_sigma_m),
+             _fmt(c.mean_error_m)]
+            for r in sorted(results, key=_sort_key) if (c := r.calibration) is not None]
+    if not rows:
+        return ""
+    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "points", "within 1σ [%]", "within 2σ [%]",
+              "mean σ [m]", "mean error [m]"]
+    return "Errors of the points against the lateral 1σ the fusion states for them (68 % / 95 % when calibrated).\n\n" + \
+        _table(header, rows)
 
 
 def extended_markdown(results: Sequence[ScenarioResult]) -> str:

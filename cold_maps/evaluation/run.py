@@ -81,13 +81,15 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     the data it needs (picklable, for a worker process): per map and scenario the error per
     frame of its own coop (Fig. 7) and the overlay of its worst frame (Fig. 8); per map,
     when the run records vehicle counts, the max error against the perception range of
-    every fusion."""
+    every fusion; per map, when its lanes state σ, the reliability of that σ."""
     from cold_maps.evaluation.plots import (
         ErrorSeries,
         plot_error_series,
         plot_error_vs_range,
         plot_frame_overlay,
+        plot_reliability,
         range_points,
+        reliability_points,
     )
 
     folder = out / PLOTS_DIR
@@ -111,6 +113,15 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
         path = folder / f"error_vs_range_{_file_part(map_name)}.png"
         jobs.append(functools.partial(plot_error_vs_range, path, range_points(accumulators),
                                       title=f"{map_name}: max error against perception range"))
+    by_map: dict[str, list[ScenarioAccumulator]] = {}
+    for key, accumulator in collector.accumulators.items():
+        by_map.setdefault(key.map, []).append(accumulator)
+    for map_name, accumulators in by_map.items():
+        curves = reliability_points(accumulators)
+        if curves:
+            path = folder / f"reliability_{_file_part(map_name)}.png"
+            jobs.append(functools.partial(plot_reliability, path, curves,
+                                          title=f"{map_name}: reliability of the stated σ"))
     for (map_name, label), overlay in collector.overlays.items():
         path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
         jobs.append(functools.partial(

@@ -1,0 +1,229 @@
+"""Lateral uncertainty (1σ) through the fusion: the model, in one place.
+
+Every σ here is the *lateral* 1σ [m] of a border point: across the border, in the world
+frame (a scalar, the same in any frame). Sources and how they combine:
+
+- **Sensor**: the per-point σ a detection states (``LaneDetection.left_sigma`` /
+  ``right_sigma``); a detection without them makes the fused σ unknown (None).
+- **Pose**: a sender's pose error δ = (δx, δy, δψ) (covariance ``pose_cov``, world frame)
+  moves its point p laterally by J·δ, J = (n_x, n_y, t·(p − s)): the position error projected
+  on the border normal n, plus the yaw error times the lever arm of p from the sender s
+  along the border tangent t (the distance ahead of the sender on a straight road). Its
+  variance J Σ Jᵀ (cross terms included) is added to the sensor variance. A detection
+  without ``pose_cov`` has an exact pose (the paper's assumption).
+- **Relative pose**: the fusion works in the ego frame. There the ego's own points carry
+  only their sensor variance, while the coop's points carry the coop's pose variance *and*
+  the ego's (the relative pose ego⁻¹·coop holds both errors; to first order their
+  covariances add, each with its own lever arm). Inverse-variance convoy weights are
+  computed in the ego frame: w_coop = σ_e² / (σ_e² + σ_c² + J_cΣ_cJ_cᵀ + J_eΣ_eJ_eᵀ).
+- **Fused point** (world frame, the result's frame): with weight w of the coop point,
+  σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
+  are independent. For inverse-variance weights and an exact ego pose this is
+  1 / (1/σ_e² + 1/σ_c²).
+- **Gap bridge** (spline fusion): see :func:`bridge_variance`: the errors at the two ends
+  propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
+  turning the end tangents by h10/h11 times the gap length) plus an interpolation term
+  k·d growing with the distance d from the nearer end, k per interpolation from
+  :data:`BRIDGE_SIGMA_PER_M` (calibrated on the analytic roads).
+- **History** (:func:`fusion.fuse_history`): a history point's σ fades linearly from the
+  ego seam's σ to the coop seam's, like the seam offsets (:func:`seam_sigma`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from fusion.types import LaneDetection, NDArrayFloat
+
+BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.0485, "hermite": 0.0413}
+"""Interpolation error of a gap bridge per metre of distance from its nearer end (1σ, m/m),
+per interpolation: k = sqrt(Σe² / Σd²) over every gap point of 40 noise-free pairs of each
+of the four analytic road families (:data:`fusion.analytic.FAMILIES`: corners with and
+without clothoids, arcs, S-bends), e the point's true error, d its distance from the nearer
+end; ``tools/calibrate_bridge_sigma.py`` reproduces it (k·d covers 83 % / 98 % of those
+errors within 1σ / 2σ for ``paper``, 88.5 % / 98 % for ``hermite``; an exact straight road
+has no interpolation error, so the term is conservative there)."""
+
+
+@dataclass(frozen=True)
+class BorderVariance:
+    """Lateral variances [m²] of the points of one border of one detection.
+
+    Fields: ``sensor`` the detection's stated σ² per point; ``pose`` the variance its sender's
+    pose error adds per point (J Σ Jᵀ, see the module docstring), zeros without
+    ``pose_cov``; ``relative`` the variance the *other* sender's pose error adds to these
+    points in that sender's frame (zeros for the ego's own points). All ``(N,)``.
+    """
+
+    sensor: NDArrayFloat
+    pose: NDArrayFloat
+    relative: NDArrayFloat
+
+    @property
+    def world(self) -> NDArrayFloat:
+        """Variance of the points in the world frame: sensor plus own pose [m²]."""
+        return self.sensor + self.pose
+
+
+def tangents(points: NDArrayFloat) -> NDArrayFloat:
+    """Unit tangents ``(N, 2)`` of a polyline (central differences, one-sided at the ends)."""
+    step = np.gradient(points, axis=0)
+    norm = np.hypot(step[:, 0], step[:, 1])
+    norm[norm == 0.0] = 1.0
+    return step / norm[:, None]
+
+
+def frame_covariance(pose_cov: NDArrayFloat | None, frame_yaw_rad: float) -> NDArrayFloat:
+    """A world-frame (x, y, yaw) pose covariance expressed in a frame rotated by
+    ``frame_yaw_rad`` (zeros for None)."""
+    if pose_cov is None:
+        return np.zeros((3, 3))
+    c, s = math.cos(frame_yaw_rad), math.sin(frame_yaw_rad)
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rotation @ pose_cov @ rotation.T
+
+
+def pose_variance(points: NDArrayFloat, sender_xy: tuple[float, float], covariance: NDArrayFloat) -> NDArrayFloat:
+    """Lateral variance [m²] of ``points`` (``(N, 2)``, a border) from a pose error of their
+    sender at ``sender_xy`` with ``covariance`` (x, y, yaw), all in one frame: J Σ Jᵀ with
+    J = (n_x, n_y, t·(p − s))."""
+    if not covariance.any():
+        return np.zeros(points.shape[0])
+    t = tangents(points)
+    jacobian = np.column_stack((-t[:, 1], t[:, 0], np.einsum("ij,ij->i", t, points - np.asarray(sender_xy))))
+    return np.maximum(np.einsum("ij,jk,ik->i", jacobian, covariance, jacobian), 0.0)
+
+
+def has_sigma(detection: LaneDetection) -> bool:
+    """Whether a detection states the σ of both its borders."""
+    return detection.left_sigma is not None and detection.right_sigma is not None
+
+
+def own_variances(detection: LaneDetection) -> tuple[BorderVariance, BorderVariance] | None:
+    """:class:`BorderVariance` of a detection's (left, right) borders with no other sender;
+    None when it states no σ."""
+    if not has_sigma(detection):
+        return None
+    covariance = frame_covariance(detection.pose_cov, detection.pose.yaw)
+    out = []
+    for points, sigma in ((detection.left, detection.left_sigma), (detection.right, detection.right_sigma)):
+        assert sigma is not None
+        zeros = np.zeros(points.shape[0])
+        out.append(BorderVariance(sigma * sigma, pose_variance(points, (0.0, 0.0), covariance), zeros))
+    return out[0], out[1]
+
+
+@dataclass(frozen=True)
+class PairUncertainty:
+    """What the fusion of a pair needs to know of its uncertainty, in the ego frame.
+
+    Fields: ``borders`` :class:`BorderVariance` of (ego left, ego right, coop left, coop
+    right); ``ego_cov``, ``coop_cov`` the senders' (x, y, yaw) pose covariances rotated into
+    the ego frame (zeros when exact); ``coop_xy`` the coop's position there [m].
+    """
+
+    borders: tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance]
+    ego_cov: NDArrayFloat
+    coop_cov: NDArrayFloat
+    coop_xy: tuple[float, float]
+
+
+def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDArrayFloat, ...],
+                     coop_xy: tuple[float, float]) -> PairUncertainty | None:
+    """:class:`PairUncertainty` of a pair whose ``borders`` (ego left, ego right, coop left,
+    coop right) are in the ego frame with the coop at ``coop_xy``; None unless both
+    detections state σ."""
+    own = own_variances(ego)
+    if own is None or not has_sigma(coop):
+        return None
+    yaw = ego.pose.yaw
+    ego_cov, coop_cov = frame_covariance(ego.pose_cov, yaw), frame_covariance(coop.pose_cov, yaw)
+    coop_parts = []
+    for points, sigma in ((borders[2], coop.left_sigma), (borders[3], coop.right_sigma)):
+        assert sigma is not None
+        coop_parts.append(BorderVariance(sigma * sigma, pose_variance(points, coop_xy, coop_cov),
+                                         pose_variance(points, (0.0, 0.0), ego_cov)))
+    return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy)
+
+
+def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat) -> NDArrayFloat:
+    """World variance [m²] of (1 − w)·P_ego + w·P_coop: w²·σ_c² + (1 − w)²·σ_e²."""
+    return w * w * coop_world + (1.0 - w) * (1.0 - w) * ego_world
+
+
+def inverse_variance_weight(ego_frame_ego: NDArrayFloat, ego_frame_coop: NDArrayFloat) -> NDArrayFloat:
+    """w_coop = σ_e² / (σ_e² + σ_c²) from the ego-frame variances of paired points; 0.5 where
+    both are exact (0 / 0)."""
+    total = ego_frame_ego + ego_frame_coop
+    out = np.full(total.shape, 0.5)
+    np.divide(ego_frame_ego, total, out=out, where=total > 0.0)
+    return out
+
+
+def smoothstep(x: NDArrayFloat) -> NDArrayFloat:
+    """3x² − 2x³ on x clipped to [0, 1]: 0 → 1 with zero slope at both ends."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass(frozen=True)
+class BridgeEnd:
+    """One end of a gap bridge: ``sensor`` the stated lateral variance of the end point
+    [m²]; ``jacobian`` (3,) how its sender's pose error (x, y, yaw, the bridge's frame) moves
+    the end laterally; ``covariance`` (3, 3) that pose error's covariance (zeros when exact)."""
+
+    sensor: float
+    jacobian: NDArrayFloat
+    covariance: NDArrayFloat
+
+
+def bridge_end(points: NDArrayFloat, variance: BorderVariance, at_end: bool, sender_xy: tuple[float, float],
+               covariance: NDArrayFloat) -> BridgeEnd:
+    """The :class:`BridgeEnd` of a border's last (``at_end``) or first point; ``points``,
+    ``sender_xy`` and ``covariance`` in one frame."""
+    k = -1 if at_end else 0
+    t = tangents(points[-2:] if at_end else points[:2])[k]
+    lever = float(t @ (points[k] - np.asarray(sender_xy)))
+    jacobian = np.array([-t[1], t[0], lever])
+    return BridgeEnd(float(variance.sensor[k]), jacobian, covariance)
+
+
+def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, ego_end: BridgeEnd,
+                    coop_start: BridgeEnd, sigma_per_m: float) -> NDArrayFloat:
+    """Lateral world variance [m²] of the gap points ``gap`` (``(K, 2)``) of a bridge from
+    ``start`` to ``stop`` (the ego border's last and the coop border's first point).
+
+    With τ the arc-length fraction along the bridge, L its length and d = L·min(τ, 1 − τ)
+    the distance from the nearer end, the cubic Hermite basis carries the end errors in:
+    the sensor parts of the ends' variances as (h00·σ_E)² + (h01·σ_C)², each sender's pose
+    error δ as ((h00·J_E + h10·L·e_ψ)·δ)² for the ego end and ((h01·J_C + h11·L·e_ψ)·δ)² for
+    the coop end (a yaw error turns that end's tangent, e_ψ = (0, 0, 1)); the interpolation
+    error adds (``sigma_per_m``·d)² (:data:`BRIDGE_SIGMA_PER_M`).
+    """
+    if gap.shape[0] == 0:
+        return np.empty(0)
+    chain = np.concatenate((start[None, :], gap, stop[None, :]))
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+    length = float(s[-1]) or 1.0
+    tau = s[1:-1] / length
+    t2, t3 = tau * tau, tau * tau * tau
+    h00, h01 = 2.0 * t3 - 3.0 * t2 + 1.0, 3.0 * t2 - 2.0 * t3
+    h10, h11 = t3 - 2.0 * t2 + tau, t3 - t2
+    out = (sigma_per_m * length * np.minimum(tau, 1.0 - tau)) ** 2
+    for end, h_offset, h_turn in ((ego_end, h00, h10), (coop_start, h01, h11)):
+        out += h_offset * h_offset * end.sensor
+        if end.covariance.any():
+            a = h_offset[:, None] * end.jacobian + (h_turn * length)[:, None] * np.array([0.0, 0.0, 1.0])
+            out += np.maximum(np.einsum("ij,jk,ik->i", a, end.covariance, a), 0.0)
+    return out
+
+
+def seam_sigma(ego_end_sigma: float, coop_start_sigma: float, w: NDArrayFloat) -> NDArrayFloat:
+    """σ [m] of history points blended between two seams (``w`` 0 at the ego seam, 1 at the
+    coop seam): (1 − w)·σ_E + w·σ_C, the seams' errors faded like the offsets, taken as fully
+    correlated with the history's own (an upper bound of the independent case)."""
+    return (1.0 - w) * ego_end_sigma + w * coop_start_sigma

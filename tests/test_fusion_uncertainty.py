@@ -1,0 +1,278 @@
+"""Uncertainty through the fusion (issue 25): inverse-variance convoy weights, σ of fused,
+bridged, history and chained points against closed forms; the defaults unchanged."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import fusion
+from fusion import FusionParams, InvalidParameterError, LaneDetection, Source
+from fusion.analytic import AnalyticRoad, Segment, detect, with_history
+from fusion.geometry import transform
+from fusion.uncertainty import BRIDGE_SIGMA_PER_M
+
+WIDTH_M = 3.5
+DETERMINISTIC = settings(max_examples=40, deadline=None, derandomize=True, database=None,
+                         suppress_health_check=[HealthCheck.too_slow])
+
+
+def straight(yaw_rad: float = 0.0) -> AnalyticRoad:
+    return AnalyticRoad([Segment(300.0)], x0=5.0, y0=-3.0, yaw0=yaw_rad)
+
+
+def sensed(road: AnalyticRoad, s_from: float, sigma: float | np.ndarray, *, shift_m: float = 0.0,
+           pose_cov: np.ndarray | None = None, length_m: float = 30.0) -> LaneDetection:
+    """Lane detection on ``road`` from ``s_from`` with both borders shifted left by ``shift_m``
+    (a rigid lateral error) and stating ``sigma`` per point (a constant or a function of x)."""
+    det = detect(road, s_from, length_m, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    left, right = (border + (0.0, shift_m) for border in (det.left, det.right))
+    sigmas = [np.full(b.shape[0], sigma) if np.isscalar(sigma) else sigma(b[:, 0]) for b in (left, right)]
+    return LaneDetection(det.pose, left, right, left_sigma=sigmas[0], right_sigma=sigmas[1], pose_cov=pose_cov)
+
+
+def lateral(points: np.ndarray, road: AnalyticRoad, offset_m: float) -> np.ndarray:
+    """Signed lateral offset of world ``points`` from the straight road's border at ``offset_m``."""
+    yaw = float(road.heading[0])
+    local = transform(points, 0.0, 0.0, -yaw) - transform(np.array([[road.xy[0, 0], road.xy[0, 1]]]), 0.0, 0.0, -yaw)
+    return local[:, 1] - offset_m
+
+
+def along_m(points: np.ndarray, road: AnalyticRoad) -> np.ndarray:
+    yaw = float(road.heading[0])
+    return (points - road.xy[0]) @ np.array([math.cos(yaw), math.sin(yaw)])
+
+
+IV = FusionParams(convoy_weights="inverse-variance", convoy_blend_offset_m=10.0)
+
+
+def overlap_middle(result: fusion.FusionResult, road: AnalyticRoad, s_from: float, s_to: float) -> np.ndarray:
+    """Mask of the fused left border's points between road stations ``s_from`` and ``s_to``."""
+    s = along_m(result.left, road)
+    return (result.left_source == Source.FUSED) & (s > s_from) & (s < s_to)
+
+
+@pytest.mark.parametrize("sigma_e, sigma_c", [(0.2, 0.1), (0.05, 0.05), (0.03, 0.12)])
+def test_inverse_variance_weights_match_the_closed_form_of_two_gaussian_sources(sigma_e: float,
+                                                                                 sigma_c: float) -> None:
+    road = straight(0.4)
+    a, b = 0.10, -0.05  # rigid lateral errors of the ego and the coop detection [m]
+    ego = sensed(road, 10.0, sigma_e, shift_m=a)
+    coop = sensed(road, 20.0, sigma_c, shift_m=b)  # 10 m ahead: a 20 m overlap, 10 m of it past both 5 m blends
+    result = fusion.fuse(ego, coop, params=IV)
+    assert result.kind == "convoy"
+    middle = overlap_middle(result, road, 25.5, 34.5)
+    assert middle.sum() > 80
+    w = sigma_e**2 / (sigma_e**2 + sigma_c**2)
+    np.testing.assert_allclose(lateral(result.left[middle], road, 0.5 * WIDTH_M), w * b + (1 - w) * a, atol=1e-9)
+    np.testing.assert_allclose(result.left_sigma[middle], math.sqrt(1.0 / (1.0 / sigma_e**2 + 1.0 / sigma_c**2)),
+                               rtol=1e-12)
+
+
+def test_inverse_variance_sigma_is_the_spread_of_fused_gaussian_errors() -> None:
+    """Monte Carlo over seeded Gaussian rigid errors of both sources: the fused points' spread
+    is the stated σ (300 draws: the sample σ lies within 10 % of the true one)."""
+    road = straight()
+    sigma_e, sigma_c = 0.08, 0.04
+    rng = np.random.default_rng(7)
+    errors, stated = [], None
+    for a, b in zip(rng.normal(0.0, sigma_e, 300), rng.normal(0.0, sigma_c, 300)):
+        result = fusion.fuse(sensed(road, 10.0, sigma_e, shift_m=a), sensed(road, 20.0, sigma_c, shift_m=b), params=IV)
+        middle = overlap_middle(result, road, 29.9, 30.1)
+        errors.append(lateral(result.left[middle], road, 0.5 * WIDTH_M)[0])
+        stated = result.left_sigma[middle][0]
+    expected = math.sqrt(1.0 / (1.0 / sigma_e**2 + 1.0 / sigma_c**2))
+    assert stated == pytest.approx(expected, rel=1e-12)
+    assert float(np.std(errors)) == pytest.approx(expected, rel=0.10)
+
+
+@pytest.mark.parametrize("ego_cov", [None, np.diag([0.02**2, 0.05**2, 0.003**2])])
+def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(ego_cov: np.ndarray | None) -> None:
+    """Straight road heading 0.7 rad, anisotropic world covariances: lateral variance of a
+    point x ahead of its sender = sin²ψ·σx² + cos²ψ·σy² + σψ²·x² (its normal is (−sin ψ, cos ψ))."""
+    yaw = 0.7
+    road = straight(yaw)
+    sigma_e = lambda x: np.hypot(0.03, 0.004 * x)  # noqa: E731 - a σ growing with distance
+    sigma_c = 0.04
+    coop_cov = np.diag([0.08**2, 0.03**2, 0.002**2])
+    ego = sensed(road, 10.0, sigma_e, pose_cov=ego_cov)
+    coop = sensed(road, 20.0, sigma_c, pose_cov=coop_cov)
+    result = fusion.fuse(ego, coop, params=IV)
+    middle = overlap_middle(result, road, 25.5, 34.5)
+    x_ego = along_m(result.left[middle], road) - 10.0
+    x_coop = x_ego - 10.0
+
+    def pose_var(cov: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+        if cov is None:
+            return np.zeros_like(x)
+        return math.sin(yaw) ** 2 * cov[0, 0] + math.cos(yaw) ** 2 * cov[1, 1] + cov[2, 2] * x * x
+
+    ve, pe = sigma_e(x_ego) ** 2, pose_var(ego_cov, x_ego)
+    vc, pc = sigma_c**2, pose_var(coop_cov, x_coop)
+    w = ve / (ve + vc + pc + pe)  # ego frame: the coop carries both pose errors
+    np.testing.assert_allclose(result.left_sigma[middle], np.sqrt(w * w * (vc + pc) + (1 - w) ** 2 * (ve + pe)),
+                               rtol=1e-6)
+    ego_only = result.left_source == Source.EGO
+    x0 = along_m(result.left[ego_only], road) - 10.0
+    np.testing.assert_allclose(result.left_sigma[ego_only], np.sqrt(sigma_e(x0) ** 2 + pose_var(ego_cov, x0)),
+                               rtol=1e-6)
+    coop_only = result.left_source == Source.COOP
+    x1 = along_m(result.left[coop_only], road) - 20.0
+    np.testing.assert_allclose(result.left_sigma[coop_only], np.sqrt(sigma_c**2 + pose_var(coop_cov, x1)), rtol=1e-6)
+
+
+def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
+    road = straight()
+    ego, coop = sensed(road, 10.0, 0.1, shift_m=0.08), sensed(road, 20.0, 0.05, shift_m=-0.08)
+    steps = {}
+    for weights in ("paper", "inverse-variance"):
+        result = fusion.fuse(ego, coop, params=FusionParams(convoy_weights=weights))
+        steps[weights] = float(np.abs(np.diff(lateral(result.left, road, 0.5 * WIDTH_M))).max())
+    assert steps["paper"] == pytest.approx(0.75 * 0.16, abs=1e-6)  # the paper's weights jump at the overlap start
+    assert steps["inverse-variance"] < 0.01  # smoothstep over 5 m: at most 1.5·0.16/5·0.1 m per point
+
+
+def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
+    """Hermite propagation of the end errors plus k·d, with the coop's pose error: at arc
+    fraction τ of a bridge of length L (ego exact), σ² = (k·L·min(τ, 1 − τ))² + h00²σ_E² + h01²σ_C²
+    + h01²σ_xy² + (h11·L)²σ_ψ²."""
+    road = straight(-0.3)
+    sigma_e, sigma_c, sxy, syaw = 0.12, 0.05, 0.06, 0.004
+    ego = sensed(road, 10.0, sigma_e)
+    coop = sensed(road, 70.0, sigma_c, pose_cov=np.diag([sxy**2, sxy**2, syaw**2]))  # a 30 m gap
+    for interpolation in ("paper", "hermite"):
+        result = fusion.fuse(ego, coop, interpolation=interpolation)
+        assert result.kind == "spline"
+        gap = result.left_source == Source.INTERPOLATED
+        tau = (along_m(result.left[gap], road) - 40.0) / 30.0
+        h00, h01, h11 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3, tau**3 - tau**2
+        d = 30.0 * np.minimum(tau, 1.0 - tau)
+        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * d) ** 2 + (h00 * sigma_e) ** 2 + (h01 * sigma_c) ** 2
+                           + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
+        np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=2e-3)
+        assert result.left_sigma[gap].max() > 0.5 * BRIDGE_SIGMA_PER_M[interpolation] * 30.0
+
+
+def test_defaults_keep_todays_geometry_and_state_no_sigma() -> None:
+    road = straight(0.2)
+    stations = (10.0, 35.0, 70.0)
+    plain = [detect(road, s, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M) for s in stations]
+    assert FusionParams().convoy_weights == "paper" and FusionParams().coop_weight == 0.75
+    for coop, station in zip(plain[1:], stations[1:]):
+        bare = fusion.fuse(plain[0], coop)
+        assert bare.kind != "none" and bare.left_sigma is None and bare.right_sigma is None
+        stated = fusion.fuse(sensed(road, 10.0, 0.1), sensed(road, station, 0.05))
+        np.testing.assert_array_equal(bare.left, stated.left)  # σ changes no point under the paper's weights
+        np.testing.assert_array_equal(bare.right_source, stated.right_source)
+    mean = fusion.fuse(plain[0], plain[1], params=FusionParams(convoy_weights="mean"))
+    np.testing.assert_array_equal(mean.left, fusion.fuse(plain[0], plain[1],
+                                                         params=FusionParams(convoy_strategy="mean")).left)
+    assert fusion.fuse_chain(plain[0], plain[1:]).left_sigma is None
+
+
+def test_inverse_variance_without_sigma_takes_the_mean_weights_and_bad_settings_are_refused() -> None:
+    road = straight()
+    ego, coop = (detect(road, s, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M) for s in (10.0, 35.0))
+    np.testing.assert_array_equal(fusion.fuse(ego, coop, params=FusionParams(convoy_weights="inverse-variance")).left,
+                                  fusion.fuse(ego, coop, params=FusionParams(convoy_weights="mean")).left)
+    with pytest.raises(InvalidParameterError, match="convoy_weights"):
+        FusionParams(convoy_weights="median")  # type: ignore[arg-type]
+    with pytest.raises(InvalidParameterError, match="convoy_strategy 'weighted'"):
+        FusionParams(convoy_weights="mean", convoy_strategy="nearest")
+
+
+def test_history_points_fade_from_the_ego_seam_sigma_to_the_coop_seam_sigma() -> None:
+    road = straight(0.1)
+    ego = sensed(road, 10.0, 0.2)
+    coop = with_history(road, sensed(road, 70.0, 0.05), 70.0, 40.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    result = fusion.fuse_history(ego, coop)
+    assert result.kind == "history"
+    gap = result.left_source == Source.COOP_HISTORY
+    w = (along_m(result.left[gap], road) - 40.0) / 30.0
+    np.testing.assert_allclose(result.left_sigma[gap], 0.2 + w * (0.05 - 0.2), atol=2e-3)
+
+
+def test_a_chain_keeps_the_sigma_of_points_a_link_leaves_unchanged() -> None:
+    road = straight()
+    ego, first, second = sensed(road, 10.0, 0.1), sensed(road, 70.0, 0.05), sensed(road, 130.0, 0.07)
+    chain = fusion.fuse_chain(ego, [first, second])
+    pair = fusion.fuse(ego, first)
+    assert chain.vehicles == 3 and chain.left_sigma.shape == chain.left.shape[:1]
+    n = pair.left.shape[0] - first.left.shape[0]  # the pair's points before the first coop's detection
+    np.testing.assert_array_equal(chain.left_sigma[:n], pair.left_sigma[:n])
+    second_link = fusion.fuse(first, second)
+    np.testing.assert_allclose(chain.left_sigma[-second_link.left.shape[0]:], second_link.left_sigma)
+
+
+road_yaws = st.floats(-math.pi, math.pi)
+
+
+@DETERMINISTIC
+@given(yaw=road_yaws, curvature=st.floats(-1 / 40.0, 1 / 40.0), lead=st.floats(5.0, 75.0),
+       sigma0=st.floats(0.0, 0.3), sigma1=st.floats(0.0, 0.01), pose_xy=st.floats(0.0, 0.2),
+       pose_yaw=st.floats(0.0, 0.01), weights=st.sampled_from(["paper", "mean", "inverse-variance"]),
+       interpolation=st.sampled_from(["paper", "hermite"]), history=st.booleans())
+def test_sigma_is_finite_non_negative_and_one_per_fused_point(yaw: float, curvature: float, lead: float,
+                                                              sigma0: float, sigma1: float, pose_xy: float,
+                                                              pose_yaw: float, weights: str, interpolation: str,
+                                                              history: bool) -> None:
+    road = AnalyticRoad([Segment(40.0), Segment(60.0, curvature), Segment(120.0)], yaw0=yaw)
+    cov = np.diag([pose_xy**2, pose_xy**2, pose_yaw**2])
+    sigma = lambda x: np.hypot(sigma0, sigma1 * x)  # noqa: E731
+    ego = sensed(road, 10.0, sigma)
+    coop = sensed(road, 10.0 + lead, sigma, pose_cov=cov)
+    if history:
+        coop = with_history(road, coop, 10.0 + lead, 40.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    params = FusionParams(convoy_weights=weights)  # type: ignore[arg-type]
+    results = [fusion.fuse_history(ego, coop, interpolation=interpolation, params=params),
+               fusion.fuse_chain(ego, [coop, sensed(road, 20.0 + 2 * lead, sigma, pose_cov=cov)],
+                                 interpolation=interpolation, params=params)]
+    for result in results:
+        for border, sigma_out in ((result.left, result.left_sigma), (result.right, result.right_sigma)):
+            assert sigma_out is not None
+            assert sigma_out.shape == (border.shape[0],)
+            assert np.isfinite(sigma_out).all() and (sigma_out >= 0.0).all()
+
+
+def test_fusion_result_refuses_sigma_of_another_length() -> None:
+    road = straight()
+    result = fusion.fuse(*(detect(road, s, 30.0, 1.75, -1.75) for s in (10.0, 35.0)))
+    with pytest.raises(InvalidParameterError, match="left_sigma"):
+        replace(result, left_sigma=np.zeros(result.left.shape[0] - 1))
+
+
+def test_end_fits_weight_points_by_inverse_variance() -> None:
+    """The last 1.5 m of the ego borders hook 0.3 m aside with a stated σ of 10 m (2 cm
+    elsewhere): weighted by 1/σ² the end fit extrapolates the good points (the true end and
+    heading); unweighted it follows the hook."""
+    road = AnalyticRoad([Segment(200.0)])
+    ego, coop = detect(road, 10.0, 30.0, 1.75, -1.75), detect(road, 70.0, 30.0, 1.75, -1.75)
+
+    def hooked(border: np.ndarray) -> np.ndarray:
+        out = border.copy()
+        tail = out[:, 0] > 28.5
+        out[tail, 1] += 0.3 * (out[tail, 0] - 28.5) / 1.5
+        return out
+
+    el, er = hooked(ego.left), hooked(ego.right)
+    sigmas = [np.where(b[:, 0] > 28.5, 10.0, 0.02) for b in (el, er)] + [np.full(len(b), 0.02)
+                                                                          for b in (coop.left, coop.right)]
+    from fusion.spline import lane_end_fits
+
+    plain, weighted = (lane_end_fits((el, er), (coop.left, coop.right), None, s)[0] for s in (None, sigmas))
+    assert abs(weighted.point[1] - 1.75) < 1e-3 and abs(weighted.direction[1]) < 1e-3
+    assert abs(plain.point[1] - 1.75) > 0.1 and abs(plain.direction[1]) > 0.1
+    deviation = {}
+    for stated in (None, sigmas):
+        pair = [LaneDetection(d.pose, left, right, left_sigma=None if stated is None else stated[i],
+                              right_sigma=None if stated is None else stated[i + 1])
+                for i, (d, left, right) in zip((0, 2), ((ego, el, er), (coop, coop.left, coop.right)))]
+        bridged = fusion.fuse(*pair, interpolation="hermite")
+        gap = bridged.left[bridged.left_source == Source.INTERPOLATED]
+        deviation[stated is None] = float(np.abs(gap[:, 1] - 1.75).max())
+    assert deviation[False] < 1e-3 < 1.0 < deviation[True]  # the bridge follows the fits: the hook or the line
