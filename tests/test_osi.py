@@ -210,6 +210,24 @@ def test_sigma_becomes_rmse_along_the_normal_and_types_are_written() -> None:
     assert decoded["sender"] == "coop1" and decoded["frame"] == 7
 
 
+def test_a_detection_stating_sigma_is_recorded_with_its_rmse(tmp_path: Path) -> None:
+    import fusion
+    from cold_maps.recording.osi import read_osi_detections
+
+    trace = tmp_path / "t.osi"
+    left = np.column_stack((np.arange(0.0, 3.0, 0.1), np.full(30, 1.75)))
+    sigma = np.linspace(0.05, 0.2, 30)
+    detection = fusion.LaneDetection(fusion.Pose2D(0.0, 0.0, 0.0), left, left - [0.0, 3.5], left_sigma=sigma)
+    with Recorder(None, osi=trace, stamp_base_ns=0) as recorder:
+        recorder.write_detection(0.0, 0, "coop1", (0.0, 0.0, 0.0), detection.left, detection.right, lanes=detection)
+    (message,) = read_trace(trace)
+    left_boundary, right_boundary = message.lane_boundary
+    assert np.allclose(_points(left_boundary.boundary_line_rmse), np.column_stack((np.zeros(30), sigma)), atol=1e-15)
+    assert not right_boundary.boundary_line_rmse
+    ((_, (read,)),) = list(read_osi_detections(trace))
+    assert np.allclose(read["left_sigma"], sigma, atol=1e-15) and read["right_sigma"] is None
+
+
 @pytest.mark.parametrize("interrupt", [RuntimeError, KeyboardInterrupt])
 def test_an_interrupted_trace_is_finalised_and_marked_partial(tmp_path: Path, interrupt: type[Exception]) -> None:
     trace = tmp_path / "t.osi"
