@@ -299,8 +299,8 @@ class _PendingScene:
 
 
 class Recorder:
-    """Context manager writing one run's MCAP file (see the module docstring) and, with
-    ``osi``, the detections as an OSI trace there (:mod:`cold_maps.recording.osi`);
+    """Context manager writing one run's MCAP file ``path`` (see the module docstring) and,
+    given the path ``osi``, the detections as an OSI trace (:mod:`cold_maps.recording.osi`);
     ``path`` None writes the trace alone.
 
     ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata (and
