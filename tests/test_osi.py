@@ -145,6 +145,7 @@ def test_an_independent_reader_gets_the_recorded_detections(run: Path) -> None:
         assert (left.header.tracking_id.value, right.header.tracking_id.value) == (0, 1)
         for boundary, border in ((left, expected["left"]), (right, expected["right"])):
             assert _close_in_float32(_points(boundary.boundary_line), border)
+            assert not boundary.boundary_line[0].position.HasField("z")  # unset: OSI's default 0
             assert boundary.header.existence_probability == 1.0
             assert not boundary.boundary_line_rmse  # the ideal sensor states no σ
             (candidate,) = boundary.candidate

@@ -17,7 +17,7 @@ little-endian unsigned integer. Per message (docs/guide/osi.md has the whole tab
   :data:`SENDER_REFERENCE_TYPE`), the map file in ``map_reference``.
 - ``lane_boundary``: the left (``header.tracking_id`` :data:`LEFT_TRACKING_ID`) and right
   (:data:`RIGHT_TRACKING_ID`) border of the sender's lane in the sensor frame, m, in driving
-  order; ``existence_probability`` 1 (the simulated sensor sends only what it sees); one
+  order (z left unset: 0, a third less to store); ``existence_probability`` 1 (the simulated sensor sends only what it sees); one
   candidate, probability 1, its ``classification.type`` the border's marking
   (``LaneBoundary.Classification.Type`` numbers, :class:`~cold_maps.opendrive.road_marks.BoundaryType`;
   UNKNOWN until the detection carries one); ``boundary_line_rmse`` the per-point lateral
@@ -114,7 +114,7 @@ def sensor_data(stamp_ns: int, frame: int, sender: str, pose: tuple[float, float
 
     def boundary(tracking_id: int, points: NDArrayFloat, sigma: NDArrayFloat | None, kind: int) -> Any:
         rmse = [] if sigma is None else [
-            osi.LaneBoundary.BoundaryPoint(position=osi.Vector3d(x=ex, y=ey, z=0.0))
+            osi.LaneBoundary.BoundaryPoint(position=osi.Vector3d(x=ex, y=ey))
             for ex, ey in _normal_rmse(points, sigma).tolist()]
         return osi.DetectedLaneBoundary(
             header=osi.DetectedItemHeader(tracking_id=osi.Identifier(value=tracking_id),
@@ -124,7 +124,7 @@ def sensor_data(stamp_ns: int, frame: int, sender: str, pose: tuple[float, float
             candidate=[osi.DetectedLaneBoundary.CandidateLaneBoundary(
                 probability=1.0, classification=osi.LaneBoundary.Classification(
                     type=osi.LaneBoundary.Classification.Type(kind)))],
-            boundary_line=[osi.LaneBoundary.BoundaryPoint(position=osi.Vector3d(x=px, y=py, z=0.0))
+            boundary_line=[osi.LaneBoundary.BoundaryPoint(position=osi.Vector3d(x=px, y=py))
                            for px, py in points.tolist()],
             boundary_line_rmse=rmse)
 
