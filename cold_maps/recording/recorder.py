@@ -365,9 +365,10 @@ class Recorder:
             raise RecordingError("a detached recorder has no file to open")
         if self._open:
             raise RecordingError(f"{self.path}: recording is already open")
-        for folder in {self.partial_path.parent, *([self.osi_path.parent] if self.osi_path else [])}:
-            if not folder.is_dir():
-                raise RecordingError(f"{self.path}: cannot create recording: no folder {folder}")
+        osi_partial = [self.osi_path.with_name(self.osi_path.name + ".partial")] if self.osi_path else []
+        for partial in ([self.partial_path] if self.mcap else []) + osi_partial:
+            if not partial.parent.is_dir():
+                raise RecordingError(f"{partial}: cannot create recording: no folder {partial.parent}")
         self.stamp_base_ns = time.time_ns() if self._requested_base_ns is None else self._requested_base_ns
         if self.osi_path is not None:
             self._osi = OsiTraceWriter(self.osi_path, {"map": self._map_path, "params": json.loads(self._params),
