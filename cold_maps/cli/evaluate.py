@@ -6,7 +6,8 @@ gaps ``--gaps``) and distractors, fuses per frame (``--interpolation``) and meas
 Lanelet2 ground truth. ``cold-eval --paper`` runs the paper's experiments on the bundled
 straight, curve90 and rural maps. The drives run in ``--workers`` processes (default: the
 cores) with the same outputs for any number; ``--method`` adds your own fusion method.
-Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap. Exit 0;
+Outputs in ``--out``: summary.md, metrics.json, frames.csv, plots/*.png, run.mcap (``--osi``: the
+detections as an ASAM OSI trace too). Exit 0;
 1 with one line on stderr for bad input or a crash (partial outputs marked as such); 2 for
 a bad command line; 130 when interrupted, 143 on SIGTERM. ``--sensor`` picks the lane
 sensor (``simulation.sensor_profile``). ``cold-eval sweep ...``: a grid
@@ -114,6 +115,14 @@ def _sensor(text: str) -> SensorProfile:
         return load_profile(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _osi_path(text: str) -> Path:
+    """argparse type: a file path for the OSI trace (not a folder)."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; expected a trace file name such as {text}/run.osi")
+    return path
 
 
 def _cooperation(plan: MapPlan, args: argparse.Namespace) -> MapPlan:
@@ -229,6 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
+    parser.add_argument("--osi", type=_osi_path, default=None, metavar="TRACE.osi",
+                        help="also write every vehicle's detections per frame as an ASAM OSI SensorData trace "
+                             "(length-prefixed binary; cold-fuse --input reads it; default: none)")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("--stamp-base", type=_stamp_base, default=None, metavar="UNIX_S",
                         help="MCAP log time of frame 0 in s since the Unix epoch (default: the run's start)")
@@ -243,6 +255,9 @@ def _interpolations(args: argparse.Namespace) -> tuple[str, ...]:
 def _plans(args: argparse.Namespace) -> list[MapPlan]:
     from cold_maps.simulation.sensor_errors import SensorErrorModel
 
+    if args.osi is not None and (args.lanes or args.history):
+        raise UsageError("--osi writes the border pair of each vehicle's own lane: it cannot carry --lanes or "
+                         "--history")
     errors = SensorErrorModel(**{name: getattr(args, name) for name in (
         "lateral_offset_m", "noise_sigma_m", "heading_bias_rad", "range_jitter_sigma_m", "drop_probability",
         "pose_sigma_xy_m", "pose_sigma_yaw_rad")})
@@ -313,7 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                              progress=progress_stream(args),
                              run_params={k: v.describe() if isinstance(v, SensorProfile) else str(v)
                                          for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
-                             workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base)
+                             workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base,
+                             osi=args.osi)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args),
                                                                             args.convoy_weights))
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - every failure is reported as one line

@@ -2,7 +2,8 @@
 
 Reads the ``/cold/detections`` channel (``cold.LaneDetection``, see
 :mod:`cold_maps.recording.recorder`) of an MCAP file written by ``cold-eval`` or by any other source
-in that format (recording version 1, 2 or 3), fuses the ego's detection (sender ``--ego``)
+in that format (recording version 1, 2 or 3), or an ASAM OSI trace (``.osi``) of
+``cold-eval --osi`` (:mod:`cold_maps.recording.osi`), fuses the ego's detection (sender ``--ego``)
 with every other sender's of the same frame (with the sender's lane history when the
 recording carries one, :func:`fusion.fuse_history`, as ``cold-eval --history`` fused it), and
 writes a new MCAP (version 3, on the input's stamp base): the detections again, the fused
@@ -35,7 +36,9 @@ def build_parser() -> argparse.ArgumentParser:
     from fusion import DEFAULT_PARAMS, FusionParams
 
     parser = make_parser(PROG, "Fuse recorded lane detections (cold.LaneDetection) again.", progress=True)
-    parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap", help="recording to read")
+    parser.add_argument("--input", required=True, type=Path, metavar="REC.mcap|TRACE.osi",
+                        help="recording to read: a cold-eval run.mcap, or an OSI trace of cold-eval --osi (a name "
+                             "ending in .osi)")
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.mcap", help="recording to write")
     parser.add_argument("--ego", default="ego", help="sender id of the ego vehicle (default ego)")
     parser.add_argument("--mode", choices=("auto", "convoy", "spline"), default="auto", help="fusion mode")
@@ -44,11 +47,17 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar="D_I", help="longest gap d_i bridged by spline fusion in m (default "
                                             f"{DEFAULT_PARAMS.d_i_m:g}, the fusion default)")
     parser.add_argument("--map", type=Path, default=None, help="OpenDRIVE map for ground truth (default: the "
-                        "recording's cold.run map when it names one readable file)")
+                        "recording's cold.run map, or an OSI trace's GroundTruth.map_reference, when it names one "
+                        "readable file)")
     parser.add_argument("--no-gt", action="store_true", help="do not measure against ground truth")
     parser.add_argument("--report", type=Path, default=None,
                         help="folder for summary.md, metrics.json, frames.csv (default: none, no report)")
     return parser
+
+
+def is_osi_trace(path: Path) -> bool:
+    """Whether ``cold-fuse`` reads ``path`` as an OSI trace (its name ends in ``.osi``)."""
+    return path.suffix.lower() == ".osi"
 
 
 def _map_path(args: argparse.Namespace) -> Path | None:
@@ -58,7 +67,12 @@ def _map_path(args: argparse.Namespace) -> Path | None:
         return None
     if args.map is not None:
         return args.map
-    named = read_metadata(args.input).get(METADATA_RUN, {}).get("map", "")
+    if is_osi_trace(args.input):
+        from cold_maps.recording.osi import first_map_reference
+
+        named = first_map_reference(args.input)
+    else:
+        named = read_metadata(args.input).get(METADATA_RUN, {}).get("map", "")
     path = Path(named) if named else None
     return path if path is not None and path.suffix == ".xodr" and path.is_file() else None
 
@@ -97,7 +111,8 @@ class Refuser:
         lanes = {d["sender"]: fusion.LaneDetection(fusion.Pose2D(**d["pose"]), d["left"], d["right"], stamp=stamp,
                                                    sender=d["sender"], neighbours=d["neighbours"],
                                                    road_edges=d["road_edges"], branches=d["branches"],
-                                                   history=d["history"])
+                                                   history=d["history"], left_sigma=d.get("left_sigma"),
+                                                   right_sigma=d.get("right_sigma"))
                  for d in detections}
         for d in detections:
             recorder.write_detection(stamp, frame, d["sender"], tuple(d["pose"].values()), d["left"], d["right"],
@@ -197,8 +212,15 @@ def _world(detection: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _detection_count(path: Path) -> int:
-    """Number of ``/cold/detections`` messages in the recording's summary statistics (0 if none)."""
+    """Number of ``/cold/detections`` messages in the recording's summary statistics, or of
+    messages in an OSI trace's sidecar (0 if unknown)."""
     from mcap.reader import make_reader
+
+    if is_osi_trace(path):
+        from cold_maps.recording.osi import read_sidecar
+
+        messages = read_sidecar(path).get("messages", 0)
+        return messages if isinstance(messages, int) and messages > 0 else 0
 
     from cold_maps.recording.recorder import TOPIC_RAW_DETECTIONS
 
@@ -210,6 +232,22 @@ def _detection_count(path: Path) -> int:
     return sum(counts.get(c.id, 0) for c in summary.channels.values() if c.topic == TOPIC_RAW_DETECTIONS)
 
 
+def _read_input(path: Path) -> tuple[Any, int]:
+    """The frames of detections of the recording or OSI trace ``path`` (as
+    ``recorder.read_detections`` yields them) and its stamp base (ns since the Unix epoch;
+    an OSI trace's sidecar's, 0 without one)."""
+    if is_osi_trace(path):
+        from cold_maps.recording.osi import read_osi_detections, read_sidecar
+
+        base = read_sidecar(path).get("stamp_base_ns", 0)
+        if isinstance(base, bool) or not isinstance(base, int) or base < 0:
+            raise ValueError(f"{path}.json: stamp_base_ns: expected an integer >= 0, got {base!r}")
+        return read_osi_detections(path), base
+    from cold_maps.recording.recorder import read_detections, read_stamp_base
+
+    return read_detections(path), read_stamp_base(path)
+
+
 @cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
@@ -217,14 +255,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
                                       startup_failure)
     from cold_maps.common.progress import ProgressBar
-    from cold_maps.recording.recorder import Recorder, read_detections, read_stamp_base
+    from cold_maps.recording.recorder import Recorder
 
     configure_logging(args.verbose, args.quiet)
     error: BaseException | None = None
     try:
         if args.input.resolve() == args.output.resolve():
             raise ValueError(f"{args.output}: output would overwrite the input recording")
-        frames = read_detections(args.input)
+        frames, stamp_base_ns = _read_input(args.input)
         detections_total = _detection_count(args.input)
         map_path = _map_path(args)
         import fusion
@@ -240,7 +278,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
                       "interpolation": args.interpolation, "d_i_m": params.d_i_m}
         recorder = Recorder(args.output, map_path=map_path or "", params=run_params,
-                            stamp_base_ns=read_stamp_base(args.input)).__enter__()
+                            stamp_base_ns=stamp_base_ns).__enter__()
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
         return startup_failure(PROG, exc)
     count = 0

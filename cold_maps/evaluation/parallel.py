@@ -35,7 +35,7 @@ from cold_maps.evaluation.scenarios import MapPlan
 
 if TYPE_CHECKING:
     from cold_maps.network.lane_graph import LaneGraph
-    from cold_maps.recording.recorder import EncodedMessage
+    from cold_maps.recording.recorder import EncodedMessage, Recorder
     from gt_matching import GroundTruth
 
 START_METHOD: Final[str] = "spawn"
@@ -179,13 +179,12 @@ class UnitResult:
     messages: list[EncodedMessage]
 
 
-def run_unit(unit: WorkUnit, stamp_base_ns: int | None) -> UnitResult:
-    """Evaluates ``unit`` (in a worker); ``stamp_base_ns``: the recording's stamp base, None
-    when nothing is recorded."""
-    from cold_maps.recording.recorder import Recorder
-
+def run_unit(unit: WorkUnit, recording: Callable[[], Recorder] | None) -> UnitResult:
+    """Evaluates ``unit`` (in a worker); ``recording`` makes its detached ``Recorder``
+    (picklable, e.g. a ``functools.partial`` of ``Recorder.detached``), None when nothing is
+    recorded."""
     collector = Collector()
-    recorder = None if stamp_base_ns is None else Recorder.detached(stamp_base_ns)
+    recorder = None if recording is None else recording()
     _evaluator(unit.map_index).run_drive(unit.drive, collector, recorder=recorder, frame_offset=unit.frame_offset,
                                          frames=range(unit.first, unit.stop))
     return UnitResult(collector, [] if recorder is None else recorder.take())
@@ -233,12 +232,12 @@ class SubmittedUnits:
 
 
 def submit_units(executor: Executor, evaluators: Sequence[MapEvaluator], workers: int,
-                 stamp_base_ns: int | None) -> SubmittedUnits:
+                 recording: Callable[[], Recorder] | None) -> SubmittedUnits:
     """Starts every unit of ``evaluators`` on ``executor`` (the first submission starts the
-    workers); ``stamp_base_ns`` as in :func:`run_unit`."""
+    workers); ``recording`` as in :func:`run_unit`."""
     units = work_units(evaluators, workers)
     return SubmittedUnits(evaluators, units,
-                          {executor.submit(run_unit, unit, stamp_base_ns): n for n, unit in enumerate(units)})
+                          {executor.submit(run_unit, unit, recording): n for n, unit in enumerate(units)})
 
 
 def merge_units(submitted: SubmittedUnits, collector: Collector, recorder: Any,

@@ -22,7 +22,7 @@ from concurrent.futures import Executor
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Final, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Callable, Final, Mapping, Sequence, TextIO
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from cold_maps.evaluation.report import (
 )
 from cold_maps.evaluation.scenarios import MapPlan
 from cold_maps.evaluation.trust import run_warnings
+
+if TYPE_CHECKING:
+    from cold_maps.recording.recorder import Recorder
 
 LOG = logging.getLogger("cold_maps.evaluation.run")
 
@@ -223,6 +226,8 @@ class RunOptions:
             in this process. The outputs are the same for any number.
         stamp_base_ns: MCAP log time of frame 0 (ns since the Unix epoch); None: the
             recording's wall-clock start.
+        osi: the OSI trace of the detections to write (:mod:`cold_maps.recording.osi`),
+            or None.
     """
 
     out: Path
@@ -232,6 +237,7 @@ class RunOptions:
     run_params: Mapping[str, Any] | None = None
     workers: int = 1
     stamp_base_ns: int | None = None
+    osi: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -262,6 +268,9 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
     created = _missing_folders(Path(options.out))
     out = prepare_out_dir(options.out)
     try:
+        if options.osi is not None:
+            created[:0] = _missing_folders(options.osi.parent)
+            prepare_out_dir(options.osi.parent)
         evaluators = [MapEvaluator(plan) for plan in plans]
         for evaluator in evaluators:
             LOG.info("%s: preparing ground truth", evaluator.plan.path)
@@ -349,6 +358,23 @@ def _discard_plots(out: Path, collector: Collector) -> None:
         folder.rmdir()
 
 
+def _map_names(plans: Sequence[MapPlan]) -> str:
+    """The maps of a run as the recordings name them: their paths, comma-separated."""
+    return ", ".join(str(p.path) for p in plans)
+
+
+def _detached_recording(plans: Sequence[MapPlan], options: RunOptions,
+                        stamp_base_ns: int) -> Callable[[], Recorder] | None:
+    """What makes a worker's detached ``Recorder`` for the outputs of ``options`` (None
+    when nothing is recorded)."""
+    if not options.mcap and options.osi is None:
+        return None
+    from cold_maps.recording.recorder import Recorder
+
+    return functools.partial(Recorder.detached, stamp_base_ns, mcap=options.mcap, osi=options.osi is not None,
+                             map_path=_map_names(plans))
+
+
 def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], collector: Collector,
              options: RunOptions, executor: Executor | None, workers: int) -> None:
     """Evaluates every drive, on ``executor``'s workers if given, into ``collector`` and the
@@ -359,7 +385,7 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
     if executor is not None:
         from cold_maps.evaluation.parallel import submit_units
 
-        submitted = submit_units(executor, evaluators, workers, stamp_base_ns if options.mcap else None)
+        submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns))
         if options.plots:
             from cold_maps.evaluation.plots import preload
 
@@ -369,12 +395,12 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
         bar = stack.enter_context(ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval",
                                               stream=options.progress))
         recorder = None
-        if options.mcap:
+        if options.mcap or options.osi is not None:
             from cold_maps.recording.recorder import Recorder
 
-            recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME,
-                                                    map_path=", ".join(str(p.path) for p in plans),
-                                                    params=options.run_params, stamp_base_ns=stamp_base_ns))
+            recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME if options.mcap else None,
+                                                    map_path=_map_names(plans), params=options.run_params,
+                                                    stamp_base_ns=stamp_base_ns, osi=options.osi))
         if submitted is not None:
             from cold_maps.evaluation.parallel import merge_units
 

@@ -31,6 +31,8 @@ Version 2: no ``history`` key in ``cold.LaneDetection`` (otherwise as version 3)
 
 The file is written as ``<path>.partial`` and renamed when finalised; a run ended by an
 exception (Ctrl-C included) is still finalised under the final name, marked ``partial``.
+The optional OSI trace of the detections (:mod:`cold_maps.recording.osi`) is written and
+finalised the same way, its status in its sidecar.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ import numpy as np
 import fusion
 from cold_maps.common.signals import signals_ignored
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.recording.osi import OsiTraceError, OsiTraceWriter, detection_sensor_data
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
 from gt_matching.polyline import simplify_lines
@@ -69,6 +72,8 @@ STATUS_PARTIAL: Final[str] = "partial"
 LINE_THICKNESS_M: Final[float] = 0.15
 DISPLAY_DECIMALS: Final[int] = 4  # SceneUpdate coordinates rounded to 0.1 mm (raw detections stay exact)
 DISPLAY_TOLERANCE_M: Final[float] = 0.01  # SceneUpdate lines simplified to within this distance
+OSI_KIND: Final[str] = "osi"
+"""``EncodedMessage.kind`` of an encoded ``osi3.SensorData`` for the OSI trace."""
 SCENE_BATCH: Final[int] = 256
 """Scene updates a recorder keeps before it simplifies their lines together (one shapely
 call) and writes them, with the messages between them, in order."""
@@ -294,23 +299,33 @@ class _PendingScene:
 
 
 class Recorder:
-    """Context manager writing one run's MCAP file (see the module docstring).
+    """Context manager writing one run's MCAP file ``path`` (see the module docstring) and,
+    given the path ``osi``, the detections as an OSI trace (:mod:`cold_maps.recording.osi`);
+    ``path`` None writes the trace alone.
 
-    ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata;
+    ``map_path`` and ``params`` (JSON-serialisable) go into the ``cold.run`` metadata (and
+    the trace's sidecar; the map also into each OSI message's ``map_reference``);
     ``stamp_base_ns`` (ns since the Unix epoch) is the log time of stamp 0 s, by default
     the wall-clock time when the recording opens. A :meth:`detached` recorder has no file:
     it keeps its messages encoded for another recorder's :meth:`log`.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, map_path: str | os.PathLike[str] = "",
-                 params: Mapping[str, Any] | None = None, stamp_base_ns: int | None = None):
-        self.path = Path(path)
+    def __init__(self, path: str | os.PathLike[str] | None, *, map_path: str | os.PathLike[str] = "",
+                 params: Mapping[str, Any] | None = None, stamp_base_ns: int | None = None,
+                 osi: str | os.PathLike[str] | None = None):
+        if path is None and osi is None:
+            raise ValueError("Recorder: give an MCAP path, an OSI trace path or both")
+        self.mcap = path is not None
+        self.path = Path(path if path is not None else osi)  # type: ignore[arg-type]
         self.partial_path = self.path.with_name(self.path.name + ".partial")
+        self.osi_path = None if osi is None else Path(osi)
         self._map_path = str(map_path)
         self._params = json.dumps(dict(params or {}), sort_keys=True)
         self._requested_base_ns = _check_stamp_base(stamp_base_ns)
         self.stamp_base_ns = 0
+        self._open = False
         self._writer: Any = None
+        self._osi: OsiTraceWriter | None = None
         self._context: Any = None
         self._channels: dict[str, Any] = {}
         self._queue: list[EncodedMessage | _PendingScene] = []
@@ -318,11 +333,13 @@ class Recorder:
         self._detached = False
 
     @classmethod
-    def detached(cls, stamp_base_ns: int) -> Recorder:
+    def detached(cls, stamp_base_ns: int, *, mcap: bool = True, osi: bool = False,
+                 map_path: str | os.PathLike[str] = "") -> Recorder:
         """A recorder without a file (in a worker process): its writes are kept, encoded and
-        in order, for :meth:`take`; a recorder with the same ``stamp_base_ns`` writes them
-        into its file with :meth:`log`."""
-        recorder = cls(os.devnull, stamp_base_ns=stamp_base_ns)
+        in order, for :meth:`take`; a recorder with the same ``stamp_base_ns``, outputs and
+        ``map_path`` writes them into its files with :meth:`log`."""
+        recorder = cls(os.devnull if mcap else None, stamp_base_ns=stamp_base_ns, map_path=map_path,
+                       osi=os.devnull if osi else None)
         recorder.stamp_base_ns = stamp_base_ns
         recorder._detached = True
         return recorder
@@ -335,7 +352,7 @@ class Recorder:
 
     def log(self, messages: Sequence[EncodedMessage]) -> None:
         """Writes the messages of a detached recorder (same stamp base) after this one's."""
-        if self._writer is None:
+        if not self._open:
             raise RecordingError(f"{self.path}: recording is not open (use it as a context manager)")
         self._write(self._take_queue())
         self._write(messages)
@@ -346,11 +363,24 @@ class Recorder:
 
         if self._detached:
             raise RecordingError("a detached recorder has no file to open")
-        if self._writer is not None:
+        if self._open:
             raise RecordingError(f"{self.path}: recording is already open")
-        if not self.partial_path.parent.is_dir():
-            raise RecordingError(f"{self.partial_path}: cannot create recording: no folder {self.partial_path.parent}")
+        osi_partial = [self.osi_path.with_name(self.osi_path.name + ".partial")] if self.osi_path else []
+        for partial in ([self.partial_path] if self.mcap else []) + osi_partial:
+            if not partial.parent.is_dir():
+                raise RecordingError(f"{partial}: cannot create recording: no folder {partial.parent}")
         self.stamp_base_ns = time.time_ns() if self._requested_base_ns is None else self._requested_base_ns
+        if self.osi_path is not None:
+            self._osi = OsiTraceWriter(self.osi_path, {"map": self._map_path, "params": json.loads(self._params),
+                                                       "stamp_base_ns": self.stamp_base_ns})
+            try:
+                self._osi.open()
+            except OsiTraceError as exc:
+                self._osi = None
+                raise RecordingError(str(exc)) from exc
+        self._open = True
+        if not self.mcap:
+            return self
         self._context = foxglove.Context()
         try:
             # a path, not a Python file object: the SDK then writes without calling back into
@@ -364,7 +394,11 @@ class Recorder:
                 "stamp_base_ns": str(self.stamp_base_ns)})
         except Exception as exc:
             self._writer = None
+            self._open = False
             self.partial_path.unlink(missing_ok=True)
+            if self._osi is not None:
+                self._osi.discard()
+                self._osi = None
             raise RecordingError(f"{self.partial_path}: cannot start recording: {exc}") from exc
         return self
 
@@ -378,7 +412,7 @@ class Recorder:
     def _finish(self, status: dict[str, str]) -> None:
         """Writes what is queued and finalises the file with ``status``, Ctrl-C and SIGTERM
         held meanwhile (a file marked complete holds every message given to it)."""
-        if self._writer is None:
+        if not self._open:
             raise RecordingError(f"{self.path}: recording is not open")
         with signals_ignored():
             try:
@@ -387,9 +421,14 @@ class Recorder:
                 self._close(status)
 
     def _close(self, status: dict[str, str]) -> None:
-        writer, channels = self._writer, self._channels
-        self._writer = self._context = None
+        writer, channels, trace = self._writer, self._channels, self._osi
+        self._writer = self._context = self._osi = None
         self._channels = {}
+        self._open = False
+        if trace is not None:
+            trace.close(status)
+        if writer is None:
+            return
         writer.write_metadata(METADATA_STATUS, status)
         writer.close()
         for channel in channels.values():
@@ -400,7 +439,7 @@ class Recorder:
 
     def _ns(self, stamp_s: float) -> int:
         """Log time (ns since the Unix epoch) of a stamp (s since the stamp base)."""
-        if self._writer is None and not self._detached:
+        if not self._open and not self._detached:
             raise RecordingError(f"{self.path}: recording is not open (use it as a context manager)")
         return self.stamp_base_ns + _stamp_ns(stamp_s)
 
@@ -426,7 +465,10 @@ class Recorder:
         self._queue.append(EncodedMessage(topic, kind, ns, payload))
 
     def _emit_scene(self, topic: str, ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> None:
-        """Queues the :func:`scene_update` of ``lines`` (checked now, drawn with the batch)."""
+        """Queues the :func:`scene_update` of ``lines`` (checked now, drawn with the batch);
+        nothing without an MCAP file."""
+        if not self.mcap:
+            return
         checked = tuple(check_polyline(name, points) for name, points in lines.items())
         self._queue.append(_PendingScene(topic, ns, tuple(lines), checked, color))
         self._scenes += 1
@@ -444,10 +486,17 @@ class Recorder:
 
     def _write(self, messages: Sequence[EncodedMessage]) -> None:
         for message in messages:
+            if message.kind == OSI_KIND:
+                if self._osi is not None:
+                    self._osi.write(message.payload)
+                continue
             self._channel(message.topic, message.kind).log(message.payload, log_time=message.log_time_ns)
 
     def _write_json(self, topic: str, ns: int, message: Mapping[str, Any]) -> None:
         import orjson
+
+        if not self.mcap:
+            return
 
         schema = LANE_DETECTION_SCHEMA if topic == TOPIC_RAW_DETECTIONS else FRAME_METRICS_SCHEMA
         self._emit(topic, schema["title"], ns, orjson.dumps(message, option=orjson.OPT_SERIALIZE_NUMPY))
@@ -480,6 +529,11 @@ class Recorder:
         left = np.ascontiguousarray(check_polyline(f"{sender} left", left))
         right = np.ascontiguousarray(check_polyline(f"{sender} right", right))
         ns = self._ns(stamp_s)
+        if self.osi_path is not None:
+            self._emit("", OSI_KIND, ns, detection_sensor_data(ns - self.stamp_base_ns, _check_frame(frame), sender,
+                                                                (x, y, yaw), left, right, lanes, self._map_path))
+        if not self.mcap:
+            return
         raw = {"stamp": _time_msg(ns), "frame": _check_frame(frame), "sender": sender,
                "pose": {"x": x, "y": y, "yaw": yaw}, "left": left, "right": right}
         if lanes is not None:
