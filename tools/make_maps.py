@@ -215,6 +215,7 @@ class RoadSpec:
         predecessor, successor: road links (None when open).
         junction: id of the junction the road belongs to, "-1" when none.
         lane_offsets: laneOffset records, s0 absolute (m); empty for none.
+        rule: traffic rule, "RHT" or "LHT" (left lanes drive along +s).
     """
 
     id: str
@@ -228,6 +229,7 @@ class RoadSpec:
     successor: RoadLink | None = None
     junction: str = "-1"
     lane_offsets: tuple[CubicPoly, ...] = ()
+    rule: str = "RHT"
 
     @property
     def length(self) -> float:
@@ -530,7 +532,7 @@ def _road(parent: etree._Element, road: RoadSpec) -> None:
     from lxml import etree
 
     element = etree.SubElement(parent, "road")
-    _attrs(element, name=road.name, length=road.length, id=road.id, junction=road.junction, rule="RHT")
+    _attrs(element, name=road.name, length=road.length, id=road.id, junction=road.junction, rule=road.rule)
     link = etree.SubElement(element, "link")
     _road_link(link, "predecessor", road.predecessor)
     _road_link(link, "successor", road.successor)
