@@ -244,12 +244,14 @@ class RoadSpec:
 
 @dataclass(frozen=True, slots=True)
 class MapSpec:
-    """A whole map: file stem, roads, junctions and an optional PROJ geoReference string."""
+    """A whole map: file stem, roads, junctions, an optional PROJ geoReference string and
+    the header's vendor (what made it)."""
 
     name: str
     roads: tuple[RoadSpec, ...]
     junctions: tuple[Junction, ...] = ()
     geo_reference: str = ""
+    vendor: str = VENDOR
 
 
 def carriageway_lanes(
@@ -582,7 +584,7 @@ def to_xodr(spec: MapSpec) -> bytes:
 
     root = etree.Element("OpenDRIVE")
     header = etree.SubElement(root, "header")
-    _attrs(header, revMajor=1, revMinor=6, name=spec.name, version="1.0", date=DATE, vendor=VENDOR)
+    _attrs(header, revMajor=1, revMinor=6, name=spec.name, version="1.0", date=DATE, vendor=spec.vendor)
     if spec.geo_reference:
         etree.SubElement(header, "geoReference").text = etree.CDATA(spec.geo_reference)
     for road in spec.roads:

@@ -86,7 +86,7 @@ RING_SEGMENT_MIN_DEG: Final[float] = 10.0
 RAMP_RADIUS_RANGE_M: Final[tuple[float, float]] = (120.0, 250.0)
 RAMP_SPIRAL_M: Final[float] = 40.0
 MOTORWAY_MAX_HEADING_RAD: Final[float] = math.radians(20.0)
-DATE_VENDOR_NOTE: Final[str] = "cold-maps tools/map_families.py"
+VENDOR: Final[str] = "cold-maps tools/map_families.py"
 
 
 # ---- random values --------------------------------------------------------------------------
@@ -256,7 +256,7 @@ def _lane_events(rng: random.Random, length: float, left: list[float], right: li
     while True:
         last = s + 450.0 > length
         lanes = carriageway(left, right, link_back=bool(sections), link_ahead=not last, opening=opening,
-                            transition_m=opening and _length(rng, TRANSITION_RANGE_M))
+                            transition_m=_length(rng, TRANSITION_RANGE_M) if opening else 0.0)
         sections.append(SectionSpec(s, _centre_mark(rng, len(left), len(right)), lanes))
         if last:
             return tuple(sections)
@@ -392,13 +392,12 @@ def build_roundabouts(rng: random.Random, name: str) -> MapSpec:
                               (SectionSpec(0.0, _centre_mark(rng, count, count),
                                            carriageway(left, right, link_back=False, link_ahead=False)),),
                               "town", 50.0, predecessor=RoadLink("junction", str(500 + i))))
-    ring_link = dict(link_back=False, link_ahead=False)
     for i, phi in enumerate(angles):
         following = angles[(i + 1) % arm_count] + (2.0 * math.pi if i + 1 == arm_count else 0.0)
         span = following - phi - 2.0 * half_span
         roads.append(RoadSpec(str(11 + i), f"ring_{i + 1}", on_ring(phi + half_span),
                               (arc(ring_radius * span, 1.0 / ring_radius),),
-                              (SectionSpec(0.0, "solid", carriageway((), ring, **ring_link)),), "town", 30.0,
+                              (SectionSpec(0.0, "solid", carriageway((), ring, link_back=False, link_ahead=False)),), "town", 30.0,
                               predecessor=RoadLink("junction", str(500 + i)),
                               successor=RoadLink("junction", str(500 + (i + 1) % arm_count))))
     for i, phi in enumerate(angles):
@@ -409,7 +408,8 @@ def build_roundabouts(rng: random.Random, name: str) -> MapSpec:
         entry_seg = _turn(reverse(arm.start), on_ring(phi + half_span))
         exit_seg = _turn(on_ring(phi - half_span), arm.start)
         specs = (
-            (str(200 + i), "through", on_ring(phi - half_span), through_seg, ring, ring, ids, [-k for k in ids],
+            (str(200 + i), "through", on_ring(phi - half_span), through_seg, ring, ring, [-k for k in ids],
+             [-k for k in ids],
              RoadLink("road", before, "end"), RoadLink("road", after, "start"), before),
             (str(300 + i), "exit", on_ring(phi - half_span), exit_seg, ring, right, [-k for k in ids],
              [-k for k in ids], RoadLink("road", before, "end"), RoadLink("road", arm.id, "start"), before),
@@ -418,7 +418,6 @@ def build_roundabouts(rng: random.Random, name: str) -> MapSpec:
         )
         connections = []
         for road_id, kind, start, seg, w_from, w_to, links_from, links_to, pred, succ, incoming in specs:
-            links_from = [-k for k in ids] if kind == "through" else links_from
             lanes = _connecting_lanes(w_from, w_to, seg.length, links_from, links_to)
             roads.append(RoadSpec(road_id, f"{kind}_{i + 1}", start, (seg,), (SectionSpec(0.0, "none", lanes),),
                                   "town", 30.0, predecessor=pred, successor=succ, junction=junction_id))
@@ -563,6 +562,7 @@ def build(family: str, seed: int) -> MapSpec:
     if seed < 0:
         raise ValueError(f"map seed must be >= 0, got {seed}")
     spec = BUILDERS[family](random.Random(f"cold-maps/{family}/{seed}"), map_name(family, seed))
+    spec = replace(spec, vendor=f"{VENDOR} (family {family}, seed {seed})")
     return mirror(spec) if seed % 2 else spec
 
 
