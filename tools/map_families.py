@@ -74,6 +74,9 @@ RADIUS_RANGE_M: Final[tuple[float, float]] = (30.0, 600.0)
 RADIUS_MARGIN_M: Final[float] = 15.0
 """A curve's radius exceeds the width of the carriageway side on its inside by this (m)."""
 SPIRAL_RANGE_M: Final[tuple[float, float]] = (15.0, 60.0)
+ARC_RANGE_M: Final[tuple[float, float]] = (10.0, 120.0)
+LINE_RANGE_M: Final[tuple[float, float]] = (30.0, 150.0)
+LEAD_LINE_RANGE_M: Final[tuple[float, float]] = (40.0, 120.0)
 ROAD_LENGTH_M: Final[float] = 1200.0
 TRANSITION_RANGE_M: Final[tuple[float, float]] = (40.0, 100.0)
 JUNCTION_ID: Final[str] = "100"
@@ -144,7 +147,7 @@ def _clothoid_curve(rng: random.Random, sign: float, min_radius: float) -> list[
     radius = _rounded(math.exp(rng.uniform(math.log(max(min_radius, RADIUS_RANGE_M[0])),
                                            math.log(RADIUS_RANGE_M[1]))), 0.1)
     k = sign / radius
-    return [spiral(_length(rng, SPIRAL_RANGE_M), 0.0, k), arc(_length(rng, (10.0, 120.0)), k),
+    return [spiral(_length(rng, SPIRAL_RANGE_M), 0.0, k), arc(_length(rng, ARC_RANGE_M), k),
             spiral(_length(rng, SPIRAL_RANGE_M), k, 0.0)]
 
 
@@ -160,16 +163,16 @@ def wander(rng: random.Random, length_m: float, *, min_radius: float,
     """Lines, clothoid-eased curves and S-bends of at least ``length_m`` in total whose
     heading stays within ±``max_heading`` of the start (a candidate that leaves the band
     is drawn again, a line after ten tries)."""
-    segments: list[Segment] = [line(_length(rng, (40.0, 120.0)))]
+    segments: list[Segment] = [line(_length(rng, LEAD_LINE_RANGE_M))]
     heading = 0.0
     while math.fsum(seg.length for seg in segments) < length_m:
-        piece: list[Segment] = [line(_length(rng, (30.0, 150.0)))]
+        piece: list[Segment] = [line(_length(rng, LINE_RANGE_M))]
         for _ in range(10):
             maker = rng.choice((_clothoid_curve, _clothoid_curve, _s_bend))
             candidate = maker(rng, rng.choice((-1.0, 1.0)), min_radius)
             low, high, _ = heading_extremes(heading, candidate)
             if -max_heading <= low and high <= max_heading:
-                piece = [*candidate, line(_length(rng, (30.0, 150.0)))]
+                piece = [*candidate, line(_length(rng, LINE_RANGE_M))]
                 break
         segments += piece
         heading = heading_extremes(heading, piece)[2]
