@@ -252,7 +252,7 @@ def study(out: Path, families: Sequence[str], seeds: Sequence[int], configuratio
     from cold_maps import __version__
     from converters.atomic_io import atomic_output
 
-    started = time.monotonic()
+    started, commit = time.monotonic(), _git_commit()
     maps = {family: map_families.write_maps(out / "maps", [family], seeds) for family in families}
     result: dict[str, Any] = {"families": {}, "maps": {}, "warnings": {}}
     runtimes: dict[str, dict[str, float]] = {}
@@ -285,7 +285,7 @@ def study(out: Path, families: Sequence[str], seeds: Sequence[int], configuratio
         "schema_version": STUDY_SCHEMA_VERSION,
         "made": {
             "command": command, "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M"),
-            "version": __version__, "commit": _git_commit(), "python": platform.python_version(),
+            "version": __version__, "commit": commit, "python": platform.python_version(),
             "seed_set": seed_set, "seeds": _seed_text(seeds), "families": list(families),
             "configurations": {name: list(args) for name, args in configurations.items()},
             "base_args": list(BASE_ARGS), "frames": frames, "routes": routes,
