@@ -43,7 +43,7 @@ def test_confidence_curve_keeps_fusions_above_the_threshold() -> None:
 
 
 def test_study_agrees_with_the_runs_metrics(tmp_path: Path) -> None:
-    study = study_families.study(tmp_path, ["junctions"], [0], {"lanes0": ("--lanes", "0")}, frames=30, routes=1,
+    study = study_families.study(tmp_path, ["junctions"], [0], {"lanes0": ("--lanes", "0")}, frames=30, routes="1",
                                  workers=1, seed_set="tune", command="pytest")
     metrics = json.loads((tmp_path / "runs" / "lanes0" / "junctions" / "metrics.json").read_text())
     fusions = study["families"]["junctions"]["fusions"]

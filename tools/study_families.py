@@ -151,7 +151,7 @@ def fusion_label(fusion: str, d_s: float) -> str:
 
 
 def run_family(paths: Sequence[Path], config_args: Sequence[str], out: Path, *, frames: int | None,
-               routes: int | None, workers: int | None) -> tuple[dict[tuple[str, str], list[Any]], list[str]]:
+               routes: str | None, workers: int | None) -> tuple[dict[tuple[str, str], list[Any]], list[str]]:
     """One cold-eval over ``paths`` with ``config_args`` into ``out``: the left-border
     records per (map, fusion label) of the coop scenarios, and the run's warnings (ground
     truth not trustworthy, plans reduced to fit a map). RuntimeError when the run fails."""
@@ -245,7 +245,7 @@ def markdown(study: Mapping[str, Any]) -> str:
 
 
 def study(out: Path, families: Sequence[str], seeds: Sequence[int], configurations: Mapping[str, Sequence[str]], *,
-          frames: int | None, routes: int | None, workers: int | None, seed_set: str,
+          frames: int | None, routes: str | None, workers: int | None, seed_set: str,
           command: str) -> dict[str, Any]:
     """Generates the maps, runs every configuration on every family, writes ``study.json``
     and ``study.md`` into ``out``; the study record."""
@@ -325,6 +325,10 @@ def _positive(text: str) -> int:
     return value
 
 
+def _routes(text: str) -> str:
+    return text if text == "all" else str(_positive(text))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry point; returns the exit status (2 for a bad command line)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -339,7 +343,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--add-config", action="append", type=_configuration, default=[], metavar="NAME=OPTIONS",
                         help="another configuration: a name and its cold-eval options")
     parser.add_argument("--frames", type=_positive, default=None, help="frames per drive (default: cold-eval's)")
-    parser.add_argument("--routes", type=_positive, default=None, help="drives per map (default: cold-eval's)")
+    parser.add_argument("--routes", type=_routes, default=None,
+                        help="drives per map, or 'all' to cover every lane (default: cold-eval's)")
     parser.add_argument("--workers", type=_positive, default=None, help="worker processes (default: the cores)")
     args = parser.parse_args(argv)
     configurations = {name: CONFIGURATIONS[name] for name in args.config or CONFIGURATIONS} | dict(args.add_config)
