@@ -64,6 +64,7 @@ def test_study_agrees_with_the_runs_metrics(tmp_path: Path) -> None:
     text = (tmp_path / "study.md").read_text()
     assert "Made by `pytest`" in text and "| junctions | spline d_s=50 |" in text
     assert json.loads((tmp_path / "study.json").read_text()) == study
+    assert any("covering" in note for note in study["notes"]["junctions"]["lanes0"])
 
 
 @pytest.mark.parametrize("argv", [["--seed-set", "both"], ["--seed-set", "tune", "--maps", "0"],

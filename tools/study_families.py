@@ -12,7 +12,8 @@ false fusions over its fusions, convoy and spline at every d_s pooled.
 
 Seed sets (:data:`SEED_SETS`) are disjoint: association thresholds are chosen on ``tune``
 and reported on ``report``. Outputs: ``OUT/study.json`` and ``OUT/study.md``, both stating
-how they were made (command, seed set and seeds, version, commit, runtime).
+how they were made (command, seed set and seeds, version, commit, runtime); the JSON also
+holds each run's notes (routes, lane coverage).
 
 Usage: ``python tools/study_families.py --out out/study --seed-set tune --maps 5 [--frames 60]
 [--family ramps ...] [--config lanes0 ...] [--add-config 'camera=--sensor camera --lanes 1']``
@@ -151,10 +152,12 @@ def fusion_label(fusion: str, d_s: float) -> str:
 
 
 def run_family(paths: Sequence[Path], config_args: Sequence[str], out: Path, *, frames: int | None,
-               routes: str | None, workers: int | None) -> tuple[dict[tuple[str, str], list[Any]], list[str]]:
+               routes: str | None, workers: int | None
+               ) -> tuple[dict[tuple[str, str], list[Any]], list[str], list[str]]:
     """One cold-eval over ``paths`` with ``config_args`` into ``out``: the left-border
-    records per (map, fusion label) of the coop scenarios, and the run's warnings (ground
-    truth not trustworthy, plans reduced to fit a map). RuntimeError when the run fails."""
+    records per (map, fusion label) of the coop scenarios, the run's warnings (ground truth
+    not trustworthy, plans reduced to fit a map) and its notes (routes, lane coverage).
+    RuntimeError when the run fails."""
     from cold_maps.cli import evaluate
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
@@ -175,7 +178,7 @@ def run_family(paths: Sequence[Path], config_args: Sequence[str], out: Path, *, 
         if key.fusion != "local" and key.boundary == "left":
             found.setdefault((key.map, fusion_label(key.fusion, key.d_s)), []).extend(accumulator.records)
     reduced = [f"reduced to fit: {name}" for name in run.collector.reduced_maps]
-    return found, [*run_warnings(run.collector), *reduced]
+    return found, [*run_warnings(run.collector), *reduced], list(run.collector.notes)
 
 
 def _git_commit() -> str:
@@ -254,17 +257,18 @@ def study(out: Path, families: Sequence[str], seeds: Sequence[int], configuratio
 
     started, commit = time.monotonic(), _git_commit()
     maps = {family: map_families.write_maps(out / "maps", [family], seeds) for family in families}
-    result: dict[str, Any] = {"families": {}, "maps": {}, "warnings": {}}
+    result: dict[str, Any] = {"families": {}, "maps": {}, "warnings": {}, "notes": {}}
     runtimes: dict[str, dict[str, float]] = {}
     for family in families:
         fusions: dict[str, dict[str, Any]] = {}
         totals: dict[str, Counts] = {}
         for config, config_args in configurations.items():
             began = time.monotonic()
-            records, warnings = run_family(maps[family], config_args, out / "runs" / config / family, frames=frames,
+            records, warnings, notes = run_family(maps[family], config_args, out / "runs" / config / family, frames=frames,
                                  routes=routes, workers=workers)
             runtimes.setdefault(family, {})[config] = round(time.monotonic() - began, 1)
             print(f"study_families: {family} {config}: {runtimes[family][config]:.0f} s", file=sys.stderr)
+            result["notes"].setdefault(family, {})[config] = notes
             if warnings:
                 result["warnings"].setdefault(family, {})[config] = warnings
             by_label: dict[str, list[Any]] = {}
