@@ -41,6 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import map_families  # noqa: E402
 
+from cold_maps.cli.common import positive_int  # noqa: E402
+
 PROJECT_ROOT: Final[Path] = Path(__file__).resolve().parents[1]
 SEED_SETS: Final[Mapping[str, range]] = {"tune": range(0, 10_000), "report": range(10_000, 20_000)}
 """Disjoint seed ranges: thresholds are chosen on ``tune``, reported on ``report``."""
@@ -319,18 +321,8 @@ def _configuration(text: str) -> tuple[str, tuple[str, ...]]:
     return name.strip(), tuple(shlex.split(args))
 
 
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
-
-
 def _routes(text: str) -> str:
-    return text if text == "all" else str(_positive(text))
+    return text if text == "all" else str(positive_int(text))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -339,17 +331,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--seed-set", choices=tuple(SEED_SETS), required=True,
                         help="tune: choose thresholds on it; report: report on it")
-    parser.add_argument("--maps", type=_positive, default=5, help="maps per family: the set's first seeds (default 5)")
+    parser.add_argument("--maps", type=positive_int, default=5, help="maps per family: the set's first seeds (default 5)")
     parser.add_argument("--family", action="append", choices=map_families.FAMILIES,
                         help="family (repeatable; default: all)")
     parser.add_argument("--config", action="append", choices=tuple(CONFIGURATIONS),
                         help="configuration (repeatable; default: all)")
     parser.add_argument("--add-config", action="append", type=_configuration, default=[], metavar="NAME=OPTIONS",
                         help="another configuration: a name and its cold-eval options")
-    parser.add_argument("--frames", type=_positive, default=None, help="frames per drive (default: cold-eval's)")
+    parser.add_argument("--frames", type=positive_int, default=None, help="frames per drive (default: cold-eval's)")
     parser.add_argument("--routes", type=_routes, default=None,
                         help="drives per map, or 'all' to cover every lane (default: cold-eval's)")
-    parser.add_argument("--workers", type=_positive, default=None, help="worker processes (default: the cores)")
+    parser.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: the cores)")
     args = parser.parse_args(argv)
     configurations = {name: CONFIGURATIONS[name] for name in args.config or CONFIGURATIONS} | dict(args.add_config)
     seed_range = SEED_SETS[args.seed_set]
