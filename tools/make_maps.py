@@ -215,6 +215,7 @@ class RoadSpec:
         predecessor, successor: road links (None when open).
         junction: id of the junction the road belongs to, "-1" when none.
         lane_offsets: laneOffset records, s0 absolute (m); empty for none.
+        rule: traffic rule, "RHT" or "LHT" (left lanes drive along +s).
     """
 
     id: str
@@ -228,6 +229,7 @@ class RoadSpec:
     successor: RoadLink | None = None
     junction: str = "-1"
     lane_offsets: tuple[CubicPoly, ...] = ()
+    rule: str = "RHT"
 
     @property
     def length(self) -> float:
@@ -242,12 +244,14 @@ class RoadSpec:
 
 @dataclass(frozen=True, slots=True)
 class MapSpec:
-    """A whole map: file stem, roads, junctions and an optional PROJ geoReference string."""
+    """A whole map: file stem, roads, junctions, an optional PROJ geoReference string and
+    the header's vendor (what made it)."""
 
     name: str
     roads: tuple[RoadSpec, ...]
     junctions: tuple[Junction, ...] = ()
     geo_reference: str = ""
+    vendor: str = VENDOR
 
 
 def carriageway_lanes(
@@ -530,7 +534,7 @@ def _road(parent: etree._Element, road: RoadSpec) -> None:
     from lxml import etree
 
     element = etree.SubElement(parent, "road")
-    _attrs(element, name=road.name, length=road.length, id=road.id, junction=road.junction, rule="RHT")
+    _attrs(element, name=road.name, length=road.length, id=road.id, junction=road.junction, rule=road.rule)
     link = etree.SubElement(element, "link")
     _road_link(link, "predecessor", road.predecessor)
     _road_link(link, "successor", road.successor)
@@ -580,7 +584,7 @@ def to_xodr(spec: MapSpec) -> bytes:
 
     root = etree.Element("OpenDRIVE")
     header = etree.SubElement(root, "header")
-    _attrs(header, revMajor=1, revMinor=6, name=spec.name, version="1.0", date=DATE, vendor=VENDOR)
+    _attrs(header, revMajor=1, revMinor=6, name=spec.name, version="1.0", date=DATE, vendor=spec.vendor)
     if spec.geo_reference:
         etree.SubElement(header, "geoReference").text = etree.CDATA(spec.geo_reference)
     for road in spec.roads:
