@@ -37,7 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
-from converters.joins import join_ends, successor_gaps
+from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_gaps
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import arc_lengths, simplify
 
@@ -176,6 +176,8 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
         right=lanelet.left,
         left_marking=lanelet.right_marking,
         right_marking=lanelet.left_marking,
+        left_tags=lanelet.right_tags,
+        right_tags=lanelet.left_tags,
         left_z=lanelet.right_z,
         right_z=lanelet.left_z,
     )
@@ -187,13 +189,15 @@ def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
     return tuple(int(i) for i in ids[keep])
 
 
-def _joined_ends(lanelets: Sequence[SourceLanelet], starts: NDArrayInt) -> list[tuple[int, int]]:
+def _joined_ends(
+    lanelets: Sequence[SourceLanelet], starts: NDArrayInt, merge_tolerance_m: float, join_tolerance_m: float
+) -> list[tuple[int, int]]:
     """(border end, successor's border start) point pairs, as indices into the stacked
     borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
     across a gap (``converters.joins.successor_gaps``)."""
     slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
     pairs = []
-    for gap in successor_gaps(lanelets, MERGE_TOLERANCE_M):
+    for gap in successor_gaps(lanelets, merge_tolerance_m, join_tolerance_m):
         if gap.joined:
             before, after = slot[gap.lanelet], slot[gap.successor]
             for side in (0, 1):
@@ -211,11 +215,21 @@ def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArr
     return kept
 
 
-def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", source: str = "") -> bytes:
+def build_osm(
+    lanelets: Sequence[SourceLanelet],
+    *,
+    geo_reference: str = "",
+    source: str = "",
+    merge_tolerance_m: float = MERGE_TOLERANCE_M,
+    join_tolerance_m: float = JOIN_TOLERANCE_M,
+) -> bytes:
     """The OSM document (UTF-8 bytes) of ``lanelets``, in our frame convention.
 
-    Raises ConversionError naming ``source`` when a lanelet has a border with fewer
-    than two distinct points, or when nothing is left to write.
+    Points of different borders closer than ``merge_tolerance_m`` (m) become one node;
+    successor ends both within ``join_tolerance_m`` (m, may be inf) of each other are
+    snapped together (``converters.joins``). Raises ConversionError naming ``source``
+    when a lanelet has a border with fewer than two distinct points, or when nothing is
+    left to write.
     """
     lanelets = [left_on_left(lanelet) for lanelet in lanelets]
     borders = [border for lanelet in lanelets for border in (lanelet.left, lanelet.right)]
@@ -224,8 +238,8 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     stacked = np.vstack(borders)
     heights = np.concatenate([_heights(lanelet, side) for lanelet in lanelets for side in ("left", "right")])
     starts = np.cumsum([0] + [len(border) for border in borders])
-    representative, positions = join_ends(stacked, merge_points(stacked, MERGE_TOLERANCE_M),
-                                          _joined_ends(lanelets, starts))
+    representative, positions = join_ends(stacked, merge_points(stacked, merge_tolerance_m),
+                                          _joined_ends(lanelets, starts, merge_tolerance_m, join_tolerance_m))
     representative = _keep_short_borders(representative, starts)
     unique, point_index = np.unique(representative, return_inverse=True)
     coordinates = np.column_stack((positions[unique], heights[unique]))
@@ -237,13 +251,13 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     for index, lanelet in enumerate(lanelets):
         pair = []
         ends = []
-        for side, position, marking in (
-            ("left", 2 * index, lanelet.left_marking),
-            ("right", 2 * index + 1, lanelet.right_marking),
+        for side, position, tags in (
+            ("left", 2 * index, dict(lanelet.left_tags) or _MARKINGS.get(lanelet.left_marking, {})),
+            ("right", 2 * index + 1, dict(lanelet.right_tags) or _MARKINGS.get(lanelet.right_marking, {})),
         ):
             points = _without_repeats(point_index[starts[position] : starts[position + 1]])
             if len(points) < 2:
-                raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {MERGE_TOLERANCE_M} m")
+                raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {merge_tolerance_m} m")
             ends.append(points[-1])
             way = ways.get(points, ways.get(points[::-1]))
             if way is None:
@@ -252,7 +266,7 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
                 way_points.append(chain[_kept_vertices(coordinates[chain])])
                 way_tags.append({})
             if not way_tags[way]:
-                way_tags[way] = _MARKINGS.get(marking, {})
+                way_tags[way] = tags
             pair.append(way)
         members.append((pair[0], pair[1]))
         exit_points.append((ends[0], ends[1]))

@@ -4,8 +4,10 @@ Every lane of the checked types is sampled by ``cold_maps.opendrive.sampling`` a
 matched to a converted lanelet: among the lanelets whose ``opendrive:lanes`` tag names
 the lane (the converter records it; crdesigner itself drops the ids), else among all
 lanelets near it (maps converted by other tools), the one whose borders lie closest.
-The disagreement of a lane is the distance from each of our
-border points to the matched lanelet's corresponding border polyline: the inner border
+The disagreement of a lane is the exact distance from each of our
+border points (every ``step`` m of s and both ends of every ``<geometry>`` record, as
+``cold-maps export`` writes them) to the closest point of the matched lanelet's whole
+corresponding border polyline (rings and short borders included): the inner border
 is the lanelet's left one in RHT, its right one in LHT. A lane over the threshold, or
 with no lanelet near it, makes the ground truth untrustworthy. A lane narrower than
 ``ZERO_WIDTH_M`` over its whole section has no area to drive: converters drop it
@@ -33,7 +35,7 @@ from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
-from gt_matching.polyline import NDArrayFloat, NDArrayInt, resample, windowed_distances
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, nearest_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -46,10 +48,6 @@ STEP_M: Final[float] = 0.1
 
 SEARCH_RADIUS_M: Final[float] = 2.0
 """Lanelets with a border vertex this close (m) to one of a lane's border points are candidates."""
-
-RESAMPLE_STEP_M: Final[float] = 0.25
-"""Lanelet borders are resampled this finely (m) to find where along them to search the
-closest segment (gt_matching's windowed search, reach = this step)."""
 
 ZERO_WIDTH_M: Final[float] = 1e-3
 """A lane whose borders are never farther apart than this (m) in its section is zero-width."""
@@ -158,15 +156,13 @@ class CheckReport:
 
 @dataclass(frozen=True, eq=False)
 class _Border:
-    """One lanelet border in its driving order, with a KD-tree of its resampled points."""
+    """One lanelet border in its driving order."""
 
     vertices: NDArrayFloat
-    tree: cKDTree
 
     def distances(self, points: NDArrayFloat) -> NDArrayFloat:
-        """Closest-point distance (m) of each point to this border."""
-        arc = self.tree.query(points)[1] * RESAMPLE_STEP_M
-        return windowed_distances(points, self.vertices, arc, RESAMPLE_STEP_M)[0]
+        """Exact closest-point distance (m) of each point to the whole border polyline."""
+        return nearest_distances(points, self.vertices)[0]
 
 
 class _LaneletIndex:
@@ -185,7 +181,7 @@ class _LaneletIndex:
             pair = []
             for line in (lanelet.leftBound, lanelet.rightBound):
                 xy = np.array([(p.x, p.y) for p in line], dtype=np.float64)
-                pair.append(_Border(xy, cKDTree(resample(xy, RESAMPLE_STEP_M)[0])))
+                pair.append(_Border(xy))
                 vertices.append(xy)
                 owners.append(np.full(len(xy), slot, dtype=np.int64))
             self.ids.append(int(lanelet.id))
@@ -196,11 +192,17 @@ class _LaneletIndex:
         self.owner = np.concatenate(owners)
         self.tree: cKDTree = cKDTree(np.vstack(vertices))
 
+    def named(self, lane: tuple[str, int, int]) -> list[int]:
+        """Slots of the lanelets whose tag names the lane: by its road id, else by the id
+        as crdesigner writes it (it parses road ids as integers)."""
+        road_id, section, lane_id = lane
+        return self.by_lane.get(lane) or self.by_lane.get((_crdesigner_road_id(road_id), section, lane_id), [])
+
     def candidates(self, samples: LaneBorderSamples, points: NDArrayFloat) -> tuple[str, set[int]]:
         """How the lane is matched ("id" or "geometry") and the candidate lanelet slots:
         those whose tag names the lane, else those with a border vertex within
         SEARCH_RADIUS_M of one of ``points``."""
-        named = self.by_lane.get((_crdesigner_road_id(samples.road_id), samples.section, samples.lane_id))
+        named = self.named((samples.road_id, samples.section, samples.lane_id))
         if named:
             return "id", set(named)
         near = self.tree.query_ball_point(points, r=SEARCH_RADIUS_M)
@@ -213,6 +215,11 @@ def _crdesigner_road_id(road_id: str) -> str:
         return str(int(road_id))
     except ValueError:
         return road_id
+
+
+def _tagged(index: _LaneletIndex, slots: list[int], lane: tuple[str, int, int]) -> tuple[str, int, int]:
+    """``lane`` as the lanelets' tag names it (its road id or crdesigner's integer form)."""
+    return lane if not slots or lane in index.by_lane else (_crdesigner_road_id(lane[0]), lane[1], lane[2])
 
 
 def _connected(index: _LaneletIndex, routing: Any, source: int, target: int, lane: tuple[str, int, int],
@@ -238,9 +245,8 @@ def _disconnected_edges(
     """The lane-graph ``edges`` that are no routing-graph successor, largest gap first."""
     missing = []
     for a, b in edges:
-        lane = (_crdesigner_road_id(a.road_id), a.section, a.lane_id)
-        after = (_crdesigner_road_id(b.road_id), b.section, b.lane_id)
-        sources, targets = index.by_lane.get(lane, []), index.by_lane.get(after, [])
+        sources, targets = index.named(tuple(a)), index.named(tuple(b))
+        lane, after = _tagged(index, sources, tuple(a)), _tagged(index, targets, tuple(b))
         pairs = [(s, t) for s in sources for t in targets]
         if any(_connected(index, routing, s, t, lane, after) for s, t in pairs):
             continue
@@ -304,7 +310,7 @@ def check_lanelet_map(
     sampled = [
         (road.rule, samples)
         for road in odr_map.roads.values()
-        for samples in sample_road(road, step_m, lane_types)
+        for samples in sample_road(road, step_m, lane_types, record_ends=True)
         if len(samples.s) > 1 and (only is None or (samples.road_id, samples.section, samples.lane_id) in only)
     ]
     zero = [_is_zero_width(samples) for _, samples in sampled]
