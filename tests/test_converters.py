@@ -363,17 +363,19 @@ def test_foreign_osm_and_unknown_suffix_are_refused(tmp_path) -> None:
         converters.load_lanelet2(tmp_path / "map.txt")
 
 
-def test_cli_convert_reports_one_line_and_loads_back(straight_map, tmp_path, capsys) -> None:
+@pytest.mark.parametrize("converter", ["engine", "crdesigner"])
+def test_cli_convert_reports_one_line_and_loads_back(straight_map, tmp_path, capsys, converter) -> None:
     from cold_maps.cli.maps import main
 
     out = tmp_path / "straight.osm"
-    assert main(["convert", str(straight_map), "-o", str(out), "--no-cache"]) == 0
-    assert capsys.readouterr().out == f"cold-maps convert: 6 lanelets in the OpenDRIVE inertial frame -> {out}\n"
+    assert main(["convert", str(straight_map), "-o", str(out), "--no-cache", "--converter", converter]) == 0
+    assert capsys.readouterr().out == (f"cold-maps convert: 6 lanelets in the OpenDRIVE inertial frame -> {out} "
+                                       f"(converter {converter})\n")
     lanelet_map, _ = converters.load_lanelet2(out)
     assert len(lanelet_map.laneletLayer) == 6
-    assert main(["convert", str(straight_map), "-o", str(out), "-v"]) == 0
+    assert main(["convert", str(straight_map), "-o", str(out), "-v", "--converter", converter]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert printed[0].endswith("6 lanelets in the OpenDRIVE inertial frame -> " + str(out))
+    assert printed[0].endswith(f"6 lanelets in the OpenDRIVE inertial frame -> {out} (converter {converter})")
     assert f"wrote {out}: 6 lanelets" in printed[1] and any("MercatorProjector" in line for line in printed)
     assert main(["convert", str(straight_map), "-o", str(out), "-q"]) == 0
     assert capsys.readouterr().out == ""

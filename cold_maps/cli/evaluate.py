@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import cli_entry, gap_list, int_in, make_parser, positive_int
+from cold_maps.cli.common import add_converter_option, cli_entry, gap_list, int_in, make_parser, positive_int
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
 from cold_maps.evaluation.scenarios import INTERPOLATIONS, MapPlan, params_for_gaps, scenarios_for
@@ -159,6 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help=f"lane change (RMS, m) that triggers a message (default {DEFAULT_CHANGE_TOLERANCE_M:g})")
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
+    add_converter_option(parser, "converter of the Lanelet2 ground truth: engine (the map engine's borders and lane "
+                         "graph) or crdesigner (commonroad-scenario-designer)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     parser.add_argument("--stamp-base", type=_stamp_base, default=None, metavar="UNIX_S",
@@ -184,7 +186,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         from cold_maps.evaluation.paper import paper_plans
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
-        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes), args) for plan in plans]
+        return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, ground_truth=args.converter), args)
+                for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
         if path.stem in seen:
@@ -196,7 +199,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params, lanes=args.lanes), args)
+                                 params=params, lanes=args.lanes, ground_truth=args.converter), args)
             for path in args.map]
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from cold_maps.cli.common import (
     EXIT_USAGE,
     DefaultsHelpFormatter,
+    add_converter_option,
     add_output_options,
     cli_entry,
     fail,
@@ -291,6 +292,8 @@ def _configure_convert(parser: argparse.ArgumentParser) -> None:
     from converters.api import configure_convert
 
     configure_convert(parser)
+    add_converter_option(parser, "engine: the map engine's borders and lane graph; crdesigner: "
+                         "commonroad-scenario-designer (the independent cross-check)")
 
 
 def _run_convert(args: argparse.Namespace) -> int:
@@ -299,13 +302,16 @@ def _run_convert(args: argparse.Namespace) -> int:
     warnings and prints."""
     from cold_maps.cli.common import progress_stream
     from cold_maps.common.progress import Spinner
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
     from cold_maps.opendrive.parser import load_opendrive
     from converters import convert
 
-    load_opendrive(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
+    odr_map = load_opendrive(args.xodr)  # refuse what our reader refuses first (crdesigner reads the file itself)
+    converter = converter_named(args.converter, odr_map)
     with Spinner(f"{PROG} convert: converting {Path(args.xodr).name}", stream=progress_stream(args)):
-        recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose >= 2)
-    result_line(args, f"{PROG} convert", f"{recipe.lanelets} lanelets in the OpenDRIVE inertial frame -> {args.output}")
+        recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose >= 2, converter=converter)
+    result_line(args, f"{PROG} convert", f"{recipe.lanelets} lanelets in the OpenDRIVE inertial frame -> "
+                f"{args.output} (converter {args.converter})")
     if args.verbose and not args.quiet:
         print(recipe.describe())
     return 0

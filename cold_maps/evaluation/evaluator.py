@@ -4,7 +4,8 @@ For every frame of every drive each vehicle senses its lane (``LaneSensor`` on t
 OpenDRIVE map, optional seeded error models), the ego's detection is measured alone
 (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
-ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
+ground truth (``converters.load_lanelet2`` of the plan's converter, by default built from
+the map engine, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
 against the true lane relation of the pair (:func:`cold_maps.simulation.drive.lane_relation`).
 
@@ -133,10 +134,12 @@ class MapEvaluator:
         if self.meter is not None:
             return
         if self._ground_truth is None:
+            from cold_maps.groundtruth.lanelet2_from_engine import converter_named
             from converters import load_lanelet2
             from gt_matching import GroundTruth
 
-            lanelet_map, routing = load_lanelet2(self.plan.path)
+            converter = converter_named(self.plan.ground_truth, self.graph.odr_map)
+            lanelet_map, routing = load_lanelet2(self.plan.path, converter=converter)
             self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
 

@@ -154,6 +154,8 @@ class MapPlan:
         messages: how lanes are exchanged (default: detections fused directly).
         lanes: neighbour lanes the sensor detects on each side besides the vehicle's own
             (0: its lane only; with N >= 1 also the road edges and lanes leaving at forks).
+        ground_truth: converter of the Lanelet2 ground truth: "engine" (the map engine's
+            borders and lane graph, ``groundtruth.lanelet2_from_engine``) or "crdesigner".
     """
 
     path: Path
@@ -172,6 +174,7 @@ class MapPlan:
     odometry: OdometryModel = field(default_factory=OdometryModel)
     messages: MessageModel = field(default_factory=MessageModel)
     lanes: int = 0
+    ground_truth: str = "engine"
 
     @property
     def name(self) -> str:

@@ -285,3 +285,18 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
         return result, geo_reference
 
     return Converter(KIND, f"{__version__}.{BUILDER_VERSION}", lanelets, MERGE_TOLERANCE_M, float("inf"))
+
+
+CONVERTERS: Final[tuple[str, ...]] = (KIND, "crdesigner")
+"""Names of the ground-truth converters (``--converter``), the default first."""
+
+
+def converter_named(name: str, odr_map: OpenDriveMap | None = None) -> Converter:
+    """The converter called ``name`` (one of ``CONVERTERS``); ``odr_map``: see ``engine_converter``."""
+    from converters import crdesigner_converter
+
+    if name == KIND:
+        return engine_converter(odr_map)
+    if name == "crdesigner":
+        return crdesigner_converter()
+    raise ValueError(f"unknown ground-truth converter {name!r}: expected one of {', '.join(CONVERTERS)}")
