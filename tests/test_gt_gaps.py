@@ -115,12 +115,12 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
 def test_check_lists_edges_without_routing_successor_with_their_gap(tmp_path) -> None:
     from cold_maps.groundtruth.check import check_map
 
-    near = check_map(_write(tmp_path, "near", branch_gap_map(0.02)), cache=False)
+    near = check_map(_write(tmp_path, "near", branch_gap_map(0.02)), cache=False, converter="crdesigner")
     assert near.trustworthy and near.edges == 3 and near.disconnected == ()
     # the straight branch's start moves by half the 2 cm gap; nothing else moves
     assert max(lane.max_m for lane in near.lanes) == pytest.approx(0.01, abs=5e-4)
     far_m = JOIN_TOLERANCE_M + 0.3
-    far = check_map(_write(tmp_path, "far", branch_gap_map(far_m)), cache=False)
+    far = check_map(_write(tmp_path, "far", branch_gap_map(far_m)), cache=False, converter="crdesigner")
     assert not far.trustworthy and not far.failing
     (edge,) = far.disconnected
     assert (edge.source, edge.target) == (("1", 0, -1), ("2", 0, -1))
@@ -280,7 +280,7 @@ def test_a_signal_past_its_road_end_is_moved_to_the_end_for_crdesigner(tmp_path)
     text = _road("<line/>", 30.0, 30.0, signals)
     data, _ = crdesigner_copy(text.encode())
     assert [float(s.get("s")) for s in etree.fromstring(data).iter("signal")] == [30.0, 0.0]
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -318,7 +318,7 @@ def test_lane_types_crdesigner_lacks_convert_and_check(tmp_path) -> None:
             .replace("</lane></right>", f"</lane>{walking}</right>"))
     data, _ = crdesigner_copy(text.encode())
     assert [lane.get("type") for lane in etree.fromstring(data).iter("lane")] == ["none", "driving", "sidewalk"]
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and [(lane.road_id, lane.lane_id) for lane in report.lanes] == [("1", -1)]
 
 
@@ -328,7 +328,7 @@ def test_a_centre_lane_without_type_converts_and_checks(tmp_path) -> None:
 
     text = _road("<line/>", 30.0, 30.0).replace('<lane id="0" type="none"/>', '<lane id="0"/>')
     assert '<lane id="0"/>' in text
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -344,7 +344,7 @@ def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_re
     text = _road('<arc curvature="0"/>', 30.0, 30.0).replace('<header revMajor="1" revMinor="6"/>', header)
     data, _ = crdesigner_copy(text.encode())
     assert etree.fromstring(data).find(".//geoReference") is None
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -363,7 +363,7 @@ def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_re
 def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, extra, sections) -> None:
     from cold_maps.groundtruth.check import check_map
 
-    report = check_map(_write(tmp_path, "m", _road(shape, length, 30.0, extra, sections)), cache=False)
+    report = check_map(_write(tmp_path, "m", _road(shape, length, 30.0, extra, sections)), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1 + bool(sections)
 
 
@@ -382,7 +382,7 @@ def test_gt_follows_the_branch_the_detection_takes(tmp_path) -> None:
     from gt_matching import GroundTruth
     from tests.gap_maps import ARC_RADIUS_M
 
-    lanelet_map, routing = load_lanelet2(_write(tmp_path, "branch", branch_gap_map(0.02, arc_exit=True)), cache=False)
+    lanelet_map, routing = load_lanelet2(_write(tmp_path, "branch", branch_gap_map(0.02, arc_exit=True)), cache=False, converter="crdesigner")
     by_road = {dict(l.attributes)[OPENDRIVE_TAG].split(":")[0]: int(l.id) for l in lanelet_map.laneletLayer}
     truth = GroundTruth(lanelet_map, routing)
     x = np.linspace(25.0, 55.0, 301)

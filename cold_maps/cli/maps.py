@@ -327,28 +327,30 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only the vehicle lanes "
                         f"({', '.join(VEHICLE_LANE_TYPES)})")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
+    parser.add_argument("--converter", choices=("engine", "crdesigner"), default=None,
+                        help="check only this converter's ground truth (default: the engine's, crdesigner's and the "
+                        "two compared; the exit status follows the engine's)")
     add_strict_option(parser)
 
 
 def _check(args: argparse.Namespace) -> int:
     """Print the check report, then the map's geometry gaps (``network.continuity``); return
     the report's exit code. Raises OpenDriveError or ConversionError."""
-    from cold_maps.groundtruth.check import check_map, format_report
+    from cold_maps.groundtruth.check import check_map, cross_check, format_cross_check, format_report
     from cold_maps.network.continuity import continuity_report
     from cold_maps.network.lane_graph import build_lane_graph
 
     odr_map = _load(args)
-    report = check_map(
-        args.map,
-        threshold_m=args.threshold,
-        step_m=args.step,
-        lane_types=None if args.all_lanes else VEHICLE_LANE_TYPES,
-        cache=not args.no_cache,
-        odr_map=odr_map,
-    )
-    print(format_report(report))
+    options = {"threshold_m": args.threshold, "step_m": args.step, "cache": not args.no_cache, "odr_map": odr_map,
+               "lane_types": None if args.all_lanes else VEHICLE_LANE_TYPES}
+    if args.converter is None:
+        result = cross_check(args.map, **options)
+        print(format_cross_check(result))
+    else:
+        result = check_map(args.map, converter=args.converter, **options)
+        print(format_report(result))
     print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
-    return report.exit_code
+    return result.exit_code
 
 
 def _run_check(args: argparse.Namespace) -> int:

@@ -257,31 +257,30 @@ def _disconnected_edges(
     return tuple(sorted(missing, key=lambda edge: -edge.gap_m))
 
 
-def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
-    inner, outer = samples.inner[:, :2], samples.outer[:, :2]
+def _best_lanelet(lane: tuple[str, int, int], matched_by: str, candidates: Collection[int], index: _LaneletIndex,
+                  first: NDArrayFloat, second: NDArrayFloat, first_is_left: bool) -> LaneCheck:
+    """The candidate lanelet whose borders lie closest (median) to the points ``first``
+    and ``second`` (compared with its left and right border, or right and left)."""
     best: tuple[float, int, NDArrayFloat] | None = None
-    matched_by, candidates = index.candidates(samples, np.vstack((inner, outer)))
     for slot in candidates:
         left, right = index.borders[slot]
-        inner_border, outer_border = (left, right) if rule == "RHT" else (right, left)
-        distances = np.concatenate((inner_border.distances(inner), outer_border.distances(outer)))
+        first_border, second_border = (left, right) if first_is_left else (right, left)
+        distances = np.concatenate((first_border.distances(first), second_border.distances(second)))
         score = float(np.median(distances))
         if best is None or score < best[0]:
             best = (score, slot, distances)
-    points = 2 * len(samples.s)
+    points = len(first) + len(second)
     if best is None:
-        return LaneCheck(samples.road_id, samples.section, samples.lane_id, None, "", np.inf, np.inf, points)
+        return LaneCheck(*lane, None, "", np.inf, np.inf, points)
     _, slot, distances = best
-    return LaneCheck(
-        samples.road_id,
-        samples.section,
-        samples.lane_id,
-        index.ids[slot],
-        matched_by,
-        float(np.median(distances)),
-        float(np.max(distances)),
-        points,
-    )
+    return LaneCheck(*lane, index.ids[slot], matched_by, float(np.median(distances)), float(np.max(distances)), points)
+
+
+def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
+    inner, outer = samples.inner[:, :2], samples.outer[:, :2]
+    matched_by, candidates = index.candidates(samples, np.vstack((inner, outer)))
+    lane = (samples.road_id, samples.section, samples.lane_id)
+    return _best_lanelet(lane, matched_by, candidates, index, inner, outer, rule == "RHT")
 
 
 def check_lanelet_map(
@@ -340,22 +339,141 @@ def check_map(
     cache_dir: str | os.PathLike[str] | None = None,
     strict: bool = False,
     odr_map: OpenDriveMap | None = None,
+    converter: str = "engine",
 ) -> CheckReport:
-    """Convert (or load from the cache) the map's ground truth and cross-check it.
+    """Convert (or load from the cache) the map's ground truth with ``converter`` ("engine"
+    or "crdesigner") and check it against the engine's borders and lane graph.
 
     Raises ``OpenDriveError`` when our parser rejects the file (``strict``: see
     ``load_opendrive``) and ``converters.ConversionError`` when the converter does.
     ``odr_map``: the file already read by our parser (it is not read again).
     """
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
     from converters import load_lanelet2
 
     if odr_map is None:
         odr_map = load_opendrive(xodr_path, strict=strict)
-    lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
+    lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir,
+                                         converter=converter_named(converter, odr_map))
     return check_lanelet_map(
         odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types,
         routing_graph=routing,
     )
+
+
+@dataclass(frozen=True)
+class CrossCheck:
+    """The engine's ground truth and crdesigner's, each checked against the engine's
+    borders and lane graph, and compared with each other.
+
+    Fields:
+        engine: the engine's Lanelet2 map checked (the evaluation's ground truth).
+        crdesigner: crdesigner's Lanelet2 map checked; None when crdesigner failed.
+        crdesigner_error: why it failed ("" when it did not).
+        between: per lane of the engine's map (its lanelet's borders resampled every
+            ``step_m``), the distance to the crdesigner lanelet naming the same lane
+            (``LaneCheck.lanelet_id`` is crdesigner's), in map order.
+    """
+
+    engine: CheckReport
+    crdesigner: CheckReport | None
+    crdesigner_error: str = ""
+    between: tuple[LaneCheck, ...] = ()
+
+    @property
+    def exit_code(self) -> int:
+        """The engine report's: the ground truth the evaluation uses."""
+        return self.engine.exit_code
+
+
+def compare_lanelet_maps(reference: Any, other: Any, step_m: float = STEP_M) -> tuple[LaneCheck, ...]:
+    """Per lanelet of ``reference`` tagged with exactly one OpenDRIVE lane, the distances
+    of its borders (resampled every ``step_m`` m) to the closest lanelet of ``other``
+    naming that lane (else to the nearest lanelets, matched "geometry")."""
+    from gt_matching.polyline import resample
+
+    index = _LaneletIndex(other)
+    result = []
+    for lanelet in reference.laneletLayer:
+        named = parse_opendrive_lanes_tag(dict(lanelet.attributes).get(OPENDRIVE_TAG, ""))
+        if len(named) != 1:
+            continue
+        left, right = (resample(np.array([(p.x, p.y) for p in line], dtype=np.float64), step_m)[0]
+                       for line in (lanelet.leftBound, lanelet.rightBound))
+        slots = index.named(named[0])
+        matched_by = "id" if slots else "geometry"
+        if not slots:
+            near = index.tree.query_ball_point(np.vstack((left, right)), r=SEARCH_RADIUS_M)
+            slots = sorted({int(index.owner[i]) for hits in near for i in hits})
+        result.append(_best_lanelet(named[0], matched_by, slots, index, left, right, True))
+    return tuple(result)
+
+
+def cross_check(
+    xodr_path: str | os.PathLike[str],
+    *,
+    threshold_m: float = THRESHOLD_M,
+    step_m: float = STEP_M,
+    lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
+    cache: bool = True,
+    cache_dir: str | os.PathLike[str] | None = None,
+    odr_map: OpenDriveMap | None = None,
+) -> CrossCheck:
+    """``check_map`` with the engine and with crdesigner, and the two Lanelet2 maps
+    compared lane by lane; a crdesigner failure is reported, not raised."""
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
+    from converters import ConversionError, load_lanelet2
+
+    if odr_map is None:
+        odr_map = load_opendrive(xodr_path)
+    graph = build_lane_graph(odr_map, lane_types)
+    maps = {}
+    reports = {}
+    error = ""
+    for name in ("engine", "crdesigner"):
+        try:
+            lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir,
+                                                 converter=converter_named(name, odr_map))
+        except ConversionError as exc:
+            if name == "engine":
+                raise
+            error = str(exc)
+            continue
+        maps[name] = lanelet_map
+        reports[name] = check_lanelet_map(odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m,
+                                          step_m=step_m, lane_types=lane_types, routing_graph=routing, lane_graph=graph)
+    between = compare_lanelet_maps(maps["engine"], maps["crdesigner"], step_m) if "crdesigner" in maps else ()
+    checked = {(lane.road_id, lane.section, lane.lane_id) for lane in reports["engine"].lanes}
+    between = tuple(lane for lane in between if (lane.road_id, lane.section, lane.lane_id) in checked)
+    return CrossCheck(reports["engine"], reports.get("crdesigner"), error, between)
+
+
+def format_cross_check(result: CrossCheck) -> str:
+    """The engine's report, crdesigner's, and their lane-by-lane comparison."""
+    lines = ["engine ground truth (the evaluation's):", format_report(result.engine), "",
+             "crdesigner ground truth (the independent cross-check):"]
+    if result.crdesigner is None:
+        lines.append(f"crdesigner failed: {result.crdesigner_error}")
+        return "\n".join(lines)
+    lines += [format_report(result.crdesigner), ""]
+    threshold = result.engine.threshold_m
+    matched = [lane for lane in result.between if lane.lanelet_id is not None]
+    over = sorted((lane for lane in result.between if not lane.passes(threshold)), key=lambda lane: -lane.max_m)
+    lines.append(f"engine vs crdesigner Lanelet2: {len(matched)} of {len(result.between)} lanes matched")
+    if matched:
+        maxima = np.array([lane.max_m for lane in matched])
+        worst = matched[int(np.argmax(maxima))]
+        lines.append(f"per-lane largest distance: median {_mm(float(np.median(maxima)))} mm, max {_mm(worst.max_m)} mm "
+                     f"(road {worst.road_id} section {worst.section} lane {worst.lane_id})")
+    verdict = "AGREE" if not over else "DISAGREE"
+    lines.append(f"engine and crdesigner: {verdict} ({len(over)} of {len(result.between)} lanes over "
+                 f"{_mm(threshold)} mm or unmatched)")
+    for lane in over[:20]:
+        lanelet = "none" if lane.lanelet_id is None else str(lane.lanelet_id)
+        lines.append(f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} {_mm(lane.max_m):>10}")
+    if len(over) > 20:
+        lines.append(f"... and {len(over) - 20} more")
+    return "\n".join(lines)
 
 
 def _mm(value: float) -> str:
