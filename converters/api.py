@@ -20,7 +20,7 @@ from converters.cache import atomic_write, cache_path
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version, odr_to_lanelets, read_geo_reference
 from converters.errors import ConversionError
 from converters.joins import JOIN_TOLERANCE_M
-from converters.osm import MERGE_TOLERANCE_M, build_osm, read_generator
+from converters.osm import MERGE_TOLERANCE_M, SIMPLIFY_TOLERANCE_M, build_osm, read_generator
 
 if TYPE_CHECKING:
     import lanelet2.core
@@ -40,6 +40,7 @@ class Converter:
             geoReference ("" if none); raises ConversionError naming the file.
         merge_tolerance_m: points of different borders closer than this (m) become one node.
         join_tolerance_m: successor ends this close (m, may be inf) are snapped together.
+        simplify_tolerance_m: Douglas-Peucker tolerance of the ways (m), None: none.
     """
 
     kind: str
@@ -47,6 +48,7 @@ class Converter:
     lanelets: Callable[[Path, bool], tuple[list[SourceLanelet], str]]
     merge_tolerance_m: float = MERGE_TOLERANCE_M
     join_tolerance_m: float = JOIN_TOLERANCE_M
+    simplify_tolerance_m: float | None = SIMPLIFY_TOLERANCE_M
 
 
 def _crdesigner_lanelets(path: Path, verbose: bool) -> tuple[list[SourceLanelet], str]:
@@ -68,7 +70,8 @@ def _read(path: Path) -> bytes:
 def _convert_bytes(xodr: Path, verbose: bool, converter: Converter) -> bytes:
     lanelets, geo_reference = converter.lanelets(xodr, verbose)
     return build_osm(lanelets, geo_reference=geo_reference, source=str(xodr),
-                     merge_tolerance_m=converter.merge_tolerance_m, join_tolerance_m=converter.join_tolerance_m)
+                     merge_tolerance_m=converter.merge_tolerance_m, join_tolerance_m=converter.join_tolerance_m,
+                     simplify_tolerance_m=converter.simplify_tolerance_m)
 
 
 def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool, converter: Converter) -> tuple[Path, bool]:

@@ -142,7 +142,10 @@ def lanelet_attributes(lanelet: SourceLanelet, urban: frozenset[str] = frozenset
 def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     """Index of each point's representative: the first earlier-or-same point within
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
-    its representative."""
+    its representative; with ``tolerance`` 0 only equal points share one."""
+    if tolerance == 0.0:
+        _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+        return first[inverse.ravel()].astype(np.int64)
     from scipy.spatial import cKDTree
 
     neighbours = cKDTree(points).query_ball_point(points, r=tolerance)
@@ -222,12 +225,15 @@ def build_osm(
     source: str = "",
     merge_tolerance_m: float = MERGE_TOLERANCE_M,
     join_tolerance_m: float = JOIN_TOLERANCE_M,
+    simplify_tolerance_m: float | None = SIMPLIFY_TOLERANCE_M,
 ) -> bytes:
     """The OSM document (UTF-8 bytes) of ``lanelets``, in our frame convention.
 
     Points of different borders closer than ``merge_tolerance_m`` (m) become one node;
     successor ends both within ``join_tolerance_m`` (m, may be inf) of each other are
-    snapped together (``converters.joins``). Raises ConversionError naming ``source``
+    snapped together (``converters.joins``); each way is thinned by Douglas-Peucker within
+    ``simplify_tolerance_m`` (m; None: every vertex kept, for borders sampled to a
+    tolerance already, except where a join moved a way's end). Raises ConversionError naming ``source``
     when a lanelet has a border with fewer than two distinct points, or when nothing is
     left to write.
     """
@@ -263,7 +269,8 @@ def build_osm(
             if way is None:
                 way = ways[points] = len(way_points)
                 chain = np.asarray(points)
-                way_points.append(chain[_kept_vertices(coordinates[chain])])
+                kept = chain if simplify_tolerance_m is None else chain[_kept_vertices(coordinates[chain], simplify_tolerance_m)]
+                way_points.append(kept)
                 way_tags.append({})
             if not way_tags[way]:
                 way_tags[way] = tags
@@ -278,23 +285,25 @@ def build_osm(
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    projector = frame.projector()
-    from lanelet2.core import BasicPoint3d
+    def write_nodes(identifiers: NDArrayInt, xyz: NDArrayFloat) -> None:
+        """Append the nodes, parsed from their text in one call (an element per node is slow)."""
+        lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
+        known = np.isfinite(xyz[:, 2]).tolist()
+        text = "".join(
+            f'<node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}">'
+            + (f'<tag k="ele" v="{height:.4f}"/>' if has_height else "") + "</node>"
+            for identifier, lat_deg, lon_deg, height, has_height in zip(identifiers.tolist(), lat.tolist(),
+                                                                        lon.tolist(), xyz[:, 2].tolist(), known)
+        )
+        root.extend(etree.fromstring(f"<nodes>{text}</nodes>"))
 
-    def write_node(identifier: int, xyz: NDArrayFloat) -> None:
-        gps = projector.reverse(BasicPoint3d(float(xyz[0]), float(xyz[1]), 0.0))
-        element = etree.SubElement(root, "node", id=str(identifier), lat=repr(gps.lat), lon=repr(gps.lon))
-        if np.isfinite(xyz[2]):
-            etree.SubElement(element, "tag", k="ele", v=f"{xyz[2]:.4f}")
-
-    for point in used:
-        write_node(int(node_id[point]), coordinates[point])
-    for way, chain in enumerate(way_points):
-        element = etree.SubElement(root, "way", id=str(way_id_base + way))
-        for point in chain:
-            etree.SubElement(element, "nd", ref=str(node_id[point]))
-        for key, value in way_tags[way].items():
-            etree.SubElement(element, "tag", k=key, v=value)
+    write_nodes(node_id[used], coordinates[used])
+    ways_text = "".join(
+        f'<way id="{way_id_base + way}">' + "".join(f'<nd ref="{ref}"/>' for ref in node_id[chain].tolist())
+        + "".join(f'<tag k="{key}" v="{value}"/>' for key, value in way_tags[way].items()) + "</way>"
+        for way, chain in enumerate(way_points)
+    )
+    root.extend(etree.fromstring(f"<ways>{ways_text}</ways>"))
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -310,7 +319,7 @@ def build_osm(
 
     def new_node(xyz: NDArrayFloat) -> int:
         identifier = next(fresh)
-        write_node(identifier, xyz)
+        write_nodes(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
         return identifier
 
     regulations = {lanelet.id: lanelet.regulations for lanelet in lanelets}
@@ -318,14 +327,14 @@ def build_osm(
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
-def _kept_vertices(points: NDArrayFloat) -> npt.NDArray[np.bool_]:
-    """Douglas-Peucker (``SIMPLIFY_TOLERANCE_M``) of an (N, 3) way, in plan and in its
-    height profile over plan length (a crest on a straight road keeps its vertices)."""
-    keep = simplify(points[:, :2], SIMPLIFY_TOLERANCE_M)
+def _kept_vertices(points: NDArrayFloat, tolerance_m: float) -> npt.NDArray[np.bool_]:
+    """Douglas-Peucker (``tolerance_m``) of an (N, 3) way, in plan and in its height
+    profile over plan length (a crest on a straight road keeps its vertices)."""
+    keep = simplify(points[:, :2], tolerance_m)
     heights = points[:, 2]
     if np.all(np.isfinite(heights)):
         along = arc_lengths(points[:, :2])
-        keep |= simplify(np.column_stack((along, heights)), SIMPLIFY_TOLERANCE_M)
+        keep |= simplify(np.column_stack((along, heights)), tolerance_m)
     return keep
 
 

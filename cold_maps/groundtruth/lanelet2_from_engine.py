@@ -12,19 +12,20 @@ Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
   end (a jump between records drawn exactly), every width, border, laneOffset, elevation
   and superelevation record start, both section ends and a vertex ``END_VERTEX_M`` inside
   each end, then intervals halved until the border's midpoint lies within
-  ``CHORD_TOLERANCE_M`` of the chord (on an arc the midpoint is where the chord is
-  farthest). All lanes of a section share the stations, so neighbours share their
+  ``CHORD_TOLERANCE_M`` of the chord (checked at a quarter, half and three quarters of
+  each interval; a failing one is split into as many pieces as the chord error's square
+  root says, the error growing with the interval squared). All lanes of a section share the stations, so neighbours share their
   border exactly and the writer makes it one way (Lanelet2 adjacency).
-- Successors are the lane graph's edges (``network.lane_graph``); linked ends closer than
-  ``MERGE_TOLERANCE_M`` are one node, farther ones are snapped to their centroid whatever
+- Successors are the lane graph's edges (``network.lane_graph``); linked ends at one
+  point are one node, others are snapped to their centroid whatever
   the gap (``converters.joins``, join tolerance infinite), so every lane-graph edge is a
   Lanelet2 routing successor. A snap moves the border end by at most half the gap and
   fades out at the vertex ``END_VERTEX_M`` inside the end (the writer's Douglas-Peucker
   keeps it once the end moved). Such gaps are where the map is broken
   (``network.continuity.link_gaps``); elsewhere the borders are the engine's within the
-  chord tolerance plus the writer's simplification (``converters.osm.SIMPLIFY_TOLERANCE_M``).
-- Line types from ``<roadMark>`` (``opendrive.road_marks.classify_border``, the kind
-  covering most of the border's length): solid → line_thin/solid (bold → line_thick),
+  chord tolerance (the writer keeps every vertex: no further simplification).
+- Line types from ``<roadMark>`` (``opendrive.road_marks.classify_border`` every
+  ``MARK_STEP_M`` and at each mark start, the kind covering most of the border's length): solid → line_thin/solid (bold → line_thick),
   broken and botts dots → dashed, solid solid → solid_solid, solid broken / broken solid
   → solid_dashed or dashed_solid (OpenDRIVE names the lines from the reference line out;
   Lanelet2 from left to right along the way), curb → curbstone/high, grass and edge →
@@ -47,6 +48,7 @@ import numpy.typing as npt
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_s, sample_section_at
@@ -68,8 +70,8 @@ default types (``filter_types``), so neighbour lanes and walkways stay as today.
 CHORD_TOLERANCE_M: Final[float] = 5e-4
 """Largest distance (m) of a border's midpoint between two stations from their chord."""
 
-INITIAL_STEP_M: Final[float] = 2.0
-"""Station spacing (m) the adaptive sampling starts from."""
+INITIAL_STEP_M: Final[float] = 50.0
+"""Longest interval (m) the adaptive sampling starts from."""
 
 MIN_STEP_M: Final[float] = 1e-3
 """Intervals this short (m) are not halved further (a jump in a width record)."""
@@ -77,11 +79,21 @@ MIN_STEP_M: Final[float] = 1e-3
 MAX_ROUNDS: Final[int] = 24
 """Most halvings of one interval (2 m / 2**24 is far below ``MIN_STEP_M``)."""
 
+SPLIT_MARGIN: Final[float] = 1.25
+"""An interval whose chord error is e is split into ceil(margin·sqrt(e / tolerance)) pieces."""
+
+MAX_PIECES: Final[int] = 64
+"""Most pieces an interval is split into in one round."""
+
 END_VERTEX_M: Final[float] = 0.1
 """A station this far (m) inside each section end: where a snapped join fades out."""
 
-MERGE_TOLERANCE_M: Final[float] = 1e-6
-"""Border points closer than this (m) become one node (shared borders are bit-identical)."""
+MERGE_TOLERANCE_M: Final[float] = 0.0
+"""Only equal border points become one node: the borders neighbours share are computed
+once, bit-identical; linked ends are joined (``converters.joins``) whatever their gap."""
+
+GRAPH_LENGTH_STEP_M: Final[float] = 1e9
+"""The lane graph's length sampling step here (m): the builder needs its edges, not its lengths."""
 
 ZERO_WIDTH_M: Final[float] = 1e-3
 """A lane never wider than this (m) over its section gets no lanelet."""
@@ -98,14 +110,21 @@ def _breakpoints(road: Road, section_index: int) -> NDArrayFloat:
     return inside
 
 
-def _chord_errors(samples: Sequence[LaneBorderSamples], middles: Sequence[LaneBorderSamples],
+CHECK_FRACTIONS: Final[tuple[float, ...]] = (0.25, 0.5, 0.75)
+"""Where inside each interval the border is compared with the chord (a cubic width
+symmetric about the midpoint leaves the midpoint on the chord, not the quarter points)."""
+
+
+def _chord_errors(samples: Sequence[LaneBorderSamples], inside: Sequence[Sequence[LaneBorderSamples]],
                   open_: npt.NDArray[np.bool_]) -> NDArrayFloat:
-    """Per open interval, the largest distance (m, 3-D) of a border's midpoint from the chord's midpoint."""
+    """Per open interval, the largest distance (m, 3-D) of a border point at one of
+    ``CHECK_FRACTIONS`` from the chord's point at the same fraction."""
     errors = np.zeros(int(open_.sum()))
-    for at, middle in zip(samples, middles):
-        for ends, mid in ((at.inner, middle.inner), (at.outer, middle.outer)):
-            chord = 0.5 * (ends[:-1][open_] + ends[1:][open_])
-            errors = np.maximum(errors, np.linalg.norm(mid - chord, axis=1))
+    for fraction, checked in zip(CHECK_FRACTIONS, inside):
+        for at, middle in zip(samples, checked):
+            for ends, mid in ((at.inner, middle.inner), (at.outer, middle.outer)):
+                chord = (1.0 - fraction) * ends[:-1][open_] + fraction * ends[1:][open_]
+                errors = np.maximum(errors, np.linalg.norm(mid - chord, axis=1))
     return errors
 
 
@@ -113,8 +132,11 @@ def adaptive_section_samples(
     road: Road, section_index: int, lane_ids: Sequence[int], tolerance_m: float = CHORD_TOLERANCE_M
 ) -> list[LaneBorderSamples]:
     """Borders of the listed lanes of one section (record ends included, see
-    ``sample_road``) at stations refined until every interval's border midpoint lies
-    within ``tolerance_m`` (m) of its chord (or the interval is shorter than ``MIN_STEP_M``)."""
+    ``sample_road``) at stations refined until, in every interval, the borders at
+    ``CHECK_FRACTIONS`` lie within ``tolerance_m`` (m) of the chord (or the interval is
+    shorter than ``MIN_STEP_M``). Refinement starts from the section's ends, the record
+    starts (``_breakpoints``) and a station ``END_VERTEX_M`` inside each end, with no
+    interval longer than ``INITIAL_STEP_M``."""
     section = road.lane_sections[section_index]
     length = section.s_end - section.s
     ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
@@ -124,13 +146,22 @@ def adaptive_section_samples(
         samples = sample_section_at(road, section_index, s, lane_ids, record_ends=True)
         stations = samples[0].s
         open_ = stations[1:] > stations[:-1]
-        middle_s = 0.5 * (stations[:-1] + stations[1:])[open_]
-        middles = sample_section_at(road, section_index, middle_s, lane_ids)
-        errors = _chord_errors(samples, middles, open_)
-        refine = (errors > tolerance_m) & (np.diff(stations)[open_] > MIN_STEP_M)
+        low, high = stations[:-1][open_], stations[1:][open_]
+        checks = np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
+        checked = sample_section_at(road, section_index, checks, lane_ids)
+        parts = len(low)
+        inside = [[LaneBorderSamples(c.road_id, c.section, c.lane_id, c.s[k * parts:(k + 1) * parts],
+                                     c.inner[k * parts:(k + 1) * parts], c.outer[k * parts:(k + 1) * parts])
+                   for c in checked] for k in range(len(CHECK_FRACTIONS))]
+        errors = _chord_errors(samples, inside, open_)
+        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
         if not refine.any():
             return samples
-        s = np.union1d(s, middle_s[refine])
+        # the chord error grows with the square of the interval: split into that many pieces at once
+        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+        starts, widths = low[refine], (high - low)[refine]
+        offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
+        s = np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
     return samples
 
 
@@ -156,11 +187,27 @@ _DOUBLE: Final[dict[str, tuple[str, str]]] = {
 """Double ``<roadMark>`` type → its lines from the reference line outwards."""
 
 
+MARK_STEP_M: Final[float] = 5.0
+"""Spacing (m) of the stations where a border's marking is classified (besides the
+``<roadMark>`` starts of the section): the kind covering most of the length wins."""
+
+
+def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
+    """Stations (m) of a section where its borders' markings are classified: every
+    ``MARK_STEP_M``, and each ``<roadMark>`` start."""
+    section = road.lane_sections[section_index]
+    starts = [section.s + mark.s_offset for lane in (section.center, *section.lanes) for mark in lane.road_marks]
+    inside = [s for s in starts if section.s < s < section.s_end]
+    return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
+
+
 def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
-              way_along_s: bool) -> tuple[tuple[str, str], ...]:
-    """Lanelet2 way tags of a lane border (stations ``s``, m) whose way runs along s when
-    ``way_along_s``: the boundary kind covering most of its length (module docstring)."""
-    marking = classify_border(road, section_index, lane_id, side, s)
+              way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
+              ) -> tuple[tuple[str, str], ...]:
+    """Lanelet2 way tags of a lane border (classified at stations ``s``, m; ``borders``:
+    ``section_borders`` there) whose way runs along s when ``way_along_s``: the boundary
+    kind covering most of its length (module docstring)."""
+    marking = classify_border(road, section_index, lane_id, side, s, borders)
     weights = np.gradient(s) if len(s) > 1 else np.ones(len(s))
     keys = np.column_stack((marking.type, marking.owner, marking.mark_index))
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
@@ -226,8 +273,13 @@ def engine_lanelets(
                 if not _is_zero_width(samples):
                     sampled.append((road, samples, kinds[samples.lane_id]))
     ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
+    stations: dict[tuple[str, int], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
     lanelets = []
     for road, samples, lane_type in sampled:
+        if (road.id, samples.section) not in stations:
+            at = mark_stations(road, samples.section)
+            stations[road.id, samples.section] = at, section_borders(road, samples.section, at)
+        mark_s, mark_borders = stations[road.id, samples.section]
         key = LaneKey(samples.road_id, samples.section, samples.lane_id)
         along = road.drives_along_s(samples.lane_id, samples.section)
         left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
@@ -246,8 +298,8 @@ def engine_lanelets(
             right_z=np.ascontiguousarray(right[:, 2]),
             regulations=regulations.get(key, LaneletRegulations()),
             successors=tuple(ids[n] for n in graph.successors[key] if n in ids),
-            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, samples.s, along),
-            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, samples.s, along),
+            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, mark_s, along, mark_borders),
+            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, mark_s, along, mark_borders),
         ))
     return lanelets
 
@@ -275,7 +327,7 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
         same = odr_map is not None and odr_map.path and os.path.samefile(odr_map.path, path)
         try:
             engine_map = odr_map if same else load_opendrive(path)
-            graph = build_lane_graph(engine_map, LANE_TYPES)
+            graph = build_lane_graph(engine_map, LANE_TYPES, length_step=GRAPH_LENGTH_STEP_M)
             rules = read_road_rules(engine_map, graph)
             result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations)
         except (OpenDriveError, ValueError) as exc:
@@ -284,7 +336,7 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
             raise ConversionError(str(path), "the map has no lane to convert")
         return result, geo_reference
 
-    return Converter(KIND, f"{__version__}.{BUILDER_VERSION}", lanelets, MERGE_TOLERANCE_M, float("inf"))
+    return Converter(KIND, f"{__version__}.{BUILDER_VERSION}", lanelets, MERGE_TOLERANCE_M, float("inf"), None)
 
 
 CONVERTERS: Final[tuple[str, ...]] = (KIND, "crdesigner")
