@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Final, Literal
 
@@ -257,12 +258,15 @@ def engine_lanelets(
     graph: LaneGraph,
     road_types: Mapping[str, Sequence[tuple[float, str]]] | None = None,
     regulations: Mapping[LaneKey, LaneletRegulations] | None = None,
+    priority: Mapping[LaneKey, Sequence[LaneKey]] | None = None,
 ) -> list[SourceLanelet]:
     """One ``SourceLanelet`` per lane and section of ``graph`` (ids 1, 2, ... in map
     order; zero-width lanes omitted), successors from the graph's edges. ``road_types``:
-    road id → (s, type) records; ``regulations``: per lane, what the writer adds."""
+    road id → (s, type) records; ``regulations``: per lane, what the writer adds;
+    ``priority``: per yielding lane, the lanes with the right of way."""
     road_types = road_types or {}
     regulations = regulations or {}
+    priority = priority or {}
     sampled: list[tuple[Road, LaneBorderSamples, str]] = []
     for road in odr_map.roads.values():
         for index, section in enumerate(road.lane_sections):
@@ -296,7 +300,8 @@ def engine_lanelets(
             junctions=() if road.junction == "-1" else (road.junction,),
             left_z=np.ascontiguousarray(left[:, 2]),
             right_z=np.ascontiguousarray(right[:, 2]),
-            regulations=regulations.get(key, LaneletRegulations()),
+            regulations=replace(regulations.get(key, LaneletRegulations()),
+                                priority_lanelets=tuple(ids[n] for n in priority.get(key, ()) if n in ids)),
             successors=tuple(ids[n] for n in graph.successors[key] if n in ids),
             left_tags=line_tags(road, samples.section, samples.lane_id, left_side, mark_s, along, mark_borders),
             right_tags=line_tags(road, samples.section, samples.lane_id, right_side, mark_s, along, mark_borders),
@@ -329,7 +334,7 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
             engine_map = odr_map if same else load_opendrive(path)
             graph = build_lane_graph(engine_map, LANE_TYPES, length_step=GRAPH_LENGTH_STEP_M)
             rules = read_road_rules(engine_map, graph)
-            result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations)
+            result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations, rules.priority)
         except (OpenDriveError, ValueError) as exc:
             raise ConversionError(str(path), f"the map engine cannot build the ground truth: {exc}") from exc
         if not result:
