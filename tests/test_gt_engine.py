@@ -206,3 +206,48 @@ def test_routing_and_matching_work_on_the_engine_gt() -> None:
     matches = getDeterministicMatches(lanelet_map, obj, 0.5)
     assert start.id in {m.lanelet.id for m in matches}
     assert lanelet2 is not None and ObjectWithCovariance2d is not None
+
+
+def _with_signals(text: str, road_id: str, signals: str) -> str:
+    """``text`` with ``signals`` (``<signal>`` elements) added to road ``road_id``."""
+    from lxml import etree
+
+    root = etree.fromstring(text.encode())
+    road = next(r for r in root.iter("road") if r.get("id") == road_id)
+    holder = etree.SubElement(road, "signals")
+    for signal in etree.fromstring(f"<s>{signals}</s>"):
+        holder.append(signal)
+    return etree.tostring(root).decode()
+
+
+def test_signals_become_regulatory_elements_on_the_lanes_they_govern(tmp_path) -> None:
+    import lanelet2.traffic_rules as tr
+    from lanelet2.core import RightOfWay, SpeedLimit, TrafficLight
+
+    text = bundled_map("junction").read_text()
+    # road 1's lane 1 and road 3's lane -1 drive into the junction (road 1 leaves it along +s)
+    text = _with_signals(text, "1", '<signal id="s1" s="1" t="5" type="1000001" dynamic="yes" orientation="-"/>')
+    text = _with_signals(text, "3", '<signal id="s2" s="149" t="-5" type="206" dynamic="no" orientation="+"/>')
+    text = _with_signals(text, "2", '<signal id="s3" s="80" t="-5" type="274" value="30" unit="km/h" '
+                                    'dynamic="no" orientation="-"/>')
+    path = tmp_path / "signals.xodr"
+    path.write_text(text)
+    _, lanelet_map, _ = _engine_gt(path)
+    named = {dict(ll.attributes)["opendrive:lanes"]: ll for ll in lanelet_map.laneletLayer}
+
+    def elements(lane: str, kind: type) -> list:
+        return [r for r in named[lane].regulatoryElements if isinstance(r, kind)]
+
+    (light,) = elements("1:0:1", TrafficLight)
+    stop_line = [(p.x, p.y) for p in light.stopLine]
+    exit_ = [(b[-1].x, b[-1].y) for b in (named["1:0:1"].leftBound, named["1:0:1"].rightBound)]
+    assert sorted(stop_line) == sorted(exit_)
+    assert all(not elements(lane, TrafficLight) for lane in named if lane != "1:0:1")
+    (right_of_way,) = elements("3:0:-1", RightOfWay)
+    assert [ll.id for ll in right_of_way.yieldLanelets()] == [named["3:0:-1"].id]
+    assert {ll.id for ll in right_of_way.rightOfWayLanelets()} == {named[k].id for k in ("1:0:1", "2:0:1", "4:0:-1")}
+    german = tr.create(tr.Locations.Germany, tr.Participants.Vehicle)
+    assert german.speedLimit(named["2:0:1"]).speedLimit == pytest.approx(30.0)
+    # the sign governs the lanes driving against s only: the other keeps the road's <speed>
+    assert german.speedLimit(named["2:0:-1"]).speedLimit == pytest.approx(50.0)
+    assert all(not r.parameters for r in elements("2:0:-1", SpeedLimit))
