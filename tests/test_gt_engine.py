@@ -251,3 +251,27 @@ def test_signals_become_regulatory_elements_on_the_lanes_they_govern(tmp_path) -
     # the sign governs the lanes driving against s only: the other keeps the road's <speed>
     assert german.speedLimit(named["2:0:-1"]).speedLimit == pytest.approx(50.0)
     assert all(not r.parameters for r in elements("2:0:-1", SpeedLimit))
+
+
+def test_evaluations_over_a_broken_link_are_unscored_and_the_rest_exact(tmp_path, monkeypatch, capsys) -> None:
+    import json
+
+    from cold_maps.cli.evaluate import main
+    from cold_maps.evaluation.trust import MAP_BROKEN
+
+    monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "far.xodr"
+    path.write_text(branch_gap_map(0.8))  # road 1 -> road 2 misses by 0.8 m
+    out = tmp_path / "out"
+    assert main(["--map", str(path), "--routes", "1", "--out", str(out), "--frames", "60", "--gaps", "20",
+                 "--interpolation", "paper", "--no-distractors", "--no-mcap", "--no-plots", "--no-progress"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    notes = (out / "summary.md").read_text()
+    assert "broken at 1 place(s)" in notes and "misses by 0.800 m" in notes
+    local = [s for s in json.loads((out / "metrics.json").read_text())["scenarios"] if s["fusion"] == "local"]
+    for scenario in local:
+        unscored = scenario["gt_unmatched"][MAP_BROKEN]
+        assert 0 < unscored < scenario["frames"] and scenario["fused_frames"] + unscored == scenario["frames"]
+        assert scenario["max_error_m"] <= 0.02  # everywhere else the GT is the engine's border
+    # many of the 60 frames see the joint: more than 1 % unscored flags the run
+    assert "GROUND TRUTH NOT TRUSTWORTHY" in line and "map is broken" in line

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Callable, Final
 
@@ -30,7 +31,14 @@ from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
-from cold_maps.evaluation.trust import GT_UNMATCHED, check_driven, driven_lanes
+from cold_maps.evaluation.trust import (
+    GT_UNMATCHED,
+    MAP_BROKEN,
+    BrokenStretches,
+    broken_stretches,
+    check_driven,
+    driven_lanes,
+)
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
@@ -144,10 +152,19 @@ class MapEvaluator:
         self.meter = GroundTruthMeter(self._ground_truth)
 
     @cached_property
+    def broken(self) -> BrokenStretches:
+        """Where the map is broken (``trust.broken_stretches``): evaluations over it are not
+        scored with the engine's ground truth."""
+        return broken_stretches(self.graph)
+
+    @cached_property
     def gt_warning(self) -> str | None:
-        """Why the ground truth of the driven lanes is not trustworthy (``cold-maps check``
-        on them), or None; computed once, where the run's notes are written (never in the
-        worker processes, which only evaluate drives)."""
+        """Why crdesigner's ground truth of the driven lanes is not trustworthy
+        (``cold-maps check`` on them), or None (always, with the engine's ground truth: it is
+        judged per evaluation, see ``trust``); computed once, where the run's notes are
+        written (never in the worker processes, which only evaluate drives)."""
+        if self.plan.ground_truth == "engine":
+            return None
         self.prepare()
         assert self._ground_truth is not None
         return check_driven(self.plan.name, self.graph, self._ground_truth.lanelet_map,
@@ -188,6 +205,11 @@ class MapEvaluator:
             collector.notes.append(
                 f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
                 f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
+        if plan.ground_truth == "engine" and self.broken.reasons:
+            shown = "; ".join(self.broken.reasons[:5])
+            more = f" and {len(self.broken.reasons) - 5} more" if len(self.broken.reasons) > 5 else ""
+            collector.notes.append(f"{plan.name}: the map is broken at {len(self.broken.reasons)} place(s), evaluations "
+                                   f"over them are not scored ({MAP_BROKEN}): {shown}{more}")
         if self.gt_warning is not None:
             LOG.warning(self.gt_warning)
             collector.gt_warnings.append(self.gt_warning)
@@ -302,10 +324,13 @@ class MapEvaluator:
 
         assert self.meter is not None
         try:
-            return self.meter.measure(left, right, pose, reference=reference)
+            measured = self.meter.measure(left, right, pose, reference=reference)
         except MatchingError as exc:
             LOG.debug("no ground truth: %s", exc)
             return "no_ground_truth"
+        if not measured.gt_unmatched and self.plan.ground_truth == "engine" and self.broken.over(left, right):
+            return replace(measured, gt_unmatched=MAP_BROKEN)
+        return measured
 
     def _pair(self, collector: Collector, scenario: Scenario, ego: Sensed, other: Sensed, index: int, stamp: float,
               metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
