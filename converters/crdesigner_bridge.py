@@ -30,7 +30,8 @@ when the sum falls short of the road length): such maps are converted from a rew
 copy (``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
 A signal whose country crdesigner has no sign catalogue or stop-line entry for
 (``KeyError: 'SWE'``, ``KeyError: 'BEL'``) is read as its fallback country "ZAM" (signs
-are not part of our output).
+are not part of our output). Objects outlined with ``<cornerRoad>`` (crdesigner reads only
+``<cornerLocal>``: shapely ``NotImplementedError``) are left out of the copy.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -300,13 +301,14 @@ def crdesigner_copy(data: bytes) -> tuple[bytes, dict[str, str]] | None:
     moved to the nearer road end; a junction connection naming only a ``linkedRoad``
     (direct junction) names it as ``connectingRoad`` too; line, arc and spiral records are
     lengthened or shortened to end where the next record (or the road) starts
-    (``_align_records``). ``data`` has been checked by ``read_geo_reference``.
+    (``_align_records``); objects outlined by ``<cornerRoad>`` are removed
+    (``_objects_without_road_corners``). ``data`` has been checked by ``read_geo_reference``.
     """
     root = etree.fromstring(data, _hardened_parser())
     original = _renumber(root)
     rewrites = (_constant_spirals_to_arcs(root) + _straight_arcs_to_lines(root) + _header_it_reads(root)
                 + _lane_types_it_knows(root) + _signals_on_their_roads(root) + _linked_as_connecting(root)
-                + _align_records(root))
+                + _align_records(root) + _objects_without_road_corners(root))
     if original is None and not rewrites:
         return None
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8"), original or {}
@@ -451,6 +453,19 @@ has driving, entry, exit, onRamp, offRamp but not the ramp between two motorways
 ALIGN_TOLERANCE_M: Final[float] = 1e-6
 """A ``<geometry>`` record ending farther than this (m) from where the next record (or
 the road) starts is lengthened or shortened to end there."""
+
+
+def _objects_without_road_corners(root: etree._Element) -> int:
+    """Remove each ``<object>`` outlined with ``<cornerRoad>`` (crdesigner 0.8.5 reads
+    only ``<cornerLocal>`` and crashes on these in shapely: ``NotImplementedError``); the
+    number removed. Objects carry no lane geometry: only their crosswalk lanelets are
+    missing from crdesigner's ground truth."""
+    removed = 0
+    for element in list(root.iter("{*}object")):
+        if element.find(".//{*}cornerRoad") is not None:
+            element.getparent().remove(element)
+            removed += 1
+    return removed
 
 
 def _linked_as_connecting(root: etree._Element) -> int:

@@ -412,3 +412,20 @@ def test_border_fit_is_the_mean_capped_offset_of_the_detected_borders(tmp_path) 
     right = np.column_stack((x, np.full_like(x, -LANE_M + 0.07)))
     assert _border_fit_m(lanelets, left, right, 1.5) == pytest.approx(0.05, abs=1e-9)
     assert _border_fit_m(lanelets, left + [0.0, 4.0], right + [0.0, 4.0], 1.5) == pytest.approx(1.5)
+
+
+CORNER_ROAD_CROSSWALK = (
+    '<objects><object id="5" type="crosswalk" s="50" t="0" zOffset="0" hdg="0" orientation="none" length="3" '
+    'width="7"><outline id="0">' + "".join(f'<cornerRoad s="{s}" t="{t}" dz="0" height="0"/>'
+                                           for s, t in ((48.5, -3.5), (48.5, 3.5), (51.5, 3.5), (51.5, -3.5)))
+    + "</outline></object></objects>"
+)
+
+
+@pytest.mark.parametrize("converter", ["crdesigner", "engine"])
+def test_a_crosswalk_outlined_by_road_corners_leaves_the_lanes_convertible(tmp_path, converter) -> None:
+    from cold_maps.groundtruth.check import check_map
+
+    path = _write(tmp_path, "corner", _road("<line/>", 100.0, 100.0, CORNER_ROAD_CROSSWALK))
+    report = check_map(path, cache=False, converter=converter)  # crdesigner raised NotImplementedError (shapely)
+    assert report.trustworthy and report.lanelets == 1 and len(report.lanes) == 1
