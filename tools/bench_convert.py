@@ -59,7 +59,7 @@ def bench_converter(xodr: Path, name: str, folder: Path, cold_runs: int, hit_run
         lanelets, geo = converter.lanelets(xodr, False)
         built = time.perf_counter()
         data = build_osm(lanelets, geo_reference=geo, source=str(xodr), merge_tolerance_m=converter.merge_tolerance_m,
-                         join_tolerance_m=converter.join_tolerance_m)
+                         join_tolerance_m=converter.join_tolerance_m, simplify_tolerance_m=converter.simplify_tolerance_m)
         osm = folder / f"stage-{name}.osm"
         osm.write_bytes(data)
         written = time.perf_counter()
