@@ -198,7 +198,8 @@ class MapEvaluator:
                    "sensor errors)" if distinct < len(self.drives) else "")
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
-            f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}")
+            f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}; ground truth: Lanelet2 built by "
+            f"{GROUND_TRUTHS.get(plan.ground_truth, plan.ground_truth)}")
         loop_m = min(d.ego.shortest_loop_m for d in self.drives)
         farthest_m = max(plan.coop_leads_m, default=0.0) + self.sensor.range_m
         if loop_m < farthest_m:
@@ -492,6 +493,13 @@ class MapEvaluator:
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
+
+
+GROUND_TRUTHS: Final[dict[str, str]] = {
+    "engine": "the map engine (its borders and lane graph)",
+    "crdesigner": "commonroad-scenario-designer",
+}
+"""How each ``MapPlan.ground_truth`` is named in the notes."""
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:
