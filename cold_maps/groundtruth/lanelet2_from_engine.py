@@ -54,7 +54,7 @@ from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_s, sample_section_at
 from converters import Converter, ConversionError
-from converters.crdesigner_bridge import SourceLanelet, read_geo_reference
+from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
 
 KIND: Final[str] = "engine"
@@ -328,18 +328,21 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
         from cold_maps.opendrive.errors import OpenDriveError
         from cold_maps.opendrive.parser import load_opendrive
 
-        geo_reference = read_geo_reference(path)
-        same = odr_map is not None and odr_map.path and os.path.samefile(odr_map.path, path)
         try:
-            engine_map = odr_map if same else load_opendrive(path)
+            same = odr_map is not None and bool(odr_map.path) and os.path.samefile(odr_map.path, path)
+        except OSError as exc:
+            raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
+        try:
+            engine_map = odr_map if same and odr_map is not None else load_opendrive(path)
             graph = build_lane_graph(engine_map, LANE_TYPES, length_step=GRAPH_LENGTH_STEP_M)
             rules = read_road_rules(engine_map, graph)
             result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations, rules.priority)
         except (OpenDriveError, ValueError) as exc:
-            raise ConversionError(str(path), f"the map engine cannot build the ground truth: {exc}") from exc
+            reason = str(exc).removeprefix(f"{path}:").strip()
+            raise ConversionError(str(path), f"the map engine cannot build the ground truth: {reason}") from exc
         if not result:
             raise ConversionError(str(path), "the map has no lane to convert")
-        return result, geo_reference
+        return result, " ".join(engine_map.header.geo_reference.proj.split())
 
     return Converter(KIND, f"{__version__}.{BUILDER_VERSION}", lanelets, MERGE_TOLERANCE_M, float("inf"), None)
 
