@@ -4,8 +4,8 @@ lanes the drives use.
 
 With the engine's ground truth (exact wherever the map is well formed) an evaluation is
 not scored where the map is broken under the lane it measures (``BrokenStretches``): a
-lane link whose borders do not meet (``network.continuity.link_gaps``; the GT joins the
-ends there) or a lane that runs over its neighbour (a negative width,
+lane link whose borders miss by more than ``BROKEN_GAP_M`` (``network.continuity.link_gaps``;
+the GT joins the ends there, moving them by half the gap) or a lane that runs over its neighbour (a negative width,
 ``opendrive.lanes.wrong_side_lanes``). Such evaluations are rejected "gt_unmatched" with
 the reason ``MAP_BROKEN``, the rest are scored. A run says so in its one-line result and
 at the top of ``summary.md`` when more than ``UNMATCHED_SHARE_LIMIT`` of a map's
@@ -35,6 +35,10 @@ if TYPE_CHECKING:
 
 MAP_BROKEN: Final[str] = "map_broken"
 """``FrameRecord.gt_unmatched`` of an evaluation over a stretch where the map is broken."""
+
+BROKEN_GAP_M: Final[float] = 0.03
+"""A lane link whose borders miss by more than this (m) is broken: the ground truth joins
+the ends midway, so there it is off the engine's borders by more than half of it."""
 
 BROKEN_MARGIN_M: Final[float] = 0.5
 """A detected point this close (m) to a broken place, plus the place's own size (the gap,
@@ -82,7 +86,7 @@ def broken_stretches(graph: LaneGraph) -> BrokenStretches:
     points: list[NDArrayFloat] = []
     radii: list[NDArrayFloat] = []
     reasons: list[str] = []
-    for gap in link_gaps(graph):
+    for gap in link_gaps(graph, BROKEN_GAP_M):
         at = link_gap_points(graph, gap)
         points.append(at)
         radii.append(np.full(len(at), gap.distance_m + BROKEN_MARGIN_M))
