@@ -1,5 +1,6 @@
-"""OpenDRIVE → Lanelet2 through commonroad-scenario-designer, in the exact OpenDRIVE
-inertial frame, with an on-disk cache.
+"""OpenDRIVE → Lanelet2 in the exact OpenDRIVE inertial frame, with an on-disk cache:
+lanelets from commonroad-scenario-designer (or from any ``Converter``, e.g. the map
+engine's in ``cold_maps.groundtruth``) through one Lanelet2 writer (``osm``).
 
 Entry points: ``load_lanelet2`` (map + routing graph), ``convert`` (write an OSM file,
 get its ``LoadRecipe``), ``configure_convert`` (the ``cold-maps convert`` subcommand's arguments),
@@ -7,17 +8,19 @@ get its ``LoadRecipe``), ``configure_convert`` (the ``cold-maps convert`` subcom
 use them. This package never imports ``cold_maps``.
 """
 
-from converters.api import configure_convert, convert, load_lanelet2, routing_graph
+from converters.api import Converter, configure_convert, convert, crdesigner_converter, load_lanelet2, routing_graph
 from converters.cache import clear_cache
 from converters.errors import ConversionError
 from converters.frame import LoadRecipe
 
 __all__ = [
     "ConversionError",
+    "Converter",
     "LoadRecipe",
     "clear_cache",
     "configure_convert",
     "convert",
+    "crdesigner_converter",
     "load_lanelet2",
     "routing_graph",
 ]

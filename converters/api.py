@@ -1,24 +1,63 @@
-"""Public entry points: load a converted map, write one, and the ``convert`` arguments."""
+"""Public entry points: load a converted map, write one, and the ``convert`` arguments.
+
+Every entry point takes a ``Converter``: the reader that turns the OpenDRIVE file into
+lanelets (crdesigner by default; ``cold_maps.groundtruth.lanelet2_from_engine`` gives the
+map engine's). Its kind and version are part of the cache key.
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
 import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from converters import frame
 from converters.cache import atomic_write, cache_path
-from converters.crdesigner_bridge import crdesigner_version, odr_to_lanelets, read_geo_reference
+from converters.crdesigner_bridge import SourceLanelet, crdesigner_version, odr_to_lanelets, read_geo_reference
 from converters.errors import ConversionError
-from converters.osm import build_osm, read_generator
+from converters.joins import JOIN_TOLERANCE_M
+from converters.osm import MERGE_TOLERANCE_M, SIMPLIFY_TOLERANCE_M, build_osm, read_generator
 
 if TYPE_CHECKING:
     import lanelet2.core
     import lanelet2.routing
 
 PathLike = str | os.PathLike[str]
+
+
+@dataclass(frozen=True)
+class Converter:
+    """A reader of OpenDRIVE files into lanelets, served by the Lanelet2 writer and the cache.
+
+    Fields:
+        kind: its name, in the cache key and in messages ("crdesigner", "engine").
+        version: its version (part of the cache key).
+        lanelets: (path, verbose) → the lanelets (inertial frame, m) and the map's
+            geoReference ("" if none); raises ConversionError naming the file.
+        merge_tolerance_m: points of different borders closer than this (m) become one node.
+        join_tolerance_m: successor ends this close (m, may be inf) are snapped together.
+        simplify_tolerance_m: Douglas-Peucker tolerance of the ways (m), None: none.
+    """
+
+    kind: str
+    version: str
+    lanelets: Callable[[Path, bool], tuple[list[SourceLanelet], str]]
+    merge_tolerance_m: float = MERGE_TOLERANCE_M
+    join_tolerance_m: float = JOIN_TOLERANCE_M
+    simplify_tolerance_m: float | None = SIMPLIFY_TOLERANCE_M
+
+
+def _crdesigner_lanelets(path: Path, verbose: bool) -> tuple[list[SourceLanelet], str]:
+    return odr_to_lanelets(path, verbose=verbose)
+
+
+def crdesigner_converter() -> Converter:
+    """commonroad-scenario-designer (``converters.crdesigner_bridge``), the default here."""
+    return Converter("crdesigner", crdesigner_version(), _crdesigner_lanelets)
 
 
 def _read(path: Path) -> bytes:
@@ -28,18 +67,20 @@ def _read(path: Path) -> bytes:
         raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
 
 
-def _convert_bytes(xodr: Path, verbose: bool) -> bytes:
-    lanelets, geo_reference = odr_to_lanelets(xodr, verbose=verbose)
-    return build_osm(lanelets, geo_reference=geo_reference, source=str(xodr))
+def _convert_bytes(xodr: Path, verbose: bool, converter: Converter) -> bytes:
+    lanelets, geo_reference = converter.lanelets(xodr, verbose)
+    return build_osm(lanelets, geo_reference=geo_reference, source=str(xodr),
+                     merge_tolerance_m=converter.merge_tolerance_m, join_tolerance_m=converter.join_tolerance_m,
+                     simplify_tolerance_m=converter.simplify_tolerance_m)
 
 
-def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool) -> tuple[Path, bool]:
+def _cached_osm(xodr: Path, cache_dir: PathLike | None, verbose: bool, converter: Converter) -> tuple[Path, bool]:
     """The cache file of ``xodr`` and whether it was there already (else it is converted
     and stored first)."""
-    target = cache_path(_read(xodr), crdesigner_version(), cache_dir)
+    target = cache_path(_read(xodr), converter.version, cache_dir, kind=converter.kind)
     if target.is_file():
         return target, True
-    atomic_write(target, _convert_bytes(xodr, verbose), create_folder=True)
+    atomic_write(target, _convert_bytes(xodr, verbose, converter), create_folder=True)
     return target, False
 
 
@@ -50,17 +91,20 @@ def convert(
     cache: bool = True,
     cache_dir: PathLike | None = None,
     verbose: bool = False,
+    converter: Converter | None = None,
 ) -> frame.LoadRecipe:
-    """Convert an OpenDRIVE map to a standard Lanelet2 OSM file in its inertial frame.
+    """Convert an OpenDRIVE map to a standard Lanelet2 OSM file in its inertial frame
+    (with ``converter``, default crdesigner).
 
     The file is written atomically; the returned recipe says how plain lanelet2 loads it
     in the same frame. Raises ConversionError naming the file on any failure.
     """
     xodr, out = Path(xodr_path), Path(osm_path)
+    converter = converter or crdesigner_converter()
     if cache:
-        data = _read(_cached_osm(xodr, cache_dir, verbose)[0])
+        data = _read(_cached_osm(xodr, cache_dir, verbose, converter)[0])
     else:
-        data = _convert_bytes(xodr, verbose)
+        data = _convert_bytes(xodr, verbose, converter)
     atomic_write(out, data)
     return frame.LoadRecipe(
         osm_path=str(out), geo_reference=read_geo_reference(xodr), lanelets=data.count(b'<tag k="type" v="lanelet"/>')
@@ -73,9 +117,11 @@ def load_lanelet2(
     cache: bool = True,
     cache_dir: PathLike | None = None,
     verbose: bool = False,
+    converter: Converter | None = None,
 ) -> tuple[lanelet2.core.LaneletMap, lanelet2.routing.RoutingGraph]:
     """Lanelet2 map (inertial frame, m) and vehicle routing graph of an ``.xodr`` map
-    (converted, cached unless ``cache=False``) or of an ``.osm`` file we wrote.
+    (converted by ``converter``, default crdesigner; cached unless ``cache=False``) or of
+    an ``.osm`` file we wrote.
 
     Raises ConversionError naming the file for an unreadable map, a converter crash, an
     empty result or an OSM file not written by this converter (its frame is unknown).
@@ -91,18 +137,19 @@ def load_lanelet2(
         return _load_osm(source)
     if suffix != ".xodr":
         raise ConversionError(str(source), f"unknown map type {suffix or '(no suffix)'!r}: expected .xodr or .osm")
+    converter = converter or crdesigner_converter()
     if cache:
-        cached, hit = _cached_osm(source, cache_dir, verbose)
+        cached, hit = _cached_osm(source, cache_dir, verbose, converter)
         try:
             return _load_osm(cached, source=source)
         except ConversionError:
             if not hit:
                 raise
         cached.unlink(missing_ok=True)  # a damaged cache entry: convert again
-        return _load_osm(_cached_osm(source, cache_dir, verbose)[0], source=source)
+        return _load_osm(_cached_osm(source, cache_dir, verbose, converter)[0], source=source)
     with tempfile.TemporaryDirectory(prefix="cold-maps-") as folder:
         osm = Path(folder) / "map.osm"
-        osm.write_bytes(_convert_bytes(source, verbose))
+        osm.write_bytes(_convert_bytes(source, verbose, converter))
         return _load_osm(osm, source=source)
 
 

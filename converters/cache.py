@@ -1,6 +1,6 @@
 """On-disk cache of converted maps, keyed by content hash and converter version.
 
-One file per (map content, crdesigner version, our format version), written atomically
+One file per (map content, converter kind and version, our format version), written atomically
 (temporary file in the same folder, then ``os.replace``), so a concurrent reader sees
 either nothing or the whole file. Temporary files are hidden (``.…tmp``) and never read.
 """
@@ -33,10 +33,12 @@ def cache_root(cache_dir: str | os.PathLike[str] | None = None) -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "cold-maps"
 
 
-def cache_path(content: bytes, converter_version: str, cache_dir: str | os.PathLike[str] | None = None) -> Path:
-    """Cache file of a map with this content converted by this crdesigner version."""
+def cache_path(
+    content: bytes, converter_version: str, cache_dir: str | os.PathLike[str] | None = None, *, kind: str = "crdesigner"
+) -> Path:
+    """Cache file of a map with this content converted by this converter (kind and version)."""
     digest = hashlib.sha256(content).hexdigest()
-    name = f"{digest}-crdesigner{converter_version}-format{frame.FORMAT_VERSION}{CACHE_SUFFIX}"
+    name = f"{digest}-{kind}{converter_version}-format{frame.FORMAT_VERSION}{CACHE_SUFFIX}"
     return cache_root(cache_dir) / name
 
 

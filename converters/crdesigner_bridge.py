@@ -30,7 +30,8 @@ when the sum falls short of the road length): such maps are converted from a rew
 copy (``crdesigner_copy``), and the lanelets' OpenDRIVE lanes name the original roads.
 A signal whose country crdesigner has no sign catalogue or stop-line entry for
 (``KeyError: 'SWE'``, ``KeyError: 'BEL'``) is read as its fallback country "ZAM" (signs
-are not part of our output).
+are not part of our output). Objects outlined with ``<cornerRoad>`` (crdesigner reads only
+``<cornerLocal>``: shapely ``NotImplementedError``) are left out of the copy.
 crdesigner and its dependencies are imported inside ``odr_to_lanelets`` only.
 """
 
@@ -69,7 +70,8 @@ during a conversion: one conversion at a time per process."""
 
 @dataclass(frozen=True)
 class SourceLanelet:
-    """One CommonRoad lanelet as converted by crdesigner.
+    """One lanelet to write: a CommonRoad lanelet as converted by crdesigner, or a lane of
+    one lane section built from another reader (the map engine) in the same terms.
 
     Fields:
         id: CommonRoad lanelet id (positive; kept as the Lanelet2 lanelet id).
@@ -86,6 +88,8 @@ class SourceLanelet:
         regulations: speed limit, traffic lights and right of way crdesigner assigned.
         successors: ids of the lanelets crdesigner links after this one (from the
             OpenDRIVE road, lane and junction links), whether or not their ends touch.
+        left_tags, right_tags: Lanelet2 way tags (key, value) of the border; when given
+            they replace the tags of ``left_marking`` / ``right_marking``.
     """
 
     id: int
@@ -100,6 +104,8 @@ class SourceLanelet:
     right_z: NDArrayFloat | None = None
     regulations: LaneletRegulations = LaneletRegulations()
     successors: tuple[int, ...] = ()
+    left_tags: tuple[tuple[str, str], ...] = ()
+    right_tags: tuple[tuple[str, str], ...] = ()
 
 
 def _hardened_parser() -> etree.XMLParser:

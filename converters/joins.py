@@ -54,9 +54,12 @@ class EndGap:
     joined: bool
 
 
-def successor_gaps(lanelets: Sequence[SourceLanelet], merge_tolerance_m: float) -> tuple[EndGap, ...]:
+def successor_gaps(
+    lanelets: Sequence[SourceLanelet], merge_tolerance_m: float, join_tolerance_m: float = JOIN_TOLERANCE_M
+) -> tuple[EndGap, ...]:
     """Every converter successor relation whose ends are farther apart than
-    ``merge_tolerance_m`` (m) on either border, in lanelet order."""
+    ``merge_tolerance_m`` (m) on either border, in lanelet order; ``joined`` when both
+    lie within ``join_tolerance_m`` (m)."""
     by_id = {lanelet.id: lanelet for lanelet in lanelets}
     gaps = []
     for lanelet in lanelets:
@@ -64,7 +67,7 @@ def successor_gaps(lanelets: Sequence[SourceLanelet], merge_tolerance_m: float) 
             left = float(np.hypot(*(lanelet.left[-1] - follower.left[0])))
             right = float(np.hypot(*(lanelet.right[-1] - follower.right[0])))
             if max(left, right) > merge_tolerance_m:
-                joined = max(left, right) <= JOIN_TOLERANCE_M
+                joined = max(left, right) <= join_tolerance_m
                 gaps.append(EndGap(lanelet.id, follower.id, left, right, joined))
     return tuple(gaps)
 

@@ -37,7 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
-from converters.joins import join_ends, successor_gaps
+from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_gaps
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import arc_lengths, simplify
 
@@ -142,7 +142,10 @@ def lanelet_attributes(lanelet: SourceLanelet, urban: frozenset[str] = frozenset
 def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     """Index of each point's representative: the first earlier-or-same point within
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
-    its representative."""
+    its representative; with ``tolerance`` 0 only equal points share one."""
+    if tolerance == 0.0:
+        _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+        return first[inverse.ravel()].astype(np.int64)
     from scipy.spatial import cKDTree
 
     neighbours = cKDTree(points).query_ball_point(points, r=tolerance)
@@ -176,6 +179,8 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
         right=lanelet.left,
         left_marking=lanelet.right_marking,
         right_marking=lanelet.left_marking,
+        left_tags=lanelet.right_tags,
+        right_tags=lanelet.left_tags,
         left_z=lanelet.right_z,
         right_z=lanelet.left_z,
     )
@@ -187,13 +192,15 @@ def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
     return tuple(int(i) for i in ids[keep])
 
 
-def _joined_ends(lanelets: Sequence[SourceLanelet], starts: NDArrayInt) -> list[tuple[int, int]]:
+def _joined_ends(
+    lanelets: Sequence[SourceLanelet], starts: NDArrayInt, merge_tolerance_m: float, join_tolerance_m: float
+) -> list[tuple[int, int]]:
     """(border end, successor's border start) point pairs, as indices into the stacked
     borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
     across a gap (``converters.joins.successor_gaps``)."""
     slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
     pairs = []
-    for gap in successor_gaps(lanelets, MERGE_TOLERANCE_M):
+    for gap in successor_gaps(lanelets, merge_tolerance_m, join_tolerance_m):
         if gap.joined:
             before, after = slot[gap.lanelet], slot[gap.successor]
             for side in (0, 1):
@@ -211,11 +218,24 @@ def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArr
     return kept
 
 
-def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", source: str = "") -> bytes:
+def build_osm(
+    lanelets: Sequence[SourceLanelet],
+    *,
+    geo_reference: str = "",
+    source: str = "",
+    merge_tolerance_m: float = MERGE_TOLERANCE_M,
+    join_tolerance_m: float = JOIN_TOLERANCE_M,
+    simplify_tolerance_m: float | None = SIMPLIFY_TOLERANCE_M,
+) -> bytes:
     """The OSM document (UTF-8 bytes) of ``lanelets``, in our frame convention.
 
-    Raises ConversionError naming ``source`` when a lanelet has a border with fewer
-    than two distinct points, or when nothing is left to write.
+    Points of different borders closer than ``merge_tolerance_m`` (m) become one node;
+    successor ends both within ``join_tolerance_m`` (m, may be inf) of each other are
+    snapped together (``converters.joins``); each way is thinned by Douglas-Peucker within
+    ``simplify_tolerance_m`` (m; None: every vertex kept, for borders sampled to a
+    tolerance already, except where a join moved a way's end). Raises ConversionError naming ``source``
+    when a lanelet has a border with fewer than two distinct points, or when nothing is
+    left to write.
     """
     lanelets = [left_on_left(lanelet) for lanelet in lanelets]
     borders = [border for lanelet in lanelets for border in (lanelet.left, lanelet.right)]
@@ -224,8 +244,8 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     stacked = np.vstack(borders)
     heights = np.concatenate([_heights(lanelet, side) for lanelet in lanelets for side in ("left", "right")])
     starts = np.cumsum([0] + [len(border) for border in borders])
-    representative, positions = join_ends(stacked, merge_points(stacked, MERGE_TOLERANCE_M),
-                                          _joined_ends(lanelets, starts))
+    representative, positions = join_ends(stacked, merge_points(stacked, merge_tolerance_m),
+                                          _joined_ends(lanelets, starts, merge_tolerance_m, join_tolerance_m))
     representative = _keep_short_borders(representative, starts)
     unique, point_index = np.unique(representative, return_inverse=True)
     coordinates = np.column_stack((positions[unique], heights[unique]))
@@ -237,22 +257,23 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     for index, lanelet in enumerate(lanelets):
         pair = []
         ends = []
-        for side, position, marking in (
-            ("left", 2 * index, lanelet.left_marking),
-            ("right", 2 * index + 1, lanelet.right_marking),
+        for side, position, tags in (
+            ("left", 2 * index, dict(lanelet.left_tags) or _MARKINGS.get(lanelet.left_marking, {})),
+            ("right", 2 * index + 1, dict(lanelet.right_tags) or _MARKINGS.get(lanelet.right_marking, {})),
         ):
             points = _without_repeats(point_index[starts[position] : starts[position + 1]])
             if len(points) < 2:
-                raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {MERGE_TOLERANCE_M} m")
+                raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {merge_tolerance_m} m")
             ends.append(points[-1])
             way = ways.get(points, ways.get(points[::-1]))
             if way is None:
                 way = ways[points] = len(way_points)
                 chain = np.asarray(points)
-                way_points.append(chain[_kept_vertices(coordinates[chain])])
+                kept = chain if simplify_tolerance_m is None else chain[_kept_vertices(coordinates[chain], simplify_tolerance_m)]
+                way_points.append(kept)
                 way_tags.append({})
             if not way_tags[way]:
-                way_tags[way] = _MARKINGS.get(marking, {})
+                way_tags[way] = tags
             pair.append(way)
         members.append((pair[0], pair[1]))
         exit_points.append((ends[0], ends[1]))
@@ -264,23 +285,25 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    projector = frame.projector()
-    from lanelet2.core import BasicPoint3d
+    def write_nodes(identifiers: NDArrayInt, xyz: NDArrayFloat) -> None:
+        """Append the nodes, parsed from their text in one call (an element per node is slow)."""
+        lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
+        known = np.isfinite(xyz[:, 2]).tolist()
+        text = "".join(
+            f'<node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}">'
+            + (f'<tag k="ele" v="{height:.4f}"/>' if has_height else "") + "</node>"
+            for identifier, lat_deg, lon_deg, height, has_height in zip(identifiers.tolist(), lat.tolist(),
+                                                                        lon.tolist(), xyz[:, 2].tolist(), known)
+        )
+        root.extend(etree.fromstring(f"<nodes>{text}</nodes>"))
 
-    def write_node(identifier: int, xyz: NDArrayFloat) -> None:
-        gps = projector.reverse(BasicPoint3d(float(xyz[0]), float(xyz[1]), 0.0))
-        element = etree.SubElement(root, "node", id=str(identifier), lat=repr(gps.lat), lon=repr(gps.lon))
-        if np.isfinite(xyz[2]):
-            etree.SubElement(element, "tag", k="ele", v=f"{xyz[2]:.4f}")
-
-    for point in used:
-        write_node(int(node_id[point]), coordinates[point])
-    for way, chain in enumerate(way_points):
-        element = etree.SubElement(root, "way", id=str(way_id_base + way))
-        for point in chain:
-            etree.SubElement(element, "nd", ref=str(node_id[point]))
-        for key, value in way_tags[way].items():
-            etree.SubElement(element, "tag", k=key, v=value)
+    write_nodes(node_id[used], coordinates[used])
+    ways_text = "".join(
+        f'<way id="{way_id_base + way}">' + "".join(f'<nd ref="{ref}"/>' for ref in node_id[chain].tolist())
+        + "".join(f'<tag k="{key}" v="{value}"/>' for key, value in way_tags[way].items()) + "</way>"
+        for way, chain in enumerate(way_points)
+    )
+    root.extend(etree.fromstring(f"<ways>{ways_text}</ways>"))
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -296,7 +319,7 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
 
     def new_node(xyz: NDArrayFloat) -> int:
         identifier = next(fresh)
-        write_node(identifier, xyz)
+        write_nodes(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
         return identifier
 
     regulations = {lanelet.id: lanelet.regulations for lanelet in lanelets}
@@ -304,14 +327,14 @@ def build_osm(lanelets: Sequence[SourceLanelet], *, geo_reference: str = "", sou
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
-def _kept_vertices(points: NDArrayFloat) -> npt.NDArray[np.bool_]:
-    """Douglas-Peucker (``SIMPLIFY_TOLERANCE_M``) of an (N, 3) way, in plan and in its
-    height profile over plan length (a crest on a straight road keeps its vertices)."""
-    keep = simplify(points[:, :2], SIMPLIFY_TOLERANCE_M)
+def _kept_vertices(points: NDArrayFloat, tolerance_m: float) -> npt.NDArray[np.bool_]:
+    """Douglas-Peucker (``tolerance_m``) of an (N, 3) way, in plan and in its height
+    profile over plan length (a crest on a straight road keeps its vertices)."""
+    keep = simplify(points[:, :2], tolerance_m)
     heights = points[:, 2]
     if np.all(np.isfinite(heights)):
         along = arc_lengths(points[:, :2])
-        keep |= simplify(np.column_stack((along, heights)), SIMPLIFY_TOLERANCE_M)
+        keep |= simplify(np.column_stack((along, heights)), tolerance_m)
     return keep
 
 

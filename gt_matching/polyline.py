@@ -97,6 +97,36 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     return segment_distances(points, vertices, all_segments)
 
 
+def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Exact closest-point distance (m) and arc length (m) of each point on the whole
+    polyline ``vertices`` (rings, short and self-approaching polylines included): only the
+    segments whose midpoint lies within the distance to the nearest vertex plus the
+    longest half segment can be closer, and those are all measured."""
+    from scipy.spatial import cKDTree
+
+    if len(vertices) < 2:
+        raise ValueError("nearest_distances needs a polyline of at least two vertices")
+    mids = 0.5 * (vertices[1:] + vertices[:-1])
+    half = 0.5 * float(np.max(np.hypot(*(vertices[1:] - vertices[:-1]).T)))
+    to_vertex = cKDTree(vertices).query(points)[0]
+    candidates = cKDTree(mids).query_ball_point(points, r=to_vertex + half + 1e-9)
+    counts = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=len(points))
+    owner = np.repeat(np.arange(len(points)), counts)
+    segment = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=int(counts.sum()))
+    start = vertices[segment]
+    delta = vertices[segment + 1] - start
+    length_sq = np.einsum("nd,nd->n", delta, delta)
+    rel = points[owner] - start
+    along = np.clip(np.divide(np.einsum("nd,nd->n", rel, delta), length_sq, out=np.zeros(len(segment)),
+                              where=length_sq > 0.0), 0.0, 1.0)
+    gap = rel - along[:, None] * delta
+    distance = np.hypot(gap[:, 0], gap[:, 1])
+    order = np.lexsort((distance, owner))
+    first = order[np.searchsorted(owner[order], np.arange(len(points)))]
+    cum = arc_lengths(vertices)
+    return distance[first], cum[segment[first]] + along[first] * np.sqrt(length_sq[first])
+
+
 def windowed_distances(
     points: NDArrayFloat, vertices: NDArrayFloat, near_arc_m: NDArrayFloat, reach_m: float
 ) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -399,7 +399,7 @@ class RouteBorder:
     ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
         """Per point, the smallest distance (m) to the samples of ``window`` (x and y views)
         centred on sample ``centre``, that sample's index, and whether it lies inside the
-        window (not on an edge that is not the border's end)."""
+        window (not on an edge that is not the border's end; a ring has no end)."""
         last = len(self.samples) - 1
         window_x, window_y = window
         width = window_x.shape[1]
@@ -409,7 +409,8 @@ class RouteBorder:
         dy = window_y[first] - points[:, 1:]
         squared += dy * dy
         closest = np.argmin(squared, axis=1)
-        inside = ((closest > 0) | (first == 0)) & ((closest < width - 1) | (first + width - 1 >= last))
+        ends = self.loop_m is None  # a ring's first and last samples are no ends: it goes on
+        inside = ((closest > 0) | ((first == 0) & ends)) & ((closest < width - 1) | ((first + width - 1 >= last) & ends))
         return np.sqrt(squared[np.arange(len(points)), closest]), first + closest, inside
 
     def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:

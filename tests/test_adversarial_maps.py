@@ -57,7 +57,7 @@ def reports(maps: dict[str, Path], tmp_path_factory: pytest.TempPathFactory):
     from cold_maps.groundtruth.check import check_map
 
     cache = tmp_path_factory.mktemp("cache")
-    return {name: check_map(path, cache_dir=cache) for name, path in maps.items()}
+    return {name: check_map(path, cache_dir=cache, converter="crdesigner") for name, path in maps.items()}
 
 
 @pytest.mark.parametrize("name", AGREEING)
@@ -217,7 +217,7 @@ def test_check_names_the_lanes_of_crdesigners_linear_parameter(maps, tmp_path: P
     from converters import crdesigner_bridge
 
     monkeypatch.setattr(crdesigner_bridge, "_param_poly3_by_arc_length", lambda original: original)
-    report = check_map(maps["param_poly3"], cache=False)
+    report = check_map(maps["param_poly3"], cache=False, converter="crdesigner")
     assert {(lane.section, lane.lane_id) for lane in report.failing} == {(2, 1), (2, -1), (2, -2)}
     assert 0.5 < max(lane.max_m for lane in report.failing) < 1.0
 

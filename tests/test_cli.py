@@ -273,10 +273,10 @@ def test_convert_writes_an_osm_that_plain_lanelet2_loads_in_the_opendrive_frame(
 
 def test_check_passes_a_bundled_map_and_fails_at_a_zero_threshold(capsys: pytest.CaptureFixture[str]) -> None:
     xodr = str(bundled_map("junction"))
-    assert main(["check", xodr]) == 0
+    assert main(["check", xodr, "--converter", "crdesigner"]) == 0
     assert "ground truth: TRUSTWORTHY" in capsys.readouterr().out
-    # the converter samples curves every 0.5 m, so some lane disagrees by more than 1 µm
-    assert main(["check", xodr, "--threshold", "1e-6"]) == 3
+    # crdesigner samples curves every 0.5 m, so some lane disagrees by more than 1 µm
+    assert main(["check", xodr, "--threshold", "1e-6", "--converter", "crdesigner"]) == 3
     assert "NOT TRUSTWORTHY" in capsys.readouterr().out
 
 

@@ -363,17 +363,19 @@ def test_foreign_osm_and_unknown_suffix_are_refused(tmp_path) -> None:
         converters.load_lanelet2(tmp_path / "map.txt")
 
 
-def test_cli_convert_reports_one_line_and_loads_back(straight_map, tmp_path, capsys) -> None:
+@pytest.mark.parametrize("converter", ["engine", "crdesigner"])
+def test_cli_convert_reports_one_line_and_loads_back(straight_map, tmp_path, capsys, converter) -> None:
     from cold_maps.cli.maps import main
 
     out = tmp_path / "straight.osm"
-    assert main(["convert", str(straight_map), "-o", str(out), "--no-cache"]) == 0
-    assert capsys.readouterr().out == f"cold-maps convert: 6 lanelets in the OpenDRIVE inertial frame -> {out}\n"
+    assert main(["convert", str(straight_map), "-o", str(out), "--no-cache", "--converter", converter]) == 0
+    assert capsys.readouterr().out == (f"cold-maps convert: 6 lanelets in the OpenDRIVE inertial frame -> {out} "
+                                       f"(converter {converter})\n")
     lanelet_map, _ = converters.load_lanelet2(out)
     assert len(lanelet_map.laneletLayer) == 6
-    assert main(["convert", str(straight_map), "-o", str(out), "-v"]) == 0
+    assert main(["convert", str(straight_map), "-o", str(out), "-v", "--converter", converter]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert printed[0].endswith("6 lanelets in the OpenDRIVE inertial frame -> " + str(out))
+    assert printed[0].endswith(f"6 lanelets in the OpenDRIVE inertial frame -> {out} (converter {converter})")
     assert f"wrote {out}: 6 lanelets" in printed[1] and any("MercatorProjector" in line for line in printed)
     assert main(["convert", str(straight_map), "-o", str(out), "-q"]) == 0
     assert capsys.readouterr().out == ""
@@ -402,7 +404,7 @@ def town01_checked(town01_path: Path, tmp_path_factory: pytest.TempPathFactory):
     lanelets, geo_reference = odr_to_lanelets(town01_path)
     target = cache_path(town01_path.read_bytes(), crdesigner_version(), cache)
     atomic_write(target, build_osm(lanelets, geo_reference=geo_reference, source=str(town01_path)))
-    report = check_map(town01_path, cache_dir=cache)
+    report = check_map(town01_path, cache_dir=cache, converter="crdesigner")
     lanelet_map, graph = converters.load_lanelet2(town01_path, cache_dir=cache)
     return report, lanelet_map, graph, lanelets
 
@@ -520,9 +522,9 @@ def test_check_subcommand_exit_codes(straight_map, tmp_path, monkeypatch, capsys
     from cold_maps.cli.maps import main
 
     monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
-    assert main(["check", "--no-progress", str(straight_map)]) == 0
+    assert main(["check", "--no-progress", str(straight_map), "--converter", "crdesigner"]) == 0
     assert "ground truth: TRUSTWORTHY (0 of 6 lanes" in capsys.readouterr().out
-    assert main(["check", "--no-progress", str(straight_map), "--threshold", "1e-6"]) == 3
+    assert main(["check", "--no-progress", str(straight_map), "--threshold", "1e-6", "--converter", "crdesigner"]) == 3
     assert "NOT TRUSTWORTHY" in capsys.readouterr().out
 
 
@@ -589,7 +591,7 @@ def test_opening_lane_keeps_its_opendrive_borders(tmp_path) -> None:
 def test_bundled_highway_ground_truth_is_trustworthy() -> None:
     from cold_maps.groundtruth.check import check_map
 
-    report = check_map(bundled_map("highway"), cache=False)
+    report = check_map(bundled_map("highway"), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) >= 20
     assert max(lane.max_m for lane in report.lanes) <= 2 * MERGE_TOLERANCE_M
 

@@ -115,12 +115,12 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
 def test_check_lists_edges_without_routing_successor_with_their_gap(tmp_path) -> None:
     from cold_maps.groundtruth.check import check_map
 
-    near = check_map(_write(tmp_path, "near", branch_gap_map(0.02)), cache=False)
+    near = check_map(_write(tmp_path, "near", branch_gap_map(0.02)), cache=False, converter="crdesigner")
     assert near.trustworthy and near.edges == 3 and near.disconnected == ()
     # the straight branch's start moves by half the 2 cm gap; nothing else moves
     assert max(lane.max_m for lane in near.lanes) == pytest.approx(0.01, abs=5e-4)
     far_m = JOIN_TOLERANCE_M + 0.3
-    far = check_map(_write(tmp_path, "far", branch_gap_map(far_m)), cache=False)
+    far = check_map(_write(tmp_path, "far", branch_gap_map(far_m)), cache=False, converter="crdesigner")
     assert not far.trustworthy and not far.failing
     (edge,) = far.disconnected
     assert (edge.source, edge.target) == (("1", 0, -1), ("2", 0, -1))
@@ -156,7 +156,8 @@ def test_run_over_a_gap_too_wide_to_join_says_so_and_scores_no_frame_past_the_gt
     monkeypatch.setenv("COLD_MAPS_CACHE_DIR", str(tmp_path / "cache"))
     path = _write(tmp_path, "far", branch_gap_map(JOIN_TOLERANCE_M + 0.3))
     out = tmp_path / "out"
-    assert main(["--map", str(path), "--routes", "1", "--out", str(out), *ISSUE_RUN]) == 0
+    # crdesigner's GT leaves the gap open (the engine's joins every lane-graph edge)
+    assert main(["--map", str(path), "--routes", "1", "--out", str(out), "--converter", "crdesigner", *ISSUE_RUN]) == 0
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert "GROUND TRUTH NOT TRUSTWORTHY" in line and "1:0:-1" in line
     summary = (out / "summary.md").read_text()
@@ -280,7 +281,7 @@ def test_a_signal_past_its_road_end_is_moved_to_the_end_for_crdesigner(tmp_path)
     text = _road("<line/>", 30.0, 30.0, signals)
     data, _ = crdesigner_copy(text.encode())
     assert [float(s.get("s")) for s in etree.fromstring(data).iter("signal")] == [30.0, 0.0]
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -318,7 +319,7 @@ def test_lane_types_crdesigner_lacks_convert_and_check(tmp_path) -> None:
             .replace("</lane></right>", f"</lane>{walking}</right>"))
     data, _ = crdesigner_copy(text.encode())
     assert [lane.get("type") for lane in etree.fromstring(data).iter("lane")] == ["none", "driving", "sidewalk"]
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and [(lane.road_id, lane.lane_id) for lane in report.lanes] == [("1", -1)]
 
 
@@ -328,7 +329,7 @@ def test_a_centre_lane_without_type_converts_and_checks(tmp_path) -> None:
 
     text = _road("<line/>", 30.0, 30.0).replace('<lane id="0" type="none"/>', '<lane id="0"/>')
     assert '<lane id="0"/>' in text
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -344,7 +345,7 @@ def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_re
     text = _road('<arc curvature="0"/>', 30.0, 30.0).replace('<header revMajor="1" revMinor="6"/>', header)
     data, _ = crdesigner_copy(text.encode())
     assert etree.fromstring(data).find(".//geoReference") is None
-    report = check_map(_write(tmp_path, "m", text), cache=False)
+    report = check_map(_write(tmp_path, "m", text), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1
 
 
@@ -363,7 +364,7 @@ def test_straight_arc_and_empty_geo_reference_convert_and_check(tmp_path, geo_re
 def test_maps_crdesigner_rejected_convert_and_check(tmp_path, shape, length, extra, sections) -> None:
     from cold_maps.groundtruth.check import check_map
 
-    report = check_map(_write(tmp_path, "m", _road(shape, length, 30.0, extra, sections)), cache=False)
+    report = check_map(_write(tmp_path, "m", _road(shape, length, 30.0, extra, sections)), cache=False, converter="crdesigner")
     assert report.trustworthy and len(report.lanes) == 1 + bool(sections)
 
 
@@ -411,3 +412,20 @@ def test_border_fit_is_the_mean_capped_offset_of_the_detected_borders(tmp_path) 
     right = np.column_stack((x, np.full_like(x, -LANE_M + 0.07)))
     assert _border_fit_m(lanelets, left, right, 1.5) == pytest.approx(0.05, abs=1e-9)
     assert _border_fit_m(lanelets, left + [0.0, 4.0], right + [0.0, 4.0], 1.5) == pytest.approx(1.5)
+
+
+CORNER_ROAD_CROSSWALK = (
+    '<objects><object id="5" type="crosswalk" s="50" t="0" zOffset="0" hdg="0" orientation="none" length="3" '
+    'width="7"><outline id="0">' + "".join(f'<cornerRoad s="{s}" t="{t}" dz="0" height="0"/>'
+                                           for s, t in ((48.5, -3.5), (48.5, 3.5), (51.5, 3.5), (51.5, -3.5)))
+    + "</outline></object></objects>"
+)
+
+
+@pytest.mark.parametrize("converter", ["crdesigner", "engine"])
+def test_a_crosswalk_outlined_by_road_corners_leaves_the_lanes_convertible(tmp_path, converter) -> None:
+    from cold_maps.groundtruth.check import check_map
+
+    path = _write(tmp_path, "corner", _road("<line/>", 100.0, 100.0, CORNER_ROAD_CROSSWALK))
+    report = check_map(path, cache=False, converter=converter)  # crdesigner raised NotImplementedError (shapely)
+    assert report.trustworthy and report.lanelets == 1 and len(report.lanes) == 1

@@ -55,3 +55,23 @@ def test_at_fractions_and_mid_line() -> None:
 @pytest.mark.parametrize(("a", "b", "expected"), [(0.1, -0.1, 0.2), (math.pi - 0.1, -math.pi + 0.1, 0.2), (0.0, math.pi, math.pi)])
 def test_angle_difference_wraps(a: float, b: float, expected: float) -> None:
     assert angle_difference(a, b) == pytest.approx(expected)
+
+
+def test_nearest_distances_are_exact_on_rings_and_short_borders() -> None:
+    from gt_matching.polyline import closest_distances, nearest_distances
+
+    rng = np.random.default_rng(7)
+    # a closed ring of radius 5 m in 40 chords: a point just before the seam is on the ring,
+    # not 2·r·sin(angle/2) away at the other end (the windowed search's false alarm)
+    angles = np.linspace(0.0, 2.0 * math.pi, 41)
+    ring = 5.0 * np.column_stack((np.cos(angles), np.sin(angles)))
+    near_seam = (0.1 * ring[-2] + 0.9 * ring[-1])[None, :]  # on the last chord, 8 cm before the seam
+    distance, arc = nearest_distances(near_seam, ring)
+    chord = float(np.hypot(*(ring[1] - ring[0])))
+    assert distance[0] == pytest.approx(0.0, abs=1e-9) and arc[0] == pytest.approx(39.9 * chord, abs=1e-9)
+    for _ in range(100):
+        vertices = np.cumsum(rng.normal(size=(int(rng.integers(2, 25)), 2)), axis=0)
+        points = rng.normal(scale=4.0, size=(30, 2))
+        exact, _ = nearest_distances(points, vertices)
+        brute, _ = closest_distances(points, vertices)
+        np.testing.assert_allclose(exact, brute, atol=1e-12)

@@ -55,7 +55,7 @@ def test_ramps_get_ground_truth_that_matches_the_engine(tmp_path) -> None:
 
     path = tmp_path / "ramps.xodr"
     path.write_text(ramp_map())
-    report = check_map(path, cache=False)
+    report = check_map(path, cache=False, converter="crdesigner")
     assert report.trustworthy
     assert sorted((lane.road_id, lane.lane_id) for lane in report.lanes) == [(road_id, -1) for road_id, _ in ROADS]
     assert all(lane.matched_by == "id" for lane in report.lanes)

@@ -1,9 +1,12 @@
-"""Benchmark of converters.load_lanelet2: cold conversion and cache hit, mean/σ/max.
+"""Benchmark of the ground-truth conversion, both converters side by side in one run:
+cold conversion and cache hit, mean/σ/max.
 
-Wall-clock times depend on what else runs on the machine; the cache hit is also given
-in CPU time of this process. Side by side in the same run: the cold conversion split into its stages (crdesigner
-OpenDRIVE → CommonRoad, our OSM build, lanelet2 load + routing graph), and the cache hit
-against its floor (lanelet2.io.load of the cached file alone).
+Per converter (engine: the map engine's borders and lane graph; crdesigner:
+commonroad-scenario-designer) the cold ``cold-maps convert`` (our reader, then the
+conversion, ``cache=False``) and its stages (lanelets, OSM build, lanelet2 load + routing
+graph), the cache hit (also in CPU time of this process) against its floor
+(lanelet2.io.load of the cached file alone); then the engine's cold time as a share of
+crdesigner's. Wall-clock times depend on what else runs on the machine.
 
     .venv/bin/python tools/bench_convert.py [MAP.xodr ...] [--cold-runs 1] [--hit-runs 10]
 """
@@ -38,39 +41,58 @@ def row(label: str, times: list[float]) -> str:
     return f"  {label:<34} n={len(times):<3} mean {statistics.mean(times):8.3f} s  σ {sigma:7.3f} s  max {max(times):8.3f} s"
 
 
-def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
+def bench_converter(xodr: Path, name: str, folder: Path, cold_runs: int, hit_runs: int) -> float:
+    """Print one converter's rows; return its mean cold ``cold-maps convert`` time (s)."""
     import lanelet2.io
 
-    from converters import frame, load_lanelet2
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
+    from cold_maps.opendrive.parser import load_opendrive
+    from converters import convert, frame, load_lanelet2
     from converters.cache import cache_path
-    from converters.crdesigner_bridge import crdesigner_version, odr_to_lanelets
     from converters.osm import build_osm
 
+    print(f"  converter {name}")
+    stages: dict[str, list[float]] = {"lanelets": [], "OSM build": [], "load + routing graph": []}
+    for _ in range(cold_runs):
+        start = time.perf_counter()
+        converter = converter_named(name, load_opendrive(xodr))
+        lanelets, geo = converter.lanelets(xodr, False)
+        built = time.perf_counter()
+        data = build_osm(lanelets, geo_reference=geo, source=str(xodr), merge_tolerance_m=converter.merge_tolerance_m,
+                         join_tolerance_m=converter.join_tolerance_m, simplify_tolerance_m=converter.simplify_tolerance_m)
+        osm = folder / f"stage-{name}.osm"
+        osm.write_bytes(data)
+        written = time.perf_counter()
+        load_lanelet2(osm)
+        stages["lanelets"].append(built - start)
+        stages["OSM build"].append(written - built)
+        stages["load + routing graph"].append(time.perf_counter() - written)
+
+    def cold_convert() -> None:
+        convert(xodr, folder / f"{name}.osm", cache=False, converter=converter_named(name, load_opendrive(xodr)))
+
+    cold = timed(cold_convert, cold_runs)
+    print(row("cold: cold-maps convert --no-cache", cold))
+    for label, times in stages.items():
+        print(row(f"  stage: {label}", times))
+    cache = folder / "cache"
+    converter = converter_named(name)
+    load_lanelet2(xodr, cache_dir=cache, converter=converter)
+    print(row("cache hit: load_lanelet2", timed(lambda: load_lanelet2(xodr, cache_dir=cache, converter=converter), hit_runs)))
+    hit_cpu = timed(lambda: load_lanelet2(xodr, cache_dir=cache, converter=converter), hit_runs, time.process_time)
+    print(row("cache hit: load_lanelet2 (CPU time)", hit_cpu))
+    cached = str(cache_path(xodr.read_bytes(), converter.version, cache, kind=converter.kind))
+    print(row("  floor: lanelet2.io.load only", timed(lambda: lanelet2.io.load(cached, frame.projector()), hit_runs)))
+    return statistics.mean(cold)
+
+
+def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
     print(f"{xodr.name} ({xodr.stat().st_size / 1e6:.1f} MB)")
     with tempfile.TemporaryDirectory(prefix="bench-convert-") as folder:
-        stages: dict[str, list[float]] = {"crdesigner OpenDRIVE → CommonRoad": [], "OSM build": [], "load + routing graph": []}
-        for _ in range(cold_runs):
-            start = time.perf_counter()
-            lanelets, geo = odr_to_lanelets(xodr)
-            built = time.perf_counter()
-            data = build_osm(lanelets, geo_reference=geo, source=str(xodr))
-            osm = Path(folder) / "stage.osm"
-            osm.write_bytes(data)
-            written = time.perf_counter()
-            load_lanelet2(osm)
-            stages["crdesigner OpenDRIVE → CommonRoad"].append(built - start)
-            stages["OSM build"].append(written - built)
-            stages["load + routing graph"].append(time.perf_counter() - written)
-        print(row("cold: load_lanelet2(cache=False)", timed(lambda: load_lanelet2(xodr, cache=False), cold_runs)))
-        for label, times in stages.items():
-            print(row(f"  stage: {label}", times))
-        cache = Path(folder) / "cache"
-        load_lanelet2(xodr, cache_dir=cache)
-        print(row("cache hit: load_lanelet2", timed(lambda: load_lanelet2(xodr, cache_dir=cache), hit_runs)))
-        hit_cpu = timed(lambda: load_lanelet2(xodr, cache_dir=cache), hit_runs, time.process_time)
-        print(row("cache hit: load_lanelet2 (CPU time)", hit_cpu))
-        cached = str(cache_path(xodr.read_bytes(), crdesigner_version(), cache))
-        print(row("  floor: lanelet2.io.load only", timed(lambda: lanelet2.io.load(cached, frame.projector()), hit_runs)))
+        engine = bench_converter(xodr, "engine", Path(folder), cold_runs, hit_runs)
+        crdesigner = bench_converter(xodr, "crdesigner", Path(folder), cold_runs, hit_runs)
+    print(f"  engine cold convert / crdesigner cold convert: {engine:.3f} s / {crdesigner:.3f} s = "
+          f"{100.0 * engine / crdesigner:.1f} %")
 
 
 def main(argv: list[str] | None = None) -> int:

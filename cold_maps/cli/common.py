@@ -375,3 +375,10 @@ def gap_list(text: str) -> tuple[float, ...]:
     if not gaps or any(not 0 < g < MAX_GAP_M for g in gaps):
         raise argparse.ArgumentTypeError(f"gaps must be > 0 m and < {MAX_GAP_M:g} m, got {text!r}")
     return gaps
+
+
+def add_converter_option(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--converter engine|crdesigner``: the ground truth's converter, engine by default."""
+    from cold_maps.groundtruth.lanelet2_from_engine import CONVERTERS
+
+    parser.add_argument("--converter", choices=CONVERTERS, default=CONVERTERS[0], help=help_text)

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence
 
-from cold_maps.cli.common import (UsageError, builds, cli_entry, finite_number, fusion_method, gap_list, int_in,
+from cold_maps.cli.common import (UsageError, add_converter_option, builds, cli_entry, finite_number, fusion_method, gap_list, int_in,
                                   make_parser, positive_int, validated, within)
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.report import ScenarioResult
@@ -237,6 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help=f"lane change (RMS, m) that triggers a message (default {DEFAULT_CHANGE_TOLERANCE_M:g})")
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes, one drive (route) each at a time (default: this machine's cores)")
+    add_converter_option(parser, "converter of the Lanelet2 ground truth: engine (the map engine's borders and lane "
+                         "graph) or crdesigner (commonroad-scenario-designer)")
     parser.add_argument("--no-mcap", action="store_true", help="do not write run.mcap")
     parser.add_argument("--osi", type=_osi_path, default=None, metavar="TRACE.osi",
                         help="also write every vehicle's detections per frame as an ASAM OSI SensorData trace "
@@ -270,6 +272,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
         return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping, sensor=args.sensor,
+                                     ground_truth=args.converter,
                                      params=replace(plan.params, convoy_weights=args.convoy_weights)), args)
                 for plan in plans]
     seen: dict[str, Path] = {}
@@ -283,7 +286,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,
                                  speed_mps=args.speed, distractors=not args.no_distractors, errors=errors,
-                                 params=params, lanes=args.lanes, stopping=stopping, sensor=args.sensor), args)
+                                 params=params, lanes=args.lanes, stopping=stopping, sensor=args.sensor,
+                                 ground_truth=args.converter), args)
             for path in args.map]
 
 

@@ -80,11 +80,12 @@ def _map_path(args: argparse.Namespace) -> Path | None:
 def _meter(map_path: Path | None) -> Any:
     if map_path is None:
         return None
+    from cold_maps.groundtruth.lanelet2_from_engine import engine_converter
     from cold_maps.groundtruth.meter import GroundTruthMeter
     from converters import load_lanelet2
     from gt_matching import GroundTruth
 
-    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path), prepare_all=False))
+    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path, converter=engine_converter()), prepare_all=False))
 
 
 class Refuser:

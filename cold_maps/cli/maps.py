@@ -30,6 +30,7 @@ import numpy as np
 from cold_maps.cli.common import (
     DefaultsHelpFormatter,
     UsageError,
+    add_converter_option,
     add_output_options,
     add_version_option,
     cli_entry,
@@ -296,6 +297,8 @@ def _configure_convert(parser: argparse.ArgumentParser) -> None:
     from converters.api import configure_convert
 
     configure_convert(parser)
+    add_converter_option(parser, "engine: the map engine's borders and lane graph; crdesigner: "
+                         "commonroad-scenario-designer (the independent cross-check)")
 
 
 def _run_convert(args: argparse.Namespace) -> int:
@@ -304,13 +307,16 @@ def _run_convert(args: argparse.Namespace) -> int:
     warnings and prints."""
     from cold_maps.cli.common import progress_stream
     from cold_maps.common.progress import Spinner
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
     from cold_maps.opendrive.parser import load_opendrive
     from converters import convert
 
-    load_opendrive(args.xodr)  # the converter reads the file itself: refuse what our reader refuses first
+    odr_map = load_opendrive(args.xodr)  # refuse what our reader refuses first (crdesigner reads the file itself)
+    converter = converter_named(args.converter, odr_map)
     with Spinner(f"{PROG} convert: converting {Path(args.xodr).name}", stream=progress_stream(args)):
-        recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose >= 2)
-    result_line(args, f"{PROG} convert", f"{recipe.lanelets} lanelets in the OpenDRIVE inertial frame -> {args.output}")
+        recipe = convert(args.xodr, args.output, cache=not args.no_cache, verbose=args.verbose >= 2, converter=converter)
+    result_line(args, f"{PROG} convert", f"{recipe.lanelets} lanelets in the OpenDRIVE inertial frame -> "
+                f"{args.output} (converter {args.converter})")
     if args.verbose and not args.quiet:
         print(recipe.describe())
     return 0
@@ -327,28 +333,30 @@ def _configure_check(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-lanes", action="store_true", help="check every lane type, not only the vehicle lanes "
                         f"({', '.join(VEHICLE_LANE_TYPES)})")
     parser.add_argument("--no-cache", action="store_true", help="convert again; neither use nor fill the cache")
+    parser.add_argument("--converter", choices=("engine", "crdesigner"), default=None,
+                        help="check only this converter's ground truth (default: the engine's, crdesigner's and the "
+                        "two compared; the exit status follows the engine's)")
     add_strict_option(parser)
 
 
 def _check(args: argparse.Namespace) -> int:
     """Print the check report, then the map's geometry gaps (``network.continuity``); return
     the report's exit code. Raises OpenDriveError or ConversionError."""
-    from cold_maps.groundtruth.check import check_map, format_report
+    from cold_maps.groundtruth.check import check_map, cross_check, format_cross_check, format_report
     from cold_maps.network.continuity import continuity_report
     from cold_maps.network.lane_graph import build_lane_graph
 
     odr_map = _load(args)
-    report = check_map(
-        args.map,
-        threshold_m=args.threshold,
-        step_m=args.step,
-        lane_types=None if args.all_lanes else VEHICLE_LANE_TYPES,
-        cache=not args.no_cache,
-        odr_map=odr_map,
-    )
-    print(format_report(report))
+    options = {"threshold_m": args.threshold, "step_m": args.step, "cache": not args.no_cache, "odr_map": odr_map,
+               "lane_types": None if args.all_lanes else VEHICLE_LANE_TYPES}
+    if args.converter is None:
+        result = cross_check(args.map, **options)
+        print(format_cross_check(result))
+    else:
+        result = check_map(args.map, converter=args.converter, **options)
+        print(format_report(result))
     print("\n".join(continuity_report(odr_map, build_lane_graph(odr_map))))
-    return report.exit_code
+    return result.exit_code
 
 
 def _run_check(args: argparse.Namespace) -> int:

@@ -5,7 +5,8 @@ plan's sensor profile: the ideal ``LaneSensor``, or a ``CameraSensor`` the other
 can hide the lane from; optional seeded error models), the ego's detection is measured
 alone (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
-ground truth (``converters.load_lanelet2``, matched by ``gt_matching``) by closest-point
+ground truth (``converters.load_lanelet2`` of the plan's converter, by default built from
+the map engine, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
 against the true lane relation of the pair (:func:`cold_maps.simulation.drive.lane_relation`).
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Callable, Final
 
@@ -32,7 +34,14 @@ from cold_maps.evaluation.methods import resolve_method
 from cold_maps.evaluation.report import FrameRecord, ScenarioKey
 from cold_maps.evaluation.safety import LANE_ACCURACY_M, STOPPING_FORMULA
 from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
-from cold_maps.evaluation.trust import GT_UNMATCHED, check_driven, driven_lanes
+from cold_maps.evaluation.trust import (
+    GT_UNMATCHED,
+    MAP_BROKEN,
+    BrokenStretches,
+    broken_stretches,
+    check_driven,
+    driven_lanes,
+)
 from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
@@ -143,18 +152,29 @@ class MapEvaluator:
         if self.meter is not None:
             return
         if self._ground_truth is None:
+            from cold_maps.groundtruth.lanelet2_from_engine import converter_named
             from converters import load_lanelet2
             from gt_matching import GroundTruth
 
-            lanelet_map, routing = load_lanelet2(self.plan.path)
+            converter = converter_named(self.plan.ground_truth, self.graph.odr_map)
+            lanelet_map, routing = load_lanelet2(self.plan.path, converter=converter)
             self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
 
     @cached_property
+    def broken(self) -> BrokenStretches:
+        """Where the map is broken (``trust.broken_stretches``): evaluations over it are not
+        scored with the engine's ground truth."""
+        return broken_stretches(self.graph)
+
+    @cached_property
     def gt_warning(self) -> str | None:
-        """Why the ground truth of the driven lanes is not trustworthy (``cold-maps check``
-        on them), or None; computed once, where the run's notes are written (never in the
-        worker processes, which only evaluate drives)."""
+        """Why crdesigner's ground truth of the driven lanes is not trustworthy
+        (``cold-maps check`` on them), or None (always, with the engine's ground truth: it is
+        judged per evaluation, see ``trust``); computed once, where the run's notes are
+        written (never in the worker processes, which only evaluate drives)."""
+        if self.plan.ground_truth == "engine":
+            return None
         self.prepare()
         assert self._ground_truth is not None
         return check_driven(self.plan.name, self.graph, self._ground_truth.lanelet_map,
@@ -188,7 +208,8 @@ class MapEvaluator:
                    "sensor errors)" if distinct < len(self.drives) else "")
         collector.notes.append(
             f"{plan.name}: {len(self.drives)} route(s) of {plan.frames} frames at {plan.speed_mps:g} m/s covering "
-            f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}")
+            f"{self.coverage[0]} of {self.coverage[1]} driving lanes{repeats}; ground truth: Lanelet2 built by "
+            f"{GROUND_TRUTHS.get(plan.ground_truth, plan.ground_truth)}")
         rule = self.stopping.rule
         collector.notes.append(
             f"{plan.name}: stopping distance {STOPPING_FORMULA} = {self.stopping.distance_m:.1f} m at "
@@ -201,6 +222,11 @@ class MapEvaluator:
             collector.notes.append(
                 f"{plan.name}: a route circles a loop of {loop_m:.1f} m; a vehicle whose stretch from the ego to the "
                 f"end of the farther detection (up to {farthest_m:g} m) circles it is absent in that frame")
+        if plan.ground_truth == "engine" and self.broken.reasons:
+            shown = "; ".join(self.broken.reasons[:5])
+            more = f" and {len(self.broken.reasons) - 5} more" if len(self.broken.reasons) > 5 else ""
+            collector.notes.append(f"{plan.name}: the map is broken at {len(self.broken.reasons)} place(s), evaluations "
+                                   f"over them are not scored ({MAP_BROKEN}): {shown}{more}")
         if self.gt_warning is not None:
             LOG.warning(self.gt_warning)
             collector.gt_warnings.append(self.gt_warning)
@@ -323,10 +349,13 @@ class MapEvaluator:
 
         assert self.meter is not None
         try:
-            return self.meter.measure(left, right, pose, reference=reference)
+            measured = self.meter.measure(left, right, pose, reference=reference)
         except MatchingError as exc:
             LOG.debug("no ground truth: %s", exc)
             return "no_ground_truth"
+        if not measured.gt_unmatched and self.plan.ground_truth == "engine" and self.broken.over(left, right):
+            return replace(measured, gt_unmatched=MAP_BROKEN)
+        return measured
 
     def _pair(self, collector: Collector, scenario: Scenario, ego: Sensed, other: Sensed, index: int, stamp: float,
               metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
@@ -497,6 +526,13 @@ class MapEvaluator:
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
+
+
+GROUND_TRUTHS: Final[dict[str, str]] = {
+    "engine": "the map engine (its borders and lane graph)",
+    "crdesigner": "commonroad-scenario-designer",
+}
+"""How each ``MapPlan.ground_truth`` is named in the notes."""
 
 
 def _rejection(measured: Measurement | str) -> tuple[str, str]:

@@ -22,7 +22,7 @@
           "frames": 300,             # evaluations: frames x vehicle pairs
           "fused_frames": 280,       # evaluations that produced a lane
           "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
-          "gt_unmatched": {"past_gt_end": 3},  # only when any: why the GT did not cover a lane
+          "gt_unmatched": {"past_gt_end": 3},  # only when any: why the GT did not cover a lane, or "map_broken"
           "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
           "fusibility": {"precision": 0.98, "recall": 1.0,     # fusibility check vs GT
                          "fused": {"own": 250, "branch": 12},   # true fusions: ego's route / a branch

@@ -162,6 +162,8 @@ class MapPlan:
             (``evaluation.safety``).
         sensor: the lane sensor's profile (``simulation.sensor_profile``; default the
             paper's ideal sensor), its lane-model error (``sensor.lane_error``) included.
+        ground_truth: converter of the Lanelet2 ground truth: "engine" (the map engine's
+            borders and lane graph, ``groundtruth.lanelet2_from_engine``) or "crdesigner".
     """
 
     path: Path
@@ -182,6 +184,7 @@ class MapPlan:
     lanes: int = 0
     stopping: StoppingRule = StoppingRule()
     sensor: SensorProfile = IDEAL
+    ground_truth: str = "engine"
 
     @property
     def name(self) -> str:

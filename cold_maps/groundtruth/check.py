@@ -4,8 +4,10 @@ Every lane of the checked types is sampled by ``cold_maps.opendrive.sampling`` a
 matched to a converted lanelet: among the lanelets whose ``opendrive:lanes`` tag names
 the lane (the converter records it; crdesigner itself drops the ids), else among all
 lanelets near it (maps converted by other tools), the one whose borders lie closest.
-The disagreement of a lane is the distance from each of our
-border points to the matched lanelet's corresponding border polyline: the inner border
+The disagreement of a lane is the exact distance from each of our
+border points (every ``step`` m of s and both ends of every ``<geometry>`` record, as
+``cold-maps export`` writes them) to the closest point of the matched lanelet's whole
+corresponding border polyline (rings and short borders included): the inner border
 is the lanelet's left one in RHT, its right one in LHT. A lane over the threshold, or
 with no lanelet near it, makes the ground truth untrustworthy. A lane narrower than
 ``ZERO_WIDTH_M`` over its whole section has no area to drive: converters drop it
@@ -33,7 +35,7 @@ from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.sampling import LaneBorderSamples, sample_road
 from converters.osm import OPENDRIVE_TAG, parse_opendrive_lanes_tag
-from gt_matching.polyline import NDArrayFloat, NDArrayInt, resample, windowed_distances
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, nearest_distances
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -46,10 +48,6 @@ STEP_M: Final[float] = 0.1
 
 SEARCH_RADIUS_M: Final[float] = 2.0
 """Lanelets with a border vertex this close (m) to one of a lane's border points are candidates."""
-
-RESAMPLE_STEP_M: Final[float] = 0.25
-"""Lanelet borders are resampled this finely (m) to find where along them to search the
-closest segment (gt_matching's windowed search, reach = this step)."""
 
 ZERO_WIDTH_M: Final[float] = 1e-3
 """A lane whose borders are never farther apart than this (m) in its section is zero-width."""
@@ -158,15 +156,13 @@ class CheckReport:
 
 @dataclass(frozen=True, eq=False)
 class _Border:
-    """One lanelet border in its driving order, with a KD-tree of its resampled points."""
+    """One lanelet border in its driving order."""
 
     vertices: NDArrayFloat
-    tree: cKDTree
 
     def distances(self, points: NDArrayFloat) -> NDArrayFloat:
-        """Closest-point distance (m) of each point to this border."""
-        arc = self.tree.query(points)[1] * RESAMPLE_STEP_M
-        return windowed_distances(points, self.vertices, arc, RESAMPLE_STEP_M)[0]
+        """Exact closest-point distance (m) of each point to the whole border polyline."""
+        return nearest_distances(points, self.vertices)[0]
 
 
 class _LaneletIndex:
@@ -185,7 +181,7 @@ class _LaneletIndex:
             pair = []
             for line in (lanelet.leftBound, lanelet.rightBound):
                 xy = np.array([(p.x, p.y) for p in line], dtype=np.float64)
-                pair.append(_Border(xy, cKDTree(resample(xy, RESAMPLE_STEP_M)[0])))
+                pair.append(_Border(xy))
                 vertices.append(xy)
                 owners.append(np.full(len(xy), slot, dtype=np.int64))
             self.ids.append(int(lanelet.id))
@@ -196,11 +192,17 @@ class _LaneletIndex:
         self.owner = np.concatenate(owners)
         self.tree: cKDTree = cKDTree(np.vstack(vertices))
 
+    def named(self, lane: tuple[str, int, int]) -> list[int]:
+        """Slots of the lanelets whose tag names the lane: by its road id, else by the id
+        as crdesigner writes it (it parses road ids as integers)."""
+        road_id, section, lane_id = lane
+        return self.by_lane.get(lane) or self.by_lane.get((_crdesigner_road_id(road_id), section, lane_id), [])
+
     def candidates(self, samples: LaneBorderSamples, points: NDArrayFloat) -> tuple[str, set[int]]:
         """How the lane is matched ("id" or "geometry") and the candidate lanelet slots:
         those whose tag names the lane, else those with a border vertex within
         SEARCH_RADIUS_M of one of ``points``."""
-        named = self.by_lane.get((_crdesigner_road_id(samples.road_id), samples.section, samples.lane_id))
+        named = self.named((samples.road_id, samples.section, samples.lane_id))
         if named:
             return "id", set(named)
         near = self.tree.query_ball_point(points, r=SEARCH_RADIUS_M)
@@ -213,6 +215,11 @@ def _crdesigner_road_id(road_id: str) -> str:
         return str(int(road_id))
     except ValueError:
         return road_id
+
+
+def _tagged(index: _LaneletIndex, slots: list[int], lane: tuple[str, int, int]) -> tuple[str, int, int]:
+    """``lane`` as the lanelets' tag names it (its road id or crdesigner's integer form)."""
+    return lane if not slots or lane in index.by_lane else (_crdesigner_road_id(lane[0]), lane[1], lane[2])
 
 
 def _connected(index: _LaneletIndex, routing: Any, source: int, target: int, lane: tuple[str, int, int],
@@ -238,9 +245,8 @@ def _disconnected_edges(
     """The lane-graph ``edges`` that are no routing-graph successor, largest gap first."""
     missing = []
     for a, b in edges:
-        lane = (_crdesigner_road_id(a.road_id), a.section, a.lane_id)
-        after = (_crdesigner_road_id(b.road_id), b.section, b.lane_id)
-        sources, targets = index.by_lane.get(lane, []), index.by_lane.get(after, [])
+        sources, targets = index.named(tuple(a)), index.named(tuple(b))
+        lane, after = _tagged(index, sources, tuple(a)), _tagged(index, targets, tuple(b))
         pairs = [(s, t) for s in sources for t in targets]
         if any(_connected(index, routing, s, t, lane, after) for s, t in pairs):
             continue
@@ -251,31 +257,30 @@ def _disconnected_edges(
     return tuple(sorted(missing, key=lambda edge: -edge.gap_m))
 
 
-def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
-    inner, outer = samples.inner[:, :2], samples.outer[:, :2]
+def _best_lanelet(lane: tuple[str, int, int], matched_by: str, candidates: Collection[int], index: _LaneletIndex,
+                  first: NDArrayFloat, second: NDArrayFloat, first_is_left: bool) -> LaneCheck:
+    """The candidate lanelet whose borders lie closest (median) to the points ``first``
+    and ``second`` (compared with its left and right border, or right and left)."""
     best: tuple[float, int, NDArrayFloat] | None = None
-    matched_by, candidates = index.candidates(samples, np.vstack((inner, outer)))
     for slot in candidates:
         left, right = index.borders[slot]
-        inner_border, outer_border = (left, right) if rule == "RHT" else (right, left)
-        distances = np.concatenate((inner_border.distances(inner), outer_border.distances(outer)))
+        first_border, second_border = (left, right) if first_is_left else (right, left)
+        distances = np.concatenate((first_border.distances(first), second_border.distances(second)))
         score = float(np.median(distances))
         if best is None or score < best[0]:
             best = (score, slot, distances)
-    points = 2 * len(samples.s)
+    points = len(first) + len(second)
     if best is None:
-        return LaneCheck(samples.road_id, samples.section, samples.lane_id, None, "", np.inf, np.inf, points)
+        return LaneCheck(*lane, None, "", np.inf, np.inf, points)
     _, slot, distances = best
-    return LaneCheck(
-        samples.road_id,
-        samples.section,
-        samples.lane_id,
-        index.ids[slot],
-        matched_by,
-        float(np.median(distances)),
-        float(np.max(distances)),
-        points,
-    )
+    return LaneCheck(*lane, index.ids[slot], matched_by, float(np.median(distances)), float(np.max(distances)), points)
+
+
+def _check_lane(samples: LaneBorderSamples, rule: str, index: _LaneletIndex) -> LaneCheck:
+    inner, outer = samples.inner[:, :2], samples.outer[:, :2]
+    matched_by, candidates = index.candidates(samples, np.vstack((inner, outer)))
+    lane = (samples.road_id, samples.section, samples.lane_id)
+    return _best_lanelet(lane, matched_by, candidates, index, inner, outer, rule == "RHT")
 
 
 def check_lanelet_map(
@@ -304,7 +309,7 @@ def check_lanelet_map(
     sampled = [
         (road.rule, samples)
         for road in odr_map.roads.values()
-        for samples in sample_road(road, step_m, lane_types)
+        for samples in sample_road(road, step_m, lane_types, record_ends=True)
         if len(samples.s) > 1 and (only is None or (samples.road_id, samples.section, samples.lane_id) in only)
     ]
     zero = [_is_zero_width(samples) for _, samples in sampled]
@@ -334,22 +339,141 @@ def check_map(
     cache_dir: str | os.PathLike[str] | None = None,
     strict: bool = False,
     odr_map: OpenDriveMap | None = None,
+    converter: str = "engine",
 ) -> CheckReport:
-    """Convert (or load from the cache) the map's ground truth and cross-check it.
+    """Convert (or load from the cache) the map's ground truth with ``converter`` ("engine"
+    or "crdesigner") and check it against the engine's borders and lane graph.
 
     Raises ``OpenDriveError`` when our parser rejects the file (``strict``: see
     ``load_opendrive``) and ``converters.ConversionError`` when the converter does.
     ``odr_map``: the file already read by our parser (it is not read again).
     """
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
     from converters import load_lanelet2
 
     if odr_map is None:
         odr_map = load_opendrive(xodr_path, strict=strict)
-    lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir)
+    lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir,
+                                         converter=converter_named(converter, odr_map))
     return check_lanelet_map(
         odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m, step_m=step_m, lane_types=lane_types,
         routing_graph=routing,
     )
+
+
+@dataclass(frozen=True)
+class CrossCheck:
+    """The engine's ground truth and crdesigner's, each checked against the engine's
+    borders and lane graph, and compared with each other.
+
+    Fields:
+        engine: the engine's Lanelet2 map checked (the evaluation's ground truth).
+        crdesigner: crdesigner's Lanelet2 map checked; None when crdesigner failed.
+        crdesigner_error: why it failed ("" when it did not).
+        between: per lane of the engine's map (its lanelet's borders resampled every
+            ``step_m``), the distance to the crdesigner lanelet naming the same lane
+            (``LaneCheck.lanelet_id`` is crdesigner's), in map order.
+    """
+
+    engine: CheckReport
+    crdesigner: CheckReport | None
+    crdesigner_error: str = ""
+    between: tuple[LaneCheck, ...] = ()
+
+    @property
+    def exit_code(self) -> int:
+        """The engine report's: the ground truth the evaluation uses."""
+        return self.engine.exit_code
+
+
+def compare_lanelet_maps(reference: Any, other: Any, step_m: float = STEP_M) -> tuple[LaneCheck, ...]:
+    """Per lanelet of ``reference`` tagged with exactly one OpenDRIVE lane, the distances
+    of its borders (resampled every ``step_m`` m) to the closest lanelet of ``other``
+    naming that lane (else to the nearest lanelets, matched "geometry")."""
+    from gt_matching.polyline import resample
+
+    index = _LaneletIndex(other)
+    result = []
+    for lanelet in reference.laneletLayer:
+        named = parse_opendrive_lanes_tag(dict(lanelet.attributes).get(OPENDRIVE_TAG, ""))
+        if len(named) != 1:
+            continue
+        left, right = (resample(np.array([(p.x, p.y) for p in line], dtype=np.float64), step_m)[0]
+                       for line in (lanelet.leftBound, lanelet.rightBound))
+        slots = index.named(named[0])
+        matched_by = "id" if slots else "geometry"
+        if not slots:
+            near = index.tree.query_ball_point(np.vstack((left, right)), r=SEARCH_RADIUS_M)
+            slots = sorted({int(index.owner[i]) for hits in near for i in hits})
+        result.append(_best_lanelet(named[0], matched_by, slots, index, left, right, True))
+    return tuple(result)
+
+
+def cross_check(
+    xodr_path: str | os.PathLike[str],
+    *,
+    threshold_m: float = THRESHOLD_M,
+    step_m: float = STEP_M,
+    lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
+    cache: bool = True,
+    cache_dir: str | os.PathLike[str] | None = None,
+    odr_map: OpenDriveMap | None = None,
+) -> CrossCheck:
+    """``check_map`` with the engine and with crdesigner, and the two Lanelet2 maps
+    compared lane by lane; a crdesigner failure is reported, not raised."""
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
+    from converters import ConversionError, load_lanelet2
+
+    if odr_map is None:
+        odr_map = load_opendrive(xodr_path)
+    graph = build_lane_graph(odr_map, lane_types)
+    maps = {}
+    reports = {}
+    error = ""
+    for name in ("engine", "crdesigner"):
+        try:
+            lanelet_map, routing = load_lanelet2(xodr_path, cache=cache, cache_dir=cache_dir,
+                                                 converter=converter_named(name, odr_map))
+        except ConversionError as exc:
+            if name == "engine":
+                raise
+            error = str(exc)
+            continue
+        maps[name] = lanelet_map
+        reports[name] = check_lanelet_map(odr_map, lanelet_map, path=os.fspath(xodr_path), threshold_m=threshold_m,
+                                          step_m=step_m, lane_types=lane_types, routing_graph=routing, lane_graph=graph)
+    between = compare_lanelet_maps(maps["engine"], maps["crdesigner"], step_m) if "crdesigner" in maps else ()
+    checked = {(lane.road_id, lane.section, lane.lane_id) for lane in reports["engine"].lanes}
+    between = tuple(lane for lane in between if (lane.road_id, lane.section, lane.lane_id) in checked)
+    return CrossCheck(reports["engine"], reports.get("crdesigner"), error, between)
+
+
+def format_cross_check(result: CrossCheck) -> str:
+    """The engine's report, crdesigner's, and their lane-by-lane comparison."""
+    lines = ["engine ground truth (the evaluation's):", format_report(result.engine), "",
+             "crdesigner ground truth (the independent cross-check):"]
+    if result.crdesigner is None:
+        lines.append(f"crdesigner failed: {result.crdesigner_error}")
+        return "\n".join(lines)
+    lines += [format_report(result.crdesigner), ""]
+    threshold = result.engine.threshold_m
+    matched = [lane for lane in result.between if lane.lanelet_id is not None]
+    over = sorted((lane for lane in result.between if not lane.passes(threshold)), key=lambda lane: -lane.max_m)
+    lines.append(f"engine vs crdesigner Lanelet2: {len(matched)} of {len(result.between)} lanes matched")
+    if matched:
+        maxima = np.array([lane.max_m for lane in matched])
+        worst = matched[int(np.argmax(maxima))]
+        lines.append(f"per-lane largest distance: median {_mm(float(np.median(maxima)))} mm, max {_mm(worst.max_m)} mm "
+                     f"(road {worst.road_id} section {worst.section} lane {worst.lane_id})")
+    verdict = "AGREE" if not over else "DISAGREE"
+    lines.append(f"engine and crdesigner: {verdict} ({len(over)} of {len(result.between)} lanes over "
+                 f"{_mm(threshold)} mm or unmatched)")
+    for lane in over[:20]:
+        lanelet = "none" if lane.lanelet_id is None else str(lane.lanelet_id)
+        lines.append(f"{lane.road_id:>8} {lane.section:>7} {lane.lane_id:>5} {lanelet:>8} {_mm(lane.max_m):>10}")
+    if len(over) > 20:
+        lines.append(f"... and {len(over) - 20} more")
+    return "\n".join(lines)
 
 
 def _mm(value: float) -> str:

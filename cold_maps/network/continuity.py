@@ -101,6 +101,13 @@ def _lane_ends(graph: LaneGraph, lane: LaneKey) -> tuple[NDArrayFloat, NDArrayFl
     return left[[0, -1], :2], right[[0, -1], :2]
 
 
+def link_gap_points(graph: LaneGraph, gap: LinkGap) -> NDArrayFloat:
+    """(4, 2) x, y (m) of the exit lane's left and right border ends and the entry lane's
+    left and right border starts of a link gap."""
+    (left_a, right_a), (left_b, right_b) = _lane_ends(graph, gap.exit_lane), _lane_ends(graph, gap.entry_lane)
+    return np.array([left_a[1], right_a[1], left_b[0], right_b[0]])
+
+
 def link_gaps(graph: LaneGraph, tolerance_m: float = LINK_TOLERANCE_M) -> list[LinkGap]:
     """Graph edges whose exit and entry borders are farther apart than ``tolerance_m`` (m)."""
     ends: dict[LaneKey, tuple[NDArrayFloat, NDArrayFloat]] = {}

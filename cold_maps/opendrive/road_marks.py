@@ -118,12 +118,14 @@ class BorderMarking:
 
 
 def classify_border(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"],
-                    s: NDArrayFloat) -> BorderMarking:
+                    s: NDArrayFloat, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
+                    ) -> BorderMarking:
     """The marking of lane ``lane_id``'s ``side`` border ("inner": towards lane 0, "outer":
-    away from it) at each road ``s`` (m) of the section, seen from inside the lane."""
+    away from it) at each road ``s`` (m) of the section, seen from inside the lane;
+    ``borders``: ``section_borders`` of every lane at ``s``, if already known."""
     section = section_of(road, section_index)
     s = np.asarray(s, dtype=np.float64)
-    borders = section_borders(road, section_index, s)
+    borders = section_borders(road, section_index, s) if borders is None else borders
     # Borders across the section from the leftmost to the rightmost: (owner lane id, t).
     slots = [(lane.id, borders[lane.id][1]) for lane in reversed(section.left)] + [(0, borders[0][0])]
     slots += [(lane.id, borders[lane.id][1]) for lane in section.right]

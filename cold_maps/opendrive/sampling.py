@@ -158,7 +158,16 @@ def _section_samples(
 ) -> list[LaneBorderSamples]:
     """Samples of the listed lanes of one section; the reference line is evaluated once."""
     section = section_of(road, section_index)
-    s = sample_s(section.s, section.s_end, step)
+    return sample_section_at(road, section_index, sample_s(section.s, section.s_end, step), lane_ids, record_ends)
+
+
+def sample_section_at(
+    road: Road, section_index: int, s: NDArrayFloat, lane_ids: Sequence[int], record_ends: bool = False
+) -> list[LaneBorderSamples]:
+    """Borders of the listed lanes of one section at the given stations ``s`` (m, strictly
+    increasing inside the section; with ``record_ends`` the interior record starts are
+    added, and doubled where the records do not join, as in ``sample_road``)."""
+    section = section_of(road, section_index)
     if record_ends:
         s, x, y, hdg = _reference_with_record_ends(road, section, s)
     else:

@@ -91,10 +91,34 @@ def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[et
             _check_doctype(events.root, path, line)
             yield events.root
     except etree.XMLSyntaxError as exc:
-        if exc.code == _XML_ERR_NO_MEMORY:
-            raise MemoryError("libxml2 ran out of memory parsing the XML") from None
-        reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
-        raise OpenDriveError(reason, path=path, line=exc.lineno or 1) from None  # 0: before the first line ended
+        raise _syntax_error(exc, path) from None
+
+
+def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
+    """The whole tree of ``data``, parsed with the checks of :func:`iter_xml`, for readers
+    that need every element at once (the ground truth's road rules); the map reader
+    streams instead."""
+    if not isinstance(data, bytes):
+        raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
+    doctype = data.find(b"<!DOCTYPE")
+    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
+    if doctype >= 0:
+        _reject_entity_declarations(data, doctype, path)
+    try:
+        root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
+    except etree.XMLSyntaxError as exc:
+        raise _syntax_error(exc, path) from None
+    _check_doctype(root, path, line)
+    return root
+
+
+def _syntax_error(exc: etree.XMLSyntaxError, path: str) -> Exception:
+    """What a libxml2 syntax error means: ``MemoryError`` when it ran out of memory, else
+    ``OpenDriveError`` naming the line (1 for an error before the first line ended)."""
+    if exc.code == _XML_ERR_NO_MEMORY:
+        return MemoryError("libxml2 ran out of memory parsing the XML")
+    reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
+    return OpenDriveError(reason, path=path, line=exc.lineno or 1)
 
 
 def _check_doctype(root: etree._Element, path: str, line: int | None) -> None:

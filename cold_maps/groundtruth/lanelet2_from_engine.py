@@ -1,0 +1,362 @@
+"""The Lanelet2 ground truth built from the map engine: the lane borders the sensor reads
+and ``cold-maps export`` writes, the lane graph's successors, through the converters'
+Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
+
+- A lanelet per lane and lane section of ``LANE_TYPES`` (lanes narrower than
+  ``ZERO_WIDTH_M`` over their whole section are dropped, as crdesigner drops them), its
+  borders in the driver's frame (the inner border is on the left when the lane drives
+  along s on the right of the reference line, or against s on its left), tagged
+  ``opendrive:lanes`` with the lane and ``ele`` with the engine's heights (elevation and
+  superelevation).
+- Borders sampled adaptively (``adaptive_section_samples``): every ``<geometry>`` record
+  end (a jump between records drawn exactly), every width, border, laneOffset, elevation
+  and superelevation record start, both section ends and a vertex ``END_VERTEX_M`` inside
+  each end, then intervals halved until the border's midpoint lies within
+  ``CHORD_TOLERANCE_M`` of the chord (checked at a quarter, half and three quarters of
+  each interval; a failing one is split into as many pieces as the chord error's square
+  root says, the error growing with the interval squared). All lanes of a section share the stations, so neighbours share their
+  border exactly and the writer makes it one way (Lanelet2 adjacency).
+- Successors are the lane graph's edges (``network.lane_graph``); linked ends at one
+  point are one node, others are snapped to their centroid whatever
+  the gap (``converters.joins``, join tolerance infinite), so every lane-graph edge is a
+  Lanelet2 routing successor. A snap moves the border end by at most half the gap and
+  fades out at the vertex ``END_VERTEX_M`` inside the end (the writer's Douglas-Peucker
+  keeps it once the end moved). Such gaps are where the map is broken
+  (``network.continuity.link_gaps``); elsewhere the borders are the engine's within the
+  chord tolerance (the writer keeps every vertex: no further simplification).
+- Line types from ``<roadMark>`` (``opendrive.road_marks.classify_border`` every
+  ``MARK_STEP_M`` and at each mark start, the kind covering most of the border's length): solid → line_thin/solid (bold → line_thick),
+  broken and botts dots → dashed, solid solid → solid_solid, solid broken / broken solid
+  → solid_dashed or dashed_solid (OpenDRIVE names the lines from the reference line out;
+  Lanelet2 from left to right along the way), curb → curbstone/high, grass and edge →
+  road_border, an unpainted border towards another drivable lane → virtual.
+- Lanelet types from the lane type and the road ``<type>`` at the section
+  (``road_rules``): town roads urban, motorways highway; junction lanes intersection.
+- Regulatory elements from ``road_rules`` (speed limits; traffic lights, stop and yield
+  signs from the engine's reading of ``<signal>``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Final, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
+from cold_maps.opendrive.cubic_poly import NDArrayFloat
+from cold_maps.opendrive.lanes import section_borders
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
+from cold_maps.opendrive.road_marks import BoundaryType, classify_border
+from cold_maps.opendrive.sampling import LaneBorderSamples, sample_s, sample_section_at
+from converters import Converter, ConversionError
+from converters.crdesigner_bridge import SourceLanelet
+from converters.regulatory import LaneletRegulations
+
+KIND: Final[str] = "engine"
+"""The converter kind of this ground truth (cache key, ``--converter``)."""
+
+BUILDER_VERSION: Final[str] = "1"
+"""Version of this builder's output (part of the cache key with the package version)."""
+
+LANE_TYPES: Final[tuple[str, ...]] = VEHICLE_LANE_TYPES + (
+    "restricted", "bidirectional", "shoulder", "sidewalk", "walking")
+"""OpenDRIVE lane types that get a lanelet: the vehicle lanes and crdesigner's other
+default types (``filter_types``), so neighbour lanes and walkways stay as today."""
+
+CHORD_TOLERANCE_M: Final[float] = 5e-4
+"""Largest distance (m) of a border's midpoint between two stations from their chord."""
+
+INITIAL_STEP_M: Final[float] = 50.0
+"""Longest interval (m) the adaptive sampling starts from."""
+
+MIN_STEP_M: Final[float] = 1e-3
+"""Intervals this short (m) are not halved further (a jump in a width record)."""
+
+MAX_ROUNDS: Final[int] = 24
+"""Most halvings of one interval (2 m / 2**24 is far below ``MIN_STEP_M``)."""
+
+SPLIT_MARGIN: Final[float] = 1.25
+"""An interval whose chord error is e is split into ceil(margin·sqrt(e / tolerance)) pieces."""
+
+MAX_PIECES: Final[int] = 64
+"""Most pieces an interval is split into in one round."""
+
+END_VERTEX_M: Final[float] = 0.1
+"""A station this far (m) inside each section end: where a snapped join fades out."""
+
+MERGE_TOLERANCE_M: Final[float] = 0.0
+"""Only equal border points become one node: the borders neighbours share are computed
+once, bit-identical; linked ends are joined (``converters.joins``) whatever their gap."""
+
+GRAPH_LENGTH_STEP_M: Final[float] = 1e9
+"""The lane graph's length sampling step here (m): the builder needs its edges, not its lengths."""
+
+ZERO_WIDTH_M: Final[float] = 1e-3
+"""A lane never wider than this (m) over its section gets no lanelet."""
+
+
+def _breakpoints(road: Road, section_index: int) -> NDArrayFloat:
+    """Road s (m) where a record of the section's geometry, widths, borders, laneOffset,
+    elevation or superelevation starts, inside the section."""
+    section = road.lane_sections[section_index]
+    starts = [record.s for record in road.plan_view]
+    starts += [poly.s0 for records in (road.lane_offsets, road.elevation, road.superelevation) for poly in records]
+    starts += [section.s + poly.s0 for lane in section.lanes for poly in lane.widths + lane.borders]
+    inside = np.array([s for s in starts if section.s < s < section.s_end], dtype=np.float64)
+    return inside
+
+
+CHECK_FRACTIONS: Final[tuple[float, ...]] = (0.25, 0.5, 0.75)
+"""Where inside each interval the border is compared with the chord (a cubic width
+symmetric about the midpoint leaves the midpoint on the chord, not the quarter points)."""
+
+
+def _chord_errors(samples: Sequence[LaneBorderSamples], inside: Sequence[Sequence[LaneBorderSamples]],
+                  open_: npt.NDArray[np.bool_]) -> NDArrayFloat:
+    """Per open interval, the largest distance (m, 3-D) of a border point at one of
+    ``CHECK_FRACTIONS`` from the chord's point at the same fraction."""
+    errors = np.zeros(int(open_.sum()))
+    for fraction, checked in zip(CHECK_FRACTIONS, inside):
+        for at, middle in zip(samples, checked):
+            for ends, mid in ((at.inner, middle.inner), (at.outer, middle.outer)):
+                chord = (1.0 - fraction) * ends[:-1][open_] + fraction * ends[1:][open_]
+                errors = np.maximum(errors, np.linalg.norm(mid - chord, axis=1))
+    return errors
+
+
+def adaptive_section_samples(
+    road: Road, section_index: int, lane_ids: Sequence[int], tolerance_m: float = CHORD_TOLERANCE_M
+) -> list[LaneBorderSamples]:
+    """Borders of the listed lanes of one section (record ends included, see
+    ``sample_road``) at stations refined until, in every interval, the borders at
+    ``CHECK_FRACTIONS`` lie within ``tolerance_m`` (m) of the chord (or the interval is
+    shorter than ``MIN_STEP_M``). Refinement starts from the section's ends, the record
+    starts (``_breakpoints``) and a station ``END_VERTEX_M`` inside each end, with no
+    interval longer than ``INITIAL_STEP_M``."""
+    section = road.lane_sections[section_index]
+    length = section.s_end - section.s
+    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
+    s = np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M), _breakpoints(road, section_index),
+                                  np.asarray(ends, dtype=np.float64))))
+    for _ in range(MAX_ROUNDS):
+        samples = sample_section_at(road, section_index, s, lane_ids, record_ends=True)
+        stations = samples[0].s
+        open_ = stations[1:] > stations[:-1]
+        low, high = stations[:-1][open_], stations[1:][open_]
+        checks = np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
+        checked = sample_section_at(road, section_index, checks, lane_ids)
+        parts = len(low)
+        inside = [[LaneBorderSamples(c.road_id, c.section, c.lane_id, c.s[k * parts:(k + 1) * parts],
+                                     c.inner[k * parts:(k + 1) * parts], c.outer[k * parts:(k + 1) * parts])
+                   for c in checked] for k in range(len(CHECK_FRACTIONS))]
+        errors = _chord_errors(samples, inside, open_)
+        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+        if not refine.any():
+            return samples
+        # the chord error grows with the square of the interval: split into that many pieces at once
+        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+        starts, widths = low[refine], (high - low)[refine]
+        offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
+        s = np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+    return samples
+
+
+def _is_zero_width(samples: LaneBorderSamples) -> bool:
+    return bool(np.hypot(*(samples.outer[:, :2] - samples.inner[:, :2]).T).max() <= ZERO_WIDTH_M)
+
+
+_EDGE_TAGS: Final[dict[int, dict[str, str]]] = {
+    BoundaryType.NO_LINE: {"type": "virtual"},
+    BoundaryType.CURB: {"type": "curbstone", "subtype": "high"},
+    BoundaryType.ROAD_EDGE: {"type": "road_border"},
+    BoundaryType.GRASS_EDGE: {"type": "road_border"},
+}
+"""Line tags of the boundary types that need no ``<roadMark>`` details."""
+
+_PAINT: Final[dict[str, str]] = {"solid": "solid", "broken": "dashed", "botts dots": "dashed", "custom": "solid"}
+"""One-line ``<roadMark>`` type → Lanelet2 line subtype (custom: a line of unknown pattern)."""
+
+_DOUBLE: Final[dict[str, tuple[str, str]]] = {
+    "solid solid": ("solid", "solid"), "broken broken": ("dashed", "dashed"),
+    "solid broken": ("solid", "dashed"), "broken solid": ("dashed", "solid"),
+}
+"""Double ``<roadMark>`` type → its lines from the reference line outwards."""
+
+
+MARK_STEP_M: Final[float] = 5.0
+"""Spacing (m) of the stations where a border's marking is classified (besides the
+``<roadMark>`` starts of the section): the kind covering most of the length wins."""
+
+
+def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
+    """Stations (m) of a section where its borders' markings are classified: every
+    ``MARK_STEP_M``, and each ``<roadMark>`` start."""
+    section = road.lane_sections[section_index]
+    starts = [section.s + mark.s_offset for lane in (section.center, *section.lanes) for mark in lane.road_marks]
+    inside = [s for s in starts if section.s < s < section.s_end]
+    return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
+
+
+def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
+              way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
+              ) -> tuple[tuple[str, str], ...]:
+    """Lanelet2 way tags of a lane border (classified at stations ``s``, m; ``borders``:
+    ``section_borders`` there) whose way runs along s when ``way_along_s``: the boundary
+    kind covering most of its length (module docstring)."""
+    marking = classify_border(road, section_index, lane_id, side, s, borders)
+    weights = np.gradient(s) if len(s) > 1 else np.ones(len(s))
+    keys = np.column_stack((marking.type, marking.owner, marking.mark_index))
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    best = int(np.argmax(np.bincount(inverse.ravel(), weights=weights)))
+    kind, owner = int(unique[best][0]), int(unique[best][1])
+    if kind in _EDGE_TAGS:
+        return tuple(_EDGE_TAGS[kind].items())
+    at = int(np.flatnonzero(inverse.ravel() == best)[0])
+    mark = marking.mark(road, section_index, at)
+    if mark is None:
+        return (("type", "virtual"),)
+    line = "line_thick" if mark.weight == "bold" else "line_thin"
+    if mark.type in _DOUBLE:
+        inside, outside = _DOUBLE[mark.type]
+        # Along +s, a line right of the reference line (owner <= 0) has its inner line on the left.
+        left, right = (inside, outside) if owner <= 0 else (outside, inside)
+        if not way_along_s:
+            left, right = right, left
+        subtype = left if left == right else f"{left}_{right}"
+        return (("type", line), ("subtype", subtype))
+    return (("type", line), ("subtype", _PAINT.get(mark.type, "solid")))
+
+
+_LANE_KINDS: Final[dict[str, str]] = {
+    "sidewalk": "sidewalk", "walking": "sidewalk", "shoulder": "shoulder", "restricted": "restricted",
+}
+"""OpenDRIVE lane type → CommonRoad lanelet type (the writer's ``_SUBTYPES`` read them)."""
+
+_ROAD_KINDS: Final[dict[str, str]] = {"motorway": "highway", "rural": "country"}
+"""OpenDRIVE road type → CommonRoad lanelet type; "town..." is urban, the rest none."""
+
+
+def lanelet_types(road: Road, lane_type: str, road_type: str) -> frozenset[str]:
+    """CommonRoad lanelet types of a lane (the writer maps them to subtype and location)."""
+    types = {_LANE_KINDS[lane_type]} if lane_type in _LANE_KINDS else set()
+    if road_type.startswith("town") or road_type in ("lowSpeed", "pedestrian", "bicycle"):
+        types.add("urban")
+    elif road_type in _ROAD_KINDS and lane_type not in _LANE_KINDS:
+        types.add(_ROAD_KINDS[road_type])
+    if road.junction != "-1":
+        types.add("intersection")
+    return frozenset(types)
+
+
+def engine_lanelets(
+    odr_map: OpenDriveMap,
+    graph: LaneGraph,
+    road_types: Mapping[str, Sequence[tuple[float, str]]] | None = None,
+    regulations: Mapping[LaneKey, LaneletRegulations] | None = None,
+    priority: Mapping[LaneKey, Sequence[LaneKey]] | None = None,
+) -> list[SourceLanelet]:
+    """One ``SourceLanelet`` per lane and section of ``graph`` (ids 1, 2, ... in map
+    order; zero-width lanes omitted), successors from the graph's edges. ``road_types``:
+    road id → (s, type) records; ``regulations``: per lane, what the writer adds;
+    ``priority``: per yielding lane, the lanes with the right of way."""
+    road_types = road_types or {}
+    regulations = regulations or {}
+    priority = priority or {}
+    sampled: list[tuple[Road, LaneBorderSamples, str]] = []
+    for road in odr_map.roads.values():
+        for index, section in enumerate(road.lane_sections):
+            kinds = {lane.id: lane.type for lane in section.lanes if LaneKey(road.id, index, lane.id) in graph.lengths}
+            if not kinds or section.s_end <= section.s:
+                continue
+            for samples in adaptive_section_samples(road, index, list(kinds)):
+                if not _is_zero_width(samples):
+                    sampled.append((road, samples, kinds[samples.lane_id]))
+    ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
+    stations: dict[tuple[str, int], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
+    lanelets = []
+    for road, samples, lane_type in sampled:
+        if (road.id, samples.section) not in stations:
+            at = mark_stations(road, samples.section)
+            stations[road.id, samples.section] = at, section_borders(road, samples.section, at)
+        mark_s, mark_borders = stations[road.id, samples.section]
+        key = LaneKey(samples.road_id, samples.section, samples.lane_id)
+        along = road.drives_along_s(samples.lane_id, samples.section)
+        left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
+        left, right = getattr(samples, left_side), getattr(samples, right_side)
+        if not along:
+            left, right = left[::-1], right[::-1]
+        road_type = _type_at(road_types.get(road.id, ()), road.lane_sections[samples.section].s)
+        lanelets.append(SourceLanelet(
+            id=ids[key],
+            left=np.ascontiguousarray(left[:, :2]),
+            right=np.ascontiguousarray(right[:, :2]),
+            types=lanelet_types(road, lane_type, road_type),
+            opendrive_lanes=((samples.road_id, samples.section, samples.lane_id),),
+            junctions=() if road.junction == "-1" else (road.junction,),
+            left_z=np.ascontiguousarray(left[:, 2]),
+            right_z=np.ascontiguousarray(right[:, 2]),
+            regulations=replace(regulations.get(key, LaneletRegulations()),
+                                priority_lanelets=tuple(ids[n] for n in priority.get(key, ()) if n in ids)),
+            successors=tuple(ids[n] for n in graph.successors[key] if n in ids),
+            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, mark_s, along, mark_borders),
+            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, mark_s, along, mark_borders),
+        ))
+    return lanelets
+
+
+def _type_at(records: Sequence[tuple[float, str]], s: float) -> str:
+    """The road type in force at s (m): the last record starting at or before it ("" if none)."""
+    current = ""
+    for start, kind in records:
+        if start <= s + 1e-9:
+            current = kind
+    return current
+
+
+def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
+    """The map engine as a ``converters.Converter`` (kind "engine"); ``odr_map``: the map
+    already read (used when the converted path is its file, else the file is read)."""
+    from cold_maps import __version__
+
+    def lanelets(path: Path, verbose: bool) -> tuple[list[SourceLanelet], str]:
+        from cold_maps.groundtruth.road_rules import read_road_rules
+        from cold_maps.opendrive.errors import OpenDriveError
+        from cold_maps.opendrive.parser import load_opendrive
+
+        try:
+            same = odr_map is not None and bool(odr_map.path) and os.path.samefile(odr_map.path, path)
+        except OSError as exc:
+            raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
+        try:
+            engine_map = odr_map if same and odr_map is not None else load_opendrive(path)
+            graph = build_lane_graph(engine_map, LANE_TYPES, length_step=GRAPH_LENGTH_STEP_M)
+            rules = read_road_rules(engine_map, graph)
+            result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations, rules.priority)
+        except (OpenDriveError, ValueError) as exc:
+            reason = str(exc).removeprefix(f"{path}:").strip()
+            raise ConversionError(str(path), f"the map engine cannot build the ground truth: {reason}") from exc
+        if not result:
+            raise ConversionError(str(path), "the map has no lane to convert")
+        return result, " ".join(engine_map.header.geo_reference.proj.split())
+
+    return Converter(KIND, f"{__version__}.{BUILDER_VERSION}", lanelets, MERGE_TOLERANCE_M, float("inf"), None)
+
+
+CONVERTERS: Final[tuple[str, ...]] = (KIND, "crdesigner")
+"""Names of the ground-truth converters (``--converter``), the default first."""
+
+
+def converter_named(name: str, odr_map: OpenDriveMap | None = None) -> Converter:
+    """The converter called ``name`` (one of ``CONVERTERS``); ``odr_map``: see ``engine_converter``."""
+    from converters import crdesigner_converter
+
+    if name == KIND:
+        return engine_converter(odr_map)
+    if name == "crdesigner":
+        return crdesigner_converter()
+    raise ValueError(f"unknown ground-truth converter {name!r}: expected one of {', '.join(CONVERTERS)}")
