@@ -3,14 +3,24 @@ inertial frame, with an on-disk cache.
 
 Entry points: ``load_lanelet2`` (map + routing graph), ``convert`` (write an OSM file,
 get its ``LoadRecipe``), ``configure_convert`` (the ``cold-maps convert`` subcommand's arguments),
-``clear_cache``. crdesigner and lanelet2 are imported lazily, inside the functions that
-use them. This package never imports ``cold_maps``.
+``clear_cache``; lanelet ↔ OpenDRIVE lane (``opendrive_lanes``, ``lanelets_by_opendrive_lane``),
+``vehicle_lanelets`` and ``route_between`` two OpenDRIVE lanes (``converters.lanes``).
+crdesigner and lanelet2 are imported lazily, inside the functions that use them. This
+package never imports ``cold_maps``.
 """
 
-from converters.api import configure_convert, convert, load_lanelet2, routing_graph
+from converters.api import configure_convert, convert, load_lanelet2
 from converters.cache import clear_cache
 from converters.errors import ConversionError
 from converters.frame import LoadRecipe
+from converters.lanes import (
+    lanelets_by_opendrive_lane,
+    opendrive_lanes,
+    route_between,
+    routing_graph,
+    vehicle_lanelets,
+    vehicle_rules,
+)
 
 __all__ = [
     "ConversionError",
@@ -18,6 +28,11 @@ __all__ = [
     "clear_cache",
     "configure_convert",
     "convert",
+    "lanelets_by_opendrive_lane",
     "load_lanelet2",
+    "opendrive_lanes",
+    "route_between",
     "routing_graph",
+    "vehicle_lanelets",
+    "vehicle_rules",
 ]
