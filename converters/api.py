@@ -20,6 +20,7 @@ from converters.cache import atomic_write, cache_path
 from converters.crdesigner_bridge import SourceLanelet, crdesigner_version, odr_to_lanelets, read_geo_reference
 from converters.errors import ConversionError
 from converters.joins import JOIN_TOLERANCE_M
+from converters.lanes import routing_graph
 from converters.osm import MERGE_TOLERANCE_M, SIMPLIFY_TOLERANCE_M, build_osm, read_generator
 
 if TYPE_CHECKING:
@@ -151,17 +152,6 @@ def load_lanelet2(
         osm = Path(folder) / "map.osm"
         osm.write_bytes(_convert_bytes(source, verbose, converter))
         return _load_osm(osm, source=source)
-
-
-def routing_graph(lanelet_map: lanelet2.core.LaneletMap) -> lanelet2.routing.RoutingGraph:
-    """Routing graph for vehicles under the German traffic rules (lanelet2's default set)."""
-    import lanelet2.routing
-    import lanelet2.traffic_rules
-
-    rules = lanelet2.traffic_rules.create(
-        lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
-    )
-    return lanelet2.routing.RoutingGraph(lanelet_map, rules)
 
 
 def _load_osm(

@@ -150,7 +150,7 @@ def validate_osm(path: str | Path) -> list[Issue]:
     for primitive, layer in layers:
         for element in layer:
             issues.extend(_tag_issues(primitive, int(element.id), _attributes(element)))
-    from converters.api import routing_graph
+    from converters.lanes import routing_graph
 
     graph = routing_graph(lanelet_map)
     issues.extend(Issue("error", "routing_graph", 0, "routing_graph.is_valid", str(e)) for e in graph.checkValidity(False))

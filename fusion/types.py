@@ -42,6 +42,16 @@ class Source(IntEnum):
     COOP_HISTORY = 4
 
 
+def _source_counts(source: NDArrayInt8) -> str:
+    """"EGO 300, COOP 300": the number of points per :class:`Source` label present, in label order."""
+    labels, counts = np.unique(source, return_counts=True)
+    return ", ".join(f"{Source(int(label)).name} {int(count)}" for label, count in zip(labels, counts))
+
+
+def _given(value: object) -> str:
+    return "no" if value is None else "yes"
+
+
 def _frozen(array: NDArrayFloat) -> NDArrayFloat:
     array.flags.writeable = False
     return array
@@ -308,6 +318,15 @@ class LaneDetection:
             raise InvalidDetectionError(f"LaneDetection.road_edges must be RoadEdges or None, "
                                         f"got {type(self.road_edges).__name__}")
 
+    def __repr__(self) -> str:
+        """One line: sender, stamp, pose, points per border and what else the detection carries."""
+        return (f"LaneDetection(sender={self.sender!r}, stamp={self.stamp:g} s, pose=({self.pose.x:.3f} m, "
+                f"{self.pose.y:.3f} m, {self.pose.yaw:.4f} rad), left: {len(self.left)} points, right: "
+                f"{len(self.right)} points, neighbours: {len(self.neighbours)}, branches: {len(self.branches)}, "
+                f"road_edges: {_given(self.road_edges)}, history: {_given(self.history)}, "
+                f"sigma: {_given(self.left_sigma if self.left_sigma is not None else self.right_sigma)}, "
+                f"pose_cov: {_given(self.pose_cov)})")
+
 
 @dataclass(frozen=True)
 class FusionParams:
@@ -452,3 +471,13 @@ class FusionResult:
         for array in (self.left, self.right, self.left_source, self.right_source, self.left_sigma, self.right_sigma):
             if array is not None:
                 array.setflags(write=False)
+
+    def __repr__(self) -> str:
+        """One line: kind, reason, gap, points per border with their :class:`Source` counts,
+        confidence, neighbour lanes and whether σ is given."""
+        reason = f", reason={self.reason!r}" if self.reason else ""
+        sigma = "yes" if self.left_sigma is not None and self.right_sigma is not None else "no"
+        return (f"FusionResult(kind={self.kind!r}{reason}, gap_m={self.gap_m:.3f}, "
+                f"left: {len(self.left)} points ({_source_counts(self.left_source)}), "
+                f"right: {len(self.right)} points ({_source_counts(self.right_source)}), "
+                f"confidence={self.confidence:.3f}, lanes: {len(self.lanes)}, sigma: {sigma})")

@@ -193,14 +193,12 @@ def lane_border_polylines(odr_map: OpenDriveMap, step: float) -> Iterator[Border
     """Left then right border of every driving lane, road by road, section by section,
     every ``step`` m of s plus both ends of every ``<geometry>`` record (a jump between
     records appears as two points at one s, never as a chord)."""
-    from cold_maps.network.route import borders_in_driving_direction
-    from cold_maps.opendrive.sampling import sample_road
+    from cold_maps.network.route import road_borders
 
     for road in odr_map.roads.values():
-        for samples in sample_road(road, step=step, lane_types=VEHICLE_LANE_TYPES, record_ends=True):
-            s, left, right = borders_in_driving_direction(road, samples)
-            for side, xyz in (("left", left), ("right", right)):
-                yield BorderPolyline(road.id, samples.section, samples.lane_id, side, s, xyz)
+        for lane in road_borders(road, step=step, lane_types=VEHICLE_LANE_TYPES, record_ends=True):
+            for side, xyz in (("left", lane.left), ("right", lane.right)):
+                yield BorderPolyline(*lane.lane, side, lane.s, xyz)
 
 
 def _write_csv(borders: Iterator[BorderPolyline], out: TextIO) -> None:

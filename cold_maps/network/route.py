@@ -19,8 +19,8 @@ import numpy.typing as npt
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
-from cold_maps.opendrive.model import Road
-from cold_maps.opendrive.sampling import LaneBorderSamples, sample_lane_borders
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
+from cold_maps.opendrive.sampling import LaneBorderSamples, sample_lane_borders, sample_road
 
 JOIN_TOLERANCE_M: Final[float] = 1e-3
 """Centre points of successive lanes closer than this (m) are one point."""
@@ -89,6 +89,55 @@ def borders_in_driving_direction(
     if road.drives_along_s(samples.lane_id, samples.section):
         return samples.s, plus_t, minus_t
     return samples.s[::-1], minus_t[::-1], plus_t[::-1]
+
+
+@dataclass(frozen=True)
+class DrivingBorders:
+    """One lane's borders as its driver sees them, world frame (OpenDRIVE inertial), in driving order.
+
+    Fields:
+        lane: the lane (road id, 0-based lane-section index, lane id).
+        s: (N,) road s (m) of each cross-section; decreasing when the lane is driven against s.
+        left: (N, 3) x, y, z (m) of the driver's left border.
+        right: (N, 3) x, y, z (m) of the driver's right border, index-aligned with ``left``.
+    """
+
+    lane: LaneKey
+    s: NDArrayFloat
+    left: NDArrayFloat
+    right: NDArrayFloat
+
+
+def _driving_borders(road: Road, samples: LaneBorderSamples) -> DrivingBorders:
+    return DrivingBorders(LaneKey(road.id, samples.section, samples.lane_id),
+                          *borders_in_driving_direction(road, samples))
+
+
+def lane_borders(
+    odr_map: OpenDriveMap, lane: tuple[str, int, int], *, step: float = 0.1, record_ends: bool = False
+) -> DrivingBorders:
+    """Left and right border of one lane (road id, section index, lane id) in driving order,
+    every ``step`` m of s over its section (``record_ends`` as in ``sampling.sample_road``).
+
+    The rows ``cold-maps export`` writes for this lane are these borders with ``record_ends=True``.
+    Raises KeyError naming the road or lane when the map has no such lane, IndexError
+    naming the road when it has no such section.
+    """
+    road_id, section, lane_id = lane
+    if road_id not in odr_map.roads:
+        raise KeyError(f"{odr_map.path}: no road {road_id!r}")
+    road = odr_map.roads[road_id]
+    return _driving_borders(road, sample_lane_borders(road, section, lane_id, step, record_ends=record_ends))
+
+
+def road_borders(
+    road: Road, *, step: float = 0.1, lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
+    record_ends: bool = False,
+) -> list[DrivingBorders]:
+    """``lane_borders`` of every lane of a road whose type is in ``lane_types`` (None: all),
+    in ``sampling.sample_road``'s order; the reference line is evaluated once per section."""
+    return [_driving_borders(road, samples)
+            for samples in sample_road(road, step=step, lane_types=lane_types, record_ends=record_ends)]
 
 
 def route_from_lanes(graph: LaneGraph, lanes: Sequence[LaneKey], *, step: float = 0.1) -> Route:

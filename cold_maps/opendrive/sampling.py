@@ -185,10 +185,13 @@ def sample_section_at(
     return [LaneBorderSamples(road.id, section_index, i, s, points(i, 0), points(i, 1)) for i in lane_ids]
 
 
-def sample_lane_borders(road: Road, section_index: int, lane_id: int, step: float = 0.1) -> LaneBorderSamples:
-    """Inner and outer border of one lane every ``step`` m over its section (ends included)."""
+def sample_lane_borders(
+    road: Road, section_index: int, lane_id: int, step: float = 0.1, *, record_ends: bool = False
+) -> LaneBorderSamples:
+    """Inner and outer border of one lane every ``step`` m over its section (ends included);
+    ``record_ends`` as in ``sample_road``."""
     lane_of(road, section_index, lane_id)
-    return _section_samples(road, section_index, step, [lane_id])[0]
+    return _section_samples(road, section_index, step, [lane_id], record_ends)[0]
 
 
 def sample_road(
