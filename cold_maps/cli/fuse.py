@@ -28,6 +28,8 @@ import numpy as np
 from cold_maps.cli.common import builds, cli_entry, finite_number, make_parser, validated
 
 PROG: Final[str] = "cold-fuse"
+UNRECORDED: Final[frozenset[str]] = frozenset({"verbose", "quiet", "no_progress"})
+"""Options that change no result, left out of the provenance parameters."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -213,10 +215,12 @@ def _detection_count(path: Path) -> int:
 @cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
                                       startup_failure)
     from cold_maps.common.progress import ProgressBar
+    from cold_maps.common.provenance import make_provenance, recorded_params
     from cold_maps.recording.recorder import Recorder, read_detections, read_stamp_base
 
     configure_logging(args.verbose, args.quiet)
@@ -237,9 +241,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             from cold_maps.evaluation.run import prepare_out_dir
 
             report_dir = prepare_out_dir(args.report)
-        run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
-                      "interpolation": args.interpolation, "d_i_m": params.d_i_m}
-        recorder = Recorder(args.output, map_path=map_path or "", params=run_params,
+        provenance = make_provenance(PROG, argv, recorded_params({**vars(args), "d_i_m": params.d_i_m}, UNRECORDED),
+                                     inputs=[("input", args.input), *([("map", map_path)] if map_path else [])])
+        recorder = Recorder(args.output, map_path=map_path or "", params=provenance.params,
                             stamp_base_ns=read_stamp_base(args.input)).__enter__()
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
         return startup_failure(PROG, exc)
@@ -257,7 +261,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if report_dir is not None:
         from cold_maps.evaluation.run import write_outputs
 
-        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG)
+        from cold_maps.evaluation.report import runtime_markdown
+
+        results = [a.result() for a in refuser.collector.accumulators.values()]
+        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG,
+                      results=results, provenance=provenance,
+                      sections=[("Runtime", runtime_markdown(results, refuser.collector.check_ms))])
     if isinstance(error, KeyboardInterrupt):
         what, status = interruption(error)
         return fail(PROG, f"{what} after {count} frames; {args.output} finalised as partial", status)

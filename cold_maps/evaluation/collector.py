@@ -37,12 +37,15 @@ class Collector:
         fuse_ms: (map, scenario label) → fusion runtimes of the scenario's own coop (ms).
         check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
             overlap check for convoy (ms).
-        overlays: (map, scenario label) → the frame with the largest error.
+        overlays: (map, scenario label) → the frame with the largest error of any of its
+            pairs (distractors included: the summary's max error).
         notes: lines for the summary (routes, lane coverage, what did not fit a map).
         reduced_maps: names of the maps evaluated with fewer frames, distractors or
             scenarios than asked, because their longest route is too short.
         gt_warnings: per map, why its ground truth is not trustworthy on the driven lanes.
         frames_done: frames evaluated.
+        drives: (map, drive index) → (global index of the drive's frame 0, its frames):
+            where each route starts on the frame axis of the plots.
     """
 
     accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
@@ -53,6 +56,7 @@ class Collector:
     reduced_maps: list[str] = field(default_factory=list)
     gt_warnings: list[str] = field(default_factory=list)
     frames_done: int = 0
+    drives: dict[tuple[str, int], tuple[int, int]] = field(default_factory=dict)
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:
         """Adds one evaluation to the scenario ``key``."""
@@ -90,3 +94,8 @@ class Collector:
         self.reduced_maps.extend(name for name in later.reduced_maps if name not in self.reduced_maps)
         self.gt_warnings.extend(later.gt_warnings)
         self.frames_done += later.frames_done
+        self.drives.update(later.drives)
+
+    def route_starts(self, map_name: str) -> list[int]:
+        """The global frame index at which each drive of ``map_name`` starts, in order."""
+        return sorted(first for (name, _), (first, _) in self.drives.items() if name == map_name)

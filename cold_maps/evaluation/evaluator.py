@@ -214,6 +214,7 @@ class MapEvaluator:
         self.prepare()
         drive = self.drives[drive_index]
         frames = range(drive.frames) if frames is None else frames
+        collector.drives[(self.plan.name, drive_index)] = (frame_offset, drive.frames)
         if frames.start == 0:
             LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
         for frame in frames:
@@ -372,10 +373,9 @@ class MapEvaluator:
             return None
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                      truth, metrics if main else None, relation=relation, confidence=result.confidence)
-        if main:
-            self._keep_overlay(collector, scenario, index, measured,
-                               {"ego": ego.detection, other.state.name: other.detection},
-                               {"left": result.left, "right": result.right})
+        self._keep_overlay(collector, scenario, index, measured,
+                           {"ego": ego.detection, other.state.name: other.detection},
+                           {"left": result.left, "right": result.right})
         return result.left, result.right
 
     def _chain(self, collector: Collector, scenario: Scenario, sensed: dict[str, Sensed], index: int, stamp: float,
