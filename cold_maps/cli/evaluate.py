@@ -268,9 +268,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 
 def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
     """The extra summary sections: Table II per interpolation and the longest gap for
-    ``--paper``, the runtime table (Table I) always."""
+    ``--paper`` (the runtime table, Table I, is part of every summary)."""
     from cold_maps.evaluation.paper import gap_limit_markdown, table_ii_markdown
-    from cold_maps.evaluation.report import runtime_markdown
 
     def sections(collector: Collector, results: list[ScenarioResult]) -> list[tuple[str, str]]:
         found = []
@@ -278,7 +277,6 @@ def _sections(paper: bool, interpolations: Sequence[str]) -> SectionsCallback:
             found += [(f"Table II vs the paper, `{name}` interpolation", table_ii_markdown(results, name))
                       for name in interpolations]
             found.append(("Longest gap", gap_limit_markdown(results)))
-        found.append(("Runtime (Table I)", runtime_markdown(results, collector.check_ms)))
         return found
 
     return sections

@@ -261,12 +261,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if report_dir is not None:
         from cold_maps.evaluation.run import write_outputs
 
-        from cold_maps.evaluation.report import runtime_markdown
-
-        results = [a.result() for a in refuser.collector.accumulators.values()]
         write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG,
-                      results=results, provenance=provenance,
-                      sections=[("Runtime", runtime_markdown(results, refuser.collector.check_ms))])
+                      provenance=provenance)
     if isinstance(error, KeyboardInterrupt):
         what, status = interruption(error)
         return fail(PROG, f"{what} after {count} frames; {args.output} finalised as partial", status)

@@ -804,10 +804,12 @@ def runtime_markdown(results: Sequence[ScenarioResult], check_ms: Mapping[tuple[
 
 def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
                      road_types: Mapping[str, str] | None = None, warnings: Sequence[str] = (),
-                     program: str = "cold-eval", provenance: Provenance | None = None) -> str:
+                     program: str = "cold-eval", provenance: Provenance | None = None,
+                     check_ms: Mapping[tuple[str, str], Sequence[float]] | None = None) -> str:
     """``summary.md`` of the command ``program``: how it was made (``provenance``), the
     partial mark and ``warnings`` on the ground truth, one row per scenario (like the paper's
-    Table II, a vehicles column when chains run) with the legend of its columns, then, for
+    Table II, a vehicles column when chains run) with the legend of its columns, one runtime
+    per scenario (:func:`runtime_markdown`, ``check_ms`` its checks timed alone), then, for
     maps named in ``road_types`` (map -> paper road type), the side-by-side with the paper."""
     parts = [f"# {program} summary\n"]
     if partial:
@@ -840,6 +842,9 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
     association = association_markdown(results)
     if association:
         parts += ["\n## Lane association\n\n", association]
+    runtime = runtime_markdown(results, check_ms or {})
+    if runtime:
+        parts += ["\n## Runtime (Table I)\n\n", runtime]
     if road_types:
         parts += ["\n## Ours vs the paper\n\n", paper_comparison_markdown(results, road_types)]
     return "".join(parts)

@@ -206,7 +206,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
-                            provenance=provenance)
+                            provenance=provenance, check_ms=collector.check_ms)
     if collector.notes:
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
     sections = [*sections, ("False fusions", false_fusion_markdown(collector))]
