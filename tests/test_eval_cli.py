@@ -270,7 +270,7 @@ def test_a_run_without_fusions_says_so_instead_of_empty_tables(tmp_path):
     write_outputs(tmp_path, collector, partial=False, plots=False, sections=[("Longest gap", "")])
     summary = (tmp_path / "summary.md").read_text()
     assert summary.count(f"\n\n{NO_FUSIONS}") == 2
-    assert "| map | scenario | evaluations |" not in summary and "| fused | false fusions |" not in summary
+    assert "| map | scenario | fusion mean" not in summary and "| fused | false fusions |" not in summary
 
 
 def test_stamp_base_sets_the_log_times(tmp_path):

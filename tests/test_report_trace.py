@@ -168,7 +168,7 @@ def test_runtime_section_has_one_row_per_scenario_equal_to_metrics():
     results = [_accumulator(ScenarioKey("m", "convoy", "", 0.0, boundary), "no_overlap").result()
                for boundary in ("left", "right")]
     rows = [line for line in runtime_markdown(results, {}).splitlines() if line.startswith("| m |")]
-    assert rows == ["| m | convoy | 2 | 3.00 / 1.41 / 4.00 | – | 2.23 / 0.42 / 3.66 |"]
+    assert rows == ["| m | convoy | 3.00 / 1.41 / 4.00 | – | 2.23 / 0.42 / 3.66 |"]
 
 
 def _sha256(path: Path) -> str:

@@ -39,6 +39,9 @@ labels, axis labels and title, fixed instead of measuring the text (``tight_layo
 LOG_SPAN_RATIO: Final[float] = 100.0
 """Errors whose largest and smallest positive value differ by this factor or more are drawn
 on a log scale."""
+LOG_FLOOR_M: Final[float] = 1e-4
+"""On a log error axis, errors below this (m; the detections are rounded to 1 µm, so smaller
+ones are numerical noise) are drawn at it, the axis starting there."""
 ROUTE_LINE_COLOR: Final[str] = "0.4"
 
 
@@ -146,22 +149,23 @@ def _split_routes(frames: NDArrayFloat, values: NDArrayFloat, starts: Sequence[i
 def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str,
                       route_starts: Sequence[int] = ()) -> None:
     """:func:`plot_frame_errors` of the series: a dotted line labelled "route k" where each
-    route starts (``route_starts``, more than one), lines broken there; a log error axis when
-    the errors span :data:`LOG_SPAN_RATIO` or more."""
+    route starts (``route_starts``, more than one), lines broken there; a log error axis from
+    :data:`LOG_FLOOR_M` when the errors span :data:`LOG_SPAN_RATIO` or more above it."""
     axes = _axes("errors", "frame", "error [m]")
     positive = np.concatenate([np.concatenate((line.means, line.maxima)) for line in series]) if series else np.empty(0)
-    positive = positive[np.isfinite(positive) & (positive > 0)]
+    positive = np.maximum(positive[np.isfinite(positive)], LOG_FLOOR_M)
     log = positive.size > 0 and positive.max() >= LOG_SPAN_RATIO * positive.min()
     for index, line in enumerate(series):
         color = f"C{index}"
         for values, style, what in ((line.means, "-", "mean"), (line.maxima, "--", "max")):
-            frames, shown = _split_routes(line.frames, np.where(values > 0, values, np.nan) if log else values,
+            frames, shown = _split_routes(line.frames, np.maximum(values, LOG_FLOOR_M) if log else values,
                                           route_starts)
             axes.plot(frames, shown, color=color, linestyle=style, label=f"{line.label} {what}")
     axes.relim()
     axes.autoscale_view()
     if log:
         axes.set_yscale("log")
+        axes.set_ylim(bottom=LOG_FLOOR_M * 0.8)
     else:
         axes.set_ylim(bottom=0.0)
     if len(route_starts) > 1:
@@ -169,7 +173,7 @@ def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries
             axes.axvline(start, color=ROUTE_LINE_COLOR, linestyle=":", linewidth=1.0)
             axes.text(start, 1.0, f" route {number}", transform=axes.get_xaxis_transform(), va="top", ha="left",
                       fontsize="small", color=ROUTE_LINE_COLOR)
-    axes.set_title(title + (" (log scale)" if log else ""))
+    axes.set_title(title + (f" (log scale, errors < {LOG_FLOOR_M * 1e3:g} mm drawn at it)" if log else ""))
     axes.legend(loc="upper right", fontsize="small")
     _save(axes.figure, path)
 

@@ -789,7 +789,7 @@ def runtime_markdown(results: Sequence[ScenarioResult], check_ms: Mapping[tuple[
         if r.key.boundary != "left" or not math.isfinite(r.runtime_ms.mean):
             continue
         paper = PAPER_TABLE_I_MS.get(r.key.fusion)
-        rows.append([r.key.map, _setup(r.key), str(r.frames),
+        rows.append([r.key.map, _setup(r.key),
                      " / ".join(_fmt(v, 2) for v in (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max)),
                      stats(check_ms.get((r.key.map, r.key.label), ())),
                      " / ".join(f"{v:.2f}" for v in paper) if paper else "–"])
@@ -798,7 +798,7 @@ def runtime_markdown(results: Sequence[ScenarioResult], check_ms: Mapping[tuple[
     return ("Fusion time per evaluation (`fusion.fuse`, includes its checks; every pair, distractors included), "
             "and the check alone on the scenario's own coop (`fusion.is_fusible`: the overlap check for convoy, "
             "the fusibility check for spline). The paper's Table I: rural road, 300 frames, AMD Ryzen 7 5700X.\n\n"
-            + _table(["map", "scenario", "evaluations", "fusion mean / σ / max [ms]",
+            + _table(["map", "scenario", "fusion mean / σ / max [ms]",
                       "check alone mean / σ / max [ms]", "paper Table I [ms]"], rows))
 
 
