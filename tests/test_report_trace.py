@@ -223,3 +223,17 @@ def test_sweep_outputs_say_how_they_were_made(tmp_path):
     assert {r["cell_version"] for r in rows} == {__version__}
     assert {r["cell_map_sha256"] for r in rows} == {_sha256(STRAIGHT)}
     assert {r["cell_sensor_profile"] for r in rows} == {IDEAL.describe()}
+
+
+def test_false_fusions_of_chains_name_their_vehicles():
+    from cold_maps.evaluation.run import false_fusion_markdown
+
+    collector = Collector()
+    for vehicles in (2, 3):
+        collector.add(ScenarioKey("m", "spline", "paper", 30.0, "left", vehicles),
+                      FrameRecord(0, 0.0, "ego", "coop", np.array([0.1 * vehicles]), predicted_fusible=True,
+                                  truly_fusible=True))
+    text = false_fusion_markdown(collector)
+    assert "| d_s [m] | vehicles | boundary |" in text
+    assert "| m | spline | paper | 30 | 2 | left | 1 | 0 | 0.200 | 0.200 |" in text
+    assert "| m | spline | paper | 30 | 3 | left | 1 | 0 | 0.300 | 0.300 |" in text

@@ -727,8 +727,8 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
 
 def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
     k = result.key
-    return (k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, BOUNDARIES.index(k.boundary), k.vehicles,
-            k.history_m, k.exchange)
+    return (k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, k.vehicles, k.history_m, k.exchange,
+            BOUNDARIES.index(k.boundary))
 
 
 REJECTION_REASONS: Final[Mapping[str, str]] = {

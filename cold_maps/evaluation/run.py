@@ -170,13 +170,15 @@ UNKNOWN_RELATIONS: Final[str] = ("Not determined: {fused} fused pairs, none with
 
 
 def false_fusion_markdown(collector: Collector) -> str:
-    """Per scenario with fusibility decisions: the fusions of pairs that are not on one lane
-    (their errors are in the main table) and the errors of the correct fusions alone;
+    """Per scenario with fusibility decisions (a vehicles column when chains run): the fusions
+    of pairs that are not on one lane (their errors are in the main table) and the errors of
+    the correct fusions alone;
     :data:`UNKNOWN_RELATIONS` when pairs were fused but none has a known true relation; ""
     when no pair was fused."""
     rows = []
     fused_pairs = sum(1 for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
                       if key.fusion != "local" and key.boundary == "left" for r in accumulator.records if r.fused)
+    chains = any(key.vehicles > 0 for key in collector.accumulators)
     for key, accumulator in collector.accumulators.items():
         fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
         if not fused:
@@ -185,14 +187,16 @@ def false_fusion_markdown(collector: Collector) -> str:
         right = [r.errors_m for r in fused if r.truly_fusible]
         errors = np.concatenate(right) if right else np.empty(0)
         stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
-        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {key.boundary} | "
+        vehicles = f"{key.vehicles} | " if chains else ""
+        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {vehicles}{key.boundary} | "
                     f"{len(fused)} | {wrong} | {stats} |")
     if not rows:
         return UNKNOWN_RELATIONS.format(fused=fused_pairs) if fused_pairs else ""
     return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
             "false fusions; their errors are included in the table above. The last two columns pool the "
-            "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | boundary | fused | false fusions | "
-            "mean [m] | max [m] |\n|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+            "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | " + ("vehicles | " if chains else "")
+            + "boundary | fused | false fusions | mean [m] | max [m] |\n|---|---|---|---|" + ("---|" if chains else "")
+            + "---|---|---|---|---|\n" + "\n".join(rows) + "\n")
 
 
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
