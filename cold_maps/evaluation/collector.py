@@ -1,4 +1,4 @@
-"""What a run measured: one accumulator per scenario key, runtimes and overlays.
+"""What a run measured: one accumulator per scenario key, check runtimes and overlays.
 
 The :class:`Collector` is filled frame by frame by the evaluator and read by the reports,
 the plots and the paper tables, also after an interrupt.
@@ -34,7 +34,6 @@ class Collector:
 
     Fields:
         accumulators: one per scenario key, in insertion order.
-        fuse_ms: (map, scenario label) → fusion runtimes of the scenario's own coop (ms).
         check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
             overlap check for convoy (ms).
         overlays: (map, scenario label) → the frame with the largest error of any of its
@@ -49,7 +48,6 @@ class Collector:
     """
 
     accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
-    fuse_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
@@ -83,9 +81,8 @@ class Collector:
             mine.messages += accumulator.messages
             mine.message_bytes += accumulator.message_bytes
             mine.sender_ns += accumulator.sender_ns
-        for mine_ms, theirs in ((self.fuse_ms, later.fuse_ms), (self.check_ms, later.check_ms)):
-            for label, runtimes in theirs.items():
-                mine_ms.setdefault(label, []).extend(runtimes)
+        for label, runtimes in later.check_ms.items():
+            self.check_ms.setdefault(label, []).extend(runtimes)
         for label, overlay in later.overlays.items():
             kept = self.overlays.get(label)
             if kept is None or overlay.max_error_m > kept.max_error_m:

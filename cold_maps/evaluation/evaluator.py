@@ -361,7 +361,6 @@ class MapEvaluator:
             start = time.perf_counter()
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
             collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
-            collector.fuse_ms.setdefault(label, []).append(runtime)
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None
@@ -413,7 +412,6 @@ class MapEvaluator:
                                   mode=scenario.fusion, interpolation=scenario.interpolation or "paper",
                                   params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
-        collector.fuse_ms.setdefault((plan.name, scenario.label), []).append(runtime)
         if chain.vehicles < scenario.vehicles:
             reject(reason_category(chain.reason), False, runtime)
             return
