@@ -11,8 +11,11 @@ from typing import Any
 
 
 def metrics_without_runtimes(out: Path) -> dict[str, Any]:
-    """``metrics.json`` without the ``runtime_ms`` fields."""
+    """``metrics.json`` without the ``runtime_ms`` fields and the provenance's command line
+    (which names ``--workers`` and the output folder when they differ)."""
     document = json.loads((out / "metrics.json").read_text())
+    document.get("provenance", {}).pop("command", None)
+    document.get("provenance", {}).get("params", {}).pop("out", None)
     for record in document["scenarios"]:
         del record["runtime_ms"]
     return document

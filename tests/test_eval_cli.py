@@ -260,18 +260,17 @@ def test_a_run_without_fusions_says_so_instead_of_empty_tables(tmp_path):
     import numpy as np
 
     from cold_maps.evaluation.collector import Collector
-    from cold_maps.evaluation.paper import runtime_markdown
-    from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.report import FrameRecord, ScenarioKey, runtime_markdown
     from cold_maps.evaluation.run import NO_FUSIONS, false_fusion_markdown, write_outputs
 
     collector = Collector()
     collector.add(ScenarioKey("m", "local", "", 0.0, "left"), FrameRecord(0, 0.0, "ego", "", np.array([0.01])))
-    assert false_fusion_markdown(collector) == "" and runtime_markdown(collector) == ""
-    write_outputs(tmp_path, collector, partial=False, plots=False,
-                  sections=[("Runtime (Table I)", runtime_markdown(collector))])
+    results = [a.result() for a in collector.accumulators.values()]
+    assert false_fusion_markdown(collector) == "" and runtime_markdown(results, collector.check_ms) == ""
+    write_outputs(tmp_path, collector, partial=False, plots=False, sections=[("Longest gap", "")])
     summary = (tmp_path / "summary.md").read_text()
     assert summary.count(f"\n\n{NO_FUSIONS}") == 2
-    assert "| map | fusion | frames |" not in summary and "| fused | false fusions |" not in summary
+    assert "| map | scenario | fusion mean" not in summary and "| fused | false fusions |" not in summary
 
 
 def test_stamp_base_sets_the_log_times(tmp_path):

@@ -129,7 +129,7 @@ def test_straight_run_ranges_errors_and_fusibility(straight_results):
             assert (result.frames, result.fused_frames) == (4 * 5, 5)
             assert result.fusibility_precision == 1.0 and result.fusibility_recall == 1.0
             assert sum(count for _, count in result.rejected) == 15
-    assert set(collector.fuse_ms) == {("straight", "convoy"), ("straight", "spline-paper-d30")}
+    assert set(collector.check_ms) == {("straight", "convoy"), ("straight", "spline-paper-d30")}
     assert all(len(v) == 5 for v in collector.check_ms.values())
 
 

@@ -122,7 +122,8 @@ def test_report_files_schema_and_round_trip(tmp_path):
 
     summary = (tmp_path / "summary.md").read_text()
     assert "| Town04 | spline | paper | 20.0 | left | 0.400 | 0.534 | 1.000 | 0.895 | 85.0 | 2 / 5 | " \
-           "no_overlap: 2, not_fusible: 1 | 0.667 | 1.000 | 4.00 / 2.00 / 6.00 |" in summary
+           "no_overlap: 2, not_fusible: 1 | 0.667 | 1.000 |" in summary
+    assert "| Town04 | spline-paper-d20 | 4.00 / 2.00 / 6.00 | – | 3.62 / 0.70 / 6.62 |" in summary
     assert summary.index("| Town04 | local |") < summary.index("| Town04 | spline |")
     assert "PARTIAL" not in summary
 

@@ -293,8 +293,9 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
 
 def _sections(paper: bool, interpolations: Sequence[str], convoy_weights: str) -> SectionsCallback:
     """The extra summary sections: Table II per interpolation and the longest gap for
-    ``--paper``, the runtime table (Table I) and the convoy weights always."""
-    from cold_maps.evaluation.paper import gap_limit_markdown, runtime_markdown, table_ii_markdown
+    ``--paper`` and the convoy weights always (the runtime table, Table I, is part of every
+    summary)."""
+    from cold_maps.evaluation.paper import gap_limit_markdown, table_ii_markdown
 
     def sections(collector: Collector, results: list[ScenarioResult]) -> list[tuple[str, str]]:
         found = []
@@ -302,7 +303,6 @@ def _sections(paper: bool, interpolations: Sequence[str], convoy_weights: str) -
             found += [(f"Table II vs the paper, `{name}` interpolation", table_ii_markdown(results, name))
                       for name in interpolations]
             found.append(("Longest gap", gap_limit_markdown(results)))
-        found.append(("Runtime (Table I)", runtime_markdown(collector)))
         found.append(("Convoy weights", f"`--convoy-weights {convoy_weights}`\n"))
         return found
 
@@ -321,6 +321,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
                                       startup_failure)
+    from cold_maps.common.provenance import make_provenance, recorded_params
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
     from cold_maps.evaluation.trust import verdict
@@ -330,8 +331,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         plans = _plans(args)
         options = RunOptions(out=args.out, mcap=not args.no_mcap, plots=not args.no_plots,
                              progress=progress_stream(args),
-                             run_params={k: v.describe() if isinstance(v, SensorProfile) else str(v)
-                                         for k, v in sorted(vars(args).items()) if k not in UNRECORDED},
+                             provenance=make_provenance(PROG, argv, recorded_params(vars(args), UNRECORDED),
+                                                        inputs=[("map", plan.path) for plan in plans]),
                              workers=args.workers or default_workers(), stamp_base_ns=args.stamp_base,
                              osi=args.osi)
         run = run_evaluation(plans, options, extra_sections=_sections(args.paper, _interpolations(args),

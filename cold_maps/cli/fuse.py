@@ -29,6 +29,8 @@ import numpy as np
 from cold_maps.cli.common import builds, cli_entry, finite_number, make_parser, validated
 
 PROG: Final[str] = "cold-fuse"
+UNRECORDED: Final[frozenset[str]] = frozenset({"verbose", "quiet", "no_progress"})
+"""Options that change no result, left out of the provenance parameters."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -252,10 +254,12 @@ def _read_input(path: Path) -> tuple[Any, int]:
 @cli_entry(PROG)
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-fuse``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
                                       startup_failure)
     from cold_maps.common.progress import ProgressBar
+    from cold_maps.common.provenance import make_provenance, recorded_params
     from cold_maps.recording.recorder import Recorder
 
     configure_logging(args.verbose, args.quiet)
@@ -276,9 +280,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             from cold_maps.evaluation.run import prepare_out_dir
 
             report_dir = prepare_out_dir(args.report)
-        run_params = {"input": str(args.input), "ego": args.ego, "mode": args.mode,
-                      "interpolation": args.interpolation, "d_i_m": params.d_i_m}
-        recorder = Recorder(args.output, map_path=map_path or "", params=run_params,
+        provenance = make_provenance(PROG, argv, recorded_params({**vars(args), "d_i_m": params.d_i_m}, UNRECORDED),
+                                     inputs=[("input", args.input), *([("map", map_path)] if map_path else [])])
+        recorder = Recorder(args.output, map_path=map_path or "", params=provenance.params,
                             stamp_base_ns=stamp_base_ns).__enter__()
     except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - bad input is reported as one line
         return startup_failure(PROG, exc)
@@ -296,7 +300,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if report_dir is not None:
         from cold_maps.evaluation.run import write_outputs
 
-        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG)
+        write_outputs(report_dir, refuser.collector, partial=error is not None, plots=False, program=PROG,
+                      provenance=provenance)
     if isinstance(error, KeyboardInterrupt):
         what, status = interruption(error)
         return fail(PROG, f"{what} after {count} frames; {args.output} finalised as partial", status)

@@ -15,6 +15,7 @@ bad input or a failed cell; 2 for a bad command line; 130 when interrupted, 143 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Callable, Final, Sequence, TypeVar
 
@@ -24,6 +25,8 @@ from cold_maps.simulation.sensor_errors import SensorErrorModel
 from cold_maps.simulation.sensor_profile import IDEAL, SensorProfile
 
 PROG: Final[str] = "cold-eval sweep"
+UNRECORDED: Final[frozenset[str]] = frozenset({"workers", "scheduler", "verbose", "quiet", "no_progress"})
+"""Options that change no result, left out of the provenance parameters."""
 DEFAULT_FRAMES: Final[int] = 100
 DEFAULT_ROUTES: Final[int] = 3
 
@@ -105,10 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``cold-eval sweep``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     from cold_maps.cli.common import (configure_logging, fail, interruption, progress_stream, result_line,
                                       startup_failure)
     from cold_maps.common.progress import ProgressBar
+    from cold_maps.common.provenance import make_provenance, recorded_params
     from cold_maps.evaluation.parallel import default_workers, process_pool
     from cold_maps.evaluation.run import prepare_out_dir
     from cold_maps.evaluation.sweep import SweepSpec, dask_executor, run_sweep, write_tables
@@ -119,6 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      args.noise, args.pose_xy, args.seeds, args.frames, args.routes, args.sensor)
     try:
         cells = spec.cells()
+        provenance = make_provenance(PROG, argv, recorded_params(vars(args), UNRECORDED),
+                                     inputs=[("map", path) for path in args.map])
         out = prepare_out_dir(args.out)
         workers = min(args.workers or default_workers(), len(cells))
         executor = (dask_executor(args.scheduler) if args.scheduler
@@ -133,7 +140,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if result.rows:
             write_tables(out, result.rows)
-        write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=not args.no_plots)
+        write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=not args.no_plots,
+                     provenance=provenance)
     except KeyboardInterrupt as exc:
         from cold_maps.common.signals import signals_ignored
         from cold_maps.evaluation.sweep_report import discard_outputs
@@ -141,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with signals_ignored():
             discard_outputs(out)
             write_report(out, result.rows, cells=len(result.cells), finished=finished, plots=False,
-                         interrupted=True)
+                         interrupted=True, provenance=provenance)
         what, status = interruption(exc)
         return fail(PROG, f"{what} while writing the tables ({counts}; the finished cells are kept, summary.md "
                     f"marked partial); run the same command again to write them -> {args.out}", status)

@@ -1,4 +1,4 @@
-"""What a run measured: one accumulator per scenario key, runtimes and overlays.
+"""What a run measured: one accumulator per scenario key, check runtimes and overlays.
 
 The :class:`Collector` is filled frame by frame by the evaluator and read by the reports,
 the plots and the paper tables, also after an interrupt.
@@ -34,25 +34,27 @@ class Collector:
 
     Fields:
         accumulators: one per scenario key, in insertion order.
-        fuse_ms: (map, scenario label) → fusion runtimes of the scenario's own coop (ms).
         check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
             overlap check for convoy (ms).
-        overlays: (map, scenario label) → the frame with the largest error.
+        overlays: (map, scenario label) → the frame with the largest error of any of its
+            pairs (distractors included: the summary's max error).
         notes: lines for the summary (routes, lane coverage, what did not fit a map).
         reduced_maps: names of the maps evaluated with fewer frames, distractors or
             scenarios than asked, because their longest route is too short.
         gt_warnings: per map, why its ground truth is not trustworthy on the driven lanes.
         frames_done: frames evaluated.
+        drives: (map, drive index) → (global index of the drive's frame 0, its frames):
+            where each route starts on the frame axis of the plots.
     """
 
     accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
-    fuse_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     reduced_maps: list[str] = field(default_factory=list)
     gt_warnings: list[str] = field(default_factory=list)
     frames_done: int = 0
+    drives: dict[tuple[str, int], tuple[int, int]] = field(default_factory=dict)
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:
         """Adds one evaluation to the scenario ``key``."""
@@ -79,9 +81,8 @@ class Collector:
             mine.messages += accumulator.messages
             mine.message_bytes += accumulator.message_bytes
             mine.sender_ns += accumulator.sender_ns
-        for mine_ms, theirs in ((self.fuse_ms, later.fuse_ms), (self.check_ms, later.check_ms)):
-            for label, runtimes in theirs.items():
-                mine_ms.setdefault(label, []).extend(runtimes)
+        for label, runtimes in later.check_ms.items():
+            self.check_ms.setdefault(label, []).extend(runtimes)
         for label, overlay in later.overlays.items():
             kept = self.overlays.get(label)
             if kept is None or overlay.max_error_m > kept.max_error_m:
@@ -90,3 +91,8 @@ class Collector:
         self.reduced_maps.extend(name for name in later.reduced_maps if name not in self.reduced_maps)
         self.gt_warnings.extend(later.gt_warnings)
         self.frames_done += later.frames_done
+        self.drives.update(later.drives)
+
+    def route_starts(self, map_name: str) -> list[int]:
+        """The global frame index at which each drive of ``map_name`` starts, in order."""
+        return sorted(first for (name, _), (first, _) in self.drives.items() if name == map_name)

@@ -241,6 +241,7 @@ class MapEvaluator:
         self.prepare()
         drive = self.drives[drive_index]
         frames = range(drive.frames) if frames is None else frames
+        collector.drives[(self.plan.name, drive_index)] = (frame_offset, drive.frames)
         if frames.start == 0:
             LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
         for frame in frames:
@@ -392,7 +393,6 @@ class MapEvaluator:
             start = time.perf_counter()
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
             collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
-            collector.fuse_ms.setdefault(label, []).append(runtime)
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None
@@ -405,10 +405,9 @@ class MapEvaluator:
         self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                      truth, metrics if main else None, relation=relation, confidence=result.confidence,
                      sigmas=(result.left_sigma, result.right_sigma))
-        if main:
-            self._keep_overlay(collector, scenario, index, measured,
-                               {"ego": ego.detection, other.state.name: other.detection},
-                               {"left": result.left, "right": result.right})
+        self._keep_overlay(collector, scenario, index, measured,
+                           {"ego": ego.detection, other.state.name: other.detection},
+                           {"left": result.left, "right": result.right})
         return result.left, result.right
 
     def _chain(self, collector: Collector, scenario: Scenario, sensed: dict[str, Sensed], index: int, stamp: float,
@@ -446,7 +445,6 @@ class MapEvaluator:
                                   mode=scenario.fusion, interpolation=scenario.interpolation or "paper",
                                   params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
-        collector.fuse_ms.setdefault((plan.name, scenario.label), []).append(runtime)
         if chain.vehicles < scenario.vehicles:
             reject(reason_category(chain.reason), False, runtime)
             return

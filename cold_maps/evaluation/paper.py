@@ -16,8 +16,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Final, Mapping, Sequence
 
-from cold_maps.evaluation.collector import Collector
-from cold_maps.evaluation.report import PAPER_TABLE_I_MS, ScenarioResult, paper_comparison_markdown
+from cold_maps.evaluation.report import ScenarioResult, paper_comparison_markdown
 from cold_maps.evaluation.scenarios import MapPlan, params_for_gaps, scenarios_for
 from cold_maps.network.lane_graph import LaneKey, load_graph
 from cold_maps.network.routing import longest_route_lengths
@@ -78,33 +77,6 @@ def table_ii_markdown(results: Sequence[ScenarioResult], interpolation: str) -> 
     chosen = [r for r in results if r.key.map in ROAD_TYPES
               and (r.key.fusion != "spline" or r.key.interpolation == interpolation)]
     return paper_comparison_markdown(chosen, {name: ROAD_TYPES[name] for name in {r.key.map for r in chosen}})
-
-
-def _stats(values: Sequence[float]) -> str:
-    if not values:
-        return "– / – / –"
-    mean = sum(values) / len(values)
-    std = math.sqrt(sum((v - mean) ** 2 for v in values) / (len(values) - 1)) if len(values) > 1 else math.nan
-    return " / ".join("–" if not math.isfinite(v) else f"{v:.3f}" for v in (mean, std, max(values)))
-
-
-def runtime_markdown(collector: Collector) -> str:
-    """Table I: fusion runtime per frame (mean / σ / max, ms) of each scenario's own coop,
-    and the overlap (convoy) or fusibility (spline) check timed alone, beside the paper's;
-    "" when no pair was fused."""
-    rows = []
-    for (map_name, label), fuse in collector.fuse_ms.items():
-        check = collector.check_ms.get((map_name, label), [])
-        kind = label.split("-")[0]
-        paper = " / ".join(f"{v:.2f}" for v in PAPER_TABLE_I_MS[kind]) if kind in PAPER_TABLE_I_MS else "–"
-        rows.append(f"| {map_name} | {label} | {len(fuse)} | {_stats(fuse)} | {_stats(check)} | {paper} |")
-    if not rows:
-        return ""
-    header = ("| map | fusion | frames | fusion mean / σ / max [ms] | check alone mean / σ / max [ms] | "
-              "paper Table I [ms] |\n|---|---|---|---|---|---|\n")
-    return ("Fusion time per frame (`fusion.fuse`, includes its checks), and the check alone (`fusion.is_fusible`: "
-            "the overlap check for convoy, the fusibility check for spline). The paper's Table I: rural road, "
-            "300 frames, AMD Ryzen 7 5700X.\n\n" + header + "\n".join(rows) + "\n")
 
 
 def gap_limit_markdown(results: Sequence[ScenarioResult], limit_m: float = MAX_ERROR_LIMIT_M) -> str:

@@ -1,6 +1,9 @@
 """PNG plots of a run (matplotlib, Agg canvas, imported lazily).
 
-- :func:`plot_frame_errors`: mean and max error per frame for each boundary (the paper's Fig. 7).
+- :func:`plot_frame_errors`: mean and max error per frame for each boundary (the paper's Fig. 7),
+  a dotted line and a label where each route (drive) starts; :func:`plot_error_series` with
+  one series per method compares the methods of a scenario kind on one axis (log scale when
+  the errors span :data:`LOG_SPAN_RATIO` or more).
 - :func:`plot_error_vs_range`: max error of every fusion against its perception range, per
   chain length.
 - :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
@@ -38,6 +41,13 @@ labels, axis labels and title, fixed instead of measuring the text (``tight_layo
 
 RELIABILITY_SIGMAS: Final[NDArrayFloat] = np.linspace(0.1, 3.0, 30)
 """The multiples k of the stated σ at which the reliability plot compares coverages."""
+LOG_SPAN_RATIO: Final[float] = 100.0
+"""Errors whose largest and smallest positive value differ by this factor or more are drawn
+on a log scale."""
+LOG_FLOOR_M: Final[float] = 1e-4
+"""On a log error axis, errors below this (m; the detections are rounded to 1 µm, so smaller
+ones are numerical noise) are drawn at it, the axis starting there."""
+ROUTE_LINE_COLOR: Final[str] = "0.4"
 
 
 _AXES: dict[str, Any] = {}
@@ -60,8 +70,9 @@ def _axes(kind: str, xlabel: str, ylabel: str) -> Any:
         axes.set_ylabel(ylabel)
         axes.grid(True, alpha=0.3)
     else:
-        for line in list(axes.lines):
+        for line in [*axes.lines, *axes.texts]:
             line.remove()
+        axes.set_yscale("linear")
         if axes.get_legend() is not None:
             axes.get_legend().remove()
         axes.set_autoscale_on(True)
@@ -105,33 +116,69 @@ class ErrorSeries:
     @classmethod
     def of(cls, scenario: ScenarioAccumulator) -> ErrorSeries:
         """The series of a scenario's records."""
-        records = scenario.records
-        return cls(f"{scenario.key.fusion} {scenario.key.boundary}",
-                   np.array([r.frame for r in records], dtype=float),
-                   np.array([r.errors_m.mean() if r.fused else np.nan for r in records]),
-                   np.array([r.errors_m.max() if r.fused else np.nan for r in records]))
+        return cls.pooled(f"{scenario.key.fusion} {scenario.key.boundary}", [scenario])
+
+    @classmethod
+    def pooled(cls, label: str, scenarios: Sequence[ScenarioAccumulator]) -> ErrorSeries:
+        """One series over the records of ``scenarios`` (usually both borders of one method):
+        per frame the mean and the max of all their errors."""
+        pooled: dict[int, list[NDArrayFloat]] = {}
+        for scenario in scenarios:
+            for r in scenario.records:
+                pooled.setdefault(r.frame, []).append(r.errors_m)
+        frames = sorted(pooled)
+        errors = [np.concatenate(pooled[f]) for f in frames]
+        return cls(label, np.array(frames, dtype=float),
+                   np.array([e.mean() if e.size else np.nan for e in errors]),
+                   np.array([e.max() if e.size else np.nan for e in errors]))
 
 
-def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "") -> None:
+def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "",
+                      route_starts: Sequence[int] = ()) -> None:
     """Mean (solid) and max (dashed) error per frame (m) of each scenario, usually the left
-    and right boundary of one fusion; frames without a lane are gaps."""
+    and right boundary of one fusion; frames without a lane are gaps; a route starts at
+    each of ``route_starts`` (global frame indices)."""
     if not scenarios:
         raise ValueError("plot_frame_errors: no scenarios to plot")
     plot_error_series(path, [ErrorSeries.of(s) for s in scenarios],
-                      title=title or f"error per frame: {scenarios[0].key.map}")
+                      title=title or f"error per frame: {scenarios[0].key.map}", route_starts=route_starts)
 
 
-def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str) -> None:
-    """:func:`plot_frame_errors` of the scenarios' series."""
+def _split_routes(frames: NDArrayFloat, values: NDArrayFloat, starts: Sequence[int]) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """``frames`` and ``values`` with a NaN point before each route start, so no line joins
+    the last frame of one route to the first of the next."""
+    cuts = np.searchsorted(frames, [s for s in starts if frames.size and frames[0] < s <= frames[-1]])
+    return np.insert(frames, cuts, np.asarray(frames)[cuts] - 0.5), np.insert(values, cuts, np.nan)
+
+
+def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries], title: str,
+                      route_starts: Sequence[int] = ()) -> None:
+    """:func:`plot_frame_errors` of the series: a dotted line labelled "route k" where each
+    route starts (``route_starts``, more than one), lines broken there; a log error axis from
+    :data:`LOG_FLOOR_M` when the errors span :data:`LOG_SPAN_RATIO` or more above it."""
     axes = _axes("errors", "frame", "error [m]")
+    positive = np.concatenate([np.concatenate((line.means, line.maxima)) for line in series]) if series else np.empty(0)
+    positive = np.maximum(positive[np.isfinite(positive)], LOG_FLOOR_M)
+    log = positive.size > 0 and positive.max() >= LOG_SPAN_RATIO * positive.min()
     for index, line in enumerate(series):
         color = f"C{index}"
-        axes.plot(line.frames, line.means, color=color, linestyle="-", label=f"{line.label} mean")
-        axes.plot(line.frames, line.maxima, color=color, linestyle="--", label=f"{line.label} max")
+        for values, style, what in ((line.means, "-", "mean"), (line.maxima, "--", "max")):
+            frames, shown = _split_routes(line.frames, np.maximum(values, LOG_FLOOR_M) if log else values,
+                                          route_starts)
+            axes.plot(frames, shown, color=color, linestyle=style, label=f"{line.label} {what}")
     axes.relim()
     axes.autoscale_view()
-    axes.set_ylim(bottom=0.0)
-    axes.set_title(title)
+    if log:
+        axes.set_yscale("log")
+        axes.set_ylim(bottom=LOG_FLOOR_M * 0.8)
+    else:
+        axes.set_ylim(bottom=0.0)
+    if len(route_starts) > 1:
+        for number, start in enumerate(route_starts, 1):
+            axes.axvline(start, color=ROUTE_LINE_COLOR, linestyle=":", linewidth=1.0)
+            axes.text(start, 1.0, f" route {number}", transform=axes.get_xaxis_transform(), va="top", ha="left",
+                      fontsize="small", color=ROUTE_LINE_COLOR)
+    axes.set_title(title + (f" (log scale, errors < {LOG_FLOOR_M * 1e3:g} mm drawn at it)" if log else ""))
     axes.legend(loc="upper right", fontsize="small")
     _save(axes.figure, path)
 

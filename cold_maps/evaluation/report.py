@@ -5,6 +5,13 @@
     {
       "schema_version": 1,
       "partial": false,              # true when the run was interrupted
+      "provenance": {                # how it was made (added in version 1; a reader takes a file without it)
+        "program": "cold-eval", "command": "cold-eval --map maps/junction.xodr --out r",
+        "version": "0.1.0",          # cold-maps version
+        "seed": "0", "sensor": "sensor ideal (ideal): ...",   # SensorProfile.describe()
+        "inputs": [{"role": "map", "name": "junction.xodr", "path": "maps/junction.xodr", "sha256": "..."}],
+        "params": {"frames": "None", "...": "..."}   # every option as text
+      },
       "scenarios": [                 # one per map x fusion x interpolation x d_s x boundary
         {
           "map": "Town04",           # map name (file stem)
@@ -95,6 +102,7 @@ from cold_maps.evaluation.safety import (
     StoppingRule,
 )
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, Calibration, ErrorStats
 
@@ -700,15 +708,19 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def metrics_document(results: Sequence[ScenarioResult], *, partial: bool = False) -> dict[str, Any]:
+def metrics_document(results: Sequence[ScenarioResult], *, partial: bool = False,
+                     provenance: Provenance | None = None) -> dict[str, Any]:
     """The ``metrics.json`` document (see the module docstring)."""
-    return {"schema_version": METRICS_SCHEMA_VERSION, "partial": bool(partial),
-            "scenarios": [r.to_dict() for r in results]}
+    return {"schema_version": METRICS_SCHEMA_VERSION, "partial": bool(partial)} | (
+        {"provenance": provenance.to_dict()} if provenance is not None else {}) | {
+        "scenarios": [r.to_dict() for r in results]}
 
 
-def write_metrics_json(path: str | os.PathLike[str], results: Sequence[ScenarioResult], *, partial: bool = False) -> None:
+def write_metrics_json(path: str | os.PathLike[str], results: Sequence[ScenarioResult], *, partial: bool = False,
+                       provenance: Provenance | None = None) -> None:
     """Writes ``metrics.json`` atomically."""
-    atomic_write_text(path, json.dumps(metrics_document(results, partial=partial), indent=2, allow_nan=False) + "\n")
+    document = metrics_document(results, partial=partial, provenance=provenance)
+    atomic_write_text(path, json.dumps(document, indent=2, allow_nan=False) + "\n")
 
 
 def read_metrics_json(path: str | os.PathLike[str]) -> tuple[list[ScenarioResult], bool]:
@@ -751,24 +763,101 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
 
 def _sort_key(result: ScenarioResult) -> tuple[Any, ...]:
     k = result.key
-    return (k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, BOUNDARIES.index(k.boundary), k.vehicles,
-            k.history_m, k.exchange)
+    return (k.map, FUSIONS.index(k.fusion), k.interpolation, k.d_s, k.vehicles, k.history_m, k.exchange,
+            BOUNDARIES.index(k.boundary))
+
+
+REJECTION_REASONS: Final[Mapping[str, str]] = {
+    "coop_not_ahead": "the coop is not ahead of the ego",
+    "other_lane": "the two detections lie on different lanes",
+    "no_overlap": "convoy: the detections do not overlap",
+    "no_gap": "spline: the detections overlap, there is no gap to bridge",
+    "gap_too_long": "spline: the gap exceeds d_i",
+    "opposite_direction": "the vehicles drive in opposite directions",
+    "heading_mismatch": "the detections' headings differ too much",
+    "pose_case": "the relative pose matches none of the paper's cases",
+    "other": "another refusal of the fusion",
+    "ego_not_seen": "the ego's sensor saw no lane", "coop_not_seen": "the coop's sensor saw no lane",
+    "ego_dropped": "an error model dropped the ego's detection",
+    "coop_dropped": "an error model dropped the coop's detection",
+    "no_ground_truth": "no ground truth lane at the ego's pose",
+    "gt_unmatched": "the ground truth does not cover the lane (why in brackets)",
+}
+"""Rejection reasons of the results table and what each means (the legend of ``summary.md``)."""
+COLUMN_LEGEND: Final[str] = (
+    "Columns: **mean / RMSE / max / p95** — closest-point distance of the evaluated lane's points to the "
+    "ground truth border, pooled over all points of the scenario (mean is the paper's eq. 1 \"MSE\"); "
+    "**range** — mean length of the evaluated lane over the fused evaluations; **fused / evaluated** — evaluations "
+    "(frames × vehicle pairs, distractor pairs included) that produced a lane / all; **rejected** — why the others "
+    "produced none (reason: count); **fus. precision / recall** — the fusibility check against the ground truth "
+    "(of the pairs it fused, the share truly on one lane / of the pairs truly on one lane, the share it fused); "
+    "**vehicles** — vehicles fused (1 local, 2 a pair, more a chain). Runtimes are in the Runtime section, "
+    "one per scenario.\n")
+DRIVE_LENGTH_NOTE: Final[str] = (
+    "Drive length: every drive is as long as the farthest coop asked for needs (the longest gap), and the "
+    "routes, frames and distractors follow from it; the results at one gap therefore change when other gaps are "
+    "asked for. Compare gaps within one run, not across runs with different gap lists.\n")
+
+
+def legend_markdown(results: Sequence[ScenarioResult]) -> str:
+    """The columns of the results table and the rejection reasons that occur in ``results``."""
+    reasons = sorted({reason for r in results for reason, _ in r.rejected})
+    if not reasons:
+        return COLUMN_LEGEND
+    return COLUMN_LEGEND + "\nRejection reasons:\n\n" + "".join(
+        f"- `{reason}`: {REJECTION_REASONS.get(reason, 'as named')}\n" for reason in reasons)
+
+
+def runtime_markdown(results: Sequence[ScenarioResult], check_ms: Mapping[tuple[str, str], Sequence[float]]) -> str:
+    """One fusion runtime per scenario (its left-border record: both borders share the
+    evaluations; all pairs, as ``metrics.json`` ``runtime_ms``), the fusibility check timed
+    alone (``check_ms``: (map, label) → ms, the scenario's own coop) and the paper's Table I;
+    "" when no scenario timed a fusion."""
+    def stats(values: Sequence[float]) -> str:
+        if not len(values):
+            return "–"
+        array = np.asarray(values, dtype=float)
+        std = float(array.std(ddof=1)) if array.size > 1 else math.nan
+        return " / ".join(_fmt(v, 2) for v in (float(array.mean()), std, float(array.max())))
+
+    rows = []
+    for r in sorted(results, key=_sort_key):
+        if r.key.boundary != "left" or not math.isfinite(r.runtime_ms.mean):
+            continue
+        paper = PAPER_TABLE_I_MS.get(r.key.fusion)
+        rows.append([r.key.map, _setup(r.key),
+                     " / ".join(_fmt(v, 2) for v in (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max)),
+                     stats(check_ms.get((r.key.map, r.key.label), ())),
+                     " / ".join(f"{v:.2f}" for v in paper) if paper else "–"])
+    if not rows:
+        return ""
+    return ("Fusion time per evaluation (`fusion.fuse`, includes its checks; every pair, distractors included), "
+            "and the check alone on the scenario's own coop (`fusion.is_fusible`: the overlap check for convoy, "
+            "the fusibility check for spline). The paper's Table I: rural road, 300 frames, AMD Ryzen 7 5700X.\n\n"
+            + _table(["map", "scenario", "fusion mean / σ / max [ms]",
+                      "check alone mean / σ / max [ms]", "paper Table I [ms]"], rows))
 
 
 def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False,
                      road_types: Mapping[str, str] | None = None, warnings: Sequence[str] = (),
-                     program: str = "cold-eval") -> str:
-    """``summary.md`` of the command ``program``: ``warnings`` on the ground truth first,
-    one row per scenario (like the paper's Table II), then, for maps named in
-    ``road_types`` (map -> paper road type), the side-by-side with the paper."""
+                     program: str = "cold-eval", provenance: Provenance | None = None,
+                     check_ms: Mapping[tuple[str, str], Sequence[float]] | None = None) -> str:
+    """``summary.md`` of the command ``program``: how it was made (``provenance``), the
+    partial mark and ``warnings`` on the ground truth, one row per scenario (like the paper's
+    Table II, a vehicles column when chains run) with the legend of its columns, one runtime
+    per scenario (:func:`runtime_markdown`, ``check_ms`` its checks timed alone), then, for
+    maps named in ``road_types`` (map -> paper road type), the side-by-side with the paper."""
     parts = [f"# {program} summary\n"]
     if partial:
         parts.append("\n**PARTIAL RUN: interrupted; the figures cover only the frames evaluated.**\n")
+    if provenance is not None:
+        parts.append("\n" + provenance.markdown())
     if warnings:
         parts.append("\n**GROUND TRUTH NOT TRUSTWORTHY on this run:**\n\n" + "".join(f"- {w}\n" for w in warnings))
-    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "mean [m]", "RMSE [m]", "max [m]", "p95 [m]",
-              "range [m]", "fused / evaluated", "rejected", "fus. precision", "fus. recall",
-              "runtime mean / σ / max [ms]"]
+    chains = any(r.key.vehicles > 0 for r in results)
+    header = ["map", "fusion", "interp.", "d_s [m]", *(["vehicles"] if chains else []), "boundary", "mean [m]",
+              "RMSE [m]", "max [m]", "p95 [m]", "range [m]", "fused / evaluated", "rejected", "fus. precision",
+              "fus. recall"]
     rows = []
     for r in sorted(results, key=_sort_key):
         k = r.key
@@ -776,18 +865,22 @@ def summary_markdown(results: Sequence[ScenarioResult], *, partial: bool = False
         rejected = ", ".join(f"{reason}: {count}" + (f" ({', '.join(f'{w}: {n}' for w, n in why.items())})"
                                                       if reason == "gt_unmatched" and why else "")
                              for reason, count in r.rejected) or "–"
-        rows.append([k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1), k.boundary, _fmt(r.mean_error_m),
-                     _fmt(r.rmse_m), _fmt(r.max_error_m), _fmt(r.p95_error_m), _fmt(r.perception_range_m, 1),
-                     f"{r.fused_frames} / {r.frames}", rejected, _fmt(r.fusibility_precision),
-                     _fmt(r.fusibility_recall), " / ".join(_fmt(v, 2) for v in
-                                                          (r.runtime_ms.mean, r.runtime_ms.std, r.runtime_ms.max))])
-    parts += ["\n## Results per scenario\n\n", _table(header, rows)]
+        rows.append([k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1), *([str(k.vehicles)] if chains else []),
+                     k.boundary, _fmt(r.mean_error_m), _fmt(r.rmse_m), _fmt(r.max_error_m), _fmt(r.p95_error_m),
+                     _fmt(r.perception_range_m, 1), f"{r.fused_frames} / {r.frames}", rejected,
+                     _fmt(r.fusibility_precision), _fmt(r.fusibility_recall)])
+    parts += ["\n## Results per scenario\n\n", _table(header, rows), "\n", legend_markdown(results)]
+    if any(r.key.fusion == "spline" for r in results):
+        parts += ["\n", DRIVE_LENGTH_NOTE]
     parts += ["\n## What CoLD adds\n\n", cold_adds_markdown(results)]
-    if any(r.key.vehicles > 0 for r in results):
+    if chains:
         parts += ["\n## Chains, history and exchange\n\n", extended_markdown(results)]
     association = association_markdown(results)
     if association:
         parts += ["\n## Lane association\n\n", association]
+    runtime = runtime_markdown(results, check_ms or {})
+    if runtime:
+        parts += ["\n## Runtime (Table I)\n\n", runtime]
     calibration = calibration_markdown(results)
     if calibration:
         parts += ["\n## Calibration of the stated σ\n\n", calibration]

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any, Callable, Final, Mapping, Sequence, TextI
 import numpy as np
 
 from cold_maps.common.progress import ProgressBar
+from cold_maps.common.provenance import Provenance
 from cold_maps.common.signals import signals_ignored
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.evaluator import MapEvaluator
@@ -34,6 +35,7 @@ from cold_maps.evaluation.report import (
     ScenarioAccumulator,
     ScenarioResult,
     atomic_write_text,
+    scenario_label,
     summary_markdown,
     write_frames_csv,
     write_metrics_json,
@@ -82,7 +84,9 @@ def _file_part(text: str) -> str:
 def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     """The plots of a run, each a call drawing one PNG into ``out/plots`` (created) from
     the data it needs (picklable, for a worker process): per map and scenario the error per
-    frame of its own coop (Fig. 7) and the overlay of its worst frame (Fig. 8); per map,
+    frame of its own coop (Fig. 7), routes marked, and the overlay of its worst frame (Fig. 8,
+    the frame of the scenario's max error over all its pairs); per map and spline kind (gap,
+    vehicles) with more than one method, the methods' errors on one axis; per map,
     when the run records vehicle counts, the max error against the perception range of
     every fusion; per map, when its lanes state σ, the reliability of that σ."""
     from cold_maps.evaluation.plots import (
@@ -102,12 +106,26 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     for key, accumulator in collector.accumulators.items():
         own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
         groups.setdefault((key.map, key.label), []).append(ScenarioAccumulator(key, own))
+    methods: dict[tuple[str, str], dict[str, list[ScenarioAccumulator]]] = {}
     for (map_name, label), accumulators in groups.items():
         if not any(r.fused for a in accumulators for r in a.records):
             continue
         path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
         jobs.append(functools.partial(plot_error_series, path, [ErrorSeries.of(a) for a in accumulators],
-                                      title=f"{map_name}: {label}, error per frame"))
+                                      title=f"{map_name}: {label}, error per frame (own coop)",
+                                      route_starts=collector.route_starts(map_name)))
+        key = accumulators[0].key
+        if key.fusion == "spline":
+            kind = scenario_label(key.fusion, "", key.d_s, key.vehicles).replace("spline--", "spline-")
+            methods.setdefault((map_name, kind), {})[key.interpolation] = accumulators
+    for (map_name, kind), by_method in methods.items():
+        if len(by_method) < 2:
+            continue
+        path = folder / f"methods_{_file_part(map_name)}_{_file_part(kind)}.png"
+        jobs.append(functools.partial(
+            plot_error_series, path, [ErrorSeries.pooled(method, a) for method, a in by_method.items()],
+            title=f"{map_name}: {kind}, methods, error per frame (own coop, both borders)",
+            route_starts=collector.route_starts(map_name)))
     extended: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         if key.vehicles > 1 and any(r.fused for r in accumulator.records):
@@ -129,7 +147,8 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
         path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
         jobs.append(functools.partial(
             plot_frame_overlay, path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
-            title=f"{map_name}: {label}, frame {overlay.frame} (max error {overlay.max_error_m:.3f} m)"))
+            title=f"{map_name}: {label}, frame {overlay.frame}, {' + '.join(overlay.detections)} "
+                  f"(max error {overlay.max_error_m:.3f} m)"))
     return jobs
 
 
@@ -165,13 +184,15 @@ UNKNOWN_RELATIONS: Final[str] = ("Not determined: {fused} fused pairs, none with
 
 
 def false_fusion_markdown(collector: Collector) -> str:
-    """Per scenario with fusibility decisions: the fusions of pairs that are not on one lane
-    (their errors are in the main table) and the errors of the correct fusions alone;
+    """Per scenario with fusibility decisions (a vehicles column when chains run): the fusions
+    of pairs that are not on one lane (their errors are in the main table) and the errors of
+    the correct fusions alone;
     :data:`UNKNOWN_RELATIONS` when pairs were fused but none has a known true relation; ""
     when no pair was fused."""
     rows = []
     fused_pairs = sum(1 for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
                       if key.fusion != "local" and key.boundary == "left" for r in accumulator.records if r.fused)
+    chains = any(key.vehicles > 0 for key in collector.accumulators)
     for key, accumulator in collector.accumulators.items():
         fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
         if not fused:
@@ -180,33 +201,37 @@ def false_fusion_markdown(collector: Collector) -> str:
         right = [r.errors_m for r in fused if r.truly_fusible]
         errors = np.concatenate(right) if right else np.empty(0)
         stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
-        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {key.boundary} | "
+        vehicles = f"{key.vehicles} | " if chains else ""
+        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {vehicles}{key.boundary} | "
                     f"{len(fused)} | {wrong} | {stats} |")
     if not rows:
         return UNKNOWN_RELATIONS.format(fused=fused_pairs) if fused_pairs else ""
     return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
             "false fusions; their errors are included in the table above. The last two columns pool the "
-            "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | boundary | fused | false fusions | "
-            "mean [m] | max [m] |\n|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+            "correct fusions only.\n\n| map | fusion | interp. | d_s [m] | " + ("vehicles | " if chains else "")
+            + "boundary | fused | false fusions | mean [m] | max [m] |\n|---|---|---|---|" + ("---|" if chains else "")
+            + "---|---|---|---|---|\n" + "\n".join(rows) + "\n")
 
 
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
                   plots: bool = True, results: Sequence[ScenarioResult] | None = None,
-                  program: str = "cold-eval") -> list[ScenarioResult]:
-    """``frames.csv``, ``summary.md`` of the command ``program`` (the per-scenario table,
-    notes, then ``sections``: (title, markdown)), ``metrics.json`` and the plots; returns the
-    scenario results (``results``: the collector's, when the caller has them already)."""
+                  program: str = "cold-eval", provenance: Provenance | None = None) -> list[ScenarioResult]:
+    """``frames.csv``, ``summary.md`` of the command ``program`` (how it was made:
+    ``provenance``, the per-scenario table, notes, then ``sections``: (title, markdown)),
+    ``metrics.json`` (with the same ``provenance``) and the plots; returns the scenario
+    results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
-    text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program)
+    text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
+                            provenance=provenance, check_ms=collector.check_ms)
     if collector.notes:
         text += "\n## Drives\n\n" + "".join(f"- {note}\n" for note in collector.notes)
     sections = [*sections, ("False fusions", false_fusion_markdown(collector))]
     for title, body in sections:
         text += f"\n## {title}\n\n{body or NO_FUSIONS}"
     atomic_write_text(out / "summary.md", text)
-    write_metrics_json(out / "metrics.json", results, partial=partial)
+    write_metrics_json(out / "metrics.json", results, partial=partial, provenance=provenance)
     if plots and not partial:
         write_plots(out, collector)
     return results
@@ -221,7 +246,9 @@ class RunOptions:
         mcap: write ``run.mcap``.
         plots: write the PNG plots.
         progress: stream of the progress bar (drawn only on a TTY).
-        run_params: the run's parameters for the MCAP ``cold.run`` metadata.
+        provenance: how the run was made (command line, version, maps and their sha256,
+            every parameter): its ``params`` go into the MCAP ``cold.run`` metadata, the whole
+            block to the top of ``summary.md`` and into ``metrics.json``.
         workers: processes evaluating the drives (work units) in parallel; 1 runs them
             in this process. The outputs are the same for any number.
         stamp_base_ns: MCAP log time of frame 0 (ns since the Unix epoch); None: the
@@ -234,7 +261,7 @@ class RunOptions:
     mcap: bool = True
     plots: bool = True
     progress: TextIO | None = None
-    run_params: Mapping[str, Any] | None = None
+    provenance: Provenance | None = None
     workers: int = 1
     stamp_base_ns: int | None = None
     osi: Path | None = None
@@ -308,7 +335,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             executor = None
         try:
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
-                                    partial=error is not None)
+                                    partial=error is not None, provenance=options.provenance)
         except KeyboardInterrupt as exc:  # while writing a complete report: rewritten as partial, without plots
             held.enter_context(signals_ignored())
             error = exc
@@ -316,7 +343,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             _stop(executor)
             executor = None
             _discard_plots(out, collector)
-            results = _write_report(out, collector, False, None, extra_sections, partial=True)
+            results = _write_report(out, collector, False, None, extra_sections, partial=True,
+                                    provenance=options.provenance)
         if error is None:
             held.enter_context(signals_ignored())
     return RunResult(results, collector, error is not None, error)
@@ -332,13 +360,14 @@ def _stop(executor: Executor | None) -> None:
 
 def _write_report(out: Path, collector: Collector, plots: bool, executor: Executor | None,
                   extra_sections: Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]] | None, *,
-                  partial: bool) -> list[ScenarioResult]:
+                  partial: bool, provenance: Provenance | None) -> list[ScenarioResult]:
     """The report of a run (:func:`write_outputs`), the plots (when ``plots``) drawn on
     ``executor``'s workers meanwhile; returns the scenario results."""
     plotted = start_plots(out, collector, executor) if plots else None
     results = [a.result() for a in collector.accumulators.values()]
     sections = list(extra_sections(collector, results)) if extra_sections is not None else []
-    results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results)
+    results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results,
+                            provenance=provenance)
     if plotted is not None:
         plotted()
     return results
@@ -399,7 +428,7 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
             from cold_maps.recording.recorder import Recorder
 
             recorder = stack.enter_context(Recorder(Path(options.out) / MCAP_NAME if options.mcap else None,
-                                                    map_path=_map_names(plans), params=options.run_params,
+                                                    map_path=_map_names(plans), params=options.provenance.params if options.provenance else None,
                                                     stamp_base_ns=stamp_base_ns, osi=options.osi))
         if submitted is not None:
             from cold_maps.evaluation.parallel import merge_units

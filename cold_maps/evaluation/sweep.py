@@ -7,7 +7,8 @@ A cell evaluates ``local``, ``convoy`` and ``spline`` with its method at its gap
 its map (``routes`` drives of ``frames`` frames, seeded by its seed, its lane sensor
 profile, sensor noise σ and coop pose σ from its error level). Its rows, one per fusion × boundary, are the
 ``metrics.json`` records flattened (``runtime_ms_mean``, ``fusibility_precision``, …,
-``rejected`` as JSON text) plus the cell's parameters (``cell_*`` columns). Each finished
+``rejected`` as JSON text) plus the cell's parameters (``cell_*`` columns, with the version
+that computed it and its sensor profile's every parameter, :func:`cell_provenance`). Each finished
 cell is written atomically to ``DIR/cells/<key>.json``; the key is a hash of the cell's
 parameters and its map's sha256, so a restarted sweep with the same arguments computes
 only the missing cells, and a changed map file is never mixed with old results.
@@ -197,7 +198,16 @@ def run_cell(cell: Cell, map_bytes: bytes | None = None) -> list[dict[str, Any]]
     path = _local_map(cell) if map_bytes is None else _shipped_map(cell, map_bytes)
     collector = Collector()
     cached_evaluator(cell_plan(cell, path)).run(collector)
-    return [{**flat_record(a.result().to_dict()), **cell.params()} for a in collector.accumulators.values()]
+    made = cell_provenance(cell)
+    return [{**flat_record(a.result().to_dict()), **cell.params(), **made} for a in collector.accumulators.values()]
+
+
+def cell_provenance(cell: Cell) -> dict[str, str]:
+    """The columns saying how a cell's rows were made beside its ``cell_*`` parameters: the
+    cold-maps version that computed it and every parameter of its sensor profile."""
+    from cold_maps import __version__
+
+    return {"cell_version": __version__, "cell_sensor_profile": cell.sensor.describe()}
 
 
 def _cell_file(out: Path, cell: Cell) -> Path:

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, Sequence
 
+from cold_maps.common.provenance import Provenance
+from cold_maps.evaluation.plots import LOG_SPAN_RATIO
 from cold_maps.simulation.sensor_profile import DEFAULT_PROFILE
 from converters.atomic_io import atomic_output
 
@@ -23,6 +25,10 @@ PLOTS_DIR: Final[str] = "plots"
 MAP_PLOT: Final[str] = "sweep_{map}.png"
 """File name (in ``PLOTS_DIR``) of a map's plot against the gap."""
 SAFE_GAP_PLOT: Final[str] = "safe_gap.png"
+CELL_DRIVE_NOTE: Final[str] = (
+    "Drive length: each cell is evaluated with its own gap alone, and its drive is as long as that gap's coop "
+    "needs; a gap's results therefore do not change when other gaps are asked for, but different gaps are "
+    "measured on drives of different length (unlike `cold-eval --gaps`, whose drives follow the longest gap).\n")
 
 
 @dataclass(frozen=True)
@@ -102,9 +108,11 @@ INTERRUPTED_WRITING: Final[str] = ("**PARTIAL: interrupted while the tables were
 """The status line of a summary whose tables an interrupt cut short."""
 
 
-def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: int, interrupted: bool = False) -> str:
-    """The sweep's summary: the error and range table against d_s and the safe gaps.
-    ``interrupted``: the tables and plots were not written (:data:`INTERRUPTED_WRITING`)."""
+def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: int, interrupted: bool = False,
+                     provenance: Provenance | None = None) -> str:
+    """The sweep's summary: how it was made (``provenance``), the error and range table
+    against d_s and the safe gaps. ``interrupted``: the tables and plots were not written
+    (:data:`INTERRUPTED_WRITING`)."""
     points = gap_points(rows)
     sensors = any(p.sensor != DEFAULT_PROFILE for p in points)
     sensor_head, sensor_rule = ("sensor | ", "---|") if sensors else ("", "")
@@ -114,8 +122,11 @@ def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: in
 
     status = "" if finished == cells else f"**PARTIAL SWEEP: {finished} of {cells} cells finished.**\n\n"
     status += INTERRUPTED_WRITING if interrupted else ""
-    lines = [f"# Sweep\n\n{status}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over seeds "
-             "and both borders, the range their mean.\n\n## Spline fusion against the gap d_s\n\n"
+    made = "" if provenance is None else provenance.markdown() + "\n"
+    lines = [f"# Sweep\n\n{status}{made}{finished} of {cells} cells, {len(rows)} rows. Errors are the worst over "
+             "seeds and both borders, the range their mean; results.csv / results.parquet carry each cell's "
+             "parameters (`cell_*`, its map's sha256, the version that computed it).\n\n"
+             f"{CELL_DRIVE_NOTE}\n## Spline fusion against the gap d_s\n\n"
              f"| map | method | {sensor_head}noise σ [m] | pose σ [m] | d_s [m] | max error [m] | p95 error [m] | "
              f"range [m] | fused / evaluated |\n|---|---|{sensor_rule}---|---|---|---|---|---|---|"]
     lines += [f"| {p.map} | {p.interpolation} | {column(p.sensor)}{p.noise_sigma_m:g} | {p.pose_sigma_xy_m:g} | "
@@ -132,8 +143,10 @@ def summary_markdown(rows: Sequence[dict[str, Any]], *, cells: int, finished: in
 
 def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
     """Per map ``plots/sweep_<map>.png`` (max error, p95 error and range against d_s, one
-    line per method and error level) and ``plots/safe_gap.png`` (safe gap per error level);
-    returns the files."""
+    line per method and error level; an error panel whose values span ``LOG_SPAN_RATIO`` or
+    more on a log scale, so one outlier does not flatten the rest) and ``plots/safe_gap.png``
+    (safe gap per error level as bars on a categorical axis, "none" written where no gap is
+    safe); returns the files."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -154,29 +167,52 @@ def write_plots(out: Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
                                            [p.range_m for p in line])):
                 axis.plot([p.d_s_m for p in line], [float("nan") if v is None else v for v in values], marker="o",
                           label=f"{method}, {level}")
-        for axis, title in zip(axes, ("max error [m]", "p95 error [m]", "perception range [m]")):
+        for index, (axis, title) in enumerate(zip(axes, ("max error [m]", "p95 error [m]", "perception range [m]"))):
+            log = index < 2 and _spans_decades([v for line in lines.values() for p in line
+                                                for v in ((p.max_error_m, p.p95_error_m)[index],)])
+            if log:
+                axis.set_yscale("log")
             axis.set_xlabel("gap d_s [m]")
-            axis.set_title(f"{map_name}: {title}")
+            axis.set_title(f"{map_name}: {title}" + (" (log scale)" if log else ""))
             axis.grid(True, alpha=0.3)
         axes[0].axhline(SAFE_MAX_ERROR_M, color="grey", linestyle="--", linewidth=1)
         axes[0].legend(fontsize="small")
         written.append(_save(figure, folder / MAP_PLOT.format(map=map_name)))
     gaps = safe_gaps(points)
     if gaps:
-        figure, axis = plt.subplots(figsize=(8, 4.5))
-        levels = list(dict.fromkeys(f"{noise:g} / {pose:g}" for (_, _, _, noise, pose) in gaps))
-        series: dict[tuple[str, str, str], dict[str, float]] = {}
-        for (map_name, method, sensor, noise, pose), gap in gaps.items():
-            series.setdefault((map_name, method, sensor), {})[f"{noise:g} / {pose:g}"] = 0.0 if gap is None else gap
-        for (map_name, method, sensor), values in series.items():
-            axis.plot(levels, [values.get(level, float("nan")) for level in levels], marker="o",
-                      label=f"{map_name}, {method}" + ("" if sensor == DEFAULT_PROFILE else f", {sensor}"))
-        axis.set_xlabel("noise σ / pose σ [m]")
-        axis.set_ylabel(f"safe gap d_s [m] (max error <= {SAFE_MAX_ERROR_M:g} m; 0: none)")
-        axis.grid(True, alpha=0.3)
-        axis.legend(fontsize="small")
-        written.append(_save(figure, folder / SAFE_GAP_PLOT))
+        written.append(_safe_gap_plot(plt, gaps, folder / SAFE_GAP_PLOT))
     return written
+
+
+def _spans_decades(values: Sequence[float | None]) -> bool:
+    """Whether the positive ``values`` span ``LOG_SPAN_RATIO`` or more."""
+    positive = [v for v in values if v is not None and v > 0]
+    return bool(positive) and max(positive) >= LOG_SPAN_RATIO * min(positive)
+
+
+def _safe_gap_plot(plt: Any, gaps: dict[tuple[str, str, str, float, float], float | None], path: Path) -> Path:
+    """Bars of the safe gap per error level (categories, in grid order), one per map, method
+    and sensor side by side; "none" written where no gap is safe."""
+    figure, axis = plt.subplots(figsize=(8, 4.5))
+    levels = list(dict.fromkeys(f"{noise:g} / {pose:g}" for (_, _, _, noise, pose) in gaps))
+    series: dict[tuple[str, str, str], dict[str, float | None]] = {}
+    for (map_name, method, sensor, noise, pose), gap in gaps.items():
+        series.setdefault((map_name, method, sensor), {})[f"{noise:g} / {pose:g}"] = gap
+    width = 0.8 / len(series)
+    for index, ((map_name, method, sensor), values) in enumerate(series.items()):
+        positions = [k + (index - (len(series) - 1) / 2) * width for k in range(len(levels))]
+        heights = [values.get(level) for level in levels]
+        axis.bar(positions, [0.0 if h is None else h for h in heights], width=width, color=f"C{index}",
+                 label=f"{map_name}, {method}" + ("" if sensor == DEFAULT_PROFILE else f", {sensor}"))
+        for x, level, height in zip(positions, levels, heights):
+            if level in values and height is None:
+                axis.text(x, 0.0, "none", rotation=90, ha="center", va="bottom", fontsize="small", color=f"C{index}")
+    axis.set_xticks(range(len(levels)), levels)
+    axis.set_xlabel("error level: noise σ / pose σ [m] (categories)")
+    axis.set_ylabel(f"safe gap d_s [m] (max error <= {SAFE_MAX_ERROR_M:g} m)")
+    axis.grid(True, axis="y", alpha=0.3)
+    axis.legend(fontsize="small")
+    return _save(figure, path)
 
 
 def _save(figure: Any, path: Path) -> Path:
@@ -190,11 +226,12 @@ def _save(figure: Any, path: Path) -> Path:
 
 
 def write_report(out: Path, rows: Sequence[dict[str, Any]], *, cells: int, finished: int, plots: bool = True,
-                 interrupted: bool = False) -> None:
-    """``summary.md`` (atomically) and, unless ``plots`` is False, the plots; ``interrupted``
-    marks the summary of a sweep whose tables were not written."""
+                 interrupted: bool = False, provenance: Provenance | None = None) -> None:
+    """``summary.md`` (atomically, opening with ``provenance``) and, unless ``plots`` is False,
+    the plots; ``interrupted`` marks the summary of a sweep whose tables were not written."""
     with atomic_output(out / SUMMARY_NAME) as stream:
-        stream.write(summary_markdown(rows, cells=cells, finished=finished, interrupted=interrupted))
+        stream.write(summary_markdown(rows, cells=cells, finished=finished, interrupted=interrupted,
+                                      provenance=provenance))
     if plots and rows:
         write_plots(out, rows)
 
