@@ -84,6 +84,15 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def shown(path: Path) -> str:
+    """``path`` relative to the project (``maps/…`` for the bundled maps, ``../shared/…``
+    for the shared ones) when inside it or its parent folder, else as given."""
+    resolved = path.resolve()
+    if resolved.is_relative_to(ROOT):
+        return str(resolved.relative_to(ROOT))
+    return f"../{resolved.relative_to(ROOT.parent)}" if resolved.is_relative_to(ROOT.parent) else str(path)
+
+
 def run_eval(argv: list[str]) -> tuple[int, str, float]:
     """``cold-eval argv`` in this process: (exit status, its stderr, wall seconds)."""
     err = io.StringIO()
@@ -201,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     for spec in MAPS:
         if wanted and spec.name not in wanted:
             continue
-        entry: dict[str, Any] = {"name": spec.name, "path": str(spec.path), "unseen": spec.unseen, "rows": [],
+        entry: dict[str, Any] = {"name": spec.name, "path": shown(spec.path), "unseen": spec.unseen, "rows": [],
                                  "runs": []}
         study["maps"].append(entry)
         if not spec.path.is_file():
