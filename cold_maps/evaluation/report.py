@@ -789,8 +789,9 @@ def cold_adds_markdown(results: Sequence[ScenarioResult]) -> str:
     ranges = [[r.key.map, _setup(r.key), r.key.boundary,
                " / ".join(_fmt(v, 1) for v in (r.perception_range_m, *r.range_percentiles_m)),
                _split_cell(r.near), _split_cell(r.far)] for r in ordered]
-    text = (f"Perception range over the fused evaluations; errors of the points within {split} m of the ego along "
-            f"the border (near) and beyond (far), as OpenLane splits them (points / mean / max / p95 [m]).\n\n"
+    text = (f"Perception range over the fused evaluations, a frame without an ego lane counted as 0 m; errors of "
+            f"the points within {split} m of the ego along the border (near) and beyond (far), as OpenLane splits "
+            "them (points / mean / max / p95 [m]).\n\n"
             + _table(["map", "scenario", "boundary", "range mean / p5 / p50 / p95 [m]", f"near ≤ {split} m",
                       f"far > {split} m"], ranges))
     stops = [[r.key.map, _setup(r.key), _fmt(r.stopping.speed_mps, 1), _fmt(r.stopping.rule.reaction_time_s, 2),
