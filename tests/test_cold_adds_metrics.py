@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from cold_maps.cli import evaluate
 from cold_maps.evaluation.report import (
+    NO_EGO_LANE,
     FrameRecord,
     ReportError,
     ScenarioAccumulator,
@@ -253,3 +254,18 @@ def test_distance_from_the_ego_counts_a_minimum_range():
     assert ahead_of_m(border, None) == pytest.approx(y - 8.0, abs=1e-9)
     # a border that starts behind the vehicle counts from its first point
     assert ahead_of_m(border, (10.0, 9.0, math.pi / 2))[0] == 0.0
+
+
+@pytest.mark.parametrize("reason", sorted(NO_EGO_LANE))
+def test_frames_without_an_ego_lane_count_once_as_range_zero(reason):
+    acc = ScenarioAccumulator(SPLINE)
+    for i, length in enumerate((10.0, 20.0, 30.0)):
+        acc.add(FrameRecord(i, 0.1 * i, "ego", "coop", np.array([0.1]), perception_range_m=length))
+    for coop in ("coop", "turn"):  # one frame, two pairs: counted once
+        acc.add(FrameRecord(3, 0.3, "ego", coop, np.empty(0), rejected=reason))
+    acc.add(FrameRecord(4, 0.4, "ego", "coop", np.empty(0), rejected="coop_not_seen"))  # the ego has its lane
+    result = acc.result()
+    # ranges 0, 10, 20, 30: mean 15; linear percentiles at rank q/100 · 3
+    assert result.perception_range_m == pytest.approx(15.0)
+    assert result.range_percentiles_m == pytest.approx((1.5, 15.0, 28.5))
+    assert result.fused_frames == 3

@@ -32,14 +32,18 @@ from cold_maps.evaluation.evaluator import MapEvaluator  # noqa: E402
 from cold_maps.evaluation.scenarios import MapPlan, params_for_gaps, scenarios_for  # noqa: E402
 from cold_maps.network.lane_graph import load_graph  # noqa: E402
 from cold_maps.simulation.detection import obstacles_of, sense  # noqa: E402
+from cold_maps.simulation.lane_model_error import LaneModelErrorSampler  # noqa: E402
 from cold_maps.simulation.sensor_profile import IDEAL, load_profile  # noqa: E402
 
 DEFAULT_MAP = ROOT.parent / "shared" / "maps" / "carla" / "Town01.xodr"
 
 
 def frame_times(evaluator: MapEvaluator, timer: Callable[[], float]) -> tuple[list[float], list[float]]:
-    """ms per frame of one pass over every drive: the whole frame, and the sensing alone."""
+    """ms per frame of one pass over every drive: the whole frame, and the sensing alone.
+    Each pass starts the drives' lane-model errors afresh (their stamps may not go back)."""
     whole, sensing = [], []
+    if evaluator.lane_errors is not None:
+        evaluator.lane_errors = [LaneModelErrorSampler(s.params, s.seed, s.drive) for s in evaluator.lane_errors]
     collector = Collector()
     rng = np.random.default_rng(0)
     for index, drive in enumerate(evaluator.drives):

@@ -25,7 +25,8 @@
           "max_error_m": 0.6,        # largest distance over the run
           "p95_error_m": 0.1,        # 95th percentile (linear interpolation) of the distances
           "mean_frame_max_error_m": 0.11,  # per-frame maximum, averaged over fused frames
-          "perception_range_m": 80.0,      # mean length of the evaluated lane over fused frames
+          "perception_range_m": 80.0,      # mean length of the evaluated lane over fused frames,
+                                           # a frame without an ego lane counted once as 0
           "frames": 300,             # evaluations: frames x vehicle pairs
           "fused_frames": 280,       # evaluations that produced a lane
           "rejected": {"no_overlap": 20},  # reason -> count of evaluations without a lane
@@ -49,7 +50,8 @@
                                      # the same over fusions whose partner truly continues the ego's lane
           # always (added in the same schema version; a reader takes a file without them):
           "perception_range_distribution_m": {"mean": 80.0, "p5": 70.1, "p50": 80.0, "p95": 83.1},
-                                     # the range over fused evaluations: mean and percentiles (linear)
+                                     # the range over fused evaluations and frames without an ego
+                                     # lane (0): mean and percentiles (linear)
           "by_distance": {"split_m": 40.0,   # errors of the points near (<= 40 m along the border from
                           "near": {"points": 400, "mean_error_m": 0.01, "max_error_m": 0.1, "p95_error_m": 0.02},
                           "far": {"points": 0, "mean_error_m": null, "max_error_m": null, "p95_error_m": null}},
@@ -153,7 +155,12 @@ FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
     "predicted_fusible", "truly_fusible", "relation", "confidence",
     "end_reason", "near_points", "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_distance_m")
 RANGE_PERCENTS: Final[tuple[float, ...]] = (5.0, 50.0, 95.0)
-"""Percentiles (linear interpolation) of the perception range over fused evaluations."""
+"""Percentiles (linear interpolation) of the perception range over fused evaluations and
+the frames without an ego lane (:data:`NO_EGO_LANE`)."""
+NO_EGO_LANE: Final[frozenset[str]] = frozenset({"ego_not_seen", "ego_dropped"})
+"""Rejections of a frame in which the ego had no lane of its own (its sensor saw none, or an
+error model dropped it): no scenario can report a lane then, so the frame counts once with
+range 0 m in the scenario's perception range (``perception_range_m`` and its distribution)."""
 
 
 class ReportError(ValueError):
@@ -351,7 +358,8 @@ class ScenarioResult:
         mean_error_m, rmse_m, max_error_m, p95_error_m: statistics of the pooled
             closest-point distances (m); NaN without samples.
         mean_frame_max_error_m: per-evaluation maximum error averaged over fused ones (m).
-        perception_range_m: mean evaluated lane length over fused evaluations (m).
+        perception_range_m: mean evaluated lane length over fused evaluations and, as 0,
+            the frames without an ego lane (:data:`NO_EGO_LANE`) (m).
         frames: evaluations (frames x vehicle pairs).
         fused_frames: evaluations that produced a lane.
         rejected: (reason, count) of evaluations without a lane, sorted by reason.
@@ -600,6 +608,7 @@ class ScenarioAccumulator:
         errors = np.concatenate([r.errors_m for r in fused]) if fused else np.empty(0)
         nan = math.nan
         ranges = [r.perception_range_m for r in fused if math.isfinite(r.perception_range_m)]
+        ranges += [0.0] * len({r.frame for r in self.records if r.rejected in NO_EGO_LANE})
         runtimes = np.array([r.runtime_ms for r in self.records if math.isfinite(r.runtime_ms)])
         decided = [(r.predicted_fusible, r.truly_fusible) for r in self.records
                    if r.predicted_fusible is not None and r.truly_fusible is not None]
@@ -912,8 +921,9 @@ def cold_adds_markdown(results: Sequence[ScenarioResult]) -> str:
     ranges = [[r.key.map, _setup(r.key), r.key.boundary,
                " / ".join(_fmt(v, 1) for v in (r.perception_range_m, *r.range_percentiles_m)),
                _split_cell(r.near), _split_cell(r.far)] for r in ordered]
-    text = (f"Perception range over the fused evaluations; errors of the points within {split} m of the ego along "
-            f"the border (near) and beyond (far), as OpenLane splits them (points / mean / max / p95 [m]).\n\n"
+    text = (f"Perception range over the fused evaluations, a frame without an ego lane counted as 0 m; errors of "
+            f"the points within {split} m of the ego along the border (near) and beyond (far), as OpenLane splits "
+            "them (points / mean / max / p95 [m]).\n\n"
             + _table(["map", "scenario", "boundary", "range mean / p5 / p50 / p95 [m]", f"near ≤ {split} m",
                       f"far > {split} m"], ranges))
     stops = [[r.key.map, _setup(r.key), _fmt(r.stopping.speed_mps, 1), _fmt(r.stopping.rule.reaction_time_s, 2),
