@@ -177,7 +177,9 @@ def test_cold_fuse_scores_the_trace_as_the_mcap(run: Path, tmp_path: Path) -> No
         reports[name] = json.loads((report / "metrics.json").read_text())
     scored = [s for s in reports["run.osi"]["scenarios"] if s["fusion"] != "local" and s.get("fused_frames")]
     assert scored, "the trace's coops were fused and scored"
+    provenances = {name: report.pop("provenance") for name, report in reports.items()}
     assert _without_runtime(reports["run.osi"]) == _without_runtime(reports["run.mcap"])
+    assert [f["name"] for f in provenances["run.osi"]["inputs"]][:1] == ["run.osi"]  # each names its own input
     stamps = {d["stamp_s"] for _, frame in read_detections(tmp_path / "run.osi.fused.mcap") for d in frame}
     assert stamps == {0.0, 0.1, 0.2, 0.3, 0.4}
 
