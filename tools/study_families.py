@@ -161,6 +161,7 @@ def run_family(paths: Sequence[Path], config_args: Sequence[str], out: Path, *, 
     not trustworthy, plans reduced to fit a map) and its notes (routes, lane coverage).
     RuntimeError when the run fails."""
     from cold_maps.cli import evaluate
+    from cold_maps.common.provenance import make_provenance, recorded_params
     from cold_maps.evaluation.parallel import default_workers
     from cold_maps.evaluation.run import RunOptions, run_evaluation
     from cold_maps.evaluation.trust import run_warnings
@@ -170,9 +171,11 @@ def run_family(paths: Sequence[Path], config_args: Sequence[str], out: Path, *, 
     argv += ["--frames", str(frames)] if frames else []
     argv += ["--routes", str(routes)] if routes else []
     args = evaluate.build_parser().parse_args(argv)
-    run = run_evaluation(evaluate._plans(args), RunOptions(out=out, mcap=False, plots=False,
-                                                          run_params={"argv": " ".join(argv)},
-                                                          workers=workers or default_workers()))
+    plans = evaluate._plans(args)
+    provenance = make_provenance(evaluate.PROG, argv, recorded_params(vars(args), evaluate.UNRECORDED),
+                                 inputs=[("map", plan.path) for plan in plans])
+    run = run_evaluation(plans, RunOptions(out=out, mcap=False, plots=False, provenance=provenance,
+                                           workers=workers or default_workers()))
     if run.error is not None:
         raise RuntimeError(f"cold-eval on {out} failed: {type(run.error).__name__}: {run.error}")
     found: dict[tuple[str, str], list[Any]] = {}
