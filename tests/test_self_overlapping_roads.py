@@ -5,6 +5,7 @@ scored, never rejected for the other turn."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -35,7 +36,9 @@ def test_the_ramp_turns_lie_on_one_another() -> None:
     assert np.max(gaps) < 0.06  # the first turn lies within half a 0.1 m sample of the second in x, y
 
 
-def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> None:
+def ramp_strip_and_ground_truth(tmp_path: Path) -> tuple[LaneStrip, Any]:
+    """The helical ramp's lane −1 from the approach over both turns as a strip, and the
+    ground truth of the ramp (converted into a cache below ``tmp_path``)."""
     from converters import load_lanelet2
     from gt_matching import GroundTruth
 
@@ -44,8 +47,12 @@ def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> No
     graph = build_lane_graph(parse_opendrive(path.read_bytes()))
     lanes = [LaneKey(road, 0, -1) for road in ["1", *(str(10 + k) for k in range(8)), "2"]]
     route = route_from_lanes(graph, lanes)
-    strip = LaneStrip.from_borders(route.left, route.right)
-    meter = GroundTruthMeter(GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache")))
+    return LaneStrip.from_borders(route.left, route.right), GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache"))
+
+
+def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> None:
+    strip, ground_truth = ramp_strip_and_ground_truth(tmp_path)
+    meter = GroundTruthMeter(ground_truth)
     sensor = LaneSensor()
     worst = []
     for station in np.arange(0.0, strip.length - sensor.range_m, STATION_STEP_M):
@@ -58,16 +65,7 @@ def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> No
 
 
 def test_a_detection_run_backwards_on_the_ramp_is_still_refused(tmp_path: Path) -> None:
-    from converters import load_lanelet2
-    from gt_matching import GroundTruth
-
-    path = tmp_path / "ramp.xodr"
-    path.write_text(helical_ramp())
-    graph = build_lane_graph(parse_opendrive(path.read_bytes()))
-    lanes = [LaneKey(road, 0, -1) for road in ["1", *(str(10 + k) for k in range(8)), "2"]]
-    route = route_from_lanes(graph, lanes)
-    strip = LaneStrip.from_borders(route.left, route.right)
-    ground_truth = GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache"))
+    strip, ground_truth = ramp_strip_and_ground_truth(tmp_path)
     for station in (140.0, 280.0):  # on the first and on the second turn
         detection = LaneSensor().detect(strip, station)
         left, right = detection.to_world()
