@@ -47,7 +47,8 @@ def ramp_strip_and_ground_truth(tmp_path: Path) -> tuple[LaneStrip, Any]:
     graph = build_lane_graph(parse_opendrive(path.read_bytes()))
     lanes = [LaneKey(road, 0, -1) for road in ["1", *(str(10 + k) for k in range(8)), "2"]]
     route = route_from_lanes(graph, lanes)
-    return LaneStrip.from_borders(route.left, route.right), GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache"))
+    ground_truth = GroundTruth(*load_lanelet2(path, cache_dir=tmp_path / "cache"))
+    return LaneStrip.from_borders(route.left, route.right), ground_truth
 
 
 def test_every_detection_on_the_ramp_is_matched_and_scored(tmp_path: Path) -> None:
