@@ -351,21 +351,23 @@ class FusionParams:
         fusibility: ``"geometric"`` (default, works across curves, see
             :func:`fusion.fusibility.geometric_check`) or ``"paper"`` (the paper's three pose
             cases, :func:`fusion.fusibility.paper_check`).
-        association: the decision on a pair that passed the geometric rules:
-            ``"confidence"`` (default; rejects a pair whose association confidence is below
-            ``min_confidence`` as "ambiguous" and, with ``gate_false_rejection`` set and both
-            detections stating σ, a spline pair that fails the statistical gate of
-            :mod:`fusion.gate`, as "another lane" or "ambiguous"), ``"strict"`` (as
+        association: the decision on a pair that passed the geometric rules: ``"legacy"``
+            (default: the geometric and lane rules alone; reproduces the paper study's
+            figures), ``"confidence"`` (also rejects a pair whose association confidence is
+            below ``min_confidence`` as "ambiguous" and, with ``gate_false_rejection`` set and
+            both detections stating σ, a spline pair that fails the statistical gate of
+            :mod:`fusion.gate`, as "another lane" or "ambiguous") or ``"strict"`` (as
             ``"confidence"``, and without neighbour lanes a gap pair is ambiguous when the lane
             a lane width beside the coop's would pass the geometric check too: precision
-            before recall) or ``"legacy"`` (the geometric and lane rules alone, as before; reproduces
-            the paper study's figures).
+            before recall). Opt-in: measured on the map families in
+            docs/fusion/association.md, neither keeps the legacy recall.
         min_confidence: lowest association confidence fused with ``association="confidence"``
+            or ``"strict"``
             (in [0, 1]; chosen on the tune seeds of ``tools/study_families.py``, see
             docs/fusion/association.md).
-        gate_false_rejection: false rejection rate α of the statistical gate, in (0, 1),
-            e.g. 0.01; ``None`` (default: not yet measured with the camera sensor) turns the
-            gate off.
+        gate_false_rejection: false rejection rate α of the statistical gate of
+            ``association="confidence"``/``"strict"``, in (0, 1), e.g. 0.01; ``None`` (default:
+            not yet measured with the camera sensor) turns the gate off.
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
             2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).
@@ -386,7 +388,7 @@ class FusionParams:
     convoy_max_offset_m: float = 1.0
     convoy_max_heading_rad: float = math.radians(30.0)
     fusibility: Fusibility = "geometric"
-    association: AssociationRule = "confidence"
+    association: AssociationRule = "legacy"
     min_confidence: float = MIN_CONFIDENCE
     gate_false_rejection: float | None = None
     heading_window_m: float | None = None

@@ -20,7 +20,7 @@ from fusion.uncertainty import BorderVariance
 LANE_WIDTH_M = 3.5
 SIGMA_M = 0.05
 LENGTH_M = 30.0
-GATED = FusionParams(gate_false_rejection=0.01)
+GATED = FusionParams(association="confidence", gate_false_rejection=0.01)
 STEP_M = 0.5
 
 
@@ -116,10 +116,26 @@ def test_confidence_rule_rejects_below_threshold_as_ambiguous_legacy_keeps() -> 
     ego, coop = (replace(d, left_sigma=None, right_sigma=None) for d in pair(0, 30.0, 0.0))
     legacy = assess(ego, coop, FusionParams(association="legacy"))
     assert legacy.reason == "" and 0.0 < legacy.confidence < 1.0
-    above = assess(ego, coop, FusionParams(min_confidence=min(legacy.confidence + 0.01, 1.0)))
+    assert assess(ego, coop) == legacy  # legacy is the default
+    above = assess(ego, coop, FusionParams(association="confidence",
+                                           min_confidence=min(legacy.confidence + 0.01, 1.0)))
     assert above.reason.startswith("ambiguous: association confidence")
-    below = assess(ego, coop, FusionParams(min_confidence=legacy.confidence - 0.01))
+    below = assess(ego, coop, FusionParams(association="confidence", min_confidence=legacy.confidence - 0.01))
     assert below.reason == "" and below.confidence == legacy.confidence
+
+
+def test_confidence_rejects_a_reverse_curve_legacy_fuses() -> None:
+    """Ego end in a left arc (R 60 m), coop start in the right arc (R 100 m) after a clothoid,
+    d_s 40 m: legacy fuses the same lane (S-bend shift); the confidence rule rejects it as
+    ambiguous (S-bend evidence, confidence ≤ 0.3 < 0.4): the recall it gives up."""
+    from fusion.analytic import AnalyticRoad, Segment, detect
+
+    road = AnalyticRoad([Segment(100.0), Segment(40.0, 1 / 60.0), Segment(20.0, 1 / 60.0, -1 / 100.0),
+                         Segment(80.0, -1 / 100.0), Segment(100.0)])
+    ego, coop = detect(road, 108.0, 30.0, 1.75, -1.75), detect(road, 178.0, 30.0, 1.75, -1.75)
+    assert assess(ego, coop).reason == ""
+    reason = assess(ego, coop, FusionParams(association="confidence")).reason
+    assert reason.startswith("ambiguous: association confidence")
 
 
 def test_strict_rejects_a_lane_whose_neighbour_passes_the_geometry_too() -> None:

@@ -3,8 +3,6 @@ inside the gap, the same lane is accepted (analytic roads, lane width 3.5 m)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import math
 from functools import lru_cache
 
@@ -99,17 +97,12 @@ def test_right_angle_curves(radius: float, entry_m: float, gap: float) -> None:
 @pytest.mark.parametrize("gap", [20.0, 40.0, 50.0])
 def test_same_lane_through_a_reverse_curve(gap: float) -> None:
     """Ego end in a left arc, coop start in the right arc after a clothoid (the rural map's
-    S-bend): the lane shifts by up to κ·L²/4 between the end headings and is accepted by the
-    geometric rules (``association="legacy"``); a lane width to the side of a straight is
-    still rejected (test_fusion_fusibility). The default confidence rule rejects it as
-    ambiguous: S-bend evidence (confidence ≤ 0.3) cannot tell lanes apart."""
+    S-bend): the lane shifts by up to κ·L²/4 between the end headings and is accepted; a lane
+    width to the side of a straight is still rejected (test_fusion_fusibility)."""
     road = AnalyticRoad([Segment(CURVE_START), Segment(40.0, 1 / 60.0), Segment(20.0, 1 / 60.0, -1 / 100.0),
                          Segment(80.0, -1 / 100.0), Segment(100.0)])
     ego_end = CURVE_START + 38.0
-    ego, coop = lane(road, ego_end - 30.0, 0), lane(road, ego_end + gap, 0)
-    assert fusion.is_fusible(ego, coop, replace(PARAMS, association="legacy")) == (True, "")
-    ok, reason = fusion.is_fusible(ego, coop, PARAMS)
-    assert not ok and reason.startswith("ambiguous: association confidence")
+    assert verdicts(road, ego_end, gap)[0] == (True, "")
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -272,7 +272,7 @@ def test_end_fits_weight_points_by_inverse_variance() -> None:
         pair = [LaneDetection(d.pose, left, right, left_sigma=None if stated is None else stated[i],
                               right_sigma=None if stated is None else stated[i + 1])
                 for i, (d, left, right) in zip((0, 2), ((ego, el, er), (coop, coop.left, coop.right)))]
-        bridged = fusion.fuse(*pair, interpolation="hermite", params=FusionParams(association="legacy"))
+        bridged = fusion.fuse(*pair, interpolation="hermite")
         gap = bridged.left[bridged.left_source == Source.INTERPOLATED]
         deviation[stated is None] = float(np.abs(gap[:, 1] - 1.75).max())
     assert deviation[False] < 1e-3 < 1.0 < deviation[True]  # the bridge follows the fits: the hook or the line

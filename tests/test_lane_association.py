@@ -108,15 +108,15 @@ S_BEND_END = 120.0 - 0.3 * 30.0
 
 def test_s_bend_weakness_and_road_edges() -> None:
     """The known S-bend weakness: across an S-bend (R 50 m, d_s 30 m) the geometric check alone
-    (``association="legacy"``) passes the right neighbour lane; the default confidence rule
+    (``association="legacy"``, the default) passes the right neighbour lane; the confidence rule
     rejects the same lane as ambiguous (S-bend evidence, confidence ≤ 0.3 < min_confidence 0.4)
     but still passes the neighbour (open radius, confidence 0.4 on the threshold), "strict"
     rejects both as ambiguous (each lane's neighbour passes the geometry too); the road edges
     of a two-lane road reject the neighbour and keep the same lane, whose index from both
     edges agrees (confidence 1)."""
-    alone = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0, replace(PARAMS, association="legacy"))
+    alone = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0)
     assert alone[0].kind == "spline" and alone[-1].kind == "spline"
-    confident = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0)
+    confident = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0, replace(PARAMS, association="confidence"))
     assert confident[0].kind == "none" and confident[0].reason.startswith("ambiguous: association confidence")
     assert confident[-1].kind == "spline" and confident[-1].confidence == pytest.approx(0.4)
     strict = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0, replace(PARAMS, association="strict"))
@@ -156,14 +156,12 @@ def _fork(radius: float, fork_m: float) -> tuple[AnalyticRoad, AnalyticRoad]:
 def test_fork_inside_the_ego_detection(gap: float) -> None:
     """The ego's 30 m detection passes a fork 15 m ahead (right turn, R 25 m): a coop on the
     turning branch is accepted by geometry alone, but with the branch reported it is rejected
-    as the other branch, while a coop straight on is still fused (the weakness shown with
-    ``association="legacy"``: the default rejects the turning coop at d_s 10 as ambiguous)."""
+    as the other branch, while a coop straight on is still fused."""
     main, branch = _fork(25.0, 15.0)
     ego = detect(main, 0.0, 30.0, W / 2, -W / 2)
     turning = detect(branch, 30.0 + gap, 30.0, W / 2, -W / 2)
     straight = detect(main, 30.0 + gap, 30.0, W / 2, -W / 2)
-    legacy = replace(PARAMS, association="legacy")
-    assert fusion.fuse(ego, turning, params=legacy).kind == "spline"  # the weakness without forks
+    assert fusion.fuse(ego, turning, params=PARAMS).kind == "spline"  # the weakness without forks
     seen = detect(branch, 15.0, 15.0, W / 2, -W / 2)
     fork = fusion.LaneBranch(*(_to_frame(_world(b, seen.pose), ego.pose) for b in (seen.left, seen.right)))
     ego = fusion.LaneDetection(ego.pose, ego.left, ego.right, branches=(fork,))
