@@ -26,6 +26,12 @@ and no other shift explains the detections as well:
   gap, so they alone are ambiguous), the ego's lane must continue into the coop's lane 0
   better than into any other lane the coop holds, and the coop's lane 0 continue the ego's
   lane 0 better than any other ego lane.
+
+What decides (``FusionParams.association``): ``"legacy"`` (default) the rules above alone;
+``"confidence"`` also rejects a pair below ``FusionParams.min_confidence`` (and, with
+``gate_false_rejection``, one that fails the σ gate of :mod:`fusion.gate`); ``"strict"`` also
+a single-lane gap pair whose lane a width aside passes the geometry too. Rejections for
+ambiguity start with "ambiguous".
 """
 
 from __future__ import annotations
@@ -53,8 +59,8 @@ from fusion.fusibility import (
 from fusion.gate import GateBorder, gate_reason
 from fusion.geometry import EndFit, foot_point, transform
 from fusion.spline import EndFits
-from fusion.uncertainty import pair_uncertainty
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
+from fusion.uncertainty import pair_uncertainty
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
 
@@ -318,10 +324,10 @@ def _confident(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], 
                association: Association, params: FusionParams, fits: Callable[[], Sequence[EndFit]] | None,
                ends: LaneEnds | None) -> Association:
     """``association`` (accepted) under ``params.association`` ``"confidence"`` or ``"strict"``:
-    rejected as ambiguous below ``params.min_confidence`` and, with ``"strict"``, a single-lane
+    rejected as ambiguous below ``params.min_confidence``; with ``"strict"`` also a single-lane
     gap pair whose lane moved a lane width aside would pass too (:func:`_neighbour_passes`);
-    with ``params.gate_false_rejection`` a
-    spline pair whose detections state σ rejected when it fails the gate of :mod:`fusion.gate`."""
+    with ``params.gate_false_rejection`` a spline pair whose detections state σ when it fails
+    the gate of :mod:`fusion.gate`."""
     if association.confidence < params.min_confidence:
         return Association(f"ambiguous: association confidence {association.confidence:.2f} below "
                            f"{params.min_confidence:.2f}", 0.0)

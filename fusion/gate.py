@@ -5,9 +5,9 @@ lane is the ego's, each coop border start lies inside the cone of the two end he
 from the matching ego border end (:func:`fusion.association.border_excess`; an S-bend in the
 gap may move it out by :func:`fusion.fusibility.s_bend_shift`); its measured lateral excess
 outside the cone is then noise only. The gate normalises each border's excess by the
-combined lateral σ of the two points it compares and of the cone's edges (:func:`border_sigma`) and rejects the pair
-when the larger normalised excess squared exceeds the χ²₁ quantile at a stated false
-rejection rate α, split over the two borders (Bonferroni: the rate holds whatever the
+combined lateral σ of the two points it compares and of the cone's edges
+(:func:`border_sigma`) and rejects the pair when the larger normalised excess squared
+exceeds the χ²₁ quantile at a stated false rejection rate α, split over the two borders (Bonferroni: the rate holds whatever the
 correlation of the two borders' errors, e.g. a shared pose error; the excess is one-sided,
 so the bound is conservative). The adjacent lane lies a lane width w outside the cone: a
 pair is *ambiguous* when a residual r passes the gate for the own lane and w − r would pass
