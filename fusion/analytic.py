@@ -184,7 +184,8 @@ def gap_errors(road: AnalyticRoad, s_end: float, s_coop: float, noise_m: float =
     Keys: ``paper``, ``hermite``, and ``arc`` (hermite with the largest arc for every turn,
     i.e. without the clothoid pair between straight ends). The ego detects 30 m up to
     ``s_end``, the coop 30 m from ``s_coop``, on the lane between ``offsets``; ``None`` when
-    the pair is not fused as a spline.
+    the pair is not fused as a spline by the geometric rules (``association="legacy"``: the
+    interpolation is measured, not the association's confidence).
     """
     from fusion.api import fuse
     from fusion.geometry import to_world
@@ -196,7 +197,8 @@ def gap_errors(road: AnalyticRoad, s_end: float, s_coop: float, noise_m: float =
     truth = [road.border(offset) for offset in offsets]
     errors: dict[str, float] = {}
     for interpolation in ("paper", "hermite"):
-        result = fuse(ego, coop, mode="spline", interpolation=interpolation)
+        result = fuse(ego, coop, mode="spline", interpolation=interpolation,
+                      params=FusionParams(association="legacy"))
         if result.kind != "spline":
             return None
         gaps = (result.left[result.left_source == Source.INTERPOLATED],

@@ -26,6 +26,12 @@ and no other shift explains the detections as well:
   gap, so they alone are ambiguous), the ego's lane must continue into the coop's lane 0
   better than into any other lane the coop holds, and the coop's lane 0 continue the ego's
   lane 0 better than any other ego lane.
+
+What decides (``FusionParams.association``): ``"legacy"`` (default) the rules above alone;
+``"confidence"`` also rejects a pair below ``FusionParams.min_confidence`` (and, with
+``gate_false_rejection``, one that fails the σ gate of :mod:`fusion.gate`); ``"strict"`` also
+a single-lane gap pair whose lane a width aside passes the geometry too. Rejections for
+ambiguity start with "ambiguous".
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Final, Mapping, Sequence
 
+import numpy as np
 
 from fusion.convoy import overlap_start
 from fusion.fusibility import (
@@ -49,9 +56,11 @@ from fusion.fusibility import (
     relative_pose,
     s_bend_shift,
 )
+from fusion.gate import GateBorder, gate_reason
 from fusion.geometry import EndFit, foot_point, transform
 from fusion.spline import EndFits
 from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
+from fusion.uncertainty import pair_uncertainty
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
 
@@ -218,18 +227,23 @@ def _better_neighbour(ego_lanes: Mapping[int, Lane], coop_lanes: Mapping[int, La
     return ""
 
 
-def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
-    """The larger lateral excess [m] of the two coop border starts outside the cone of the two
-    end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
+def border_excesses(own: tuple[Lane, Lane], ends: LaneEnds) -> tuple[float, float]:
+    """The lateral excess [m] of the (left, right) coop border start outside the cone of the
+    two end headings drawn from the matching ego border end (:func:`fusion.fusibility.cone_excess`
     on each border instead of the centre line)."""
     (el, er), (cl, cr) = own
     turn = end_turn(ends)
-    excess = 0.0
+    out = []
     for ego_border, coop_border in ((el, cl), (er, cr)):
         p_end, p_start = ego_border[-1].tolist(), coop_border[0].tolist()
         chord = math.hypot(p_start[0] - p_end[0], p_start[1] - p_end[1])
-        excess = max(excess, cone_point_excess(ends.t_end, turn, p_end, p_start, chord))
-    return excess
+        out.append(cone_point_excess(ends.t_end, turn, p_end, p_start, chord))
+    return out[0], out[1]
+
+
+def border_excess(own: tuple[Lane, Lane], ends: LaneEnds) -> float:
+    """The larger of :func:`border_excesses`."""
+    return max(border_excesses(own, ends))
 
 
 def geometry_check(own: tuple[Lane, Lane], convoy: bool, evidence: Evidence, params: FusionParams,
@@ -295,11 +309,64 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
         return Association(reason, 0.0)
     graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
     if not _multi_lane(ego, coop):
-        return Association("", GEOMETRY_CONFIDENCE[evidence] * graded)
-    association = _associate_lanes(ego, coop, own, convoy, evidence, params)
-    if association.reason:
+        association = Association("", GEOMETRY_CONFIDENCE[evidence] * graded)
+    else:
+        association = _associate_lanes(ego, coop, own, convoy, evidence, params)
+        if association.reason:
+            return association
+        association = Association("", association.confidence * graded, association.matched)
+    if params.association == "legacy":
         return association
-    return Association("", association.confidence * graded, association.matched)
+    return _confident(ego, coop, own, convoy, association, params, fits, ends)
+
+
+def _confident(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
+               association: Association, params: FusionParams, fits: Callable[[], Sequence[EndFit]] | None,
+               ends: LaneEnds | None) -> Association:
+    """``association`` (accepted) under ``params.association`` ``"confidence"`` or ``"strict"``:
+    rejected as ambiguous below ``params.min_confidence``; with ``"strict"`` also a single-lane
+    gap pair whose lane moved a lane width aside would pass too (:func:`_neighbour_passes`);
+    with ``params.gate_false_rejection`` a spline pair whose detections state σ when it fails
+    the gate of :mod:`fusion.gate`."""
+    if association.confidence < params.min_confidence:
+        return Association(f"ambiguous: association confidence {association.confidence:.2f} below "
+                           f"{params.min_confidence:.2f}", 0.0)
+    if params.association == "strict" and not convoy and not _multi_lane(ego, coop):
+        side = _neighbour_passes(ego, coop, own, params, fits)
+        if side:
+            return Association(f"ambiguous: the lane a lane width to the {side} of the coop's would pass the "
+                               "geometric check as well", 0.0)
+    if convoy or params.gate_false_rejection is None:
+        return association
+    (el, er), (cl, cr) = own
+    x_rel, y_rel, _ = relative_pose(ego.pose, coop.pose)
+    uncertainty = pair_uncertainty(ego, coop, (el, er, cl, cr), (x_rel, y_rel))
+    if uncertainty is None:
+        return association
+    ends = lane_ends(el, er, cl, cr) if ends is None else ends
+    shift = s_bend_shift(ends.gap_m, fits()) if fits is not None else 0.0
+    excess = border_excesses(own, ends)
+    variances = uncertainty.borders
+    borders = (GateBorder(el, variances[0], cl, variances[2], max(excess[0] - shift, 0.0)),
+               GateBorder(er, variances[1], cr, variances[3], max(excess[1] - shift, 0.0)))
+    reason = gate_reason(borders, ends.gap_m, ends.width_m, params.gate_false_rejection)
+    return Association(reason, 0.0) if reason else association
+
+
+def _neighbour_passes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], params: FusionParams,
+                      fits: Callable[[], Sequence[EndFit]] | None) -> str:
+    """"left" / "right" when the coop's lane moved a lane width to that side (across its start
+    heading) passes the geometric check of a gap too (:func:`fusion.fusibility.geometric_assessment`,
+    the same end fits: a shift moves no heading or curvature), else "": without neighbour
+    lanes the geometry cannot tell the coop's lane from that one."""
+    (el, er), (cl, cr) = own
+    ends = lane_ends(el, er, cl, cr)
+    normal = np.array([-ends.t_start[1], ends.t_start[0]]) * ends.width_m
+    for sign, side in ((1.0, "left"), (-1.0, "right")):
+        moved = lane_ends(el, er, cl + sign * normal, cr + sign * normal)
+        if not geometric_assessment(ego.pose, coop.pose, moved, params, fits)[0]:
+            return side
+    return ""
 
 
 def _multi_lane(ego: LaneDetection, coop: LaneDetection) -> bool:

@@ -16,7 +16,7 @@ from typing import Callable, Final, Literal, Sequence
 from fusion.geometry import EndFit, end_direction, wrap_angle
 from fusion.types import FusionParams, NDArrayFloat, Pose2D
 
-_CHORD_WINDOW_M: Final[float] = 4.0
+CHORD_WINDOW_M: Final[float] = 4.0
 _MIN_GAP_M: Final[float] = 1e-6
 _MIN_ARC_CURVATURE: Final[float] = 1.0 / 1000.0
 _ARC_LENGTH_SLACK: Final[float] = 1.2
@@ -63,10 +63,10 @@ def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArra
     (clx, cly), (crx, cry) = coop_left[0].tolist(), coop_right[0].tolist()
     p_end = (0.5 * (lx + rx), 0.5 * (ly + ry))
     p_start = (0.5 * (clx + crx), 0.5 * (cly + cry))
-    t_end = _mean_direction(end_direction(ego_left, True, _CHORD_WINDOW_M),
-                            end_direction(ego_right, True, _CHORD_WINDOW_M))
-    t_start = _mean_direction(end_direction(coop_left, False, _CHORD_WINDOW_M),
-                              end_direction(coop_right, False, _CHORD_WINDOW_M))
+    t_end = _mean_direction(end_direction(ego_left, True, CHORD_WINDOW_M),
+                            end_direction(ego_right, True, CHORD_WINDOW_M))
+    t_start = _mean_direction(end_direction(coop_left, False, CHORD_WINDOW_M),
+                              end_direction(coop_right, False, CHORD_WINDOW_M))
     dx, dy = p_start[0] - p_end[0], p_start[1] - p_end[1]
     length = math.hypot(dx, dy)
     along = dx * t_end[0] + dy * t_end[1]

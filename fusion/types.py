@@ -23,6 +23,10 @@ FusionKind = Literal["convoy", "spline", "history", "none"]
 FusionMode = Literal["auto", "convoy", "spline"]
 Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
+MIN_CONFIDENCE: Final[float] = 0.4
+"""Default lowest association confidence fused (``FusionParams.min_confidence``)."""
+AssociationRule = Literal["confidence", "strict", "legacy"]
+ASSOCIATION_RULES: Final[tuple[str, ...]] = ("confidence", "strict", "legacy")
 ConvoyStrategy = Literal["weighted", "mean", "nearest"]
 ConvoyWeights = Literal["paper", "mean", "inverse-variance"]
 CONVOY_WEIGHTS: Final[tuple[str, ...]] = ("paper", "mean", "inverse-variance")
@@ -366,6 +370,23 @@ class FusionParams:
         fusibility: ``"geometric"`` (default, works across curves, see
             :func:`fusion.fusibility.geometric_check`) or ``"paper"`` (the paper's three pose
             cases, :func:`fusion.fusibility.paper_check`).
+        association: the decision on a pair that passed the geometric rules: ``"legacy"``
+            (default: the geometric and lane rules alone; reproduces the paper study's
+            figures), ``"confidence"`` (also rejects a pair whose association confidence is
+            below ``min_confidence`` as "ambiguous" and, with ``gate_false_rejection`` set and
+            both detections stating σ, a spline pair that fails the statistical gate of
+            :mod:`fusion.gate`, as "another lane" or "ambiguous") or ``"strict"`` (as
+            ``"confidence"``, and without neighbour lanes a gap pair is ambiguous when the lane
+            a lane width beside the coop's would pass the geometric check too: precision
+            before recall). Opt-in: measured on the map families in
+            docs/fusion/association.md, neither keeps the legacy recall.
+        min_confidence: lowest association confidence fused with ``association="confidence"``
+            or ``"strict"``
+            (in [0, 1]; chosen on the tune seeds of ``tools/study_families.py``, see
+            docs/fusion/association.md).
+        gate_false_rejection: false rejection rate α of the statistical gate of
+            ``association="confidence"``/``"strict"``, in (0, 1), e.g. 0.01; ``None`` (default:
+            not yet measured with the camera sensor) turns the gate off.
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
             2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).
@@ -386,6 +407,9 @@ class FusionParams:
     convoy_max_offset_m: float = 1.0
     convoy_max_heading_rad: float = math.radians(30.0)
     fusibility: Fusibility = "geometric"
+    association: AssociationRule = "legacy"
+    min_confidence: float = MIN_CONFIDENCE
+    gate_false_rejection: float | None = None
     heading_window_m: float | None = None
 
     def __post_init__(self) -> None:
@@ -417,6 +441,14 @@ class FusionParams:
             raise InvalidParameterError(f"FusionParams.spline_parameter unknown: {self.spline_parameter!r}")
         if self.fusibility not in ("geometric", "paper"):
             raise InvalidParameterError(f"FusionParams.fusibility unknown: {self.fusibility!r}")
+        if self.association not in ASSOCIATION_RULES:
+            raise InvalidParameterError(f"FusionParams.association must be one of {ASSOCIATION_RULES}, "
+                                        f"got {self.association!r}")
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise InvalidParameterError(f"FusionParams.min_confidence must be in [0, 1], got {self.min_confidence!r}")
+        if self.gate_false_rejection is not None and not 0.0 < self.gate_false_rejection < 1.0:
+            raise InvalidParameterError(f"FusionParams.gate_false_rejection must be in (0, 1), "
+                                        f"got {self.gate_false_rejection!r}")
 
     @property
     def coop_weight(self) -> float:

@@ -28,6 +28,14 @@ def test_convoy_weights_reach_every_plan(argv: list[str], weights: str) -> None:
     assert plans and all(plan.params.convoy_weights == weights for plan in plans)
 
 
+@pytest.mark.parametrize("argv, rule", [([], "legacy"), (["--association", "strict"], "strict"),
+                                        (["--paper", "--association", "confidence"], "confidence")])
+def test_association_reaches_every_plan(argv: list[str], rule: str) -> None:
+    args = evaluate.build_parser().parse_args(argv if "--paper" in argv else ["--map", "a.xodr", *argv])
+    plans = evaluate._plans(args)
+    assert plans and all(plan.params.association == rule for plan in plans)
+
+
 def test_a_bad_convoy_weights_value_is_a_usage_error(capsys) -> None:
     with pytest.raises(SystemExit) as exited:
         evaluate.main(["--map", "a.xodr", "--convoy-weights", "median"])

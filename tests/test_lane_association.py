@@ -3,6 +3,8 @@ edges and forks, and the neighbour-aware fusibility decision (analytic roads, la
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import math
 
 import numpy as np
@@ -66,11 +68,11 @@ def lane_detection(road: AnalyticRoad, s_from: float, position: int, lanes: int,
 
 
 def decisions(road: AnalyticRoad, s_end: float, gap: float, position: int, lanes: int,
-              count: int) -> dict[int, fusion.FusionResult]:
+              count: int, params: fusion.FusionParams = PARAMS) -> dict[int, fusion.FusionResult]:
     """Fusion of the ego in lane ``position`` with a coop in every lane, d_s = ``gap``, by
     lateral offset of the coop's lane."""
     ego = lane_detection(road, s_end - 30.0, position, lanes, count)
-    return {p - position: fusion.fuse(ego, lane_detection(road, s_end + gap, p, lanes, count), params=PARAMS)
+    return {p - position: fusion.fuse(ego, lane_detection(road, s_end + gap, p, lanes, count), params=params)
             for p in range(lanes)}
 
 
@@ -106,10 +108,19 @@ S_BEND_END = 120.0 - 0.3 * 30.0
 
 def test_s_bend_weakness_and_road_edges() -> None:
     """The known S-bend weakness: across an S-bend (R 50 m, d_s 30 m) the geometric check alone
-    passes the right neighbour lane; the road edges of a two-lane road reject it and keep the
-    same lane, whose index from both edges agrees (confidence 1)."""
+    (``association="legacy"``, the default) passes the right neighbour lane; the confidence rule
+    rejects the same lane as ambiguous (S-bend evidence, confidence ≤ 0.3 < min_confidence 0.4)
+    but still passes the neighbour (open radius, confidence 0.4 on the threshold), "strict"
+    rejects both as ambiguous (each lane's neighbour passes the geometry too); the road edges
+    of a two-lane road reject the neighbour and keep the same lane, whose index from both
+    edges agrees (confidence 1)."""
     alone = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0)
     assert alone[0].kind == "spline" and alone[-1].kind == "spline"
+    confident = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0, replace(PARAMS, association="confidence"))
+    assert confident[0].kind == "none" and confident[0].reason.startswith("ambiguous: association confidence")
+    assert confident[-1].kind == "spline" and confident[-1].confidence == pytest.approx(0.4)
+    strict = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 0, replace(PARAMS, association="strict"))
+    assert all(r.kind == "none" and r.reason.startswith("ambiguous") for r in (strict[0], strict[-1]))
     with_edges = decisions(S_BEND, S_BEND_END, 30.0, 1, 2, 1)
     assert with_edges[0].kind == "spline"
     # the S-bend puts the coop start off the cone: some of the lateral margin is used

@@ -42,7 +42,7 @@ from cold_maps.simulation.odometry import DEFAULT_HISTORY_M, TYPICAL_HEADING_DRI
 from cold_maps.simulation.sensor_errors import SensorErrorModel
 from cold_maps.simulation.sensor_profile import BUILTIN_PROFILES, DEFAULT_PROFILE, SensorProfile, load_profile
 from fusion.bezier import DEFAULT_TOLERANCE_M
-from fusion.types import CONVOY_WEIGHTS
+from fusion.types import ASSOCIATION_RULES, CONVOY_WEIGHTS
 
 SectionsCallback = Callable[[Collector, list[ScenarioResult]], list[tuple[str, str]]]
 
@@ -178,6 +178,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="weights of the convoy overlap: the paper's fixed 0.75 coop / 0.25 ego, 0.5 each, or "
                              "inverse-variance point by point from the detections' σ and pose covariances (the "
                              "weights of mean when the detections state no σ) (default paper)")
+    parser.add_argument("--association", choices=ASSOCIATION_RULES, default="legacy",
+                        help="lane association decision: the geometric and lane rules alone (legacy), also reject "
+                             "pairs below the association confidence 0.4 as ambiguous (confidence), and also "
+                             "single-lane gap pairs whose lane a width aside passes the geometry too (strict); see "
+                             "docs/fusion/association.md (default legacy)")
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
                              "at forks (default 0: the vehicle's own lane only)")
@@ -273,7 +278,8 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
         plans = paper_plans(frames=args.frames, seed=args.seed, speed_mps=args.speed, interpolations=interpolations)
         return [_cooperation(replace(plan, errors=errors, lanes=args.lanes, stopping=stopping, sensor=args.sensor,
                                      ground_truth=args.converter,
-                                     params=replace(plan.params, convoy_weights=args.convoy_weights)), args)
+                                     params=replace(plan.params, convoy_weights=args.convoy_weights,
+                                                    association=args.association)), args)
                 for plan in plans]
     seen: dict[str, Path] = {}
     for path in args.map:
@@ -281,7 +287,7 @@ def _plans(args: argparse.Namespace) -> list[MapPlan]:
             raise UsageError(f"--map {seen[path.stem]} and --map {path} share the name {path.stem!r}; the report "
                              "keys results by map name: give every map its own file name")
         seen[path.stem] = path
-    params = params_for_gaps(args.gaps, args.convoy_weights)
+    params = params_for_gaps(args.gaps, args.convoy_weights, args.association)
     scenarios = scenarios_for(args.gaps, interpolations)
     return [_cooperation(MapPlan(path, scenarios, frames=args.frames or DEFAULT_FRAMES,
                                  frames_at_most=args.frames is None, routes=args.routes, seed=args.seed,

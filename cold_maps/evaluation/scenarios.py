@@ -127,12 +127,14 @@ def extended_scenarios(scenarios: Sequence[Scenario], *, coops: int, history_m: 
     return tuple(out)
 
 
-def params_for_gaps(gaps_m: Sequence[float], convoy_weights: str = "paper") -> fusion.FusionParams:
+def params_for_gaps(gaps_m: Sequence[float], convoy_weights: str = "paper",
+                    association: str = "legacy") -> fusion.FusionParams:
     """Fusion parameters whose longest bridged gap d_i (default 50 m) admits every gap
     asked for, with 1 m to spare (a gap set along the lane is measured as a chord), and
-    ``convoy_weights`` (:attr:`fusion.FusionParams.convoy_weights`)."""
+    ``convoy_weights`` and ``association`` (:class:`fusion.FusionParams`)."""
     return fusion.FusionParams(d_i_m=max(fusion.DEFAULT_PARAMS.d_i_m, max(gaps_m, default=0.0) + 1.0),
-                               convoy_weights=convoy_weights)  # type: ignore[arg-type]  # checked by FusionParams
+                               convoy_weights=convoy_weights,  # type: ignore[arg-type]  # checked by FusionParams
+                               association=association)  # type: ignore[arg-type]  # checked by FusionParams
 
 
 @dataclass(frozen=True)
