@@ -26,9 +26,10 @@ settings.register_profile("ci", derandomize=True, database=None, print_blob=True
 settings.register_profile("dev", **_UNTIMED)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
-# Conversions go to a cache of the suite's own (removed by `make clean`), never the user's;
-# tests that exercise the cache location set their own.
+# Conversions (and matplotlib's font cache) go to caches of the suite's own (removed by
+# `make clean`), never the user's; tests that exercise the cache location set their own.
 os.environ["COLD_MAPS_CACHE_DIR"] = str(TEST_CACHE_DIR)
+os.environ["MPLCONFIGDIR"] = str(PROJECT_ROOT / ".pytest_cache" / "matplotlib")  # matplotlib's font cache too
 
 
 def load_tool(name: str) -> ModuleType:
