@@ -88,12 +88,17 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
     return _validated_border(name, points)[0]
 
 
-def _validated_border(name: str, points: object) -> tuple[NDArrayFloat, npt.NDArray[np.bool_] | None]:
-    """``validated_border`` and the mask of the input points it kept (None: all)."""
+def _float_array(name: str, values: object) -> NDArrayFloat:
+    """``values`` as a float64 array; ``InvalidDetectionError`` naming ``name`` when not numeric."""
     try:
-        array = np.array(points, dtype=np.float64)
+        return np.array(values, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
+
+
+def _validated_border(name: str, points: object) -> tuple[NDArrayFloat, npt.NDArray[np.bool_] | None]:
+    """``validated_border`` and the mask of the input points it kept (None: all)."""
+    array = _float_array(name, points)
     if array.ndim != 2 or array.shape[1] != 2:
         raise InvalidDetectionError(f"{name} must have shape (N, 2), got {array.shape}")
     if not np.isfinite(array).all():
@@ -115,10 +120,7 @@ def _validated_border(name: str, points: object) -> tuple[NDArrayFloat, npt.NDAr
 
 def _validated_sigma(name: str, sigma: object, n_points: int, kept: npt.NDArray[np.bool_] | None) -> NDArrayFloat:
     """Read-only per-point 1σ ``(n_points,)`` [m], finite and >= 0, reduced to ``kept``."""
-    try:
-        array = np.array(sigma, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
+    array = _float_array(name, sigma)
     if array.shape != (n_points,):
         raise InvalidDetectionError(f"{name} must have shape ({n_points},), one per border point, got {array.shape}")
     if not (np.isfinite(array).all() and (array >= 0.0).all()):
@@ -128,10 +130,7 @@ def _validated_sigma(name: str, sigma: object, n_points: int, kept: npt.NDArray[
 
 def _validated_covariance(name: str, covariance: object) -> NDArrayFloat:
     """Read-only symmetric positive semi-definite ``(3, 3)`` covariance."""
-    try:
-        array = np.array(covariance, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidDetectionError(f"{name} is not numeric: {exc}") from None
+    array = _float_array(name, covariance)
     if array.shape != (3, 3) or not np.isfinite(array).all():
         raise InvalidDetectionError(f"{name} must be a finite (3, 3) covariance of (x, y, yaw), got shape {array.shape}")
     if not np.allclose(array, array.T, rtol=0.0, atol=1e-12) or np.linalg.eigvalsh(array).min() < -1e-12:

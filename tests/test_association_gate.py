@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-import fusion
 from fusion.api import assess
 from fusion import FusionParams, InvalidParameterError, LaneDetection
 from fusion.gate import GateBorder, chord_heading_sigma, gate_reason, gate_threshold

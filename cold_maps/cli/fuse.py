@@ -178,7 +178,6 @@ class Refuser:
         from cold_maps.evaluation.report import FrameRecord, ScenarioKey
         from cold_maps.evaluation.trust import GT_UNMATCHED
         from cold_maps.evaluation.safety import LANE_ACCURACY_M
-        from cold_maps.groundtruth.meter import Measurement
 
         interpolation = self.interpolation if fusion_name == "spline" else ""
         why = ""

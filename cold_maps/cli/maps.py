@@ -34,7 +34,6 @@ from cold_maps.cli.common import (
     add_output_options,
     add_version_option,
     cli_entry,
-    fail,
     make_parser,
     one_line,
     result_line,

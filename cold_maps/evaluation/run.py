@@ -22,7 +22,7 @@ from concurrent.futures import Executor
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Final, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Callable, Final, Sequence, TextIO
 
 import numpy as np
 

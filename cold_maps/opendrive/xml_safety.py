@@ -54,6 +54,18 @@ def _entities_reason(names: list[str]) -> str:
     return f"DOCTYPE declares entities ({', '.join(names[:5])}); entities are not allowed"
 
 
+def _doctype_line(data: bytes, path: str) -> int | None:
+    """The line of ``data``'s DOCTYPE (None without one), after refusing entity
+    declarations in it; TypeError unless ``data`` is bytes."""
+    if not isinstance(data, bytes):
+        raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
+    doctype = data.find(b"<!DOCTYPE")
+    if doctype < 0:
+        return None
+    _reject_entity_declarations(data, doctype, path)
+    return data.count(b"\n", 0, doctype) + 1
+
+
 def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[etree._Element]:
     """Parse ``data`` with the hardened parser, streaming: first the root element, then
     each child of the root named one of ``tags`` (local names, any namespace) once it is
@@ -66,12 +78,7 @@ def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[et
     DOCTYPE that declares entities or references an external DTD; ``MemoryError`` when
     libxml2 runs out of memory.
     """
-    if not isinstance(data, bytes):
-        raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
-    doctype = data.find(b"<!DOCTYPE")
-    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
-    if doctype >= 0:
-        _reject_entity_declarations(data, doctype, path)
+    line = _doctype_line(data, path)
     events = etree.iterparse(io.BytesIO(data), events=("end",), tag=[f"{{*}}{tag}" for tag in tags], **_HARDENED)
     root: etree._Element | None = None
     try:
@@ -98,12 +105,7 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     """The whole tree of ``data``, parsed with the checks of :func:`iter_xml`, for readers
     that need every element at once (the ground truth's road rules); the map reader
     streams instead."""
-    if not isinstance(data, bytes):
-        raise TypeError(f"OpenDRIVE data must be bytes, got {type(data).__name__}")
-    doctype = data.find(b"<!DOCTYPE")
-    line = data.count(b"\n", 0, doctype) + 1 if doctype >= 0 else None
-    if doctype >= 0:
-        _reject_entity_declarations(data, doctype, path)
+    line = _doctype_line(data, path)
     try:
         root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
     except etree.XMLSyntaxError as exc:
