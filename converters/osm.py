@@ -285,25 +285,12 @@ def build_osm(
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    def write_nodes(identifiers: NDArrayInt, xyz: NDArrayFloat) -> None:
-        """Append the nodes, parsed from their text in one call (an element per node is slow)."""
-        lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
-        known = np.isfinite(xyz[:, 2]).tolist()
-        text = "".join(
-            f'<node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}">'
-            + (f'<tag k="ele" v="{height:.4f}"/>' if has_height else "") + "</node>"
-            for identifier, lat_deg, lon_deg, height, has_height in zip(identifiers.tolist(), lat.tolist(),
-                                                                        lon.tolist(), xyz[:, 2].tolist(), known)
-        )
-        root.extend(etree.fromstring(f"<nodes>{text}</nodes>"))
-
-    write_nodes(node_id[used], coordinates[used])
-    ways_text = "".join(
-        f'<way id="{way_id_base + way}">' + "".join(f'<nd ref="{ref}"/>' for ref in node_id[chain].tolist())
-        + "".join(f'<tag k="{key}" v="{value}"/>' for key, value in way_tags[way].items()) + "</way>"
+    bulk = _nodes_text(node_id[used], coordinates[used]) + "".join(
+        f'  <way id="{way_id_base + way}">\n' + "".join(f'    <nd ref="{ref}"/>\n' for ref in node_id[chain].tolist())
+        + "".join(f'    <tag k="{_escape(key)}" v="{_escape(value)}"/>\n' for key, value in way_tags[way].items())
+        + "  </way>\n"
         for way, chain in enumerate(way_points)
     )
-    root.extend(etree.fromstring(f"<ways>{ways_text}</ways>"))
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -319,12 +306,34 @@ def build_osm(
 
     def new_node(xyz: NDArrayFloat) -> int:
         identifier = next(fresh)
-        write_nodes(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
+        text = _nodes_text(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
+        root.append(etree.fromstring(text, etree.XMLParser(remove_blank_text=True)))
         return identifier
 
     regulations = {lanelet.id: lanelet.regulations for lanelet in lanelets}
     append_regulatory_elements(root, regulations, exits, new_node, fresh)
-    return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+    document = etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+    # The bulk of nodes and ways, written as text in lxml's pretty-printed form (an element
+    # per node is slow), goes right after the recipe comment, where the tree would put it.
+    after_comment = document.index(b"-->\n") + len(b"-->\n")
+    return document[:after_comment] + bulk.encode("utf-8") + document[after_comment:]
+
+
+def _escape(value: str) -> str:
+    """``value`` as the text of a double-quoted XML attribute."""
+    return value.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
+    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1."""
+    lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
+    known = np.isfinite(xyz[:, 2]).tolist()
+    return "".join(
+        f'  <node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}">\n    <tag k="ele" v="{height:.4f}"/>\n  </node>\n'
+        if has_height else f'  <node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}"/>\n'
+        for identifier, lat_deg, lon_deg, height, has_height in zip(identifiers.tolist(), lat.tolist(), lon.tolist(),
+                                                                    xyz[:, 2].tolist(), known)
+    )
 
 
 def _kept_vertices(points: NDArrayFloat, tolerance_m: float) -> npt.NDArray[np.bool_]:

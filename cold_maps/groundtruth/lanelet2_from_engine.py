@@ -52,7 +52,7 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
-from cold_maps.opendrive.sampling import LaneBorderSamples, sample_s, sample_section_at
+from cold_maps.opendrive.sampling import LaneBorderSamples, record_joints, sample_s, section_points
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -116,16 +116,15 @@ CHECK_FRACTIONS: Final[tuple[float, ...]] = (0.25, 0.5, 0.75)
 symmetric about the midpoint leaves the midpoint on the chord, not the quarter points)."""
 
 
-def _chord_errors(samples: Sequence[LaneBorderSamples], inside: Sequence[Sequence[LaneBorderSamples]],
-                  open_: npt.NDArray[np.bool_]) -> NDArrayFloat:
+def _chord_errors(points: NDArrayFloat, checked: NDArrayFloat, open_: npt.NDArray[np.bool_]) -> NDArrayFloat:
     """Per open interval, the largest distance (m, 3-D) of a border point at one of
-    ``CHECK_FRACTIONS`` from the chord's point at the same fraction."""
+    ``CHECK_FRACTIONS`` (``checked``: (borders, fractions, intervals, 3)) from the chord's
+    point at the same fraction (``points``: (borders, stations, 3))."""
+    low, high = points[:, :-1][:, open_], points[:, 1:][:, open_]
     errors = np.zeros(int(open_.sum()))
-    for fraction, checked in zip(CHECK_FRACTIONS, inside):
-        for at, middle in zip(samples, checked):
-            for ends, mid in ((at.inner, middle.inner), (at.outer, middle.outer)):
-                chord = (1.0 - fraction) * ends[:-1][open_] + fraction * ends[1:][open_]
-                errors = np.maximum(errors, np.linalg.norm(mid - chord, axis=1))
+    for k, fraction in enumerate(CHECK_FRACTIONS):
+        chord = (1.0 - fraction) * low + fraction * high
+        errors = np.maximum(errors, np.linalg.norm(checked[:, k] - chord, axis=2).max(axis=0, initial=0.0))
     return errors
 
 
@@ -143,27 +142,25 @@ def adaptive_section_samples(
     ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
     s = np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M), _breakpoints(road, section_index),
                                   np.asarray(ends, dtype=np.float64))))
+    joints = record_joints(road, section_index)
     for _ in range(MAX_ROUNDS):
-        samples = sample_section_at(road, section_index, s, lane_ids, record_ends=True)
-        stations = samples[0].s
+        stations, points = section_points(road, section_index, s, lane_ids, joints)
+        borders = points.reshape(-1, len(stations), 3)
         open_ = stations[1:] > stations[:-1]
         low, high = stations[:-1][open_], stations[1:][open_]
         checks = np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
-        checked = sample_section_at(road, section_index, checks, lane_ids)
-        parts = len(low)
-        inside = [[LaneBorderSamples(c.road_id, c.section, c.lane_id, c.s[k * parts:(k + 1) * parts],
-                                     c.inner[k * parts:(k + 1) * parts], c.outer[k * parts:(k + 1) * parts])
-                   for c in checked] for k in range(len(CHECK_FRACTIONS))]
-        errors = _chord_errors(samples, inside, open_)
+        checked = section_points(road, section_index, checks, lane_ids)[1]
+        errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3), open_)
         refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
         if not refine.any():
-            return samples
+            break
         # the chord error grows with the square of the interval: split into that many pieces at once
         pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
         starts, widths = low[refine], (high - low)[refine]
         offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
         s = np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
-    return samples
+    return [LaneBorderSamples(road.id, section_index, lane_id, stations, points[index, 0], points[index, 1])
+            for index, lane_id in enumerate(lane_ids)]
 
 
 def _is_zero_width(samples: LaneBorderSamples) -> bool:

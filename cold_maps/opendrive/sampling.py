@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Final, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
@@ -112,20 +113,42 @@ def record_indices(road: Road, s_start: float, s_end: float) -> list[int]:
     return [i for i, record in enumerate(road.plan_view) if s_start < record.s < s_end]
 
 
+@dataclass(frozen=True)
+class RecordJoints:
+    """The ``<geometry>`` record starts inside one lane section, for sampling record ends.
+
+    Fields:
+        boundaries: (K,) road s (m) of each record start strictly inside the section.
+        jumps: (K,) whether the record before it ends farther than ``JOINED_M`` from it.
+        ends: (J, 3) x, y (m, inertial frame) and heading (rad) where the record before
+            each jumping start ends (J = jumps.sum()).
+    """
+
+    boundaries: NDArrayFloat
+    jumps: npt.NDArray[np.bool_]
+    ends: NDArrayFloat
+
+
+def record_joints(road: Road, section_index: int) -> RecordJoints:
+    """The record starts inside a section and where the records do not join."""
+    section = section_of(road, section_index)
+    indices = record_indices(road, section.s, section.s_end)
+    joints = [record_joint(road, i) for i in indices]
+    jumps = np.array([np.hypot(*(end[:2] - start[:2])) > JOINED_M for end, start in joints], dtype=bool)
+    ends = np.array([end for (end, _), jump in zip(joints, jumps) if jump], dtype=np.float64).reshape(-1, 3)
+    return RecordJoints(np.array([road.plan_view[i].s for i in indices], dtype=np.float64), jumps, ends)
+
+
 def _reference_with_record_ends(
-    road: Road, section: LaneSection, s: NDArrayFloat
+    road: Road, section: LaneSection, s: NDArrayFloat, joints: RecordJoints
 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """s with each interior record start added, and doubled where the records do not join
     (end and start farther apart than ``JOINED_M``), with the reference pose there: the
     first of a pair on the record that ends at it, the second on the record that starts."""
-    indices = record_indices(road, section.s, section.s_end)
-    boundaries = np.array([road.plan_view[i].s for i in indices], dtype=np.float64)
-    joints = [record_joint(road, i) for i in indices]
-    ends = [end for end, _ in joints]
-    jumps = np.array([np.hypot(*(end[:2] - start[:2])) > JOINED_M for end, start in joints], dtype=bool)
-    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries[jumps])))
+    boundaries = joints.boundaries
+    s = np.sort(np.concatenate((s[~np.isin(s, boundaries)], boundaries, boundaries[joints.jumps])))
     x, y, hdg = reference_pose(road, s, before=section.s_end)
-    for boundary, end in zip(boundaries[jumps], (e for e, jump in zip(ends, jumps) if jump)):
+    for boundary, end in zip(boundaries[joints.jumps], joints.ends):
         first = int(np.searchsorted(s, boundary, side="left"))
         x[first], y[first], hdg[first] = end
     return s, x, y, hdg
@@ -161,15 +184,17 @@ def _section_samples(
     return sample_section_at(road, section_index, sample_s(section.s, section.s_end, step), lane_ids, record_ends)
 
 
-def sample_section_at(
-    road: Road, section_index: int, s: NDArrayFloat, lane_ids: Sequence[int], record_ends: bool = False
-) -> list[LaneBorderSamples]:
-    """Borders of the listed lanes of one section at the given stations ``s`` (m, strictly
-    increasing inside the section; with ``record_ends`` the interior record starts are
-    added, and doubled where the records do not join, as in ``sample_road``)."""
+def section_points(
+    road: Road, section_index: int, s: NDArrayFloat, lane_ids: Sequence[int], joints: RecordJoints | None = None
+) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Stations (N,) (m) and borders (L, 2, N, 3) (x, y, z in m, inertial frame; inner
+    then outer of each of the L listed lanes) of one section at ``s`` (m, strictly
+    increasing inside the section); with ``joints`` (``record_joints`` of the section)
+    its record ends are added as in ``sample_road``. ValueError naming road, section,
+    lane and s where a border point is not finite."""
     section = section_of(road, section_index)
-    if record_ends:
-        s, x, y, hdg = _reference_with_record_ends(road, section, s)
+    if joints is not None:
+        s, x, y, hdg = _reference_with_record_ends(road, section, s, joints)
     else:
         x, y, hdg = reference_pose(road, s, before=section.s_end)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
@@ -177,12 +202,34 @@ def sample_section_at(
     outermost = max((abs(i) for i in lane_ids), default=0)
     borders = section_borders(road, section_index, s, outermost=outermost)
     heights = _border_heights(road, section, s, z, borders)
+    points = np.empty((len(lane_ids), 2, len(s), 3))
+    for index, lane_id in enumerate(lane_ids):
+        for which in (0, 1):
+            t = borders[lane_id][which]
+            points[index, which, :, 0] = x + t * normal_x
+            points[index, which, :, 1] = y + t * normal_y
+            points[index, which, :, 2] = heights[lane_id][which]
+    bad = ~np.isfinite(points).all(axis=3)
+    if bad.any():
+        lane, which, at = (int(i[0]) for i in np.nonzero(bad))
+        raise ValueError(f"road {road.id}: lane section {section_index}, lane {lane_ids[lane]}: the "
+                         f"{('inner', 'outer')[which]} border is not finite at s={float(s[at]):.6g} m")
+    return s, points
 
-    def points(lane_id: int, which: int) -> NDArrayFloat:
-        t = borders[lane_id][which]
-        return np.column_stack((x + t * normal_x, y + t * normal_y, heights[lane_id][which]))
 
-    return [LaneBorderSamples(road.id, section_index, i, s, points(i, 0), points(i, 1)) for i in lane_ids]
+def sample_section_at(
+    road: Road, section_index: int, s: NDArrayFloat, lane_ids: Sequence[int], record_ends: bool = False,
+    joints: RecordJoints | None = None,
+) -> list[LaneBorderSamples]:
+    """Borders of the listed lanes of one section at the given stations ``s`` (m, strictly
+    increasing inside the section; with ``record_ends`` the interior record starts are
+    added, and doubled where the records do not join, as in ``sample_road``; ``joints``:
+    the section's ``record_joints`` when already computed)."""
+    if record_ends and joints is None:
+        joints = record_joints(road, section_index)
+    stations, points = section_points(road, section_index, s, lane_ids, joints if record_ends else None)
+    return [LaneBorderSamples(road.id, section_index, lane_id, stations, points[index, 0], points[index, 1])
+            for index, lane_id in enumerate(lane_ids)]
 
 
 def sample_lane_borders(
