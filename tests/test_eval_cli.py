@@ -316,3 +316,35 @@ def test_unscored_evaluations_are_said_to_match_no_ground_truth():
     assert 2 / 100 > UNMATCHED_SHARE_LIMIT
     assert unmatched_warnings(collector) == [
         "m: 2 of 100 evaluations (2.0%) not scored, no ground-truth lanelets matched the detected lane (off_lane: 2)"]
+
+
+@pytest.mark.parametrize(("unscored", "total", "flagged"), [(1, 100, False), (2, 200, False), (2, 199, True),
+                                                            (3, 100, True), (0, 100, False)])
+def test_a_map_is_flagged_only_above_one_percent_of_unscored_evaluations(unscored, total, flagged):
+    """Every unscored evaluation counts (GT that does not cover the lane, the map broken
+    under it, no lanelet at the pose), over every scenario and side of the map; other
+    rejections (no lane produced) are evaluations but not unscored ones."""
+    import numpy as np
+
+    from cold_maps.evaluation.collector import Collector
+    from cold_maps.evaluation.report import FrameRecord, ScenarioKey
+    from cold_maps.evaluation.trust import GT_UNMATCHED, MAP_BROKEN, NO_GROUND_TRUTH, unmatched_warnings
+
+    collector = Collector()
+    keys = [ScenarioKey("m", "local", "", 0.0, "left"), ScenarioKey("m", "convoy", "", 25.0, "right")]
+    kinds = [(NO_GROUND_TRUTH, ""), (GT_UNMATCHED, MAP_BROKEN), (GT_UNMATCHED, "off_lane")]
+    for frame in range(total):
+        key = keys[frame % 2]
+        if frame < unscored:
+            rejected, why = kinds[frame % 3]
+            record = FrameRecord(frame, 0.0, "ego", "", np.empty(0), rejected=rejected, gt_unmatched=why)
+        elif frame % 5 == 0:
+            record = FrameRecord(frame, 0.0, "ego", "coop25", np.empty(0), rejected="no_overlap")
+        else:
+            record = FrameRecord(frame, 0.0, "ego", "", np.array([0.01]))
+        collector.add(key, record)
+    warnings = unmatched_warnings(collector)
+    assert bool(warnings) == flagged
+    if flagged:
+        assert warnings[0].startswith(f"m: {unscored} of {total} evaluations ({unscored / total:.1%}) not scored")
+        assert f"{NO_GROUND_TRUTH}: 1" in warnings[0]

@@ -6,7 +6,8 @@ commonroad-scenario-designer) the cold ``cold-maps convert`` (our reader, then t
 conversion, ``cache=False``) and its stages (lanelets, OSM build, lanelet2 load + routing
 graph), the cache hit (also in CPU time of this process) against its floor
 (lanelet2.io.load of the cached file alone); then the engine's cold time as a share of
-crdesigner's. Wall-clock times depend on what else runs on the machine.
+crdesigner's, in wall-clock and in CPU time of the same runs. Wall-clock times depend on
+what else runs on the machine; on a shared machine compare the CPU times.
 
     .venv/bin/python tools/bench_convert.py [MAP.xodr ...] [--cold-runs 1] [--hit-runs 10]
 """
@@ -26,14 +27,20 @@ sys.path.insert(0, str(PROJECT_ROOT))
 DEFAULT_MAPS = [PROJECT_ROOT.parent / "shared" / "maps" / "carla" / f"Town0{i}.xodr" for i in (1, 4)]
 
 
-def timed(action: Callable[[], object], runs: int, clock: Callable[[], float] = time.perf_counter) -> list[float]:
-    """Seconds of ``runs`` calls on ``clock`` (wall clock by default)."""
-    times = []
+def timed(action: Callable[[], object], runs: int, cpu: bool = False) -> list[float]:
+    """Seconds of ``runs`` calls: wall clock, or CPU time of this process with ``cpu``."""
+    return timed_both(action, runs)[1 if cpu else 0]
+
+
+def timed_both(action: Callable[[], object], runs: int) -> tuple[list[float], list[float]]:
+    """Wall-clock and CPU seconds (this process, all its threads) of the same ``runs`` calls."""
+    wall, cpu = [], []
     for _ in range(runs):
-        start = clock()
+        start, start_cpu = time.perf_counter(), time.process_time()
         action()
-        times.append(clock() - start)
-    return times
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return wall, cpu
 
 
 def row(label: str, times: list[float]) -> str:
@@ -41,8 +48,8 @@ def row(label: str, times: list[float]) -> str:
     return f"  {label:<34} n={len(times):<3} mean {statistics.mean(times):8.3f} s  σ {sigma:7.3f} s  max {max(times):8.3f} s"
 
 
-def bench_converter(xodr: Path, name: str, folder: Path, cold_runs: int, hit_runs: int) -> float:
-    """Print one converter's rows; return its mean cold ``cold-maps convert`` time (s)."""
+def bench_converter(xodr: Path, name: str, folder: Path, cold_runs: int, hit_runs: int) -> tuple[float, float]:
+    """Print one converter's rows; return its mean cold ``cold-maps convert`` wall and CPU times (s)."""
     import lanelet2.io
 
     from cold_maps.groundtruth.lanelet2_from_engine import converter_named
@@ -71,19 +78,20 @@ def bench_converter(xodr: Path, name: str, folder: Path, cold_runs: int, hit_run
     def cold_convert() -> None:
         convert(xodr, folder / f"{name}.osm", cache=False, converter=converter_named(name, load_opendrive(xodr)))
 
-    cold = timed(cold_convert, cold_runs)
+    cold, cold_cpu = timed_both(cold_convert, cold_runs)
     print(row("cold: cold-maps convert --no-cache", cold))
+    print(row("cold: the same in CPU time", cold_cpu))
     for label, times in stages.items():
         print(row(f"  stage: {label}", times))
     cache = folder / "cache"
     converter = converter_named(name)
     load_lanelet2(xodr, cache_dir=cache, converter=converter)
     print(row("cache hit: load_lanelet2", timed(lambda: load_lanelet2(xodr, cache_dir=cache, converter=converter), hit_runs)))
-    hit_cpu = timed(lambda: load_lanelet2(xodr, cache_dir=cache, converter=converter), hit_runs, time.process_time)
+    hit_cpu = timed(lambda: load_lanelet2(xodr, cache_dir=cache, converter=converter), hit_runs, cpu=True)
     print(row("cache hit: load_lanelet2 (CPU time)", hit_cpu))
     cached = str(cache_path(xodr.read_bytes(), converter.version, cache, kind=converter.kind))
     print(row("  floor: lanelet2.io.load only", timed(lambda: lanelet2.io.load(cached, frame.projector()), hit_runs)))
-    return statistics.mean(cold)
+    return statistics.mean(cold), statistics.mean(cold_cpu)
 
 
 def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
@@ -91,8 +99,9 @@ def bench(xodr: Path, cold_runs: int, hit_runs: int) -> None:
     with tempfile.TemporaryDirectory(prefix="bench-convert-") as folder:
         engine = bench_converter(xodr, "engine", Path(folder), cold_runs, hit_runs)
         crdesigner = bench_converter(xodr, "crdesigner", Path(folder), cold_runs, hit_runs)
-    print(f"  engine cold convert / crdesigner cold convert: {engine:.3f} s / {crdesigner:.3f} s = "
-          f"{100.0 * engine / crdesigner:.1f} %")
+    for clock, index in (("wall clock", 0), ("CPU time", 1)):
+        print(f"  engine cold convert / crdesigner cold convert ({clock}): {engine[index]:.3f} s / "
+              f"{crdesigner[index]:.3f} s = {100.0 * engine[index] / crdesigner[index]:.1f} %")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -37,6 +37,7 @@ from cold_maps.evaluation.scenarios import MapPlan, Scenario, reason_category
 from cold_maps.evaluation.trust import (
     GT_UNMATCHED,
     MAP_BROKEN,
+    NO_GROUND_TRUTH,
     BrokenStretches,
     broken_stretches,
     check_driven,
@@ -261,7 +262,7 @@ class MapEvaluator:
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""
         plan = self.plan
-        unmatched = sum(r.rejected == "no_ground_truth" for key, a in collector.accumulators.items()
+        unmatched = sum(r.rejected == NO_GROUND_TRUTH for key, a in collector.accumulators.items()
                         if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
                         for r in a.records)
         if unmatched:
@@ -353,7 +354,7 @@ class MapEvaluator:
             measured = self.meter.measure(left, right, pose, reference=reference)
         except MatchingError as exc:
             LOG.debug("no ground truth: %s", exc)
-            return "no_ground_truth"
+            return NO_GROUND_TRUTH
         if not measured.gt_unmatched and self.plan.ground_truth == "engine" and self.broken.over(left, right):
             return replace(measured, gt_unmatched=MAP_BROKEN)
         return measured
@@ -430,11 +431,11 @@ class MapEvaluator:
                     for a, b in zip(states, states[1:]))
         last = coops[-1].state.name
 
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan) -> None:
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan, why: str = "") -> None:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", last, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               stopping=self.stopping))
+                                               gt_unmatched=why, stopping=self.stopping))
 
         if ego.detection is None or any(c.detection is None for c in coops):
             reject(ego.missing("ego") if ego.detection is None
@@ -450,8 +451,9 @@ class MapEvaluator:
             return
         measured = self._measure(chain.left, chain.right, detection_pose(ego.detection),
                                  self._frame_true_lane(ego.state, coops[-1].state))
-        if isinstance(measured, str):
-            reject(measured, True, runtime)
+        if isinstance(measured, str) or measured.gt_unmatched:
+            rejected, why = _rejection(measured)
+            reject(rejected, True, runtime, why)
             return
         self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None,
                      sigmas=(chain.left_sigma, chain.right_sigma))

@@ -9,8 +9,9 @@ the GT joins the ends there, moving them by half the gap) or a lane that runs ov
 ``opendrive.lanes.wrong_side_lanes``). Such evaluations are rejected "gt_unmatched" with
 the reason ``MAP_BROKEN``, the rest are scored. A run says so in its one-line result and
 at the top of ``summary.md`` when more than ``UNMATCHED_SHARE_LIMIT`` of a map's
-evaluations are not scored (rejected "gt_unmatched": no GT lanelets matched, or the map
-is broken there), or, with crdesigner's ground truth, when ``check`` flags a lane the
+evaluations are not scored (a lane was produced but rejected "gt_unmatched": no GT
+lanelets matched, or the map is broken there; or "no_ground_truth": no lanelet at the
+ego's pose), or, with crdesigner's ground truth, when ``check`` flags a lane the
 drives use (a border off by more than its threshold, or a lane-graph edge between two of
 them that is no Lanelet2 routing successor).
 """
@@ -114,6 +115,12 @@ UNMATCHED_SHARE_LIMIT: Final[float] = 0.01
 GT_UNMATCHED: Final[str] = "gt_unmatched"
 """``FrameRecord.rejected`` of a lane whose GT does not cover it."""
 
+NO_GROUND_TRUTH: Final[str] = "no_ground_truth"
+"""``FrameRecord.rejected`` of a lane with no GT lanelet at the ego's pose at all."""
+
+UNSCORED: Final[frozenset[str]] = frozenset({GT_UNMATCHED, NO_GROUND_TRUTH})
+"""``FrameRecord.rejected`` of an evaluation that produced a lane the GT could not score."""
+
 
 def driven_lanes(drives: Iterable[Drive]) -> frozenset[LaneKey]:
     """Every lane on the track of the ego or of another vehicle of ``drives``."""
@@ -148,15 +155,16 @@ def check_driven(map_name: str, graph: LaneGraph, lanelet_map: Any, routing_grap
 
 
 def unmatched_warnings(collector: Collector) -> list[str]:
-    """Per map whose share of evaluations rejected "gt_unmatched" exceeds
-    ``UNMATCHED_SHARE_LIMIT``: a warning with the count and the reasons."""
+    """Per map whose share of unscored evaluations (``UNSCORED``: a lane was produced but
+    the GT could not score it) exceeds ``UNMATCHED_SHARE_LIMIT``: a warning with the
+    count and the reasons."""
     totals: Counter[str] = Counter()
     unmatched: dict[str, Counter[str]] = {}
     for key, accumulator in collector.accumulators.items():
         totals[key.map] += len(accumulator.records)
         for record in accumulator.records:
-            if record.rejected == GT_UNMATCHED:
-                unmatched.setdefault(key.map, Counter())[record.gt_unmatched] += 1
+            if record.rejected in UNSCORED:
+                unmatched.setdefault(key.map, Counter())[record.gt_unmatched or record.rejected] += 1
     warnings = []
     for name, reasons in unmatched.items():
         count = sum(reasons.values())

@@ -24,13 +24,13 @@ NDArrayFloat = npt.NDArray[np.float64]
 
 def _coefficients(records: Sequence[CubicPoly]) -> tuple[NDArrayFloat, NDArrayFloat]:
     """Record starts (n,) and coefficients (n, 4), after checking the starts are ordered."""
-    starts = np.array([r.s0 for r in records], dtype=np.float64)
-    coeffs = np.array([(r.a, r.b, r.c, r.d) for r in records], dtype=np.float64).reshape(-1, 4)
-    if not np.all(np.isfinite(starts)) or not np.all(np.isfinite(coeffs)):
+    table = np.array([(r.s0, r.a, r.b, r.c, r.d) for r in records], dtype=np.float64).reshape(-1, 5)
+    if not np.isfinite(table).all():
         raise ValueError("cubic profile: a record has a non-finite s0 or coefficient")
-    if np.any(np.diff(starts) < 0.0):
+    starts = table[:, 0]
+    if len(starts) > 1 and (starts[1:] < starts[:-1]).any():
         raise ValueError(f"cubic profile: record starts are not ordered by s0: {starts.tolist()}")
-    return starts, coeffs
+    return starts, table[:, 1:]
 
 
 def _locate(

@@ -42,17 +42,24 @@ def reference_pose(
     starts = np.array([g.s for g in road.plan_view])
     last = len(starts) if before is None else max(int(np.searchsorted(starts, before, side="left")), 1)
     index = np.clip(np.searchsorted(starts[:last], s, side="right") - 1, 0, last - 1)
+    if s.ndim and s.size and index.min() == index.max():  # one record: no masks
+        return _evaluate(road, int(index.flat[0]), s)
     x = np.empty_like(s)
     y = np.empty_like(s)
     hdg = np.empty_like(s)
     for i in np.unique(index):
         mask = index == i
-        record = road.plan_view[i]
-        try:
-            x[mask], y[mask], hdg[mask] = geometry.evaluate(record, np.maximum(s[mask] - record.s, 0.0))
-        except ValueError as exc:
-            raise ValueError(f"road {road.id}: {exc}") from None
+        x[mask], y[mask], hdg[mask] = _evaluate(road, int(i), s[mask])
     return x, y, hdg
+
+
+def _evaluate(road: Road, index: int, s: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Pose (x, y in m, heading in rad) at road s (m) on record ``index`` (s before its start: at its start)."""
+    record = road.plan_view[index]
+    try:
+        return geometry.evaluate(record, np.maximum(s - record.s, 0.0))
+    except ValueError as exc:
+        raise ValueError(f"road {road.id}: {exc}") from None
 
 
 def record_joint(road: Road, index: int) -> tuple[NDArrayFloat, NDArrayFloat]:
