@@ -206,39 +206,47 @@ def _cpu(action: Callable[[], object]) -> tuple[float, object]:
 
 def bench(path: Path, frames: int) -> None:
     """CPU seconds of ``cold-maps info`` (read + ``map_info``) and of the ground-truth
-    preparation of ``cold-eval`` (read, lane graph, engine Lanelet2 conversion without
-    cache, lanelet2 load + routing graph, ``GroundTruth``), then a small ``cold-eval``
-    (``frames`` frames, one route) end to end."""
+    preparation of ``cold-eval`` (read, lane graph, engine conversion to Lanelet2 without
+    cache, ``lanelet2.io.load``, the routing graph, ``GroundTruth``), then, with
+    ``frames`` > 0, a small ``cold-eval`` (one route of ``frames`` frames) end to end."""
     import tempfile
+
+    import lanelet2.io
 
     from cold_maps.cli.maps import map_info
     from cold_maps.groundtruth.lanelet2_from_engine import LANE_TYPES, engine_converter
     from cold_maps.network.lane_graph import build_lane_graph
     from cold_maps.opendrive.parser import load_opendrive
-    from converters import load_lanelet2
+    from converters import convert, frame, routing_graph
     from gt_matching import GroundTruth
 
     info_read, odr_map = _cpu(lambda: load_opendrive(path))
     info_rest, _ = _cpu(lambda: map_info(odr_map))
     info = info_read + info_rest
-    print(f"{path.name} ({path.stat().st_size / 1e6:.1f} MB, {len(odr_map.roads)} roads)")
-    print(f"  cold-maps info: read {info_read:.2f} s + summary {info_rest:.2f} s = {info:.2f} s CPU")
-    read, gt_map = _cpu(lambda: load_opendrive(path))
-    graph_s, _ = _cpu(lambda: build_lane_graph(gt_map, LANE_TYPES))
-    load_s, loaded = _cpu(lambda: load_lanelet2(path, cache=False, converter=engine_converter(gt_map)))
-    truth_s, _ = _cpu(lambda: GroundTruth(*loaded, prepare_all=False))  # type: ignore[misc]
-    total = read + graph_s + load_s + truth_s
-    print(f"  ground truth: read {read:.2f} s + lane graph {graph_s:.2f} s + convert and load {load_s:.2f} s "
-          f"+ GroundTruth {truth_s:.2f} s = {total:.2f} s CPU = {total / info:.2f} x info")
-    from cold_maps.evaluation import run as evaluation_run  # noqa: F401  (the CLI below imports it too)
-    from cold_maps.cli import evaluate
-
+    print(f"{path.name} ({path.stat().st_size / 1e6:.1f} MB, {len(odr_map.roads)} roads)", flush=True)
+    print(f"  cold-maps info: read {info_read:.2f} s + summary {info_rest:.2f} s = {info:.2f} s CPU", flush=True)
     with tempfile.TemporaryDirectory(prefix="big-maps-") as folder:
-        eval_s, status = _cpu(lambda: evaluate.main(["--map", str(path), "--routes", "1", "--frames", str(frames),
-                                                     "--workers", "1", "--no-mcap", "--no-plots", "-q",
-                                                     "--out", folder]))
-    print(f"  cold-eval --routes 1 --frames {frames} (in this process, cache warm or not): exit {status}, "
-          f"{eval_s:.2f} s CPU")
+        osm = Path(folder) / "gt.osm"
+        stages = {}
+        stages["read"], gt_map = _cpu(lambda: load_opendrive(path))
+        stages["lane graph"], _ = _cpu(lambda: build_lane_graph(gt_map, LANE_TYPES))
+        stages["convert"], _ = _cpu(lambda: convert(path, osm, cache=False, converter=engine_converter(gt_map)))
+        print("  ground truth: " + ", ".join(f"{k} {v:.2f} s" for k, v in stages.items()), end="", flush=True)
+        stages["lanelet2 load"], lanelet_map = _cpu(lambda: lanelet2.io.load(str(osm), frame.projector()))
+        print(f", lanelet2 load {stages['lanelet2 load']:.2f} s", end="", flush=True)
+        stages["routing graph"], routing = _cpu(lambda: routing_graph(lanelet_map))
+        print(f", routing graph {stages['routing graph']:.2f} s", end="", flush=True)
+        stages["GroundTruth"], _ = _cpu(lambda: GroundTruth(lanelet_map, routing, prepare_all=False))
+        total = sum(stages.values())
+        print(f", GroundTruth {stages['GroundTruth']:.2f} s = {total:.2f} s CPU = {total / info:.2f} x info; "
+              f"without the routing graph {(total - stages['routing graph']) / info:.2f} x info", flush=True)
+        if frames > 0:
+            from cold_maps.cli import evaluate
+
+            eval_s, status = _cpu(lambda: evaluate.main([
+                "--map", str(path), "--routes", "1", "--frames", str(frames), "--workers", "1", "--no-mcap",
+                "--no-plots", "-q", "--out", str(Path(folder) / "eval")]))
+            print(f"  cold-eval --routes 1 --frames {frames}: exit {status}, {eval_s:.2f} s CPU", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -254,7 +262,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     junction_parser.add_argument("--seed", type=int, default=0)
     bench_parser = commands.add_parser("bench", help="cold-maps info vs ground-truth preparation (CPU time)")
     bench_parser.add_argument("maps", nargs="+", type=Path)
-    bench_parser.add_argument("--frames", type=int, default=20)
+    bench_parser.add_argument("--frames", type=int, default=20, help="frames of the cold-eval run (0: none)")
     args = parser.parse_args(argv)
     if args.command == "chain":
         if args.roads < 1:
