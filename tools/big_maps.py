@@ -9,7 +9,8 @@ preparation of ``cold-eval`` on them.
   incoming roads end on the west quarter of a circle of ``JUNCTION_RADIUS_M``, as many
   outgoing roads start on its east quarter, and every incoming road is joined to every
   outgoing one by a one-lane connecting road (a ``paramPoly3`` cubic Hermite curve, C¹ at
-  both ends).
+  both ends); every connection crosses most others. ``--parallel``: as many connections
+  side by side, none crossing another.
 
 The documents are written as text, road by road (an element tree of 100 000 roads needs
 gigabytes). Same seed, same bytes.
@@ -155,22 +156,30 @@ def hermite(start: Pose, end: Pose) -> tuple[str, float]:
     return f'<paramPoly3 {coefficients} pRange="normalized"/>', _gauss_length(speed)
 
 
-def junction(arms: int, seed: int) -> Iterator[str]:
-    """The junction map's text, piece by piece (the seed turns the arms' spread)."""
+def junction(arms: int, seed: int, parallel: bool = False) -> Iterator[str]:
+    """The junction map's text, piece by piece (the seed turns the arms' spread). With
+    ``parallel``: arms² incoming roads side by side, each joined to the outgoing road
+    straight ahead only (the same number of connections, none crossing another)."""
     rng = random.Random(seed)
     yield _HEADER.format(name=f"junction of {arms * arms} connections", seed=seed)
     turn = rng.uniform(-0.1, 0.1)
     one_lane = _center("none") + "<right>{lane}</right>"
     entries, exits = [], []
-    for index in range(arms):
-        fraction = (index + 0.5) / arms - 0.5
-        west = math.pi + turn + QUARTER_RAD * fraction
-        east = turn - QUARTER_RAD * fraction
-        entry = Pose(JUNCTION_RADIUS_M * math.cos(west), JUNCTION_RADIUS_M * math.sin(west), west + math.pi)
+    count = arms * arms if parallel else arms
+    for index in range(count):
+        if parallel:
+            across = Pose(-math.sin(turn), math.cos(turn), turn)
+            entry = Pose(index * LANE_WIDTH_M * across.x, index * LANE_WIDTH_M * across.y, turn)
+            exit_ = Pose(entry.x + ARM_LENGTH_M * math.cos(turn), entry.y + ARM_LENGTH_M * math.sin(turn), turn)
+        else:
+            fraction = (index + 0.5) / arms - 0.5
+            west = math.pi + turn + QUARTER_RAD * fraction
+            east = turn - QUARTER_RAD * fraction
+            entry = Pose(JUNCTION_RADIUS_M * math.cos(west), JUNCTION_RADIUS_M * math.sin(west), west + math.pi)
+            exit_ = Pose(JUNCTION_RADIUS_M * math.cos(east), JUNCTION_RADIUS_M * math.sin(east), east)
         far = Pose(entry.x - ARM_LENGTH_M * math.cos(entry.hdg), entry.y - ARM_LENGTH_M * math.sin(entry.hdg), entry.hdg)
         yield _road(f"in{index}", ARM_LENGTH_M, _geometry(far, ARM_LENGTH_M, "<line/>"),
                     one_lane.format(lane=_lane(-1, None, None, "solid")), successor=_link("successor", "junction", "J"))
-        exit_ = Pose(JUNCTION_RADIUS_M * math.cos(east), JUNCTION_RADIUS_M * math.sin(east), east)
         yield _road(f"out{index}", ARM_LENGTH_M, _geometry(exit_, ARM_LENGTH_M, "<line/>"),
                     one_lane.format(lane=_lane(-1, None, None, "solid")), predecessor=_link("predecessor", "junction", "J"))
         entries.append(entry)
@@ -178,6 +187,8 @@ def junction(arms: int, seed: int) -> Iterator[str]:
     connections = []
     for i, entry in enumerate(entries):
         for j, exit_ in enumerate(exits):
+            if parallel and i != j:
+                continue
             road_id = f"c{i}_{j}"
             shape, length = hermite(entry, exit_)
             yield _road(road_id, length, _geometry(entry, length, shape),
@@ -260,6 +271,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     junction_parser.add_argument("out", type=Path)
     junction_parser.add_argument("--arms", type=int, default=100)
     junction_parser.add_argument("--seed", type=int, default=0)
+    junction_parser.add_argument("--parallel", action="store_true",
+                                 help="arms² side-by-side arms, each joined straight ahead (no crossing connections)")
     bench_parser = commands.add_parser("bench", help="cold-maps info vs ground-truth preparation (CPU time)")
     bench_parser.add_argument("maps", nargs="+", type=Path)
     bench_parser.add_argument("--frames", type=int, default=20, help="frames of the cold-eval run (0: none)")
@@ -271,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.command == "junction":
         if args.arms < 1:
             parser.error("--arms must be at least 1")
-        write(junction(args.arms, args.seed), args.out)
+        write(junction(args.arms, args.seed, args.parallel), args.out)
     else:
         for path in args.maps:
             bench(path, args.frames)
