@@ -1,5 +1,5 @@
 """tools/bench_stages.py: exclusive time per stage (a nested stage counts for itself only,
-the rest is ``other``), and every stage target of this checkout found and wrapped."""
+the rest is ``other``), and every stage's functions of this checkout found, wrapped and put back."""
 
 from __future__ import annotations
 
@@ -52,19 +52,24 @@ def test_a_stage_that_raises_still_ends() -> None:
     assert totals["other"] == pytest.approx(1.0)
 
 
-def test_every_stage_target_exists_and_is_wrapped_where_the_evaluator_finds_it() -> None:
+def test_every_stage_has_targets_wrapped_where_the_evaluator_finds_them() -> None:
     import cold_maps.evaluation.evaluator as evaluator
     import cold_maps.simulation.detection as detection
     from cold_maps.groundtruth.meter import GroundTruthMeter
 
-    sense, measure = detection.sense, GroundTruthMeter.__dict__["measure"]
+    functions = {id(getattr(detection, name, None)) for name in ("sense", "sense_block")} - {id(None)}
+    bound = {name: value for name, value in vars(evaluator).items() if id(value) in functions}
+    measure = GroundTruthMeter.__dict__["measure"]
     clock = bench_stages.StageClock(FakeTimer(1.0))
     try:
-        assert bench_stages.install(clock) == []
-        assert evaluator.sense is detection.sense is not sense
-        assert detection.sense.__wrapped__ is sense
+        missing = bench_stages.install(clock)
+        for stage, targets in bench_stages.STAGE_TARGETS.items():
+            assert set(targets) - set(missing), f"no function of stage {stage} found"
+        assert bound, "the evaluator calls no sensing function by name"
+        for name, original in bound.items():
+            assert getattr(evaluator, name).__wrapped__ is original is getattr(detection, name).__wrapped__
         assert GroundTruthMeter.__dict__["measure"].__wrapped__ is measure
     finally:
         clock.restore()
-    assert evaluator.sense is detection.sense is sense
+    assert all(getattr(evaluator, name) is original for name, original in bound.items())
     assert GroundTruthMeter.__dict__["measure"] is measure

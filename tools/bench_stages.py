@@ -47,12 +47,14 @@ DEFAULT_MAP: Final[Path] = ROOT.parent / "shared" / "maps" / "carla" / "Town01.x
 DEFAULT_BASELINE_REF: Final[str] = "0abd8c1"
 
 STAGE_TARGETS: Final[dict[str, tuple[str, ...]]] = {
-    "states": ("cold_maps.simulation.drive:Drive.states",),
-    "sensing": ("cold_maps.simulation.detection:sense", "cold_maps.simulation.detection:obstacles_of"),
+    "states": ("cold_maps.simulation.drive:Drive.states", "cold_maps.simulation.drive:Drive.states_block"),
+    "sensing": ("cold_maps.simulation.detection:sense", "cold_maps.simulation.detection:sense_block",
+                "cold_maps.simulation.detection:obstacles_of"),
     "fusion": ("fusion:fuse", "fusion:fuse_history", "fusion:fuse_chain", "fusion:is_fusible"),
     "ground truth": ("cold_maps.groundtruth.meter:GroundTruthMeter.measure",
                      "cold_maps.evaluation.trust:BrokenStretches.over"),
     "records": ("cold_maps.evaluation.collector:Collector.add", "cold_maps.evaluation.collector:Collector.add_traffic",
+                "cold_maps.evaluation.collector:Collector.add_check_ms",
                 "cold_maps.evaluation.evaluator:MapEvaluator._record",
                 "cold_maps.evaluation.evaluator:MapEvaluator._keep_overlay"),
     "recording": ("cold_maps.recording.recorder:Recorder.write_detection",
@@ -60,7 +62,8 @@ STAGE_TARGETS: Final[dict[str, tuple[str, ...]]] = {
                   "cold_maps.recording.recorder:Recorder.write_metrics"),
 }
 """Per stage, the functions (``module:attribute``, methods as ``Class.method``) whose calls
-are its time."""
+are its time: the frame loop's and the array path's (issue 27: ``states_block``,
+``sense_block``); a checkout has some of them."""
 STAGES: Final[tuple[str, ...]] = (*STAGE_TARGETS, "other")
 PIPELINE: Final[tuple[str, ...]] = tuple(stage for stage in STAGES if stage != "recording")
 """The stages of the frame pipeline (sense, fuse, measure, record): all but the MCAP."""
