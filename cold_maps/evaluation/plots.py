@@ -178,7 +178,9 @@ def plot_error_series(path: str | os.PathLike[str], series: Sequence[ErrorSeries
             axes.axvline(start, color=ROUTE_LINE_COLOR, linestyle=":", linewidth=1.0)
             axes.text(start, 1.0, f" route {number}", transform=axes.get_xaxis_transform(), va="top", ha="left",
                       fontsize="small", color=ROUTE_LINE_COLOR)
-    axes.set_title(title + (f" (log scale, errors < {LOG_FLOOR_M * 1e3:g} mm drawn at it)" if log else ""))
+    # y given: matplotlib skips measuring the tick labels to lift the title above a y-axis offset
+    # text, which this axis never has (it starts at 0, or is logarithmic): the same pixels, faster
+    axes.set_title(title + (f" (log scale, errors < {LOG_FLOOR_M * 1e3:g} mm drawn at it)" if log else ""), y=1.0)
     axes.legend(loc="upper right", fontsize="small")
     _save(axes.figure, path)
 
