@@ -26,8 +26,14 @@ _POINT_TAG: Final[int] = 0x2A  # LinePrimitive.points, field 5, length-delimited
 _DOUBLE: Final = struct.Struct("<d")
 
 
+_ONE_BYTE: Final[tuple[bytes, ...]] = tuple(bytes((value,)) for value in range(0x80))
+"""The varints of 0 ... 127 (most lengths and tags)."""
+
+
 def _varint(value: int) -> bytes:
     """``value >= 0`` as a protobuf varint."""
+    if value < 0x80:
+        return _ONE_BYTE[value]
     out = bytearray()
     while value > 0x7F:
         out.append(value & 0x7F | 0x80)
@@ -38,12 +44,12 @@ def _varint(value: int) -> bytes:
 
 def _nested(tag: int, payload: bytes) -> bytes:
     """A length-delimited field (``tag``: field number << 3 | 2, below 128)."""
-    return bytes((tag,)) + _varint(len(payload)) + payload
+    return _ONE_BYTE[tag] + _varint(len(payload)) + payload
 
 
 def _double(tag: int, value: float) -> bytes:
     """A double field (``tag``: field number << 3 | 1); nothing for 0.0 and -0.0 (proto3)."""
-    return b"" if value == 0.0 else bytes((tag,)) + _DOUBLE.pack(value)
+    return b"" if value == 0.0 else _ONE_BYTE[tag] + _DOUBLE.pack(value)
 
 
 def _string(tag: int, text: str) -> bytes:
