@@ -21,11 +21,12 @@ from cold_maps.recording.recorder import (
     scene_update,
 )
 
+STAMPS_NS = st.integers(0, 2**32 * 10**9 - 1)  # the SDK's Timestamp holds seconds as u32
 # coordinates as drawn (rounded to 0.1 mm), often exactly 0.0 or -0.0 (left out of the wire)
 coordinates = st.one_of(st.sampled_from([0.0, -0.0, 1e-4, -1e-4]),
                         st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False).map(lambda v: round(v, 4)))
 lines = st.integers(2, 12).flatmap(lambda n: st.lists(st.tuples(coordinates, coordinates), min_size=n, max_size=n))
-updates = st.lists(st.tuples(st.integers(0, 2**62), st.lists(lines, max_size=4),
+updates = st.lists(st.tuples(STAMPS_NS, st.lists(lines, max_size=4),
                              st.sampled_from([COLOR_GT, COLOR_FUSED, COLOR_EGO, COLOR_COOP])), min_size=1, max_size=4)
 
 
@@ -44,7 +45,7 @@ def test_scene_updates_equal_the_sdk_encoding(batch) -> None:
 
 
 @settings(max_examples=60, deadline=None)
-@given(ns=st.integers(0, 2**62), sender=st.sampled_from(["ego", "coop1", "coop_2-b"]), x=coordinates, y=coordinates,
+@given(ns=STAMPS_NS, sender=st.sampled_from(["ego", "coop1", "coop_2-b"]), x=coordinates, y=coordinates,
        yaw=st.one_of(st.sampled_from([0.0, -0.0, np.pi, -np.pi]), st.floats(-4.0, 4.0)))
 def test_frame_transforms_equal_the_sdk_encoding(ns, sender, x, y, yaw) -> None:
     assert wire.frame_transform(ns, FRAME_ID, sender, x, y, yaw) == frame_transform(ns, sender, x, y, yaw).encode()

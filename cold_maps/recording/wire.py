@@ -6,6 +6,7 @@ order, proto3 zero scalars left out, ``-0.0`` included, sub-messages that are se
 even when empty); ``tests/test_recording_wire.py`` checks them against it. Only what the
 recording sets is encoded: ``foxglove.SceneUpdate`` with one ``All`` deletion and one
 ``LINE_STRIP`` entity per line (identity pose, one colour), and ``foxglove.FrameTransform``.
+Timestamps past 2106 (2**32 s), which the SDK refuses, are encoded as protobuf's int64.
 """
 
 from __future__ import annotations
