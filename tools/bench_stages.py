@@ -1,5 +1,5 @@
 """Per-stage benchmark of a whole ``cold-eval`` run in one process: where each frame's time
-goes (states, sensing, fusion, ground truth, records, recording) and what the run pays once
+goes (states, sensing, fusion, ground truth, records, the MCAP outputs) and what the run pays once
 (imports, lane graph, ground-truth preparation, outputs), with the ideal and the camera
 sensor, beside a baseline commit in the same run.
 
@@ -15,7 +15,7 @@ checkout that evaluates frames in blocks shows its blocks in σ and max, not in 
 
 Printed per sensor: per stage the time per frame (ms: mean / σ / max over every frame of
 every pass) for this checkout and the baseline, with the ratio; frames/s of the frame
-pipeline (every stage but the recording), of the frames with the recording, and of the
+pipeline (every stage but the MCAP), of the frames with the MCAP, and of the
 whole run (imports, start-up and outputs included); the one-off times (s). The baseline
 (``--baseline-ref``, default 0abd8c1, the frame loop before issue 27) runs this same
 script on that commit's code (``git archive`` to a temporary folder), alternating with this
@@ -57,21 +57,23 @@ STAGE_TARGETS: Final[dict[str, tuple[str, ...]]] = {
                 "cold_maps.evaluation.collector:Collector.add_check_ms",
                 "cold_maps.evaluation.evaluator:MapEvaluator._record",
                 "cold_maps.evaluation.evaluator:MapEvaluator._keep_overlay"),
-    "recording": ("cold_maps.recording.recorder:Recorder.write_detection",
-                  "cold_maps.recording.recorder:Recorder.write_gt", "cold_maps.recording.recorder:Recorder.write_fused",
-                  "cold_maps.recording.recorder:Recorder.write_metrics"),
+    "outputs (MCAP)": ("cold_maps.recording.recorder:Recorder.write_detection",
+                       "cold_maps.recording.recorder:Recorder.write_gt",
+                       "cold_maps.recording.recorder:Recorder.write_fused",
+                       "cold_maps.recording.recorder:Recorder.write_metrics"),
 }
 """Per stage, the functions (``module:attribute``, methods as ``Class.method``) whose calls
 are its time: the frame loop's and the array path's (issue 27: ``states_block``,
 ``sense_block``); a checkout has some of them."""
 STAGES: Final[tuple[str, ...]] = (*STAGE_TARGETS, "other")
-PIPELINE: Final[tuple[str, ...]] = tuple(stage for stage in STAGES if stage != "recording")
+PIPELINE: Final[tuple[str, ...]] = tuple(stage for stage in STAGES if stage != "outputs (MCAP)")
 """The stages of the frame pipeline (sense, fuse, measure, record): all but the MCAP."""
 LAZY_MODULES: Final[tuple[str, ...]] = ("scipy.spatial", "lanelet2", "shapely", "orjson", "foxglove",
                                         "matplotlib.figure", "matplotlib.backends.backend_agg")
 """Modules a default run imports after start-up (each where it is first used)."""
 ONE_OFF: Final[tuple[str, ...]] = ("imports (cold-eval)", "imports (lazy)", "lane graph and drives",
-                                   "ground-truth preparation", "MCAP finalising", "report files", "plots")
+                                   "ground-truth preparation", "outputs: MCAP finalising", "outputs: report files",
+                                   "outputs: plots")
 
 
 class StageClock:
@@ -188,7 +190,6 @@ def measure(map_path: Path, sensor: str, frames: int | None, repeat: int, cpu: b
     with tempfile.TemporaryDirectory(prefix="bench-stages-") as folder:
         for _ in range(repeat):
             collector = Collector()
-            start = timer()
             with Recorder(Path(folder) / "run.mcap", map_path=str(map_path), stamp_base_ns=0) as recorder:
                 offset = 0
                 clock.take()
@@ -196,13 +197,13 @@ def measure(map_path: Path, sensor: str, frames: int | None, repeat: int, cpu: b
                     offset = evaluator.run_drive(drive, collector, recorder=recorder, frame_offset=offset,
                                                  on_frame=lambda: per_frame.append(clock.take()))
                 finalising = timer()
-            one_off["MCAP finalising"] += (timer() - finalising) / repeat
+            one_off["outputs: MCAP finalising"] += (timer() - finalising) / repeat
             start = timer()
             write_outputs(Path(folder), collector, partial=False, plots=False)
-            one_off["report files"] += (timer() - start) / repeat
+            one_off["outputs: report files"] += (timer() - start) / repeat
             start = timer()
             write_plots(Path(folder), collector)
-            one_off["plots"] += (timer() - start) / repeat
+            one_off["outputs: plots"] += (timer() - start) / repeat
     return {"per_frame": per_frame, "one_off": one_off, "frames": len(per_frame) // repeat, "missing": missing}
 
 
@@ -213,12 +214,12 @@ def _stats(values: list[float]) -> tuple[float, float, float]:
 
 
 def rates(side: dict[str, Any]) -> dict[str, float]:
-    """Frames per second of the pipeline, of the frames with the recording, of the whole run."""
+    """Frames per second of the pipeline, of the frames with the MCAP, of the whole run."""
     frames = side["per_frame"]
     pipeline = statistics.fmean(sum(f[s] for s in PIPELINE) for f in frames)
     recorded = statistics.fmean(sum(f.values()) for f in frames)
     whole = recorded + sum(side["one_off"].values()) / side["frames"]
-    return {"pipeline": 1.0 / pipeline, "with recording": 1.0 / recorded, "whole run": 1.0 / whole}
+    return {"pipeline": 1.0 / pipeline, "with MCAP": 1.0 / recorded, "whole run": 1.0 / whole}
 
 
 def table(sensor: str, sides: dict[str, dict[str, Any]]) -> list[str]:
@@ -234,7 +235,7 @@ def table(sensor: str, sides: dict[str, dict[str, Any]]) -> list[str]:
         cells = "".join(f"{m:12.3f} / {s:6.3f} / {x:7.2f}" for m, s, x in figures)
         ratio = f"   {figures[1][0] / figures[0][0]:5.2f}x" if len(names) > 1 and figures[0][0] > 0 else ""
         lines.append(f"  {stage:24s}{cells}{ratio}")
-    for what in ("pipeline", "with recording", "whole run"):
+    for what in ("pipeline", "with MCAP", "whole run"):
         fps = [rates(sides[name])[what] for name in names]
         ratio = f"   {fps[0] / fps[1]:5.2f}x" if len(names) > 1 else ""
         lines.append(f"  {'frames/s ' + what:24s}" + "".join(f"{v:30.1f}" for v in fps) + ratio)
