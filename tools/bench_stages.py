@@ -4,8 +4,8 @@ goes (states, sensing, fusion, ground truth, records, the MCAP outputs) and what
 sensor, beside a baseline commit in the same run.
 
 The run is the one ``cold-eval --map MAP [--frames N]`` makes (its own plans, default
-scenarios), evaluated by the public ``MapEvaluator.run_drive`` with an MCAP ``Recorder``
-attached, then finalised (``run.mcap``), reported (``write_outputs``: ``frames.csv``,
+scenarios), evaluated in each pass by a fresh ``MapEvaluator`` (its public ``run_drive``)
+with an MCAP ``Recorder`` attached, then finalised (``run.mcap``), reported (``write_outputs``: ``frames.csv``,
 ``summary.md``, ``metrics.json``) and plotted (``write_plots``) into a temporary folder.
 Stages are timed by wrapping the functions that do them (:data:`STAGE_TARGETS`, looked up
 where the evaluator finds them; a name a checkout lacks is skipped and listed), each call
@@ -178,17 +178,18 @@ def measure(map_path: Path, sensor: str, frames: int | None, repeat: int, cpu: b
 
     argv = ["--map", str(map_path), "--sensor", sensor, *(["--frames", str(frames)] if frames else [])]
     (plan,) = _plans(build_parser().parse_args(argv))
-    start = timer()
-    evaluator = MapEvaluator(plan)
-    one_off["lane graph and drives"] = timer() - start
-    start = timer()
-    evaluator.prepare()
-    one_off["ground-truth preparation"] = timer() - start
     clock = StageClock(timer)
     missing = install(clock)
     per_frame: list[dict[str, float]] = []
     with tempfile.TemporaryDirectory(prefix="bench-stages-") as folder:
-        for _ in range(repeat):
+        for index in range(repeat):  # each pass a fresh evaluator (error models start over), as a run
+            start = timer()
+            evaluator = MapEvaluator(plan)
+            prepared = timer()
+            evaluator.prepare()
+            if index == 0:
+                one_off["lane graph and drives"] = prepared - start
+                one_off["ground-truth preparation"] = timer() - prepared
             collector = Collector()
             with Recorder(Path(folder) / "run.mcap", map_path=str(map_path), stamp_base_ns=0) as recorder:
                 offset = 0
