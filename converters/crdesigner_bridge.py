@@ -48,7 +48,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
-from unittest import mock
 
 import numpy as np
 import numpy.typing as npt
@@ -551,6 +550,7 @@ def _run_crdesigner(path: Path) -> tuple[Any, dict[int, tuple[tuple[str, int, in
     from commonroad.scenario.traffic_sign import TrafficSignIDCountries
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_conversion import utils as conversion_utils
     from crdesigner.map_conversion.opendrive.odr2cr.opendrive_parser.parser import parse_opendrive
+    from unittest import mock  # here: it imports asyncio, which no run without crdesigner needs
 
     config = OpenDriveConfig()
     config.proj_string_odr = None

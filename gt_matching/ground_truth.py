@@ -188,8 +188,8 @@ class GroundTruth:
 
     Construction extracts every lanelet's geometry, border samples and the borders'
     clearances to other lines, and every line string's samples and KD-tree (with
-    ``prepare_all=False`` the clearances and KD-trees are built on first use instead:
-    the same results, cheaper when frames match few of the map's lanelets); lanelet
+    ``prepare_all=False`` the border samples, clearances and KD-trees are built on first
+    use instead: the same results, cheaper when frames match few of the map's lanelets); lanelet
     sequences matched by frames are assembled from them on first use (joining arrays) and
     kept (LRU, ``ROUTE_CACHE_SIZE``).
 
@@ -222,10 +222,9 @@ class GroundTruth:
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
-            for side in ("left", "right"):
-                part = self._part(geometry, side)
-                if prepare_all:
-                    part.clearances
+            if prepare_all:
+                for side in ("left", "right"):
+                    self._part(geometry, side).clearances
         if prepare_all:
             for slot in range(len(self.lines.vertices)):
                 self.lines.tree(slot, self.config.step_m)

@@ -200,13 +200,20 @@ def simplify_lines(lines: list[NDArrayFloat], tolerance_m: float) -> list[NDArra
     """Douglas-Peucker (shapely/GEOS, all lines in one call): each ``(N >= 2, 2)`` polyline's
     vertices such that no dropped one is farther than ``tolerance_m`` from the kept line;
     the ends are kept."""
-    import shapely
-
     if not lines:
         return []
+    coordinates, counts = simplify_joined(lines, tolerance_m)
+    return np.split(coordinates, np.cumsum(counts)[:-1])
+
+
+def simplify_joined(lines: list[NDArrayFloat], tolerance_m: float) -> tuple[NDArrayFloat, NDArrayInt]:
+    """:func:`simplify_lines` of at least one line as one ``(M, 2)`` array of the kept
+    vertices, line after line, and the number kept of each line."""
+    import shapely
+
     counts = [len(line) for line in lines]
     geometries = shapely.linestrings(np.vstack(lines), indices=np.repeat(np.arange(len(lines)), counts))
     with np.errstate(divide="ignore", invalid="ignore"):  # GEOS on a zero-length line: kept as is
         simple = shapely.simplify(geometries, tolerance_m, preserve_topology=False)
     coordinates, owner = shapely.get_coordinates(simple, return_index=True)
-    return np.split(coordinates, np.cumsum(np.bincount(owner, minlength=len(lines)))[:-1])
+    return coordinates, np.bincount(owner, minlength=len(lines))

@@ -139,11 +139,11 @@ def test_sequence_arc_equals_per_point_search(grid: tuple[Any, Any, GroundTruth]
 
 
 def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[Any, Any, GroundTruth]) -> None:
-    """prepare_all=False builds clearances and KD-trees only for the lanelets and lines a
-    frame needs; matches and errors (other-lane check included) are bit-identical."""
+    """prepare_all=False builds border samples, clearances and KD-trees only for the lanelets
+    and lines a frame needs; matches and errors (other-lane check included) are bit-identical."""
     lanelet_map, graph, prepared = grid
     lazy = GroundTruth(lanelet_map, graph, prepare_all=False)
-    assert not any("clearances" in vars(part) for part in lazy._parts.values())
+    assert not lazy._parts
     assert not lazy.lines._trees
     for left, right, pose in random_frames(lanelet_map, graph, 12, seed=7):
         match, lazy_match = prepared.match(left, right, pose), lazy.match(left, right, pose)
@@ -157,7 +157,7 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
                 np.testing.assert_array_equal(a.arc_m, b.arc_m)
                 np.testing.assert_array_equal(a.unmatched, b.unmatched)
     built = sum("clearances" in vars(part) for part in lazy._parts.values())
-    assert 0 < built < len(lazy._parts)
+    assert 0 < built <= len(lazy._parts) < len(prepared._parts)
 
 
 def test_lanes_matched_at_one_pose_share_its_candidates(grid: tuple[Any, Any, GroundTruth]) -> None:

@@ -123,3 +123,18 @@ def test_a_plot_drawn_after_another_equals_it_drawn_first(tmp_path, scenarios):
         after, fresh = imread(tmp_path / f"after_{index}.png"), imread(tmp_path / f"fresh_{index}.png")
         assert after.shape == fresh.shape and np.array_equal(after, fresh), index
     assert not np.array_equal(imread(tmp_path / "fresh_0.png"), imread(tmp_path / "fresh_1.png"))
+
+
+def test_png_decodes_to_the_same_pixels_with_matplotlib_s_chunks():
+    import io
+
+    from PIL import Image
+
+    from cold_maps.evaluation.plots import png
+
+    rgba = np.random.default_rng(3).integers(0, 256, size=(7, 5, 4), dtype=np.uint8)
+    image = Image.open(io.BytesIO(png(rgba, "Matplotlib version9, https://matplotlib.org/")))
+    assert image.mode == "RGBA" and image.size == (5, 7)
+    np.testing.assert_array_equal(np.asarray(image), rgba)
+    assert image.info["Software"] == "Matplotlib version9, https://matplotlib.org/"
+    assert image.info["dpi"] == pytest.approx((DPI, DPI), abs=1e-3)

@@ -1,7 +1,8 @@
 """MCAP recording of an evaluation run, viewable in Foxglove and re-readable for re-fusion.
 
 Recording version 3 (:data:`RECORDING_VERSION`), written with the ``foxglove-sdk`` MCAP
-writer (zstd chunks). Channels:
+writer (zstd chunks); the protobuf messages are encoded by :mod:`cold_maps.recording.wire`
+(the SDK's bytes, built with numpy). Channels:
 
 - ``/gt``, ``/fused``, ``/detections/<sender>``: ``foxglove.SceneUpdate`` (the official
   Foxglove protobuf schema). One entity per polyline, a ``LINE_STRIP`` in frame ``map`` (=
@@ -52,10 +53,11 @@ import numpy as np
 import fusion
 from cold_maps.common.signals import signals_ignored
 from cold_maps.network.lane_strip import NDArrayFloat
+from cold_maps.recording import wire
 from cold_maps.recording.osi import OsiTraceError, OsiTraceWriter, detection_sensor_data
 from cold_maps.simulation.sensor import vehicle_to_world
 from cold_maps.simulation.sensor_errors import check_polyline
-from gt_matching.polyline import simplify_lines
+from gt_matching.polyline import simplify_joined, simplify_lines
 
 RECORDING_VERSION: Final[int] = 3
 TOPIC_GT: Final[str] = "/gt"
@@ -76,7 +78,8 @@ OSI_KIND: Final[str] = "osi"
 """``EncodedMessage.kind`` of an encoded ``osi3.SensorData`` for the OSI trace."""
 SCENE_BATCH: Final[int] = 256
 """Scene updates a recorder keeps before it simplifies their lines together (one shapely
-call) and writes them, with the messages between them, in order."""
+call) and encodes them, then writes them with the messages between them, in order (a
+detached recorder keeps them, encoded, for ``take``)."""
 MCAP_MAGIC: Final[bytes] = b"\x89MCAP0\r\n"
 NS_PER_S: Final[int] = 1_000_000_000
 MAX_STAMP_BASE_NS: Final[int] = 2**63 - 1 - 10**6 * NS_PER_S  # log times stay int64 for 11 days of frames
@@ -226,7 +229,8 @@ def _timestamp(ns: int) -> Any:
 
 
 def scene_update(ns: int, names: Sequence[str], drawn: Sequence[NDArrayFloat], color: RGBA) -> Any:
-    """A ``foxglove.SceneUpdate`` replacing everything on its topic with one entity per line.
+    """A ``foxglove.SceneUpdate`` replacing everything on its topic with one entity per line
+    (the reference: the recording writes :func:`wire.scene_updates`, its encoding as bytes).
 
     ``names`` are the entity ids of the ``(N, 2)`` world-frame polylines (m) ``drawn`` (as
     :func:`display_lines` returns them); ``ns`` is the log time (ns since the Unix epoch).
@@ -261,7 +265,8 @@ def scene_update(ns: int, names: Sequence[str], drawn: Sequence[NDArrayFloat], c
 
 def frame_transform(ns: int, sender: str, x: float, y: float, yaw: float) -> Any:
     """``foxglove.FrameTransform`` ``map`` -> ``sender`` at log time ``ns``: the vehicle at
-    (x m, y m) heading ``yaw`` (rad, counter-clockwise from x) in the world frame."""
+    (x m, y m) heading ``yaw`` (rad, counter-clockwise from x) in the world frame (the
+    reference of :func:`wire.frame_transform`, which the recording writes)."""
     from foxglove.messages import FrameTransform, Quaternion, Vector3
 
     return FrameTransform(timestamp=_timestamp(ns), parent_frame_id=FRAME_ID, child_frame_id=sender,
@@ -464,25 +469,36 @@ class Recorder:
     def _emit(self, topic: str, kind: str, ns: int, payload: bytes) -> None:
         self._queue.append(EncodedMessage(topic, kind, ns, payload))
 
-    def _emit_scene(self, topic: str, ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA) -> None:
-        """Queues the :func:`scene_update` of ``lines`` (checked now, drawn with the batch);
-        nothing without an MCAP file."""
+    def _emit_scene(self, topic: str, ns: int, lines: Mapping[str, NDArrayFloat], color: RGBA, *,
+                    checked: bool = False) -> None:
+        """Queues the :func:`scene_update` of ``lines`` (checked now unless ``checked``: finite
+        ``(N >= 2, 2)`` float64 arrays already; drawn with the batch); nothing without an MCAP file."""
         if not self.mcap:
             return
-        checked = tuple(check_polyline(name, points) for name, points in lines.items())
-        self._queue.append(_PendingScene(topic, ns, tuple(lines), checked, color))
+        polylines = tuple(lines.values()) if checked else tuple(check_polyline(n, p) for n, p in lines.items())
+        self._queue.append(_PendingScene(topic, ns, tuple(lines), polylines, color))
         self._scenes += 1
-        if self._scenes >= SCENE_BATCH and not self._detached:
-            self._write(self._take_queue())
+        if self._scenes >= SCENE_BATCH:
+            encoded = self._take_queue()
+            if self._detached:  # kept, encoded, for take()
+                self._queue = list(encoded)
+            else:
+                self._write(encoded)
 
     def _take_queue(self) -> list[EncodedMessage]:
         """The queued messages, in order, the scene updates' lines simplified together."""
         queue, self._queue, self._scenes = self._queue, [], 0
-        drawn = iter(_drawn([line for item in queue if isinstance(item, _PendingScene) for line in item.lines]))
-        return [item if isinstance(item, EncodedMessage) else EncodedMessage(
-            item.topic, "scene", item.log_time_ns,
-            scene_update(item.log_time_ns, item.names, [next(drawn) for _ in item.names], item.color).encode())
-            for item in queue]
+        scenes = [item for item in queue if isinstance(item, _PendingScene)]
+        lines = [line for item in scenes for line in item.lines]
+        if lines:
+            coordinates, counts = simplify_joined(lines, DISPLAY_TOLERANCE_M)
+            coordinates = np.round(coordinates, DISPLAY_DECIMALS)
+        else:
+            coordinates, counts = np.empty((0, 2)), np.empty(0, dtype=np.int64)
+        payloads = iter(wire.scene_updates([(item.log_time_ns, item.names, item.color) for item in scenes],
+                                           coordinates, counts, LINE_THICKNESS_M, FRAME_ID))
+        return [item if isinstance(item, EncodedMessage) else EncodedMessage(item.topic, "scene", item.log_time_ns,
+                                                                             next(payloads)) for item in queue]
 
     def _write(self, messages: Sequence[EncodedMessage]) -> None:
         for message in messages:
@@ -539,9 +555,12 @@ class Recorder:
         if lanes is not None:
             raw.update(_multi_lane(lanes))
         self._write_json(TOPIC_RAW_DETECTIONS, ns, raw)
-        self._emit(TOPIC_TF, "transform", ns, frame_transform(ns, sender, x, y, yaw).encode())
-        world = {"left": vehicle_to_world(left, x, y, yaw), "right": vehicle_to_world(right, x, y, yaw)}
-        self._emit_scene(TOPIC_DETECTIONS_PREFIX + sender, ns, world, COLOR_EGO if ego else COLOR_COOP)
+        self._emit(TOPIC_TF, "transform", ns, wire.frame_transform(ns, FRAME_ID, sender, x, y, yaw))
+        world = vehicle_to_world(np.concatenate((left, right)), x, y, yaw)
+        if not np.isfinite(world).all():
+            raise ValueError(f"{sender}: detection too far out to draw in the world frame")
+        self._emit_scene(TOPIC_DETECTIONS_PREFIX + sender, ns, {"left": world[:len(left)], "right": world[len(left):]},
+                         COLOR_EGO if ego else COLOR_COOP, checked=True)
 
     def write_metrics(self, stamp_s: float, frame: int, values: Mapping[str, float | int | None]) -> None:
         """Per-frame metrics on ``/metrics``; NaN and None are written as null."""
