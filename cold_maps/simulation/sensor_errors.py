@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
@@ -56,6 +57,24 @@ def left_normals(points: NDArrayFloat, name: str = "polyline") -> NDArrayFloat:
     norms = np.hypot(tangents[:, 0], tangents[:, 1])
     if np.any(norms == 0.0):
         raise ValueError(f"{name}: repeated or reversing points, normal undefined")
+    tangents /= norms[:, None]
+    return np.column_stack((-tangents[:, 1], tangents[:, 0]))
+
+
+def left_normals_stacked(points: NDArrayFloat, offsets: npt.NDArray[np.intp],
+                         names: Sequence[str]) -> NDArrayFloat:
+    """:func:`left_normals` of every polyline of the stack ``points`` (polyline k is
+    ``points[offsets[k]:offsets[k + 1]]``, at least 2 points, named ``names[k]``), in one
+    pass: the same values; ValueError naming the first one with a repeated point."""
+    first, last = offsets[:-1], offsets[1:] - 1
+    tangents = np.empty_like(points)
+    tangents[1:-1] = (points[2:] - points[:-2]) / 2.0
+    tangents[first] = points[first + 1] - points[first]
+    tangents[last] = points[last] - points[last - 1]
+    norms = np.hypot(tangents[:, 0], tangents[:, 1])
+    if np.any(norms == 0.0):
+        broken = int(np.searchsorted(offsets, np.flatnonzero(norms == 0.0)[0], side="right")) - 1
+        left_normals(points[first[broken]: last[broken] + 1], names[broken])
     tangents /= norms[:, None]
     return np.column_stack((-tangents[:, 1], tangents[:, 0]))
 
