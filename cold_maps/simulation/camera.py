@@ -157,6 +157,7 @@ def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBoo
     below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
     occluded = np.zeros(len(points), dtype=bool)
     for f, (start, stop) in enumerate(zip(offsets[:-1].tolist(), offsets[1:].tolist())):
+        # Frame by frame: a frame's footprints × points fit the cache, a block's do not.
         occluded[start:stop] = behind_footprints(points[start:stop], cameras[f, :2],
                                                  np.asarray(obstacles[f], dtype=np.float64).reshape(-1, 3),
                                                  profile.vehicle_length_m, profile.vehicle_width_m)
