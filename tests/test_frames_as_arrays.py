@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 import fusion
 from cold_maps.cli.evaluate import _plans, build_parser
 from cold_maps.evaluation.collector import Collector
+from cold_maps.evaluation import evaluator as evaluator_module
 from cold_maps.evaluation.evaluator import FRAME_RATE_HZ, MapEvaluator
 from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, obstacles_of, sense, sense_block
 from cold_maps.simulation.lane_model_error import LaneModelErrorSampler
@@ -119,9 +120,9 @@ def test_blocks_of_the_ideal_sensor_equal_the_frame_loop_on_the_junction(options
 
 @pytest.mark.parametrize("options", [(), tuple(ERRORS)], ids=["lane-error", "lane-error-errors"])
 def test_blocks_of_the_camera_equal_the_frame_loop_on_the_junction(options) -> None:
-    evaluator = _evaluator(bundled_map("junction"), "--sensor", "camera", *options)
+    evaluator = _evaluator(bundled_map("junction"), "--sensor", "camera", "--frames", "20", *options)
     assert evaluator.lane_errors is not None
-    assert _check_drives(evaluator, cuts=(1, 5, 30)) > 0
+    assert _check_drives(evaluator, cuts=(1, 5, 13)) > 0
 
 
 @pytest.mark.parametrize("sensor", ["ideal", "camera"])
@@ -182,12 +183,13 @@ def _records(collector: Collector) -> list[tuple]:
 @pytest.mark.parametrize("options", [("--history", "20", "--coops", "2", "--lanes", "1", *ERRORS),
                                      ("--exchange", "bezier", "--sensor", "camera")],
                          ids=["history-coops-lanes", "exchange-camera"])
-def test_the_evaluator_over_blocks_equals_its_frame_loop(options) -> None:
-    evaluator = _evaluator(bundled_map("junction"), "--frames", "25", *options)
+def test_the_evaluator_over_blocks_equals_its_frame_loop(options, monkeypatch) -> None:
+    monkeypatch.setattr(evaluator_module, "BLOCK_FRAMES", 4)
+    evaluator = _evaluator(bundled_map("junction"), "--frames", "10", "--routes", "1", *options)
     evaluator.prepare()
     blocks = Collector()
     evaluator.run(blocks)
-    reference = _evaluator(bundled_map("junction"), "--frames", "25", *options)
+    reference = _evaluator(bundled_map("junction"), "--frames", "10", "--routes", "1", *options)
     reference.prepare()
     loop = Collector()
     reference.note_drives(loop)

@@ -174,12 +174,11 @@ def _read_block(frames: Sequence[Mapping[str, VehicleState]],
                 sensor: LaneSensor | CameraSensor) -> list[dict[str, tuple[Detection | None, str]]]:
     """Every vehicle's sensor reading in every frame (the camera's obstacles: the other
     vehicles of the frame), read as arrays over the frames of each vehicle and track."""
-    camera = isinstance(sensor, CameraSensor)
-    obstacles = [obstacles_of(states) for states in frames] if camera else None
     groups: dict[tuple[str, int], list[int]] = {}
     for frame, states in enumerate(frames):
         for name, state in states.items():
             groups.setdefault((name, id(state.track)), []).append(frame)
+    obstacles = _block_obstacles(frames, groups) if isinstance(sensor, CameraSensor) else None
     raws: list[dict[str, tuple[Detection | None, str]]] = [{} for _ in frames]
     for (name, _), indices in groups.items():
         track = frames[indices[0]][name].track
@@ -188,6 +187,24 @@ def _read_block(frames: Sequence[Mapping[str, VehicleState]],
         for frame, reading in zip(indices, sensor.read_many(track, stations, hidden_by)):
             raws[frame][name] = reading
     return raws
+
+
+def _block_obstacles(frames: Sequence[Mapping[str, VehicleState]],
+                     groups: Mapping[tuple[str, int], Sequence[int]]) -> list[dict[str, NDArrayFloat]]:
+    """:func:`obstacles_of` of every frame, the poses of each vehicle's frames on a track
+    taken at once (``LaneStrip.poses``: the same values)."""
+    poses: list[dict[str, tuple[float, float, float]]] = [{} for _ in frames]
+    for (name, _), indices in groups.items():
+        strip = frames[indices[0]][name].track.strip
+        x, y, yaw = strip.poses(np.array([frames[frame][name].station for frame in indices]))
+        for frame, pose in zip(indices, zip(x.tolist(), y.tolist(), yaw.tolist())):
+            poses[frame][name] = pose
+    out = []
+    for states, frame_poses in zip(frames, poses):
+        table = np.array([frame_poses[name] for name in states]).reshape(-1, 3)
+        everyone = np.arange(len(table))
+        out.append({name: table[everyone != index] for index, name in enumerate(states)})
+    return out
 
 
 def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_error: LaneModelErrorSampler | None,
