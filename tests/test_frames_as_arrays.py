@@ -22,11 +22,16 @@ from cold_maps.evaluation import evaluator as evaluator_module
 from cold_maps.evaluation.evaluator import FRAME_RATE_HZ, MapEvaluator
 from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, obstacles_of, sense, sense_block
 from cold_maps.simulation.lane_model_error import LaneModelErrorSampler
+from cold_maps.simulation.sensor_errors import SensorErrorModel
 from fusion.types import clean_borders, stacked_arclength, stacked_arclengths
 
 ERRORS = ["--lateral-offset", "0.05", "--noise", "0.03", "--heading-bias", "0.002", "--range-jitter", "3",
           "--drop", "0.1", "--pose-xy", "0.2", "--pose-yaw", "0.01"]
 """Every sensor error model on (each draws from the drive's generator)."""
+KNOWN_ERRORS = ["--lateral-offset", "0.05", "--noise", "0.03", "--heading-bias", "0.002", "--pose-xy", "0.2",
+                "--pose-yaw", "0.01"]
+"""The error models whose draws per detection are known before drawing (no drop, no jitter):
+drawn for a whole block at once."""
 
 
 def _evaluator(map_path, *options: str) -> MapEvaluator:
@@ -112,13 +117,15 @@ def _check_drives(evaluator: MapEvaluator, cuts: tuple[int, ...] = (17,)) -> int
     return compared
 
 
-@pytest.mark.parametrize("options", [(), tuple(ERRORS), ("--lanes", "1", *ERRORS)],
-                         ids=["ideal", "errors", "lanes1-errors"])
+@pytest.mark.parametrize("options", [(), tuple(ERRORS), tuple(KNOWN_ERRORS), ("--lanes", "1"),
+                                     ("--lanes", "1", *ERRORS), ("--lanes", "1", *KNOWN_ERRORS)],
+                         ids=["ideal", "errors", "known-errors", "lanes1", "lanes1-errors", "lanes1-known-errors"])
 def test_blocks_of_the_ideal_sensor_equal_the_frame_loop_on_the_junction(options) -> None:
     assert _check_drives(_evaluator(bundled_map("junction"), *options)) > 0
 
 
-@pytest.mark.parametrize("options", [(), tuple(ERRORS)], ids=["lane-error", "lane-error-errors"])
+@pytest.mark.parametrize("options", [(), tuple(ERRORS), tuple(KNOWN_ERRORS)],
+                         ids=["lane-error", "lane-error-errors", "lane-error-known-errors"])
 def test_blocks_of_the_camera_equal_the_frame_loop_on_the_junction(options) -> None:
     evaluator = _evaluator(bundled_map("junction"), "--sensor", "camera", "--frames", "20", *options)
     assert evaluator.lane_errors is not None
@@ -230,3 +237,33 @@ def test_block_checks_equal_the_detection_checks(lengths, seed, repeat) -> None:
         for k in range(0, len(borders) - 1, 2):
             pair = np.concatenate(borders[k: k + 2])
             assert np.array_equal(arclength[offsets[k]: offsets[k + 2]], stacked_arclength(pair, lengths[k]))
+
+
+@settings(max_examples=30, deadline=None)
+@given(lengths=st.lists(st.integers(2, 30), min_size=2, max_size=10).filter(lambda n: len(n) % 2 == 0),
+       seed=st.integers(0, 2**16), offset=st.sampled_from([0.0, -0.2]), noise=st.sampled_from([0.0, 0.05]),
+       bias=st.sampled_from([0.0, 0.01]), pose_xy=st.sampled_from([0.0, 0.3]), pose_yaw=st.sampled_from([0.0, 0.02]))
+def test_apply_block_equals_apply_then_perturb_pose(lengths, seed, offset, noise, bias, pose_xy, pose_yaw) -> None:
+    """SensorErrorModel.apply_block draws what apply and perturb_pose draw, detection by
+    detection, and moves every point and pose the same, bit for bit."""
+    errors = SensorErrorModel(lateral_offset_m=offset, noise_sigma_m=noise, heading_bias_rad=bias,
+                              pose_sigma_xy_m=pose_xy, pose_sigma_yaw_rad=pose_yaw)
+    borders = [np.column_stack((np.arange(n) * 0.1, np.sin(np.arange(n) * 0.1) + side))
+               for n, side in zip(lengths, [1.5, -1.5] * len(lengths))]
+    pairs = list(zip(borders[::2], borders[1::2]))
+    poses = [None if k % 3 == 0 else (float(k), -float(k), 0.1 * k) for k in range(len(pairs))]
+    one, other = np.random.default_rng(seed), np.random.default_rng(seed)
+    expected_borders, expected_poses = [], []
+    for (left, right), pose in zip(pairs, poses):
+        expected_borders.append(errors.apply(left, right, one))
+        expected_poses.append(None if pose is None else errors.perturb_pose(*pose, one))
+    got_borders, got_poses = errors.apply_block(pairs, poses, other)
+    assert got_poses == expected_poses
+    for (a, b), (c, d) in zip(expected_borders, got_borders):
+        assert np.array_equal(a, c) and np.array_equal(b, d)
+    assert one.random() == other.random()
+
+
+def test_apply_block_refuses_models_that_draw_as_they_go() -> None:
+    with pytest.raises(ValueError, match="apply_block"):
+        SensorErrorModel(drop_probability=0.1).apply_block([], [], np.random.default_rng(0))

@@ -117,11 +117,11 @@ def _reported_pose(state: VehicleState, raw: Detection, errors: SensorErrorModel
 @dataclass
 class _Pending:
     """A detection of :func:`sense_block` between its draws and its checks: where it is in
-    the block, its state, sensor reading, borders (vehicle frame, m) and what comes with it."""
+    the block, its state, why its lane ended, its borders (vehicle frame, m) and what comes
+    with it."""
 
     frame: int
     state: VehicleState
-    raw: Detection
     end_reason: str
     borders: tuple[NDArrayFloat, NDArrayFloat]
     beside: tuple[tuple[fusion.NeighbourLane, ...], fusion.RoadEdges | None, tuple[fusion.LaneBranch, ...]]
@@ -143,19 +143,34 @@ def sense_block(frames: Sequence[Mapping[str, VehicleState]], sensor: LaneSensor
     out: list[dict[str, Sensed]] = [{} for _ in frames]
     pending: list[_Pending] = []
     identity = errors == SensorErrorModel()
+    at_once = not identity and neighbours is None and errors.draws_known
     for frame, states in enumerate(frames):
         for name, state in states.items():
             raw, end_reason = raws[frame][name]
             if raw is None:
                 out[frame][name] = Sensed(state, None, end_reason, seen=False)
                 continue
-            borders = (raw.left, raw.right) if identity else errors.apply(raw.left, raw.right, rng)
+            if identity or at_once:
+                # Identity errors draw nothing; known draws come after the loop, all at once.
+                pending.append(_Pending(frame, state, end_reason, (raw.left, raw.right),
+                                        _beside(state, raw, sensor, errors, rng, neighbours),
+                                        fusion.Pose2D(raw.x, raw.y, raw.yaw)))
+                continue
+            borders = errors.apply(raw.left, raw.right, rng)
             if borders is None:
                 out[frame][name] = Sensed(state, None, end_reason)
                 continue
             beside = _beside(state, raw, sensor, errors, rng, neighbours)
-            pending.append(_Pending(frame, state, raw, end_reason, borders, beside,
+            pending.append(_Pending(frame, state, end_reason, borders, beside,
                                     _reported_pose(state, raw, errors, rng)))
+    if at_once:
+        borders, poses = errors.apply_block(
+            [item.borders for item in pending],
+            [None if item.state.role == "ego" else (item.pose.x, item.pose.y, item.pose.yaw) for item in pending], rng)
+        for item, pair, pose in zip(pending, borders, poses):
+            item.borders = pair
+            if pose is not None:
+                item.pose = fusion.Pose2D(*pose)
     if lane_error is not None:
         by_vehicle: dict[str, list[_Pending]] = {}
         for item in pending:
@@ -221,7 +236,8 @@ def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_erro
     clean = clean_borders(points, offsets)
     arclength = _frozen(stacked_arclengths(points, offsets))
     params = None if lane_error is None else lane_error.params
-    sigma = _block_sigmas(points, errors, params)
+    sigma = _point_sigmas(points[:, 0], errors, params)
+    sigma = None if sigma is None else _frozen(sigma)
     covariances = {role: _frozen_or_none(pose_covariance(errors, role)) for role in ("ego", "coop")}
     out = []
     for k, item in enumerate(pending):
@@ -242,19 +258,6 @@ def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_erro
     return out
 
 
-def _block_sigmas(points: NDArrayFloat, errors: SensorErrorModel,
-                  lane_error: LaneModelErrorParams | None) -> NDArrayFloat | None:
-    """:func:`lateral_sigmas` of every point of the stacked borders ``points`` (read-only),
-    or None when no model states one."""
-    noise = errors.noise_sigma_m
-    if lane_error is None and noise == 0.0:
-        return None
-    if lane_error is None:
-        return _frozen(np.full(len(points), noise))
-    out = lane_error.sigma_m(points[:, 0])
-    return _frozen(np.hypot(out, noise) if noise > 0.0 else out)
-
-
 def _frozen(array: NDArrayFloat) -> NDArrayFloat:
     array.flags.writeable = False
     return array
@@ -270,13 +273,20 @@ def lateral_sigmas(borders: tuple[NDArrayFloat, NDArrayFloat], errors: SensorErr
     the lane model's closed form at the point's x and the per-point noise σ, independent,
     so their variances add; (None, None) when neither model is on. The constant offset and
     heading bias are systematic and the range jitter is along the lane: none adds to σ."""
+    return _point_sigmas(borders[0][:, 0], errors, lane_error), _point_sigmas(borders[1][:, 0], errors, lane_error)
+
+
+def _point_sigmas(x: NDArrayFloat, errors: SensorErrorModel,
+                  lane_error: LaneModelErrorParams | None) -> NDArrayFloat | None:
+    """Lateral 1σ (m) of border points at forward distances ``x`` (m, vehicle frame), as
+    :func:`lateral_sigmas` states them; None when neither model is on."""
     noise = errors.noise_sigma_m
     if lane_error is None and noise == 0.0:
-        return None, None
+        return None
     if lane_error is None:
-        return np.full(len(borders[0]), noise), np.full(len(borders[1]), noise)
-    out = [lane_error.sigma_m(border[:, 0]) for border in borders]
-    return (np.hypot(out[0], noise), np.hypot(out[1], noise)) if noise > 0.0 else (out[0], out[1])
+        return np.full(len(x), noise)
+    out = lane_error.sigma_m(x)
+    return np.hypot(out, noise) if noise > 0.0 else out
 
 
 def pose_covariance(errors: SensorErrorModel, role: str) -> NDArrayFloat | None:

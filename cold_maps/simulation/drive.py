@@ -314,13 +314,12 @@ class Drive:
             return
         lanes = np.clip(np.searchsorted(self.ego.lane_starts, targets, side="right") - 1, 0, len(self.ego.lanes) - 1)
         points = self.ego.strip.interpolate(targets)[0]
-        found = np.full(len(targets), -1)
-        stations = np.zeros(len(targets))
+        placed = np.zeros(len(targets), dtype=bool)
         for lane_index in np.unique(lanes[fits]).tolist():
             for role, track in self.beside.get(self.ego.lanes[lane_index], ()):
                 if role != vehicle.role:
                     continue
-                frames = np.flatnonzero(fits & (lanes == lane_index) & (found < 0))
+                frames = np.flatnonzero(fits & (lanes == lane_index) & ~placed)
                 if frames.size == 0:
                     break
                 nearest = track.nearest_within(points[frames], BESIDE_MAX_DISTANCE_M)
@@ -328,9 +327,10 @@ class Drive:
                 ok = (nearest >= 0) & self._fits_all(track, station)
                 for frame, at in zip(frames[ok].tolist(), station[ok].tolist()):
                     blocks[frame][vehicle.name] = self._state(vehicle.name, vehicle.role, track, at, vehicle.lead_m)
-                found[frames[ok]] = 1
+                placed[frames[ok]] = True
 
     def _fits_all(self, track: Track, stations: NDArrayFloat) -> npt.NDArray[np.bool_]:
+        """:meth:`_fits` of every station (m)."""
         return (0.0 <= stations) & (stations <= track.length - self.sensor_range_m)
 
     def _state(self, name: str, role: str, track: Track, station: float, lead_m: float = 0.0) -> VehicleState:
