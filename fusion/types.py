@@ -88,6 +88,39 @@ def validated_border(name: str, points: object) -> NDArrayFloat:
     return _validated_border(name, points)[0]
 
 
+def clean_borders(points: NDArrayFloat, offsets: npt.NDArray[np.intp]) -> npt.NDArray[np.bool_]:
+    """Per border of the stack ``points`` (float64 ``(N, 2)``, border k is
+    ``points[offsets[k]:offsets[k + 1]]``), whether :func:`validated_border` keeps it as it
+    is: finite, at least two points, none within ``MIN_POINT_STEP_M`` of its predecessor
+    (one check for the whole stack)."""
+    counts = np.diff(offsets)
+    out = counts >= MIN_BORDER_POINTS
+    if len(points) == 0:
+        return out
+    step = np.diff(points, axis=0)
+    bad = np.zeros(len(points), dtype=bool)
+    bad[1:] = ~(np.hypot(step[:, 0], step[:, 1]) > MIN_POINT_STEP_M)
+    starts = offsets[:-1][counts > 0]
+    bad[starts] = False
+    finite = np.isfinite(points)
+    if not finite.all():
+        bad |= ~(finite[:, 0] & finite[:, 1])
+    if bad.any():
+        out[counts > 0] &= ~np.logical_or.reduceat(bad, starts)
+    return out
+
+
+def stacked_arclengths(points: NDArrayFloat, offsets: npt.NDArray[np.intp]) -> NDArrayFloat:
+    """:func:`stacked_arclength` of every polyline of the stack ``points`` (polyline k is
+    ``points[offsets[k]:offsets[k + 1]]``, at least one point each), each from 0 at its first
+    point: the segment lengths in one pass, accumulated polyline by polyline (the same values)."""
+    seg = np.abs((points[1:] - points[:-1]).view(np.complex128)[:, 0])
+    out = np.zeros(len(points))
+    for start, stop in zip(offsets[:-1].tolist(), offsets[1:].tolist()):
+        np.cumsum(seg[start: stop - 1], out=out[start + 1: stop])
+    return out
+
+
 def _float_array(name: str, values: object) -> NDArrayFloat:
     """``values`` as a float64 array; ``InvalidDetectionError`` naming ``name`` when not numeric."""
     try:
@@ -320,6 +353,26 @@ class LaneDetection:
         if self.road_edges is not None and not isinstance(self.road_edges, RoadEdges):
             raise InvalidDetectionError(f"LaneDetection.road_edges must be RoadEdges or None, "
                                         f"got {type(self.road_edges).__name__}")
+
+    @classmethod
+    def trusted(cls, pose: Pose2D, points: NDArrayFloat, n_left: int, *, stamp: float = 0.0, sender: str = "",
+                neighbours: tuple[NeighbourLane, ...] = (), road_edges: RoadEdges | None = None,
+                branches: tuple[LaneBranch, ...] = (), left_sigma: NDArrayFloat | None = None,
+                right_sigma: NDArrayFloat | None = None, pose_cov: NDArrayFloat | None = None,
+                arclength: NDArrayFloat | None = None) -> LaneDetection:
+        """The detection of borders already checked as a block (:func:`clean_borders` true for
+        both, ``points`` the stacked left and right, float64, read-only), sigmas, covariance
+        and (if given) ``arclength`` (:func:`stacked_arclengths`) already valid and read-only:
+        equal to the constructor's, without its per-detection checks and copies."""
+        detection = object.__new__(cls)
+        put = object.__setattr__
+        for name, value in (("pose", pose), ("stamp", stamp), ("sender", sender), ("history", None),
+                            ("neighbours", neighbours), ("road_edges", road_edges), ("branches", branches),
+                            ("left_sigma", left_sigma), ("right_sigma", right_sigma), ("pose_cov", pose_cov),
+                            ("points", points), ("left", points[:n_left]), ("right", points[n_left:]),
+                            ("arclength", _frozen(stacked_arclength(points, n_left)) if arclength is None else arclength)):
+            put(detection, name, value)
+        return detection
 
     def __repr__(self) -> str:
         """One line: sender, stamp, pose, points per border and what else the detection carries."""

@@ -47,7 +47,7 @@ from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
-from cold_maps.simulation.detection import NO_OBSTACLES, Sensed, detection_pose, obstacles_of, sense, world_borders
+from cold_maps.simulation.detection import Sensed, detection_pose, sense_block, world_borders
 from cold_maps.simulation.exchange import LaneExchange
 from cold_maps.simulation.drive import (
     FRAME_RATE_HZ,
@@ -77,6 +77,9 @@ OVERLAY_MARGIN_M: Final[float] = 10.0
 """The overlay plot shows the GT this far (m) around the detections and the fused lane."""
 RELATION_MARGIN_M: Final[float] = 5.0
 """Slack (m) on the longest lane distance at which a coop counts as ahead of the ego."""
+BLOCK_FRAMES: Final[int] = 100
+"""Frames of a drive whose vehicle states and detections are computed at once, as arrays
+(:meth:`Drive.states_block`, :func:`sense_block`); the fusion stays per frame."""
 
 
 class MapEvaluator:
@@ -245,11 +248,17 @@ class MapEvaluator:
         collector.drives[(self.plan.name, drive_index)] = (frame_offset, drive.frames)
         if frames.start == 0:
             LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-        for frame in frames:
-            self._frame(collector, drive_index, frame, frame_offset + frame, recorder)
-            collector.frames_done += 1
-            if on_frame is not None:
-                on_frame()
+        lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
+        for first in range(frames.start, frames.stop, BLOCK_FRAMES):
+            block = range(first, min(first + BLOCK_FRAMES, frames.stop))
+            sensed = sense_block(drive.states_block(block), self.sensor, self.plan.errors, self.drive_rngs[drive_index],
+                                 stamps_s=[(frame_offset + frame) / FRAME_RATE_HZ for frame in block],
+                                 neighbours=self.neighbours, lane_error=lane_error)
+            for frame, frame_sensed in zip(block, sensed):
+                self._frame(collector, drive_index, frame_offset + frame, recorder, frame_sensed)
+                collector.frames_done += 1
+                if on_frame is not None:
+                    on_frame()
         return frame_offset + frames.stop
 
     @property
@@ -271,19 +280,14 @@ class MapEvaluator:
             LOG.warning(note)
             collector.notes.append(note)
 
-    def _frame(self, collector: Collector, drive_index: int, frame: int, index: int,
-               recorder: Recorder | None) -> None:
+    def _frame(self, collector: Collector, drive_index: int, index: int, recorder: Recorder | None,
+               sensed: dict[str, Sensed]) -> None:
+        """One frame (global index ``index``) of drive ``drive_index`` from its vehicles'
+        detections ``sensed`` (:func:`sense_block`): the pairs fused, measured, recorded."""
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
-        drive, rng = self.drives[drive_index], self.drive_rngs[drive_index]
         self._relations.clear()
         self._true_lanes.clear()
-        states = drive.states(frame)
-        obstacles = obstacles_of(states) if plan.sensor.kind == "camera" else {}
-        lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
-        sensed = {name: sense(state, self.sensor, plan.errors, rng, stamp_s=stamp, neighbours=self.neighbours,
-                              obstacles=obstacles.get(name, NO_OBSTACLES), lane_error=lane_error)
-                  for name, state in states.items()}
         sent: dict[str, int] = {}
         if self.exchange is not None:
             sensed, sent = self.exchange.apply(drive_index, sensed, stamp)

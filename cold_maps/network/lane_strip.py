@@ -29,6 +29,18 @@ def resample_polyline(points: NDArrayFloat, distance: NDArrayFloat, start: float
     return np.column_stack((np.interp(samples, distance, points[:, 0]), np.interp(samples, distance, points[:, 1])))
 
 
+def resample_polylines(points: NDArrayFloat, distance: NDArrayFloat, start: NDArrayFloat, end: NDArrayFloat,
+                       step: float) -> tuple[NDArrayFloat, npt.NDArray[np.intp]]:
+    """:func:`resample_polyline` from every ``start[k]`` to ``end[k]`` (m of arc length), the
+    samples of all stretches stacked in order (the same values as one by one), and the
+    (K + 1,) offsets of each stretch's first sample in the stack."""
+    counts = np.maximum(np.ceil((end - start) / step - 1e-9).astype(np.intp), 1) + 1
+    offsets = np.concatenate(([0], np.cumsum(counts)))
+    local = np.arange(offsets[-1]) - np.repeat(offsets[:-1], counts)
+    samples = np.minimum(np.repeat(start, counts) + step * local, np.repeat(end, counts))
+    return np.column_stack((np.interp(samples, distance, points[:, 0]), np.interp(samples, distance, points[:, 1]))), offsets
+
+
 @dataclass(frozen=True)
 class LaneStrip:
     """A lane along a route, world frame (OpenDRIVE inertial), in driving direction.
@@ -102,6 +114,19 @@ class LaneStrip:
         return (self.centerline[index] * (1.0 - w) + self.centerline[after] * w,
                 self.left[index] * (1.0 - w) + self.left[after] * w,
                 self.right[index] * (1.0 - w) + self.right[after] * w)
+
+    def poses(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+        """:meth:`pose` of every station (m): x, y (m) and heading (rad) arrays, the same
+        values as station by station."""
+        stations = np.asarray(stations, dtype=np.float64)
+        clamped = np.minimum(np.maximum(stations, 0.0), self.length)
+        index = np.minimum(np.maximum(np.searchsorted(self.station, clamped, side="right") - 1, 0),
+                           len(self.station) - 2)
+        before = self.station[index]
+        w = ((clamped - before) / (self.station[index + 1] - before))[:, None]
+        centre = self.centerline[index] * (1.0 - w) + self.centerline[index + 1] * w
+        yaw = np.interp(stations, self.station, self.heading)
+        return centre[:, 0], centre[:, 1], np.arctan2(np.sin(yaw), np.cos(yaw))
 
     def pose(self, station: float) -> tuple[float, float, float]:
         """Position (m) and heading (rad) of the centreline at a station (``_weights`` of

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -43,7 +43,8 @@ from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.opendrive.road_marks import classify_border
 from cold_maps.simulation.drive import Track
-from cold_maps.simulation.sensor import Detection, LaneSensor, detection_between, world_to_vehicle
+from cold_maps.simulation.sensor import (Detection, LaneSensor, _into_frame, detection_between, detections_between,
+                                         world_to_vehicle)
 from cold_maps.simulation.sensor_profile import SensorProfile
 
 NDArrayBool = npt.NDArray[np.bool_]
@@ -129,6 +130,40 @@ def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, ca
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
+
+
+def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, offsets: NDArrayInt,
+                   counts: NDArrayInt, cameras: NDArrayFloat, obstacles: Sequence[NDArrayFloat],
+                   profile: SensorProfile) -> NDArrayInt:
+    """:func:`hidden_by` of F frames at once: frame f's points are
+    ``points[offsets[f]:offsets[f + 1]]``, its left border's ``counts[f]`` candidates then its
+    right's (z, detectable alike), seen from ``cameras[f]`` (x, y m, yaw rad, z m) with the
+    other vehicles at ``obstacles[f]`` (M, 3); the (P,) masks, the same values."""
+    owner = np.repeat(np.arange(len(counts)), 2 * counts)
+    x, y, yaw, camera_z = (cameras[:, k][owner] for k in range(4))
+    local = _into_frame(points, x, y, np.cos(cameras[:, 2])[owner], np.sin(cameras[:, 2])[owner])
+    distance = np.hypot(local[:, 0], local[:, 1])
+    bearing = np.abs(np.arctan2(local[:, 1], local[:, 0]))
+    elevation = np.arctan2(z - camera_z, distance)
+    # The running horizon along each border: its candidates as one row of a padded table.
+    border = np.repeat(np.arange(2 * len(counts)), np.repeat(counts, 2))
+    border_start = np.repeat(offsets[:-1], 2) + np.tile([0, 1], len(counts)) * np.repeat(counts, 2)
+    column = np.arange(len(points)) - border_start[border]
+    table = np.full((2 * len(counts), int(counts.max())), -np.inf)
+    table[border, column] = elevation
+    horizon = np.maximum.accumulate(table, axis=1)
+    below = np.zeros(len(points), dtype=bool)
+    later = column > 0
+    below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
+    occluded = np.zeros(len(points), dtype=bool)
+    for f, (start, stop) in enumerate(zip(offsets[:-1].tolist(), offsets[1:].tolist())):
+        # Frame by frame: a frame's footprints × points fit the cache, a block's do not.
+        occluded[start:stop] = behind_footprints(points[start:stop], cameras[f, :2],
+                                                 np.asarray(obstacles[f], dtype=np.float64).reshape(-1, 3),
+                                                 profile.vehicle_length_m, profile.vehicle_width_m)
+    failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
+              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
+    return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(len(points), np.int64))
 
 
 def behind_footprints(points: NDArrayFloat, camera: NDArrayFloat, obstacles: NDArrayFloat, length_m: float,
@@ -261,6 +296,68 @@ class CameraSensor:
             return None, reason
         return detection_between(strip, x, y, yaw, float(stations[start]), float(stations[end]), self.step_m,
                                  reason), reason
+
+    def read_many(self, track: Track, stations: NDArrayFloat,
+                  obstacles: Sequence[NDArrayFloat]) -> list[tuple[Detection | None, str]]:
+        """:meth:`read` at every station (m) of ``stations`` with the other vehicles at
+        ``obstacles[k]``."""
+        strip = track.strip
+        profile = self.profile
+        stations = np.asarray(stations, dtype=np.float64)
+        if len(stations) == 0:
+            return []
+        last = np.minimum(stations + self.search_m, strip.length)
+        counts = np.maximum(np.ceil((last - stations) / self.step_m - 1e-9).astype(np.intp), 1) + 1
+        starts = np.concatenate(([0], np.cumsum(counts)))
+        frame_of = np.repeat(np.arange(len(stations)), counts)
+        local = np.arange(starts[-1]) - starts[frame_of]
+        candidates = np.minimum(stations[frame_of] + self.step_m * local, last[frame_of])
+        _, left, right = strip.interpolate(candidates)
+        surface = self.surface(track)
+        z, detectable = surface.at(candidates)
+        x, y, yaw = strip.poses(stations)
+        camera_z = np.interp(stations, surface.station, 0.5 * (surface.z[0] + surface.z[1])) + profile.camera_height_m
+        # Each frame's points as hidden_by sees them: its left border's candidates, then its right's.
+        total = int(starts[-1])
+        order = np.arange(2 * total)
+        owner = np.repeat(np.arange(len(stations)), 2 * counts)
+        within = order - 2 * starts[owner]
+        right_side = within >= counts[owner]
+        pick = starts[owner] + within - counts[owner] * right_side + total * right_side
+        points = np.concatenate((left, right))[pick]
+        hidden = hidden_by_many(points, np.concatenate((z[0], z[1]))[pick],
+                                np.concatenate((detectable[0], detectable[1]))[pick], 2 * starts, counts,
+                                np.column_stack((x, y, yaw, camera_z)), obstacles, profile)
+        near = np.hypot(points[:, 0] - x[owner], points[:, 1] - y[owner]) >= profile.min_range_m
+        along_left = np.interp(candidates, strip.station, strip.left_distance)
+        along_right = np.interp(candidates, strip.station, strip.right_distance)
+        out: list[tuple[Detection | None, str]] = []
+        windows: list[tuple[int, float, float, str]] = []
+        for f, (first, count) in enumerate(zip(starts[:-1].tolist(), counts.tolist())):
+            ran_out = "map_end" if last[f] >= strip.length else "range"
+            both = near[2 * first: 2 * first + count] & near[2 * first + count: 2 * first + 2 * count]
+            started = np.flatnonzero(both)
+            if started.size == 0:
+                out.append((None, ran_out))
+                continue
+            start = int(started[0])
+            mask = hidden[2 * first: 2 * first + 2 * count].reshape(2, count)
+            along = np.stack((along_left[first: first + count], along_right[first: first + count]))
+            end, why = detection_window(mask, along, start, profile.gap_tolerance_m)
+            reason = END_REASONS[why] if why >= 0 else ran_out
+            here = candidates[first: first + count]
+            if end <= start or here[end] - here[start] < self.step_m:
+                out.append((None, reason))
+                continue
+            windows.append((f, float(here[start]), float(here[end]), reason))
+            out.append((None, reason))
+        if windows:
+            index = np.array([w[0] for w in windows])
+            found = detections_between(strip, x[index], y[index], yaw[index], np.array([w[1] for w in windows]),
+                                       np.array([w[2] for w in windows]), self.step_m, [w[3] for w in windows])
+            for (f, _, _, reason), detection in zip(windows, found):
+                out[f] = (detection, reason)
+        return out
 
 
 def lane_sensor(profile: SensorProfile, graph: LaneGraph) -> LaneSensor | CameraSensor:

@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Final, Literal, Mapping, Sequence
+from functools import cached_property
+from typing import Any, Final, Literal, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.network.lane_area import offset_inside
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
@@ -134,6 +136,44 @@ class Track:
         return any(max(starts[i], start) <= min(starts[i + 1], end - (starts[j] - starts[i]))
                    for i, j in self._repeats())
 
+    def wraps_all(self, start: NDArrayFloat, end: NDArrayFloat) -> npt.NDArray[np.bool_]:
+        """:meth:`wraps` of every stretch [``start[k]``, ``end[k]``] (m)."""
+        starts = self.lane_starts
+        out = np.zeros(np.shape(start), dtype=bool)
+        for i, j in self._repeats():
+            out |= np.maximum(starts[i], start) <= np.minimum(starts[i + 1], end - (starts[j] - starts[i]))
+        return out
+
+    def nearest_within(self, points: NDArrayFloat, radius_m: float) -> npt.NDArray[np.intp]:
+        """Per point of ``points`` (K, 2, world frame, m), the index of its nearest centreline
+        point as ``np.argmin`` of the ``np.hypot`` distances to all of them finds it (the first
+        of equals) when that distance is at most ``radius_m``, else -1; only the points a
+        k-d tree finds within a slightly larger radius are measured."""
+        centre = self.strip.centerline
+        found = self._centre_tree.query_ball_point(points, radius_m * (1.0 + 1e-9) + 1e-9, return_sorted=True)
+        counts = np.array([len(near) for near in found], dtype=np.intp)
+        out = np.full(len(points), -1, dtype=np.intp)
+        if not counts.any():
+            return out
+        index = np.concatenate([near for near in found if near]).astype(np.intp)
+        rows = np.repeat(np.arange(len(points)), counts)
+        distance = np.hypot(centre[index, 0] - points[rows, 0], centre[index, 1] - points[rows, 1])
+        starts = np.concatenate(([0], np.cumsum(counts)))[:-1][counts > 0]
+        least = np.minimum.reduceat(distance, starts)
+        row_least = np.repeat(least, counts[counts > 0])
+        first = np.flatnonzero(distance == row_least)
+        first = first[np.concatenate(([True], rows[first][1:] != rows[first][:-1]))]
+        within = distance[first] <= radius_m
+        out[rows[first][within]] = index[first][within]
+        return out
+
+    @cached_property
+    def _centre_tree(self) -> Any:
+        """A k-d tree of the centreline points (scipy ``cKDTree``)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.strip.centerline)
+
     def lane_at(self, station: float) -> tuple[int, float]:
         """Index of the lane at ``station`` and the distance (m) driven in it."""
         index = int(np.clip(np.searchsorted(self.lane_starts, station, side="right") - 1, 0, len(self.lanes) - 1))
@@ -233,6 +273,65 @@ class Drive:
             if state is not None:
                 states[vehicle.name] = state
         return states
+
+    def states_block(self, frames: range) -> list[dict[str, VehicleState]]:
+        """:meth:`states` of every frame of ``frames`` (a step-1 range inside the drive),
+        computed as arrays over the frames, vehicle by vehicle: the same states, same order."""
+        if frames.step != 1 or (len(frames) and not 0 <= frames.start <= frames.stop - 1 < self.frames):
+            raise ValueError(f"frames {frames} outside the drive's 0..{self.frames - 1} (or not consecutive)")
+        ego_stations = self.start_station_m + np.arange(frames.start, frames.stop) * self.speed_mps / self.rate_hz
+        blocks: list[dict[str, VehicleState]] = [{} for _ in frames]
+        self._fill(blocks, "ego", "ego", self.ego, ego_stations, np.ones(len(frames), dtype=bool), 0.0)
+        for vehicle in self.vehicles:
+            self._vehicle_states(blocks, vehicle, ego_stations)
+        return blocks
+
+    def _fill(self, blocks: list[dict[str, VehicleState]], name: str, role: str, track: Track, stations: NDArrayFloat,
+              present: npt.NDArray[np.bool_], lead_m: float) -> None:
+        """Adds the state at ``stations`` (m, one per frame) to the frames where ``present``."""
+        frames = np.flatnonzero(present)
+        kept = stations[frames]
+        index = np.clip(np.searchsorted(track.lane_starts, kept, side="right") - 1, 0, len(track.lanes) - 1)
+        offsets = kept - track.lane_starts[index]
+        for frame, station, lane, offset in zip(frames.tolist(), kept.tolist(), index.tolist(), offsets.tolist()):
+            blocks[frame][name] = VehicleState(name, role, track, station, track.lanes[lane], offset, lead_m)
+
+    def _vehicle_states(self, blocks: list[dict[str, VehicleState]], vehicle: Vehicle,
+                        ego_stations: NDArrayFloat) -> None:
+        """:meth:`_vehicle_state` over the frames of ``blocks`` (ego at ``ego_stations``)."""
+        targets = ego_stations + vehicle.lead_m
+        if vehicle.track is not None:
+            track = vehicle.track
+            present = self._fits_all(track, targets)
+            if vehicle.role == "turn":
+                present &= (ego_stations < vehicle.branch_station_m) & (vehicle.branch_station_m < targets)
+            present &= ~track.wraps_all(np.minimum(ego_stations, targets),
+                                        np.maximum(ego_stations, targets) + self.sensor_range_m)
+            self._fill(blocks, vehicle.name, vehicle.role, track, targets, present, vehicle.lead_m)
+            return
+        fits = self._fits_all(self.ego, targets)
+        if not fits.any():
+            return
+        lanes = np.clip(np.searchsorted(self.ego.lane_starts, targets, side="right") - 1, 0, len(self.ego.lanes) - 1)
+        points = self.ego.strip.interpolate(targets)[0]
+        placed = np.zeros(len(targets), dtype=bool)
+        for lane_index in np.unique(lanes[fits]).tolist():
+            for role, track in self.beside.get(self.ego.lanes[lane_index], ()):
+                if role != vehicle.role:
+                    continue
+                frames = np.flatnonzero(fits & (lanes == lane_index) & ~placed)
+                if frames.size == 0:
+                    break
+                nearest = track.nearest_within(points[frames], BESIDE_MAX_DISTANCE_M)
+                station = track.strip.station[nearest]
+                ok = (nearest >= 0) & self._fits_all(track, station)
+                for frame, at in zip(frames[ok].tolist(), station[ok].tolist()):
+                    blocks[frame][vehicle.name] = self._state(vehicle.name, vehicle.role, track, at, vehicle.lead_m)
+                placed[frames[ok]] = True
+
+    def _fits_all(self, track: Track, stations: NDArrayFloat) -> npt.NDArray[np.bool_]:
+        """:meth:`_fits` of every station (m)."""
+        return (0.0 <= stations) & (stations <= track.length - self.sensor_range_m)
 
     def _state(self, name: str, role: str, track: Track, station: float, lead_m: float = 0.0) -> VehicleState:
         index, offset = track.lane_at(station)

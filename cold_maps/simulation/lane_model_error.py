@@ -22,12 +22,12 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass, field
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
-from cold_maps.simulation.sensor_errors import left_normals
+from cold_maps.simulation.sensor_errors import left_normals, left_normals_stacked
 
 LANE_MODEL_STREAM: Final[int] = 13
 """Sub-stream of the run's seed that the lane-model errors draw from (the history and the
@@ -95,7 +95,13 @@ def evolve(coefficients: NDArrayFloat | None, params: LaneModelErrorParams, dt_s
     shape = (*chains, 4) if coefficients is None else np.shape(coefficients)
     if not sigmas.any():
         return np.zeros(shape)
-    fresh = rng.standard_normal(shape) * sigmas
+    return _step(coefficients, params, dt_s, rng.standard_normal(shape))
+
+
+def _step(coefficients: NDArrayFloat | None, params: LaneModelErrorParams, dt_s: float,
+          normals: NDArrayFloat) -> NDArrayFloat:
+    """:func:`evolve`'s step with its standard normals ``normals`` drawn."""
+    fresh = normals * params.coefficient_sigmas
     if coefficients is None:
         return fresh
     rho = math.exp(-dt_s / params.tau_s)
@@ -157,3 +163,61 @@ class LaneModelErrorSampler:
         moved = [border + lateral_error(c, border[:, 0], self.params, chain.rng)[:, None] * left_normals(border, name)
                  for name, border, c in zip(_BORDERS, (left, right), chain.coefficients)]
         return moved[0], moved[1]
+
+    def perturb_many(self, vehicle: str, stamps_s: Sequence[float],
+                     borders: Sequence[tuple[NDArrayFloat, NDArrayFloat]]) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+        """:meth:`perturb` of ``vehicle``'s detections with ``borders`` at ``stamps_s`` (s,
+        in order), as arrays: the vehicle's normal draws of all of them taken at once, in
+        the order :meth:`perturb` takes them, and the errors evaluated over all points at
+        once; the same borders."""
+        if not borders:
+            return []
+        params = self.params
+        counts = np.array([len(border) for pair in borders for border in pair])
+        coefficients, white = self._coefficients(vehicle, stamps_s, counts.tolist())
+        stacked = np.concatenate([border for pair in borders for border in pair])
+        offsets = np.concatenate(([0], np.cumsum(counts)))
+        c = np.repeat(coefficients.reshape(-1, 4), counts, axis=0)
+        x = stacked[:, 0]
+        error = c[:, 0] + x * (c[:, 1] + x * (c[:, 2] / 2.0 + x * c[:, 3] / 6.0))
+        if params.white_m > 0.0:
+            error = error + (0.0 + params.white_m * white)
+        moved = stacked + error[:, None] * left_normals_stacked(stacked, offsets, _BORDERS * len(borders))
+        parts = np.split(moved, offsets[1:-1])
+        return [(parts[2 * k], parts[2 * k + 1]) for k in range(len(borders))]
+
+    def _coefficients(self, vehicle: str, stamps_s: Sequence[float],
+                      points: Sequence[int]) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """(D, 2, 4) coefficients of ``vehicle``'s D detections at ``stamps_s`` (their
+        borders having ``points`` points, left and right in turn), evolved as :meth:`perturb`
+        evolves them, and the standard normals of their points' white noise, all from one
+        draw in :meth:`perturb`'s order."""
+        params = self.params
+        coefficient_draws = 8 if params.coefficient_sigmas.any() else 0
+        white = params.white_m > 0.0
+        chain = self._chains.get(vehicle)
+        fresh = chain is None
+        if chain is None:
+            rng = np.random.default_rng([self.seed, LANE_MODEL_STREAM, self.drive, zlib.crc32(vehicle.encode())])
+            chain = self._chains[vehicle] = _Chain(rng, np.zeros((2, 4)), stamps_s[0])
+        total = len(stamps_s) * coefficient_draws + (sum(points) if white else 0)
+        draws = chain.rng.standard_normal(total)
+        out = np.empty((len(stamps_s), 2, 4))
+        whites = []
+        at = 0
+        for k, stamp_s in enumerate(stamps_s):
+            if stamp_s < chain.stamp_s:
+                raise ValueError(f"lane model error: {vehicle} detects at {stamp_s!r} s, before its last detection at "
+                                 f"{chain.stamp_s!r} s")
+            previous = None if fresh and k == 0 else chain.coefficients
+            chain.coefficients = (_step(previous, params, stamp_s - chain.stamp_s,
+                                        draws[at: at + coefficient_draws].reshape(2, 4))
+                                  if coefficient_draws else np.zeros((2, 4)))
+            chain.stamp_s = stamp_s
+            at += coefficient_draws
+            out[k] = chain.coefficients
+            if white:
+                count = points[2 * k] + points[2 * k + 1]
+                whites.append(draws[at: at + count])
+                at += count
+        return out, np.concatenate(whites) if whites else np.empty(0)

@@ -10,11 +10,11 @@ vehicle frame (ISO 8855: x forward, y left).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final, Protocol
+from typing import Final, Protocol, Sequence
 
 import numpy as np
 
-from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat, resample_polyline
+from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat, resample_polyline, resample_polylines
 
 
 class OnStrip(Protocol):
@@ -58,9 +58,16 @@ class Detection:
         return vehicle_to_world(self.left, self.x, self.y, self.yaw), vehicle_to_world(self.right, self.x, self.y, self.yaw)
 
 
-def world_to_vehicle(points: NDArrayFloat, x: float, y: float, yaw: float) -> NDArrayFloat:
-    """World points (m) into the frame of a vehicle at (x, y, yaw)."""
-    c, s = np.cos(yaw), np.sin(yaw)
+def world_to_vehicle(points: NDArrayFloat, x: float | NDArrayFloat, y: float | NDArrayFloat,
+                     yaw: float | NDArrayFloat) -> NDArrayFloat:
+    """World points (m) into the frame of a vehicle at (x, y, yaw); with (N,) arrays, point
+    k into the frame of the vehicle at (x[k], y[k], yaw[k])."""
+    return _into_frame(points, x, y, np.cos(yaw), np.sin(yaw))
+
+
+def _into_frame(points: NDArrayFloat, x: float | NDArrayFloat, y: float | NDArrayFloat, c: float | NDArrayFloat,
+                s: float | NDArrayFloat) -> NDArrayFloat:
+    """:func:`world_to_vehicle` with the heading's cosine ``c`` and sine ``s`` given."""
     dx, dy = points[:, 0] - x, points[:, 1] - y
     return np.column_stack((c * dx + s * dy, -s * dx + c * dy))
 
@@ -98,6 +105,45 @@ class LaneSensor:
         nothing from the ideal sensor) and its end reason ("" when it sees nothing)."""
         detection = self.detect(track.strip, station)
         return detection, "" if detection is None else detection.end_reason
+
+    def read_many(self, track: OnStrip, stations: NDArrayFloat,
+                  obstacles: Sequence[NDArrayFloat]) -> list[tuple[Detection | None, str]]:
+        """:meth:`read` at every station (m) of ``stations``, as arrays over them (the same
+        detections); ``obstacles`` (one (M, 3) array per station) hide nothing."""
+        strip = track.strip
+        stations = np.asarray(stations, dtype=np.float64)
+        ends = np.minimum(stations + self.range_m, strip.length)
+        seen = ~(ends - stations < self.step_m)
+        reasons = np.where(stations + self.range_m <= strip.length, END_RANGE, END_MAP)
+        kept = np.flatnonzero(seen)
+        detections = detections_between(strip, *strip.poses(stations[kept]), stations[kept], ends[kept], self.step_m,
+                                         reasons[kept].tolist())
+        out: list[tuple[Detection | None, str]] = [(None, "")] * len(stations)
+        for index, detection in zip(kept.tolist(), detections):
+            out[index] = (detection, detection.end_reason)
+        return out
+
+
+def detections_between(strip: LaneStrip, x: NDArrayFloat, y: NDArrayFloat, yaw: NDArrayFloat, start: NDArrayFloat,
+                       end: NDArrayFloat, step_m: float, end_reasons: Sequence[str]) -> list[Detection]:
+    """:func:`detection_between` for every k of the (K,) arrays (vehicle poses, world frame,
+    and station windows, m), evaluated over all of them at once: the same detections."""
+    if len(start) == 0:
+        return []
+    borders = []
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    for points, distance in ((strip.left, strip.left_distance), (strip.right, strip.right_distance)):
+        ends = np.interp(np.concatenate((start, end)), strip.station, distance)
+        world, offsets = resample_polylines(points, distance, ends[: len(start)], ends[len(start):], step_m)
+        counts = np.diff(offsets)
+        local = _into_frame(world, np.repeat(x, counts), np.repeat(y, counts), np.repeat(cos, counts),
+                            np.repeat(sin, counts))
+        borders.append(np.split(local, offsets[1:-1]))
+    return [Detection(x=px, y=py, yaw=pyaw, left=left, right=right, start_station=first, end_station=last,
+                      end_reason=reason)
+            for px, py, pyaw, left, right, first, last, reason in zip(
+                x.tolist(), y.tolist(), yaw.tolist(), borders[0], borders[1], start.tolist(), end.tolist(),
+                end_reasons)]
 
 
 def detection_between(strip: LaneStrip, x: float, y: float, yaw: float, start: float, end: float, step_m: float,

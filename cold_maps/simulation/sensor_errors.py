@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.sensor import vehicle_to_world
@@ -56,6 +57,24 @@ def left_normals(points: NDArrayFloat, name: str = "polyline") -> NDArrayFloat:
     norms = np.hypot(tangents[:, 0], tangents[:, 1])
     if np.any(norms == 0.0):
         raise ValueError(f"{name}: repeated or reversing points, normal undefined")
+    tangents /= norms[:, None]
+    return np.column_stack((-tangents[:, 1], tangents[:, 0]))
+
+
+def left_normals_stacked(points: NDArrayFloat, offsets: npt.NDArray[np.intp],
+                         names: Sequence[str]) -> NDArrayFloat:
+    """:func:`left_normals` of every polyline of the stack ``points`` (polyline k is
+    ``points[offsets[k]:offsets[k + 1]]``, at least 2 points, named ``names[k]``), in one
+    pass: the same values; ValueError naming the first one with a repeated point."""
+    first, last = offsets[:-1], offsets[1:] - 1
+    tangents = np.empty_like(points)
+    tangents[1:-1] = (points[2:] - points[:-2]) / 2.0
+    tangents[first] = points[first + 1] - points[first]
+    tangents[last] = points[last] - points[last - 1]
+    norms = np.hypot(tangents[:, 0], tangents[:, 1])
+    if np.any(norms == 0.0):
+        broken = int(np.searchsorted(offsets, np.flatnonzero(norms == 0.0)[0], side="right")) - 1
+        left_normals(points[first[broken]: last[broken] + 1], names[broken])
     tangents /= norms[:, None]
     return np.column_stack((-tangents[:, 1], tangents[:, 0]))
 
@@ -148,6 +167,58 @@ class SensorErrorModel:
         if self.heading_bias_rad != 0:
             borders = [vehicle_to_world(border, 0.0, 0.0, self.heading_bias_rad) for border in borders]
         return borders[0], borders[1]
+
+    @property
+    def draws_known(self) -> bool:
+        """Whether a detection's number of draws is known before drawing (no drop, no range
+        jitter): :meth:`apply_block` applies then."""
+        return self.drop_probability == 0 and self.range_jitter_sigma_m == 0
+
+    def apply_block(self, borders: Sequence[tuple[NDArrayFloat, NDArrayFloat]],
+                    poses: Sequence[tuple[float, float, float] | None], rng: np.random.Generator
+                    ) -> tuple[list[tuple[NDArrayFloat, NDArrayFloat]], list[tuple[float, float, float] | None]]:
+        """:meth:`apply` then :meth:`perturb_pose` (where ``poses[k]`` is not None) of every
+        detection in turn (borders checked by the sensor already), as arrays: all their
+        normals drawn at once in that order, offset, noise and heading applied to all
+        borders at once; the same values. Only when :attr:`draws_known`."""
+        if not self.draws_known:
+            raise ValueError("SensorErrorModel.apply_block: drops and range jitter draw as they go, use apply")
+        counts = np.array([len(border) for pair in borders for border in pair], dtype=np.intp)
+        noise = self.noise_sigma_m > 0
+        pose_draws = (2 if self.pose_sigma_xy_m > 0 else 0) + (1 if self.pose_sigma_yaw_rad > 0 else 0)
+        sizes = counts.reshape(-1, 2).sum(axis=1) * noise + np.array([pose is not None for pose in poses]) * pose_draws
+        draws = rng.standard_normal(int(sizes.sum()))
+        starts = np.concatenate(([0], np.cumsum(sizes)))
+        out = [(left, right) for left, right in borders]
+        if self.lateral_offset_m != 0 or noise or self.heading_bias_rad != 0:
+            stacked = np.concatenate([border for pair in borders for border in pair])
+            if self.lateral_offset_m != 0 or noise:
+                along = np.full(len(stacked), self.lateral_offset_m)
+                if noise:
+                    picked = np.concatenate([draws[start: start + count] for start, count in
+                                             zip(starts[:-1].tolist(), counts.reshape(-1, 2).sum(axis=1).tolist())])
+                    along = along + (0.0 + self.noise_sigma_m * picked)
+                offsets = np.concatenate(([0], np.cumsum(counts)))
+                stacked = stacked + along[:, None] * left_normals_stacked(stacked, offsets,
+                                                                          ("left", "right") * len(borders))
+            if self.heading_bias_rad != 0:
+                stacked = vehicle_to_world(stacked, 0.0, 0.0, self.heading_bias_rad)
+            parts = np.split(stacked, np.cumsum(counts)[:-1])
+            out = [(parts[2 * k], parts[2 * k + 1]) for k in range(len(borders))]
+        moved: list[tuple[float, float, float] | None] = []
+        for pose, start, size in zip(poses, starts[:-1].tolist(), sizes.tolist()):
+            if pose is None:
+                moved.append(None)
+                continue
+            x, y, yaw = pose
+            at = start + size - pose_draws
+            if self.pose_sigma_xy_m > 0:
+                dx, dy = 0.0 + self.pose_sigma_xy_m * draws[at: at + 2]
+                x, y, at = x + float(dx), y + float(dy), at + 2
+            if self.pose_sigma_yaw_rad > 0:
+                yaw = yaw + float(0.0 + self.pose_sigma_yaw_rad * draws[at])
+            moved.append((x, y, yaw))
+        return out, moved
 
     def perturb_pose(self, x: float, y: float, yaw: float, rng: np.random.Generator) -> tuple[float, float, float]:
         """The sender's pose ``(x m, y m, yaw rad)`` (world frame) with localisation error."""
