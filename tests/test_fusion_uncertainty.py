@@ -119,11 +119,24 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
                                rtol=1e-6)
     ego_only = result.left_source == Source.EGO
     x0 = along_m(result.left[ego_only], road) - 10.0
-    np.testing.assert_allclose(result.left_sigma[ego_only], np.sqrt(sigma_e(x0) ** 2 + pose_var(ego_cov, x0)),
-                               rtol=1e-6)
+    before = x0 < 10.0 - IV.convoy_end_blend_m  # short of the seam blend the ego's own σ
+    assert before.sum() > 20
+    np.testing.assert_allclose(result.left_sigma[ego_only][before],
+                               np.sqrt(sigma_e(x0[before]) ** 2 + pose_var(ego_cov, x0[before])), rtol=1e-6)
     coop_only = result.left_source == Source.COOP
     x1 = along_m(result.left[coop_only], road) - 20.0
-    np.testing.assert_allclose(result.left_sigma[coop_only], np.sqrt(sigma_c**2 + pose_var(coop_cov, x1)), rtol=1e-6)
+    beyond = x1 > 20.0 + IV.convoy_end_blend_m  # past the seam blend the coop's own σ
+    np.testing.assert_allclose(result.left_sigma[coop_only][beyond],
+                               np.sqrt(sigma_c**2 + pose_var(coop_cov, x1[beyond])), rtol=1e-6)
+    # in the seam blend the coop point keeps 1 − λ·(1 − w_end) of its weight, the ego's last point the rest
+    x_end = float(along_m(result.left[result.left_source == Source.FUSED], road)[-1]) - 10.0
+    ve_end, pe_end = sigma_e(np.array(x_end)) ** 2, pose_var(ego_cov, np.array(x_end))
+    w_end = ve_end / (ve_end + vc + pose_var(coop_cov, np.array(x_end - 10.0)) + pe_end)
+    t = np.clip(1.0 - (x1[~beyond] - (x_end - 10.0)) / IV.convoy_end_blend_m, 0.0, 1.0)
+    w_seam = 1.0 - (1.0 - w_end) * t * t * (3.0 - 2.0 * t)
+    np.testing.assert_allclose(result.left_sigma[coop_only][~beyond],
+                               np.sqrt(w_seam**2 * (vc + pose_var(coop_cov, x1[~beyond]))
+                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)), rtol=1e-6)
 
 
 def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
@@ -135,6 +148,26 @@ def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
         steps[weights] = float(np.abs(np.diff(lateral(result.left, road, 0.5 * WIDTH_M))).max())
     assert steps["paper"] == pytest.approx(0.75 * 0.16, abs=1e-6)  # the paper's weights jump at the overlap start
     assert steps["inverse-variance"] < 0.01  # smoothstep over 5 m: at most 1.5·0.16/5·0.1 m per point
+
+
+def test_inverse_variance_weights_hold_to_the_overlap_ends_and_the_seams_fade_outside() -> None:
+    """Rigid errors +a (ego), b (coop): the whole overlap sits at w·b + (1 − w)·a, the ego
+    points λ·w·(b − a) and the coop points λ·(1 − w)·(a − b) from their own, λ the smoothstep
+    of the distance d from the overlap, 1 − 3(d/L)² + 2(d/L)³ (L = 5 m)."""
+    road = straight(-0.2)
+    a, b, sigma_e, sigma_c = 0.08, -0.06, 0.1, 0.05
+    result = fusion.fuse(sensed(road, 10.0, sigma_e, shift_m=a), sensed(road, 20.0, sigma_c, shift_m=b), params=IV)
+    w = sigma_e**2 / (sigma_e**2 + sigma_c**2)
+    s, offset = along_m(result.left, road), lateral(result.left, road, 0.5 * WIDTH_M)
+    fused = result.left_source == Source.FUSED
+    np.testing.assert_allclose(offset[fused], w * b + (1 - w) * a, atol=1e-9)
+    start, end = s[fused].min(), s[fused].max()
+    blend = lambda d: np.where(d < 5.0, 1 - 3 * (d / 5.0) ** 2 + 2 * (d / 5.0) ** 3, 0.0)  # noqa: E731
+    ego = result.left_source == Source.EGO
+    np.testing.assert_allclose(offset[ego], a + blend(start - s[ego]) * w * (b - a), atol=1e-6)
+    coop = result.left_source == Source.COOP
+    np.testing.assert_allclose(offset[coop], b + blend(s[coop] - end) * (1 - w) * (a - b), atol=1e-6)
+    assert (s[ego] < start - 5.0).sum() > 20 and (s[coop] > end + 5.0).sum() > 20
 
 
 def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
