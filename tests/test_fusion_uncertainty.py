@@ -171,9 +171,10 @@ def test_inverse_variance_weights_hold_to_the_overlap_ends_and_the_seams_fade_ou
 
 
 def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
-    """Hermite propagation of the end errors plus k·d, with the coop's pose error: at arc
-    fraction τ of a bridge of length L (ego exact), σ² = (k·L·min(τ, 1 − τ))² + h00²σ_E² + h01²σ_C²
-    + h01²σ_xy² + (h11·L)²σ_ψ²."""
+    """Hermite propagation of the end errors, with the coop's pose error: at arc fraction τ of
+    a bridge of length L (ego exact), σ² = (k·F·d)² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
+    (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend, F = 0 for ``hermite``,
+    F = 1 for ``paper``."""
     road = straight(-0.3)
     sigma_e, sigma_c, sxy, syaw = 0.12, 0.05, 0.06, 0.004
     ego = sensed(road, 10.0, sigma_e)
@@ -184,11 +185,38 @@ def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None
         gap = result.left_source == Source.INTERPOLATED
         tau = (along_m(result.left[gap], road) - 40.0) / 30.0
         h00, h01, h11 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3, tau**3 - tau**2
+        bend = 0.0 if interpolation == "hermite" else 1.0
         d = 30.0 * np.minimum(tau, 1.0 - tau)
-        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * d) ** 2 + (h00 * sigma_e) ** 2 + (h01 * sigma_c) ** 2
-                           + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
+        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma_e) ** 2
+                           + (h01 * sigma_c) ** 2 + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
         np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=2e-3)
-        assert result.left_sigma[gap].max() > 0.5 * BRIDGE_SIGMA_PER_M[interpolation] * 30.0
+
+
+@pytest.mark.parametrize("interpolation", ["paper", "hermite"])
+def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpolation: str) -> None:
+    """A right-angle corner of radius 20 m inside the gap between two straights: the bend is
+    F = π/2 (both ends straight) for ``hermite``, 1 for ``paper``; the interpolation term
+    k·F·d at distance d from the nearer end, on top of the ends' σ carried by h00, h01
+    (exact poses)."""
+    sigma = 0.02
+    arc = Segment(20.0 * math.pi / 2.0, 1.0 / 20.0)
+    road = AnalyticRoad([Segment(80.0), arc, Segment(80.0)], yaw0=0.3)
+    ego = sensed(road, 45.0, sigma)  # ends 5 m before the corner
+    coop = sensed(road, 80.0 + arc.length_m + 5.0, sigma)  # starts 5 m after it
+    result = fusion.fuse(ego, coop, interpolation=interpolation)
+    assert result.kind == "spline"
+    gap = result.left_source == Source.INTERPOLATED
+    inside = np.flatnonzero(gap)
+    chain = result.left[inside[0] - 1: inside[-1] + 2]
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+    tau = s[1:-1] / s[-1]
+    h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+    d = s[-1] * np.minimum(tau, 1.0 - tau)
+    k = BRIDGE_SIGMA_PER_M[interpolation]
+    bend = math.pi / 2.0 if interpolation == "hermite" else 1.0
+    expected = np.sqrt((k * bend * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
+    np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=1e-3)
+    assert result.left_sigma[gap].max() > 0.5  # k·F·d at mid-bridge, d ≥ 15 m
 
 
 def test_defaults_keep_todays_geometry_and_state_no_sigma() -> None:
