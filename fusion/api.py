@@ -215,7 +215,7 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
 
 
 def _spline_variances(parts: Sequence[NDArrayFloat], uncertainty: PairUncertainty, sigma_per_m: float,
-                      bend: tuple[float, float] | None) -> list[NDArrayFloat]:
+                      bend: tuple[float, float, float] | None) -> list[NDArrayFloat]:
     """World variances of the parts (ego, gap, coop per border) of a spline fusion: the
     detections' own, and :func:`fusion.uncertainty.bridge_variance` across the gap (``bend``
     from :func:`fusion.uncertainty.gap_bend`, or None)."""

@@ -219,6 +219,27 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
     assert result.left_sigma[gap].max() > 0.5  # k·F·d at mid-bridge, d ≥ 15 m
 
 
+def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
+    """A gap inside an arc of radius 150 m: the ends' turn is the arc's own (F = |Δψ − L·κ̄| +
+    L·|Δκ| ≈ 0), so hermite's bridge σ is the ends' σ carried by h00, h01 alone, while the
+    paper's keeps k·d (F = 1)."""
+    sigma = 0.03
+    road = AnalyticRoad([Segment(20.0), Segment(200.0, 1.0 / 150.0)], yaw0=-0.5)
+    ego, coop = sensed(road, 40.0, sigma), sensed(road, 100.0, sigma)  # a 30 m gap
+    for interpolation, bend in (("hermite", 0.0), ("paper", 1.0)):
+        result = fusion.fuse(ego, coop, interpolation=interpolation)
+        assert result.kind == "spline"
+        inside = np.flatnonzero(result.left_source == Source.INTERPOLATED)
+        chain = result.left[inside[0] - 1: inside[-1] + 2]
+        s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+        tau = s[1:-1] / s[-1]
+        h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+        d = s[-1] * np.minimum(tau, 1.0 - tau)
+        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma) ** 2
+                           + (h01 * sigma) ** 2)
+        np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-2)
+
+
 def test_defaults_keep_todays_geometry_and_state_no_sigma() -> None:
     road = straight(0.2)
     stations = (10.0, 35.0, 70.0)

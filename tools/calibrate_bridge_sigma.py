@@ -45,7 +45,7 @@ def samples(pairs: int, seed: int) -> dict[str, list[Sample]]:
             ego = detect(road, s_end - 30.0, 30.0, *OFFSETS_M)
             coop = detect(road, s_coop, 30.0, *OFFSETS_M)
             borders, _ = ego_frame_borders(ego, coop)
-            turn, curvature_change = gap_bend(end_fits(ego, coop, borders, DEFAULT_PARAMS).arcs())
+            ends = gap_bend(end_fits(ego, coop, borders, DEFAULT_PARAMS).arcs())
             for name in INTERPOLATIONS:
                 result = fuse(ego, coop, mode="spline", interpolation=name)
                 if result.kind != "spline":
@@ -57,7 +57,7 @@ def samples(pairs: int, seed: int) -> dict[str, list[Sample]]:
                         continue
                     s = cumulative_length(points[inside[0] - 1: inside[-1] + 2])
                     d = np.minimum(s, s[-1] - s)[1:-1]
-                    bend = bridge_bend(turn, curvature_change, float(s[-1])) if BRIDGE_SCALES_WITH_BEND[name] else 1.0
+                    bend = bridge_bend(*ends, float(s[-1])) if BRIDGE_SCALES_WITH_BEND[name] else 1.0
                     out[name].append((family, bend * d, distance_to_polyline(points[inside], road.border(offset))))
     return out
 

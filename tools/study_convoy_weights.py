@@ -143,7 +143,8 @@ def maps_markdown(study: dict[str, Any]) -> str:
                      + " | ".join(cells) + f" | {row['paper']['fused']} |")
     lines += ["", "Calibration of the stated σ (share of fused points within 1σ / 2σ, %; the convoy "
               "row per weighting, spline rows from the inverse-variance run; 68.3 / 95.4 when calibrated):", "",
-              "| map | pose σ_xy [m] / σ_yaw [mrad] | scenario | within 1σ | within 2σ | mean σ [m] | mean error [m] |",
+              "| map | pose σ_xy [m] / σ_yaw [mrad] | scenario | within 1σ | within 2σ | mean σ [m] "
+              "| mean error [m] |",
               "|---|---|---|---|---|---|---|"]
     for row in study["rows"]:
         for w in WEIGHTS:
