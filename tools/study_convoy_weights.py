@@ -16,7 +16,7 @@ fusion, calibration of the bridge σ; weights do not apply).
 
 With ``--maps`` it runs ``cold-eval`` instead (in this process, ``--no-mcap --no-plots``, the
 same routes, frames, gaps and seed for every run) on each map × sensor (``ideal``,
-``camera``) × coop pose error (none, 0.05 m / 2 mrad, 0.1 m / 5 mrad: ``--pose-xy``,
+``camera``, or one of them with ``--sensors``) × coop pose error (none, 0.05 m / 2 mrad, 0.1 m / 5 mrad: ``--pose-xy``,
 ``--pose-yaw``) × ``--convoy-weights`` (paper, mean, inverse-variance) and tabulates the
 convoy scenario's errors of correct fusions (``tools/study_sensor.py``'s ``correct_errors``:
 the larger of the two borders' max and p95; the mean of both borders' means) and the
@@ -24,7 +24,7 @@ calibration of the stated σ of every fused scenario (both borders' points poole
 ``study.json`` (every figure and how it was made) and ``study.md`` to ``--out``:
 
     .venv/bin/python tools/study_convoy_weights.py --maps rural,Town01,Town04 --out out/study-weights \
-        [--routes 3] [--frames 100] [--eval-seed 0] [--gaps 20,30,50] [--workers 2]
+        [--routes 3] [--frames 100] [--eval-seed 0] [--gaps 20,30,50] [--workers 2] [--sensors camera]
 """
 
 from __future__ import annotations
@@ -179,7 +179,7 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
             study["maps"].append({"name": name, "path": shown(spec.path), "sha256": None})
             continue
         study["maps"].append({"name": name, "path": shown(spec.path), "sha256": sha256(spec.path)})
-        for sensor in SENSORS:
+        for sensor in args.sensors.split(","):
             for sigma_xy, sigma_yaw in POSE_LEVELS:
                 row: dict[str, Any] = {"map": name, "sensor": sensor, "pose": [sigma_xy, sigma_yaw]}
                 for weights in WEIGHTS:
@@ -221,6 +221,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--eval-seed", default="0", help="--maps: cold-eval --seed (default 0)")
     parser.add_argument("--gaps", default="20,30,50", help="--maps: cold-eval --gaps (default 20,30,50)")
     parser.add_argument("--workers", default="2", help="--maps: cold-eval --workers (default 2)")
+    parser.add_argument("--sensors", default=",".join(SENSORS), choices=(*SENSORS, ",".join(SENSORS)),
+                        help="--maps: the sensors, ideal, camera or both (default ideal,camera)")
     args = parser.parse_args(argv)
     if args.maps:
         return maps_study(args, argv)
