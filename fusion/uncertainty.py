@@ -19,7 +19,10 @@ frame (a scalar, the same in any frame). Sources and how they combine:
 - **Fused point** (world frame, the result's frame): with weight w of the coop point,
   σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
   are independent. For inverse-variance weights and an exact ego pose this is
-  1 / (1/σ_e² + 1/σ_c²).
+  1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
+  steps out (:func:`fusion.convoy.convoy_border`), a point takes the same formula with the
+  faded weight of the other sender's end point, its error fully correlated with its own
+  end's (neighbouring points of one lane model).
 - **Gap bridge** (spline fusion): see :func:`bridge_variance`: the errors at the two ends
   propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
   turning the end tangents by h10/h11 times the gap length) plus an interpolation term
