@@ -63,7 +63,7 @@ def test_inverse_variance_weights_match_the_closed_form_of_two_gaussian_sources(
     road = straight(0.4)
     a, b = 0.10, -0.05  # rigid lateral errors of the ego and the coop detection [m]
     ego = sensed(road, 10.0, sigma_e, shift_m=a)
-    coop = sensed(road, 20.0, sigma_c, shift_m=b)  # 10 m ahead: a 20 m overlap, 10 m of it past both 5 m blends
+    coop = sensed(road, 20.0, sigma_c, shift_m=b)  # 10 m ahead: a 20 m overlap
     result = fusion.fuse(ego, coop, params=IV)
     assert result.kind == "convoy"
     middle = overlap_middle(result, road, 25.5, 34.5)
