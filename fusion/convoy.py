@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Callable, Final
 
 import numpy as np
 
@@ -59,9 +59,9 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     no jump. Returns the parts in order with their :class:`Source` labels and, with
     ``variances`` (ego's, coop's: :class:`fusion.uncertainty.BorderVariance`), their world
     variances [m²] (else None). ``inverse_variance`` (needs ``variances``) weights each pair
-    by :func:`fusion.uncertainty.inverse_variance_weight` of their ego-frame variances,
-    blended by a smoothstep over ``end_blend_m`` (at most half the overlap) from 0 at the
-    overlap start and to the weight of the detection that continues (1 coop, 0 ego) at its end.
+    by :func:`fusion.uncertainty.inverse_variance_weight` of their ego-frame variances over
+    the whole overlap and closes the steps at its two ends outside it
+    (:func:`_seam_blend`, over ``end_blend_m``).
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
     first = int(s_ego.searchsorted(s0))
@@ -72,32 +72,54 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])
     overlap = np.ascontiguousarray(ego[first:stop]).view(np.complex128)[:, 0]
     ramp = offset > blend_offset_m and overlap_end > 0.0
+    seams = inverse_variance and variances is not None and not ramp and u.size > 0 and end_blend_m > 0.0
     if ramp:
         w: NDArrayFloat | float = u / overlap_end
     elif inverse_variance and variances is not None:
         e, c = variances
-        paired_var = np.interp(u, s_coop, c.sensor + c.pose + c.relative)
-        w = inverse_variance_weight(e.sensor[first:stop], paired_var)
-        length = min(end_blend_m, 0.5 * overlap_end)
-        if length > 0.0:
-            into, out_of = smoothstep(u / length), smoothstep((overlap_end - u) / length)
-            w = w * into * out_of + (1.0 - out_of) * float(coop_continues)
+        w = inverse_variance_weight(e.sensor[first:stop], np.interp(u, s_coop, c.sensor + c.pose + c.relative))
     else:
         w = coop_weight
-    paired -= overlap
-    paired *= w
-    paired += overlap
-    ego_var = coop_var = None
+    difference = paired - overlap  # coop minus ego at each overlap point
+    paired = overlap + w * difference
+    ego_var = coop_var = paired_var = None
     if variances is not None:
         ego_var, coop_var = variances[0].world, variances[1].world
-        fused_var: NDArrayFloat | None = fused_variance(w, ego_var[first:stop], np.interp(u, s_coop, coop_var))
+        paired_var = np.interp(u, s_coop, coop_var)
+        fused_var: NDArrayFloat | None = fused_variance(w, ego_var[first:stop], paired_var)
     else:
         fused_var = None
-    parts = [(ego[:first], Source.EGO, None if ego_var is None else ego_var[:first]),
-             (paired.view(np.float64).reshape(-1, 2), Source.FUSED, fused_var)]
+    before, before_var = ego[:first], None if ego_var is None else ego_var[:first]
+    if seams:
+        assert isinstance(w, np.ndarray) and ego_var is not None and paired_var is not None
+        before, before_var = _seam_blend(before, s0 - s_ego[:first], w[0] * difference[0], end_blend_m,
+                                         lambda lam: fused_variance(w[0] * lam, ego_var[:first], paired_var[0]))
+    parts = [(before, Source.EGO, before_var), (paired.view(np.float64).reshape(-1, 2), Source.FUSED, fused_var)]
     if not coop_continues:
-        parts.append((ego[stop:], Source.EGO, None if ego_var is None else ego_var[stop:]))
+        after, after_var = ego[stop:], None if ego_var is None else ego_var[stop:]
+        if seams:
+            assert isinstance(w, np.ndarray) and ego_var is not None and paired_var is not None
+            after, after_var = _seam_blend(after, s_ego[stop:] - s0 - u[-1], w[-1] * difference[-1], end_blend_m,
+                                           lambda lam: fused_variance(w[-1] * lam, ego_var[stop:], paired_var[-1]))
+        parts.append((after, Source.EGO, after_var))
     else:
         tail = int(s_coop.searchsorted(overlap_end, side="right"))
-        parts.append((coop[tail:], Source.COOP, None if coop_var is None else coop_var[tail:]))
+        after, after_var = coop[tail:], None if coop_var is None else coop_var[tail:]
+        if seams:
+            assert isinstance(w, np.ndarray) and ego_var is not None and coop_var is not None
+            after, after_var = _seam_blend(after, s_coop[tail:] - u[-1], (w[-1] - 1.0) * difference[-1],
+                                           end_blend_m, lambda lam: fused_variance(1.0 - (1.0 - w[-1]) * lam,
+                                                                                   ego_var[stop - 1], coop_var[tail:]))
+        parts.append((after, Source.COOP, after_var))
     return parts
+
+
+def _seam_blend(points: NDArrayFloat, distance: NDArrayFloat, step: complex, length_m: float,
+                variance: Callable[[NDArrayFloat], NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """Points of one sender beside an end of the overlap moved by λ·``step`` (the fused
+    point minus this sender's at that end, x + iy [m]), λ = smoothstep(1 − d / ``length_m``)
+    of their arc distance d [m] from that end (1 there, 0 from ``length_m`` on): the seam's
+    fusion fades out instead of jumping, and ``variance(λ)`` gives their world variances [m²]."""
+    lam = smoothstep(1.0 - distance / length_m)
+    moved = points + lam[:, None] * np.array([step.real, step.imag])
+    return moved, variance(lam)

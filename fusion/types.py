@@ -406,13 +406,13 @@ class FusionParams:
         convoy_weights: the weights of the convoy overlap: ``"paper"`` (default: the fixed
             weights of ``convoy_strategy``, the paper's 0.75 coop / 0.25 ego), ``"mean"`` (0.5
             each) or ``"inverse-variance"`` (point by point from both detections' σ and pose
-            covariances, :mod:`fusion.uncertainty`; blended in from the ego at the overlap
-            start and out to the detection that continues at its end over
-            ``convoy_end_blend_m``; the weights of ``"mean"`` when a detection states no σ).
+            covariances, :mod:`fusion.uncertainty`, over the whole overlap; the steps at its
+            two ends fade out over ``convoy_end_blend_m`` outside it; the weights of
+            ``"mean"`` when a detection states no σ).
             ``"mean"`` and ``"inverse-variance"`` need ``convoy_strategy="weighted"``.
-        convoy_end_blend_m: length over which inverse-variance weights blend smoothly
-            (smoothstep) from the ego at the overlap start and to the continuing detection
-            at its end, at most half the overlap each [m] (default 5).
+        convoy_end_blend_m: length over which the steps of inverse-variance weights at the
+            overlap's ends fade out (smoothstep) into the ego lane before it and into the
+            detection that continues after it [m] (default 5; 0 keeps the steps).
         convoy_blend_offset_m: offset of the two borders at the overlap start above which the
             overlap blends linearly from ego to coop instead of the weights [m].
         convoy_max_offset_m: largest lateral distance of the coop border start from the ego

@@ -19,12 +19,17 @@ frame (a scalar, the same in any frame). Sources and how they combine:
 - **Fused point** (world frame, the result's frame): with weight w of the coop point,
   σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
   are independent. For inverse-variance weights and an exact ego pose this is
-  1 / (1/σ_e² + 1/σ_c²).
+  1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
+  steps out (:func:`fusion.convoy.convoy_border`), a point takes the same formula with the
+  faded weight of the other sender's end point, its error fully correlated with its own
+  end's (neighbouring points of one lane model).
 - **Gap bridge** (spline fusion): see :func:`bridge_variance`: the errors at the two ends
   propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
   turning the end tangents by h10/h11 times the gap length) plus an interpolation term
-  k·d growing with the distance d from the nearer end, k per interpolation from
-  :data:`BRIDGE_SIGMA_PER_M` (calibrated on the analytic roads).
+  k·F·d growing with the distance d from the nearer end, for ``hermite`` also with the
+  road's bend F across the gap that one arc does not follow (:func:`bridge_bend`; F = 1
+  for ``paper``), k per interpolation from :data:`BRIDGE_SIGMA_PER_M` (calibrated on the
+  analytic roads).
 - **History** (:func:`fusion.fuse_history`): a history point's σ fades linearly from the
   ego seam's σ to the coop seam's, like the seam offsets (:func:`seam_sigma`).
 """
@@ -33,20 +38,27 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Sequence
 
 import numpy as np
 
+from fusion.geometry import EndFit
 from fusion.types import LaneDetection, NDArrayFloat
 
-BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.0485, "hermite": 0.0413}
-"""Interpolation error of a gap bridge per metre of distance from its nearer end (1σ, m/m),
-per interpolation: k = sqrt(Σe² / Σd²) over every gap point of 40 noise-free pairs of each
-of the four analytic road families (:data:`fusion.analytic.FAMILIES`: corners with and
-without clothoids, arcs, S-bends), e the point's true error, d its distance from the nearer
-end; ``tools/calibrate_bridge_sigma.py`` reproduces it (k·d covers 83 % / 98 % of those
-errors within 1σ / 2σ for ``paper``, 88.5 % / 98 % for ``hermite``; an exact straight road
-has no interpolation error, so the term is conservative there)."""
+BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.0485, "hermite": 0.0388}
+"""Interpolation error k of a gap bridge per interpolation (1σ): the bridge's interpolation
+term is k·F·d at distance d [m] from its nearer end, F [rad] the road's bend across the gap
+that one arc does not follow (:func:`bridge_bend`) for ``hermite`` (exact on lines and arcs;
+k in m/(m·rad)) and F = 1 for ``paper`` (k in m/m: its natural spline errs on arcs too, and
+its end tangents from two points 0.2 m apart turn with the detection's point noise on any
+road). k = sqrt(Σe² / Σ(F·d)²) over every gap point of 40 noise-free pairs of each of the
+four analytic road families (:data:`fusion.analytic.FAMILIES`: corners with and without
+clothoids, arcs, S-bends; seed 123), e the point's true error;
+``tools/calibrate_bridge_sigma.py`` reproduces it and reports the coverage on another seed."""
+
+BRIDGE_SCALES_WITH_BEND: Final[dict[str, bool]] = {"paper": False, "hermite": True}
+"""Per interpolation: whether its interpolation term scales with the bend F
+(:data:`BRIDGE_SIGMA_PER_M`)."""
 
 
 @dataclass(frozen=True)
@@ -192,8 +204,30 @@ def bridge_end(points: NDArrayFloat, variance: BorderVariance, at_end: bool, sen
     return BridgeEnd(float(variance.sensor[k]), jacobian, covariance)
 
 
+def bridge_bend(turn_rad: float, mean_curvature_per_m: float, curvature_change_per_m: float,
+                length_m: float) -> float:
+    """The bend F [rad] of a gap bridge of length L [m] that scales its interpolation error:
+    F = |Δψ − L·κ̄| + L·|κ_C − κ_E|, the heading change between the two ends' tangents that an
+    arc of the ends' mean curvature κ̄ does not make, plus the turn the change of curvature
+    between the ends would make over the bridge. Zero on a straight road and on an arc, where
+    ``hermite`` (line and arc) is exact; π/2 for a right-angle corner between two straights."""
+    return abs(turn_rad - length_m * mean_curvature_per_m) + length_m * abs(curvature_change_per_m)
+
+
+def gap_bend(arcs: Sequence[EndFit]) -> tuple[float, float, float]:
+    """(Δψ [rad], κ̄ [1/m], κ_C − κ_E [1/m]) across a gap from the end fits of (ego left, ego
+    right, coop left, coop right), one frame: the turn from the ego end's tangent to the coop
+    start's, the mean curvature of the four ends and the change of curvature from the ego's
+    end to the coop's start, each end's two borders averaged."""
+    ego_dir, coop_dir = (np.add(arcs[i].direction, arcs[i + 1].direction) for i in (0, 2))
+    turn = math.atan2(ego_dir[0] * coop_dir[1] - ego_dir[1] * coop_dir[0], float(ego_dir @ coop_dir))
+    return (turn, 0.25 * sum(fit.curvature for fit in arcs),
+            0.5 * (arcs[2].curvature + arcs[3].curvature - arcs[0].curvature - arcs[1].curvature))
+
+
 def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, ego_end: BridgeEnd,
-                    coop_start: BridgeEnd, sigma_per_m: float) -> NDArrayFloat:
+                    coop_start: BridgeEnd, sigma_per_m: float,
+                    bend: tuple[float, float, float] | None = None) -> NDArrayFloat:
     """Lateral world variance [m²] of the gap points ``gap`` (``(K, 2)``) of a bridge from
     ``start`` to ``stop`` (the ego border's last and the coop border's first point).
 
@@ -202,7 +236,9 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     the sensor parts of the ends' variances as (h00·σ_E)² + (h01·σ_C)², each sender's pose
     error δ as ((h00·J_E + h10·L·e_ψ)·δ)² for the ego end and ((h01·J_C + h11·L·e_ψ)·δ)² for
     the coop end (a yaw error turns that end's tangent, e_ψ = (0, 0, 1)); the interpolation
-    error adds (``sigma_per_m``·d)² (:data:`BRIDGE_SIGMA_PER_M`).
+    error adds (``sigma_per_m``·F·d)² (:data:`BRIDGE_SIGMA_PER_M`), F = :func:`bridge_bend` of
+    ``bend`` (the ends' heading change [rad], mean curvature and curvature change [1/m],
+    :func:`gap_bend`), or F = 1 when ``bend`` is None.
     """
     if gap.shape[0] == 0:
         return np.empty(0)
@@ -213,7 +249,8 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     t2, t3 = tau * tau, tau * tau * tau
     h00, h01 = 2.0 * t3 - 3.0 * t2 + 1.0, 3.0 * t2 - 2.0 * t3
     h10, h11 = t3 - 2.0 * t2 + tau, t3 - t2
-    out = (sigma_per_m * length * np.minimum(tau, 1.0 - tau)) ** 2
+    scale = 1.0 if bend is None else bridge_bend(*bend, length)
+    out = (sigma_per_m * scale * length * np.minimum(tau, 1.0 - tau)) ** 2
     for end, h_offset, h_turn in ((ego_end, h00, h10), (coop_start, h01, h11)):
         out += h_offset * h_offset * end.sensor
         if end.covariance.any():

@@ -63,7 +63,7 @@ def test_inverse_variance_weights_match_the_closed_form_of_two_gaussian_sources(
     road = straight(0.4)
     a, b = 0.10, -0.05  # rigid lateral errors of the ego and the coop detection [m]
     ego = sensed(road, 10.0, sigma_e, shift_m=a)
-    coop = sensed(road, 20.0, sigma_c, shift_m=b)  # 10 m ahead: a 20 m overlap, 10 m of it past both 5 m blends
+    coop = sensed(road, 20.0, sigma_c, shift_m=b)  # 10 m ahead: a 20 m overlap
     result = fusion.fuse(ego, coop, params=IV)
     assert result.kind == "convoy"
     middle = overlap_middle(result, road, 25.5, 34.5)
@@ -119,11 +119,24 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
                                rtol=1e-6)
     ego_only = result.left_source == Source.EGO
     x0 = along_m(result.left[ego_only], road) - 10.0
-    np.testing.assert_allclose(result.left_sigma[ego_only], np.sqrt(sigma_e(x0) ** 2 + pose_var(ego_cov, x0)),
-                               rtol=1e-6)
+    before = x0 < 10.0 - IV.convoy_end_blend_m  # short of the seam blend the ego's own σ
+    assert before.sum() > 20
+    np.testing.assert_allclose(result.left_sigma[ego_only][before],
+                               np.sqrt(sigma_e(x0[before]) ** 2 + pose_var(ego_cov, x0[before])), rtol=1e-6)
     coop_only = result.left_source == Source.COOP
     x1 = along_m(result.left[coop_only], road) - 20.0
-    np.testing.assert_allclose(result.left_sigma[coop_only], np.sqrt(sigma_c**2 + pose_var(coop_cov, x1)), rtol=1e-6)
+    beyond = x1 > 20.0 + IV.convoy_end_blend_m  # past the seam blend the coop's own σ
+    np.testing.assert_allclose(result.left_sigma[coop_only][beyond],
+                               np.sqrt(sigma_c**2 + pose_var(coop_cov, x1[beyond])), rtol=1e-6)
+    # in the seam blend the coop point keeps 1 − λ·(1 − w_end) of its weight, the ego's last point the rest
+    x_end = float(along_m(result.left[result.left_source == Source.FUSED], road)[-1]) - 10.0
+    ve_end, pe_end = sigma_e(np.array(x_end)) ** 2, pose_var(ego_cov, np.array(x_end))
+    w_end = ve_end / (ve_end + vc + pose_var(coop_cov, np.array(x_end - 10.0)) + pe_end)
+    t = np.clip(1.0 - (x1[~beyond] - (x_end - 10.0)) / IV.convoy_end_blend_m, 0.0, 1.0)
+    w_seam = 1.0 - (1.0 - w_end) * t * t * (3.0 - 2.0 * t)
+    np.testing.assert_allclose(result.left_sigma[coop_only][~beyond],
+                               np.sqrt(w_seam**2 * (vc + pose_var(coop_cov, x1[~beyond]))
+                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)), rtol=1e-6)
 
 
 def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
@@ -137,10 +150,31 @@ def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
     assert steps["inverse-variance"] < 0.01  # smoothstep over 5 m: at most 1.5·0.16/5·0.1 m per point
 
 
+def test_inverse_variance_weights_hold_to_the_overlap_ends_and_the_seams_fade_outside() -> None:
+    """Rigid errors +a (ego), b (coop): the whole overlap sits at w·b + (1 − w)·a, the ego
+    points λ·w·(b − a) and the coop points λ·(1 − w)·(a − b) from their own, λ the smoothstep
+    of the distance d from the overlap, 1 − 3(d/L)² + 2(d/L)³ (L = 5 m)."""
+    road = straight(-0.2)
+    a, b, sigma_e, sigma_c = 0.08, -0.06, 0.1, 0.05
+    result = fusion.fuse(sensed(road, 10.0, sigma_e, shift_m=a), sensed(road, 20.0, sigma_c, shift_m=b), params=IV)
+    w = sigma_e**2 / (sigma_e**2 + sigma_c**2)
+    s, offset = along_m(result.left, road), lateral(result.left, road, 0.5 * WIDTH_M)
+    fused = result.left_source == Source.FUSED
+    np.testing.assert_allclose(offset[fused], w * b + (1 - w) * a, atol=1e-9)
+    start, end = s[fused].min(), s[fused].max()
+    blend = lambda d: np.where(d < 5.0, 1 - 3 * (d / 5.0) ** 2 + 2 * (d / 5.0) ** 3, 0.0)  # noqa: E731
+    ego = result.left_source == Source.EGO
+    np.testing.assert_allclose(offset[ego], a + blend(start - s[ego]) * w * (b - a), atol=1e-6)
+    coop = result.left_source == Source.COOP
+    np.testing.assert_allclose(offset[coop], b + blend(s[coop] - end) * (1 - w) * (a - b), atol=1e-6)
+    assert (s[ego] < start - 5.0).sum() > 20 and (s[coop] > end + 5.0).sum() > 20
+
+
 def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
-    """Hermite propagation of the end errors plus k·d, with the coop's pose error: at arc
-    fraction τ of a bridge of length L (ego exact), σ² = (k·L·min(τ, 1 − τ))² + h00²σ_E² + h01²σ_C²
-    + h01²σ_xy² + (h11·L)²σ_ψ²."""
+    """Hermite propagation of the end errors, with the coop's pose error: at arc fraction τ of
+    a bridge of length L (ego exact), σ² = (k·F·d)² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
+    (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend, F = 0 for ``hermite``,
+    F = 1 for ``paper``."""
     road = straight(-0.3)
     sigma_e, sigma_c, sxy, syaw = 0.12, 0.05, 0.06, 0.004
     ego = sensed(road, 10.0, sigma_e)
@@ -151,11 +185,59 @@ def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None
         gap = result.left_source == Source.INTERPOLATED
         tau = (along_m(result.left[gap], road) - 40.0) / 30.0
         h00, h01, h11 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3, tau**3 - tau**2
+        bend = 0.0 if interpolation == "hermite" else 1.0
         d = 30.0 * np.minimum(tau, 1.0 - tau)
-        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * d) ** 2 + (h00 * sigma_e) ** 2 + (h01 * sigma_c) ** 2
-                           + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
+        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma_e) ** 2
+                           + (h01 * sigma_c) ** 2 + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
         np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=2e-3)
-        assert result.left_sigma[gap].max() > 0.5 * BRIDGE_SIGMA_PER_M[interpolation] * 30.0
+
+
+@pytest.mark.parametrize("interpolation", ["paper", "hermite"])
+def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpolation: str) -> None:
+    """A right-angle corner of radius 20 m inside the gap between two straights: the bend is
+    F = π/2 (both ends straight) for ``hermite``, 1 for ``paper``; the interpolation term
+    k·F·d at distance d from the nearer end, on top of the ends' σ carried by h00, h01
+    (exact poses)."""
+    sigma = 0.02
+    arc = Segment(20.0 * math.pi / 2.0, 1.0 / 20.0)
+    road = AnalyticRoad([Segment(80.0), arc, Segment(80.0)], yaw0=0.3)
+    ego = sensed(road, 45.0, sigma)  # ends 5 m before the corner
+    coop = sensed(road, 80.0 + arc.length_m + 5.0, sigma)  # starts 5 m after it
+    result = fusion.fuse(ego, coop, interpolation=interpolation)
+    assert result.kind == "spline"
+    gap = result.left_source == Source.INTERPOLATED
+    inside = np.flatnonzero(gap)
+    chain = result.left[inside[0] - 1: inside[-1] + 2]
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+    tau = s[1:-1] / s[-1]
+    h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+    d = s[-1] * np.minimum(tau, 1.0 - tau)
+    k = BRIDGE_SIGMA_PER_M[interpolation]
+    bend = math.pi / 2.0 if interpolation == "hermite" else 1.0
+    expected = np.sqrt((k * bend * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
+    np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=1e-3)
+    assert result.left_sigma[gap].max() > 0.5  # k·F·d at mid-bridge, d ≥ 15 m
+
+
+def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
+    """A gap inside an arc of radius 150 m: the ends' turn is the arc's own (F = |Δψ − L·κ̄| +
+    L·|Δκ| ≈ 0), so hermite's bridge σ is the ends' σ carried by h00, h01 alone, while the
+    paper's keeps k·d (F = 1)."""
+    sigma = 0.03
+    road = AnalyticRoad([Segment(20.0), Segment(200.0, 1.0 / 150.0)], yaw0=-0.5)
+    ego, coop = sensed(road, 40.0, sigma), sensed(road, 100.0, sigma)  # a 30 m gap
+    for interpolation, bend in (("hermite", 0.0), ("paper", 1.0)):
+        result = fusion.fuse(ego, coop, interpolation=interpolation)
+        assert result.kind == "spline"
+        inside = np.flatnonzero(result.left_source == Source.INTERPOLATED)
+        chain = result.left[inside[0] - 1: inside[-1] + 2]
+        s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+        tau = s[1:-1] / s[-1]
+        h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+        d = s[-1] * np.minimum(tau, 1.0 - tau)
+        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma) ** 2
+                           + (h01 * sigma) ** 2)
+        np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-2)
 
 
 def test_defaults_keep_todays_geometry_and_state_no_sigma() -> None:

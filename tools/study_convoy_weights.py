@@ -13,30 +13,49 @@ at the overlap's middle (closed form), and the calibration of the stated σ (sha
 fusion, calibration of the bridge σ; weights do not apply).
 
     .venv/bin/python tools/study_convoy_weights.py [--pairs 200] [--seed 1] [--lead 25] [--range 50]
+
+With ``--maps`` it runs ``cold-eval`` instead (in this process, ``--no-mcap --no-plots``, the
+same routes, frames, gaps and seed for every run) on each map × sensor (``ideal``,
+``camera``, or one of them with ``--sensors``) × coop pose error (none, 0.05 m / 2 mrad, 0.1 m / 5 mrad: ``--pose-xy``,
+``--pose-yaw``) × ``--convoy-weights`` (paper, mean, inverse-variance) and tabulates the
+convoy scenario's errors of correct fusions (``tools/study_sensor.py``'s ``correct_errors``:
+the larger of the two borders' max and p95; the mean of both borders' means) and the
+calibration of the stated σ of every fused scenario (both borders' points pooled). Writes
+``study.json`` (every figure and how it was made) and ``study.md`` to ``--out``:
+
+    .venv/bin/python tools/study_convoy_weights.py --maps rural,Town01,Town04 --out out/study-weights \
+        [--routes 3] [--frames 100] [--eval-seed 0] [--gaps 20,30,50] [--workers 2] [--sensors camera]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import shlex
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import cold_maps  # noqa: E402
 import fusion  # noqa: E402
 from cold_maps.simulation.lane_model_error import LaneModelErrorParams  # noqa: E402
 from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
 from fusion.geometry import distance_to_polyline  # noqa: E402
+from study_sensor import MAPS, correct_errors, run_eval, sha256, shown  # noqa: E402
 
 CAMERA = LaneModelErrorParams(sigma_c0_m=0.05, sigma_c1_rad=0.002, sigma_c2_per_m=4e-5, sigma_c3_per_m2=0.0,
                               white_m=0.01)
 POSE_LEVELS = ((0.0, 0.0), (0.05, 0.002), (0.1, 0.005))  # (σ_xy m, σ_yaw rad) of the coop's reported pose
 WEIGHTS = ("paper", "mean", "inverse-variance")
 HALF_WIDTH_M = 1.75
+SENSORS = ("ideal", "camera")
 
 
 def random_road(rng: np.random.Generator) -> AnalyticRoad:
@@ -69,7 +88,123 @@ def with_pose_error(det: fusion.LaneDetection, sigma_xy: float, sigma_yaw: float
     return replace(det, pose=pose, pose_cov=np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2]))
 
 
-def main() -> int:
+def convoy_row(metrics: dict[str, Any]) -> dict[str, Any]:
+    """Errors of the correct convoy fusions of one run (module docstring) and how many."""
+    records = [r for r in metrics["scenarios"] if r["fusion"] == "convoy"]
+    worst = [correct_errors(r) for r in records]
+    means = []
+    for record in records:
+        groups = [g for g in record.get("by_route", {}).values() if g["fused"]]
+        if groups:
+            means.append(sum(g["fused"] * g["mean_error_m"] for g in groups) / sum(g["fused"] for g in groups))
+
+    def larger(name: str) -> float | None:
+        values = [w[name] for w in worst if w.get(name) is not None]
+        return max(values) if values else None
+
+    return {"fused": sum(g["fused"] for g in records[0].get("by_route", {}).values()) if records else 0,
+            "max_error_m": larger("max_error_m"), "p95_error_m": larger("p95_error_m"),
+            "mean_error_m": sum(means) / len(means) if means else None}
+
+
+def calibration_rows(metrics: dict[str, Any]) -> list[dict[str, Any]]:
+    """Calibration of every fused scenario of one run, both borders' points pooled."""
+    pooled: dict[str, list[dict[str, Any]]] = {}
+    for record in metrics["scenarios"]:
+        if record["fusion"] != "local" and record.get("calibration"):
+            label = record["fusion"] if record["fusion"] != "spline" else \
+                f"spline-{record['interpolation']}-d{record['d_s']:g}"
+            pooled.setdefault(label, []).append(record["calibration"])
+    rows = []
+    for label, parts in pooled.items():
+        points = sum(p["points"] for p in parts)
+        rows.append({"scenario": label, "points": points,
+                     **{key: sum(p[key] * p["points"] for p in parts) / points
+                        for key in ("within_1sigma", "within_2sigma", "mean_sigma_m", "mean_error_m")}})
+    return rows
+
+
+def _num(value: float | None, digits: int = 3) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def maps_markdown(study: dict[str, Any]) -> str:
+    """The tables of a ``--maps`` study."""
+    lines = [f"Made by `{study['command']}` (cold-maps {study['version']}; cold-eval options "
+             f"`{study['eval_options']}`).", "",
+             "Convoy, errors of correct fusions [m] (max / p95: the larger border's; mean: both borders'):", "",
+             "| map | sensor | pose σ_xy [m] / σ_yaw [mrad] | " + " | ".join(
+                 f"{w} max | {w} p95 | {w} mean" for w in WEIGHTS) + " | fused |",
+             "|---|---|---|" + "---|" * (3 * len(WEIGHTS) + 1)]
+    for row in study["rows"]:
+        cells = [f"{_num(row[w]['max_error_m'])} | {_num(row[w]['p95_error_m'])} | {_num(row[w]['mean_error_m'])}"
+                 for w in WEIGHTS]
+        lines.append(f"| {row['map']} | {row['sensor']} | {row['pose'][0]:g} / {1e3 * row['pose'][1]:g} | "
+                     + " | ".join(cells) + f" | {row['paper']['fused']} |")
+    lines += ["", "Calibration of the stated σ (share of fused points within 1σ / 2σ, %; the convoy "
+              "row per weighting, spline rows from the inverse-variance run; 68.3 / 95.4 when calibrated):", "",
+              "| map | pose σ_xy [m] / σ_yaw [mrad] | scenario | within 1σ | within 2σ | mean σ [m] "
+              "| mean error [m] |",
+              "|---|---|---|---|---|---|---|"]
+    for row in study["rows"]:
+        for w in WEIGHTS:
+            for cal in row[w]["calibration"]:
+                if cal["scenario"] != "convoy" and w != "inverse-variance":
+                    continue
+                name = f"{cal['scenario']} ({w})" if cal["scenario"] == "convoy" else cal["scenario"]
+                lines.append(f"| {row['map']} | {row['pose'][0]:g} / {1e3 * row['pose'][1]:g} | {name} | "
+                             f"{100 * cal['within_1sigma']:.1f} | {100 * cal['within_2sigma']:.1f} | "
+                             f"{cal['mean_sigma_m']:.3f} | {cal['mean_error_m']:.3f} |")
+    return "\n".join(lines)
+
+
+def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
+    """The ``--maps`` study (module docstring)."""
+    specs = {m.name: m for m in MAPS}
+    wanted = [name for name in args.maps.split(",") if name]
+    unknown = sorted(set(wanted) - set(specs))
+    if unknown:
+        print(f"study_convoy_weights: --maps: unknown map(s) {', '.join(unknown)} (known: {', '.join(specs)})",
+              file=sys.stderr)
+        return 2
+    options = ["--routes", args.routes, "--frames", args.frames, "--seed", args.eval_seed, "--gaps", args.gaps,
+               "--interpolation", "both", "--workers", args.workers, "--no-mcap", "--no-plots", "-q"]
+    study: dict[str, Any] = {"command": shlex.join(["python", "tools/study_convoy_weights.py", *argv]),
+                             "version": cold_maps.__version__, "eval_options": shlex.join(options), "maps": [],
+                             "rows": []}
+    for name in wanted:
+        spec = specs[name]
+        if not spec.path.is_file():
+            print(f"{name}: skipped, {spec.path} not found", file=sys.stderr)
+            study["maps"].append({"name": name, "path": shown(spec.path), "sha256": None})
+            continue
+        study["maps"].append({"name": name, "path": shown(spec.path), "sha256": sha256(spec.path)})
+        for sensor in args.sensors.split(","):
+            for sigma_xy, sigma_yaw in POSE_LEVELS:
+                row: dict[str, Any] = {"map": name, "sensor": sensor, "pose": [sigma_xy, sigma_yaw]}
+                for weights in WEIGHTS:
+                    out = args.out / name / sensor / f"pose{sigma_xy:g}_{sigma_yaw:g}" / weights
+                    run = ["--map", str(spec.path), "--sensor", sensor, "--pose-xy", f"{sigma_xy:g}", "--pose-yaw",
+                           f"{sigma_yaw:g}", "--convoy-weights", weights, *options, "--out", str(out)]
+                    status, err, seconds = run_eval(run)
+                    print(f"{name} {sensor} {sigma_xy:g}/{sigma_yaw:g} {weights}: exit {status} in {seconds:.0f} s",
+                          file=sys.stderr)
+                    if status != 0:
+                        print(f"study_convoy_weights: cold-eval exit {status}: {err}", file=sys.stderr)
+                        return 1
+                    metrics = json.loads((out / "metrics.json").read_text())
+                    row[weights] = convoy_row(metrics) | {"calibration": calibration_rows(metrics),
+                                                          "cold_eval": shlex.join(["cold-eval", *run])}
+                study["rows"].append(row)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "study.json").write_text(json.dumps(study, indent=1) + "\n")
+    (args.out / "study.md").write_text(maps_markdown(study) + "\n")
+    print(f"study: {args.out / 'study.md'}, {args.out / 'study.json'}", file=sys.stderr)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pairs", type=int, default=200, help="pairs per pose-error level (default 200)")
     parser.add_argument("--seed", type=int, default=1, help="seed (default 1)")
@@ -78,7 +213,19 @@ def main() -> int:
     parser.add_argument("--gap", type=float, default=None, help="spline study: gap d_s past the ego's range, m")
     parser.add_argument("--interpolation", choices=("paper", "hermite"), default="hermite",
                         help="interpolation of the spline study (default hermite)")
-    args = parser.parse_args()
+    parser.add_argument("--maps", default="", help="comma-separated maps of tools/study_sensor.py (e.g. "
+                        "rural,Town01,Town04): the cold-eval study instead of the analytic one")
+    parser.add_argument("--out", type=Path, default=Path("out/study-weights"), help="--maps: output folder")
+    parser.add_argument("--routes", default="3", help="--maps: cold-eval --routes (default 3)")
+    parser.add_argument("--frames", default="100", help="--maps: cold-eval --frames (default 100)")
+    parser.add_argument("--eval-seed", default="0", help="--maps: cold-eval --seed (default 0)")
+    parser.add_argument("--gaps", default="20,30,50", help="--maps: cold-eval --gaps (default 20,30,50)")
+    parser.add_argument("--workers", default="2", help="--maps: cold-eval --workers (default 2)")
+    parser.add_argument("--sensors", default=",".join(SENSORS), choices=(*SENSORS, ",".join(SENSORS)),
+                        help="--maps: the sensors, ideal, camera or both (default ideal,camera)")
+    args = parser.parse_args(argv)
+    if args.maps:
+        return maps_study(args, argv)
     lead = args.lead if args.gap is None else args.range + args.gap
     schemes = WEIGHTS if args.gap is None else ("paper",)
     middle_source = fusion.Source.FUSED if args.gap is None else fusion.Source.INTERPOLATED
