@@ -28,6 +28,7 @@ from gt_matching.polyline import (
     as_polyline,
     closest_distances,
     mid_line,
+    SegmentIndex,
 )
 from gt_matching.route import BorderPart, RouteBorder
 
@@ -171,15 +172,24 @@ def _walked_arc(lanelets: Sequence[LaneletGeometry], samples: NDArrayFloat, spac
     return min((walk(float(start)) for start in starts), key=lambda found: found[0])[1]
 
 
-def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float) -> float:
+def _joined_border(lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
+    """The ``side`` ("left", "right") borders of ``lanelets`` joined, repeated vertices
+    dropped, indexed for capped distances."""
+    vertices = np.vstack([getattr(g, side) for g in lanelets])
+    distinct = np.concatenate(([True], np.any(np.diff(vertices, axis=0) != 0.0, axis=1)))
+    return SegmentIndex(vertices[distinct])
+
+
+JoinedBorder = Callable[[Sequence[LaneletGeometry], str], SegmentIndex]
+"""``_joined_border`` (or a cached equivalent)."""
+
+
+def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float,
+                  joined: JoinedBorder = _joined_border) -> float:
     """Mean exact distance (m, each capped at ``cap_m``) of every ``BORDER_FIT_STRIDE``-th
     detected border point to the joined borders of ``lanelets``, both sides."""
-    fits = []
-    for points, side in ((left, "left"), (right, "right")):
-        vertices = np.vstack([getattr(g, side) for g in lanelets])
-        distinct = np.concatenate(([True], np.any(np.diff(vertices, axis=0) != 0.0, axis=1)))
-        distances = closest_distances(points[::BORDER_FIT_STRIDE], vertices[distinct])[0]
-        fits.append(float(np.mean(np.minimum(distances, cap_m))))
+    fits = [float(np.mean(joined(lanelets, side).capped(points[::BORDER_FIT_STRIDE], cap_m)))
+            for points, side in ((left, "left"), (right, "right"))]
     return float(np.mean(fits))
 
 
@@ -220,6 +230,7 @@ class GroundTruth:
         self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
+        self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
             for side in ("left", "right"):
@@ -320,6 +331,19 @@ class GroundTruth:
             )
         return part
 
+    def _joined_border(self, lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
+        """``_joined_border`` of a lanelet sequence, kept (LRU, ``ROUTE_CACHE_SIZE``): the
+        tied sequences of consecutive frames recur."""
+        key = (tuple(g.key for g in lanelets), side)
+        found = self._joined.get(key)
+        if found is None:
+            found = self._joined[key] = _joined_border(lanelets, side)
+            if len(self._joined) > ROUTE_CACHE_SIZE:
+                self._joined.popitem(last=False)
+        else:
+            self._joined.move_to_end(key)
+        return found
+
     def _candidates(self, pose: Pose) -> list[_Candidate]:
         """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose
         (those of the last ``CANDIDATE_CACHE_SIZE`` poses kept)."""
@@ -395,7 +419,8 @@ class GroundTruth:
         tied = [sequences[i] for i in order if sequences[i].candidate.on_pose
                 and sequences[i].score_m - own.score_m <= TIE_SCORE_M and sequences[i].lanelets != own.lanelets]
         if tied:
-            own = min([own, *tied], key=lambda s: _border_fit_m(s.lanelets, left, right, config.max_distance_m))
+            own = min([own, *tied], key=lambda s: _border_fit_m(s.lanelets, left, right, config.max_distance_m,
+                                                                 self._joined_border))
         pose_ids = tuple(sorted(c.geometry.key[0] for c in candidates if c.on_pose))
         mismatch = None
         if own.score_m - best.score_m > OTHER_LANE_GAIN_M:

@@ -6,7 +6,7 @@ these helpers: the converter, the recording and the lane strips use them too."""
 
 from __future__ import annotations
 
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +19,9 @@ NDArrayBool = npt.NDArray[np.bool_]
 
 #: Segments shorter than this are treated as zero-length (a repeated vertex), m.
 ZERO_LENGTH_M: Final = 1e-12
+#: Slack (m) on ``SegmentIndex.capped``'s search radius: covers the rounding of the
+#: midpoint distances, so no segment within the cap is left out.
+CAP_MARGIN_M: Final = 1e-6
 
 
 def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
@@ -95,6 +98,44 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     brute force over all segments: O(N * M), for short inputs."""
     all_segments = np.broadcast_to(np.arange(len(vertices) - 1), (len(points), len(vertices) - 1))
     return segment_distances(points, vertices, all_segments)
+
+
+class SegmentIndex:
+    """The segments of a polyline (``(M >= 2, 2)`` vertices, m) indexed by their midpoints
+    (KD-tree built on first use), for distances capped at a bound: :meth:`capped` gives
+    ``np.minimum(closest_distances(points, vertices)[0], cap_m)`` bit for bit while
+    measuring only the segments that can come within ``cap_m`` of a point."""
+
+    def __init__(self, vertices: NDArrayFloat) -> None:
+        self.vertices = vertices
+        self._tree: Any = None
+        self._reach_m = 0.0
+
+    def capped(self, points: NDArrayFloat, cap_m: float) -> NDArrayFloat:
+        """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
+        is smaller, m. A segment whose midpoint lies farther than ``cap_m`` plus the longest
+        half segment (and a micrometre for rounding) is farther than ``cap_m``; the others
+        are measured by :func:`segment_distances` (each point's list padded with its first)."""
+        vertices = self.vertices
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(0.5 * (vertices[1:] + vertices[:-1]))
+            self._reach_m = 0.5 * float(np.max(np.hypot(*(vertices[1:] - vertices[:-1]).T))) + CAP_MARGIN_M
+        capped = np.full(len(points), cap_m)
+        near = self._tree.query_ball_point(points, r=cap_m + self._reach_m)
+        counts = np.fromiter((len(found) for found in near), dtype=np.int64, count=len(points))
+        rows = np.flatnonzero(counts)
+        if len(rows) == 0:
+            return capped
+        width = int(counts.max())
+        segments = np.empty((len(rows), width), dtype=np.int64)
+        for row, index in enumerate(rows.tolist()):
+            found = near[index]
+            segments[row, : len(found)] = found
+            segments[row, len(found):] = found[0]
+        capped[rows] = np.minimum(segment_distances(points[rows], vertices, segments)[0], cap_m)
+        return capped
 
 
 def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
