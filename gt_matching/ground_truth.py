@@ -281,6 +281,19 @@ class GroundTruth:
         route = self._route([self._geometry[key] for key in match.route_key])
         return self._errors(left_xy, right_xy, match, route, exact, others)
 
+    def resampled(self, match: LaneMatch, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat]]
+                  ) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+        """Per lane (left and right borders, ``as_polyline``-valid, world frame, driving
+        order), its points' distances (m) to the GT borders of ``match`` resampled every
+        ``config.step_m``: the ``distances_m`` of ``errors(left, right, match,
+        others=False)`` bit for bit, all lanes in one pass per border."""
+        unknown = [key for key in match.route_key if key not in self._geometry]
+        if unknown:
+            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
+        route = self._route([self._geometry[key] for key in match.route_key])
+        return list(zip(route.left.resampled([left for left, _ in lanes]),
+                        route.right.resampled([right for _, right in lanes])))
+
     def _errors(
         self, left: NDArrayFloat, right: NDArrayFloat, match: LaneMatch, route: _Route, exact: bool, others: bool
     ) -> LaneErrors:

@@ -1,18 +1,25 @@
 """Ground-truth measuring fast paths against the straightforward computations they replace,
-bit for bit: capped closest-point distances through a segment index, and the meter's
-per-border figures (perception range, distances ahead, points past the GT ends)."""
+bit for bit: capped closest-point distances through a segment index, the meter's
+per-border figures (perception range, distances ahead, points past the GT ends), and the
+block API (``GroundTruthMeter.measure_many``) against measuring lane by lane and against a
+brute-force search of the GT samples, on the lanes of real runs on bundled maps."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import fields
+from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, _end_direction,
-                                         ahead_of_m, covered_length_m, gt_ends, points_past_ends)
+from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, GroundTruthMeter,
+                                         Measurement, _end_direction, ahead_of_m, covered_length_m, gt_ends,
+                                         points_past_ends)
 from gt_matching.polyline import SegmentIndex, arc_lengths, closest_distances
+from conftest import bundled_map
 
 
 def _polyline(seed: int, count: int, scale: float) -> np.ndarray:
@@ -97,3 +104,83 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
         distances = rng.uniform(0.0, 3.0, count)
         assert points_past_ends(border, gt, distances, 0.02) == _past_reference(border, gt, distances, 0.02)
         assert points_past_ends(border, gt_ends(gt), distances, 0.02) == _past_reference(border, gt, distances, 0.02)
+
+
+def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
+    """The ``GroundTruthMeter.measure`` calls of a short ``cold-eval`` run (with coops and
+    lanes on), in order."""
+    from cold_maps.cli import evaluate
+
+    calls = []
+    measure = GroundTruthMeter.measure
+
+    def recorded(self, left, right, pose, *, reference=None):  # type: ignore[no-untyped-def]
+        calls.append((np.array(left), np.array(right), tuple(pose),
+                      None if reference is None else tuple(np.array(side) for side in reference)))
+        return measure(self, left, right, pose, reference=reference)
+
+    monkeypatch.setattr(GroundTruthMeter, "measure", recorded)
+    status = evaluate.main(["--map", str(map_path), "--frames", "40", "--workers", "1", "--no-plots", "--no-mcap",
+                            "--no-progress", "--out", str(tmp_path / "out")])
+    assert status == 0 and calls
+    return calls
+
+
+def _brute_force(points: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """Each point's distance (m) to its nearest sample, over all samples (rows of 64 points)."""
+    found = []
+    for first in range(0, len(points), 64):
+        chunk = points[first:first + 64]
+        dx = samples[:, 0] - chunk[:, :1]
+        dy = samples[:, 1] - chunk[:, 1:]
+        found.append(np.sqrt(np.min(dx * dx + dy * dy, axis=1)))
+    return np.concatenate(found)
+
+
+def _same(found: Measurement | Exception, expected: Measurement | Exception) -> bool:
+    """Whether two measurements (or errors) agree in every field, bit for bit."""
+    if isinstance(expected, Exception):
+        return isinstance(found, Exception) and str(found) == str(expected)
+    assert isinstance(found, Measurement)
+    return all(np.array_equal(getattr(found, item.name), getattr(expected, item.name))
+               if isinstance(getattr(expected, item.name), np.ndarray)
+               else getattr(found, item.name) == getattr(expected, item.name) for item in fields(Measurement))
+
+
+@pytest.mark.parametrize("name", ["junction", "curve90"])
+def test_measure_many_equals_measure_one_by_one_on_the_bundled_maps(name: str, tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """Blocks of 1, 7 and all calls of a run against fresh meters measuring one by one; the
+    distances also against a brute-force search over all GT samples."""
+    from cold_maps.groundtruth.lanelet2_from_engine import converter_named
+    from cold_maps.network.lane_graph import load_graph
+    from converters import load_lanelet2
+    from gt_matching import GroundTruth, MatchingError
+
+    map_path = bundled_map(name)
+    calls = _captured_calls(map_path, tmp_path, monkeypatch)
+    graph = load_graph(map_path)
+    lanelet_map, routing = load_lanelet2(map_path, converter=converter_named("engine", graph.odr_map))
+
+    def fresh() -> GroundTruthMeter:
+        return GroundTruthMeter(GroundTruth(lanelet_map, routing, prepare_all=False))
+
+    single = fresh()
+    expected: list[Measurement | Exception] = []
+    for left, right, pose, reference in calls:
+        try:
+            expected.append(single.measure(left, right, pose, reference=reference))
+        except MatchingError as exc:
+            expected.append(exc)
+    checked = 0
+    for item, (left, right, pose, reference) in list(zip(expected, calls))[::5]:
+        if isinstance(item, Measurement):
+            match = single.match(*(reference or (left, right)), pose)
+            assert np.array_equal(item.left_errors_m, _brute_force(left, match.left_gt_samples))
+            assert np.array_equal(item.right_errors_m, _brute_force(right, match.right_gt_samples))
+            checked += 1
+    assert checked
+    for block in (1, 7, len(calls)):
+        meter = fresh()
+        found = [item for first in range(0, len(calls), block) for item in meter.measure_many(calls[first:first + block])]
+        assert all(_same(item, reference) for item, reference in zip(found, expected))

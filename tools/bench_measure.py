@@ -9,8 +9,9 @@ preparation within the frame loop counts as it does in a run. Printed: CPU ms pe
 (mean / σ / max over the passes' per-frame sums), and a SHA-256 digest of every
 ``Measurement`` field of every call: the baseline's must be the same.
 
-Usage: ``python tools/bench_measure.py [--map MAP.xodr] [--args "--frames 100"] [--repeat 3]
-[--baseline-ref 0abd8c1]``.
+Each pass runs in a fresh interpreter; with ``--baseline-ref`` the two sides alternate, so
+both see the same load. Usage: ``python tools/bench_measure.py [--map MAP.xodr] [--args
+"--frames 100"] [--repeat 3] [--baseline-ref 0abd8c1] [--save calls.pkl | --calls calls.pkl]``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import io
+import json
 import os
 import pickle
 import shlex
@@ -82,8 +84,10 @@ def _digest(measured: Any, hasher: Any) -> None:
         hasher.update(np.ascontiguousarray(value).tobytes() if isinstance(value, np.ndarray) else repr(value).encode())
 
 
-def replay(map_path: Path, calls: list[Call], repeat: int) -> tuple[list[float], str]:
-    """CPU ms of the measure calls per frame over ``repeat`` passes, and the digest of the results."""
+def replay(map_path: Path, calls: list[Call], repeat: int, block: int = 0) -> tuple[list[float], str]:
+    """CPU ms of the measure calls per frame over ``repeat`` passes, and the digest of the
+    results; ``block`` > 0: the calls of every ``block`` frames in one ``measure_many``
+    (their time spread evenly over those frames)."""
     from cold_maps.groundtruth.lanelet2_from_engine import converter_named
     from cold_maps.groundtruth.meter import GroundTruthMeter
     from cold_maps.network.lane_graph import load_graph
@@ -99,14 +103,23 @@ def replay(map_path: Path, calls: list[Call], repeat: int) -> tuple[list[float],
         meter = GroundTruthMeter(GroundTruth(lanelet_map, routing, prepare_all=False))
         hasher = hashlib.sha256()
         spent = np.zeros(frames + 1)
-        for frame, left, right, pose, reference in calls:
-            start = time.process_time()
-            try:
-                measured: Any = meter.measure(left, right, pose, reference=reference)
-            except MatchingError as exc:
-                measured = str(exc)
-            spent[frame] += time.process_time() - start
-            _digest(measured, hasher)
+        if block:
+            for first in range(1, frames + 1, block):
+                chosen = [call for call in calls if first <= call[0] < first + block]
+                start = time.process_time()
+                found = meter.measure_many([(left, right, pose, reference) for _, left, right, pose, reference in chosen])
+                spent[first:first + block] += (time.process_time() - start) / len(spent[first:first + block])
+                for measured in found:
+                    _digest(str(measured) if isinstance(measured, MatchingError) else measured, hasher)
+        else:
+            for frame, left, right, pose, reference in calls:
+                start = time.process_time()
+                try:
+                    measured: Any = meter.measure(left, right, pose, reference=reference)
+                except MatchingError as exc:
+                    measured = str(exc)
+                spent[frame] += time.process_time() - start
+                _digest(measured, hasher)
         per_frame.extend((spent[1:] * 1e3).tolist())
         digest = hasher.hexdigest()
     return per_frame, digest
@@ -118,20 +131,45 @@ def summary(label: str, per_frame: list[float], digest: str) -> str:
             f"{max(per_frame):7.3f} CPU ms per frame   digest {digest[:16]}")
 
 
-def baseline(ref: str, map_path: Path, calls_file: Path, repeat: int) -> str:
-    """The summary line of the calls replayed on commit ``ref``'s code (``git archive``
-    extracted to a temporary folder; this script run with that folder first on the path)."""
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
-                             check=True).stdout
-    with tempfile.TemporaryDirectory(prefix="bench-measure-") as folder:
-        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-            tar.extractall(folder, filter="tar")
-        done = subprocess.run([sys.executable, __file__, "--map", str(map_path), "--repeat", str(repeat),
-                               "--replay", str(calls_file), "--code", folder, "--label", ref],
-                              check=False, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": folder})
+def side_pass(code: Path, map_path: Path, calls_file: Path) -> tuple[list[float], str]:
+    """One replay pass on the code in ``code`` (a fresh interpreter with it first on the path)."""
+    done = subprocess.run([sys.executable, __file__, "--map", str(map_path), "--replay", str(calls_file),
+                           "--code", str(code)], check=False, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(code)})
     if done.returncode:
-        raise SystemExit(f"replay on {ref} failed: {done.stderr.strip().splitlines()[-1:]}")
-    return done.stdout.strip()
+        raise SystemExit(f"replay on {code} failed: {done.stderr.strip().splitlines()[-1:]}")
+    found = json.loads(done.stdout)
+    return found["per_frame"], found["digest"]
+
+
+def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None) -> list[str]:
+    """Report lines: the calls replayed ``repeat`` times on this checkout and, with ``ref``,
+    on that commit's code (``git archive`` extracted to a temporary folder), the sides
+    alternating so that both see the same load."""
+    with tempfile.TemporaryDirectory(prefix="bench-measure-") as folder:
+        calls_file = Path(folder) / "calls.pkl"
+        with calls_file.open("wb") as stream:
+            pickle.dump(calls, stream)
+        sides = {"current": ROOT}
+        if ref:
+            archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
+                                     check=True).stdout
+            with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+                tar.extractall(Path(folder) / "baseline", filter="tar")
+            sides[ref] = Path(folder) / "baseline"
+        found: dict[str, tuple[list[float], set[str]]] = {name: ([], set()) for name in sides}
+        for _ in range(repeat):
+            for name, code in sides.items():
+                per_frame, digest = side_pass(code, map_path, calls_file)
+                found[name][0].extend(per_frame)
+                found[name][1].add(digest)
+    lines = [summary(name, per_frame, "/".join(sorted(digests))) for name, (per_frame, digests) in found.items()]
+    if ref:
+        current, baseline = (statistics.fmean(found[name][0]) for name in sides)
+        same = found["current"][1] == found[ref][1]
+        lines.append(f"  ratio {ref} / current: {baseline / current:.2f}x; results "
+                     f"{'identical' if same else 'DIFFER'}")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -140,26 +178,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--args", default="", help="extra cold-eval options of the captured run")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--baseline-ref", help="also replay the calls on this git commit's code")
+    parser.add_argument("--calls", type=Path, help="the calls captured earlier (--save), instead of a run")
+    parser.add_argument("--save", type=Path, help="keep the captured calls in this file")
     parser.add_argument("--replay", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--code", help=argparse.SUPPRESS)
-    parser.add_argument("--label", default="current", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     map_path = args.map.resolve()
     if args.replay:
-        sys.path.insert(0, args.code or str(ROOT))
+        sys.path.insert(0, args.code)
         with args.replay.open("rb") as stream:
             calls = pickle.load(stream)
-        print(summary(args.label, *replay(map_path, calls, args.repeat)))
+        per_frame, digest = replay(map_path, calls, 1)
+        print(json.dumps({"per_frame": per_frame, "digest": digest}))
         return 0
-    calls = capture(map_path, shlex.split(args.args))
-    print(f"{map_path.name} {args.args}: {len(calls)} measure calls over {max(c[0] for c in calls)} frames, "
-          f"{args.repeat} passes", flush=True)
-    print(summary("current", *replay(map_path, calls, args.repeat)), flush=True)
-    if args.baseline_ref:
-        with tempfile.NamedTemporaryFile(suffix=".pkl") as stream:
+    if args.calls:
+        with args.calls.open("rb") as stream:
+            calls = pickle.load(stream)
+    else:
+        calls = capture(map_path, shlex.split(args.args))
+    if args.save:
+        with args.save.open("wb") as stream:
             pickle.dump(calls, stream)
-            stream.flush()
-            print(baseline(args.baseline_ref, map_path, Path(stream.name), args.repeat))
+    print(f"{map_path.name} {args.args}: {len(calls)} measure calls over {max(c[0] for c in calls)} frames, "
+          f"{args.repeat} passes per side (alternating)", flush=True)
+    print("\n".join(compare(map_path, calls, args.repeat, args.baseline_ref)))
     return 0
 
 

@@ -17,16 +17,23 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import arc_lengths
+from gt_matching.polyline import arc_lengths, as_polyline
 
 if TYPE_CHECKING:
-    from gt_matching import GroundTruth, LaneMatch
+    from gt_matching import GroundTruth, LaneMatch, MatchingError
+
+Lane = tuple[NDArrayFloat, NDArrayFloat, tuple[float, float, float],
+             tuple[NDArrayFloat, NDArrayFloat] | None]
+"""A lane to measure: left and right border (``(N, 2)``, world frame, driving order), the
+sender's pose (x m, y m, yaw rad) and the reference lane's borders or None
+(``GroundTruthMeter.measure``)."""
 
 MATCH_CACHE_SIZE: Final[int] = 16
 """Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
@@ -241,21 +248,53 @@ class GroundTruthMeter:
                pose: tuple[float, float, float] | None = None) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``; the
         points' distances from the sender at ``pose`` (x m, y m, yaw rad; None: from the
-        lane's first points) by :func:`ahead_of_m`."""
-        found = self.ground_truth.errors(left, right, match, others=False)
-        past = 0
-        figures = []
-        for points, side, border in ((left, "left", found.left), (right, "right", found.right)):
-            points = np.asarray(points, dtype=np.float64)
-            past += points_past_ends(points, self._ends(match, side), border.distances_m, self.step_m)
-            arc = arc_lengths(points)
-            covered, chords = _covered(points, arc, border.distances_m)
-            figures.append((covered, _ahead(points, arc, _chord_lengths(points, arc, 0, len(arc))
-                                            if chords is None else chords, pose)))
-        reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
-        (left_range, left_ahead), (right_range, right_ahead) = figures
-        return Measurement(found.left.distances_m, found.right.distances_m, left_range, right_range,
-                           match.left_gt, match.right_gt, match.matched, reason, left_ahead, right_ahead)
+        lane's first points) by :func:`ahead_of_m`. Raises ``gt_matching.MatchingError``."""
+        lane = (as_polyline("left border", left), as_polyline("right border", right))
+        return self._measured([match], [lane], [pose])[0]
+
+    def measure_many(self, lanes: Sequence[Lane]) -> list[Measurement | MatchingError]:
+        """:meth:`measure` of each lane (left, right, pose, reference), or its
+        ``gt_matching.MatchingError``: the lanes matched to the same GT lanelets (the lanes
+        of a block of frames on one route) measured in one pass per GT border, bit for bit
+        as one by one."""
+        from gt_matching import MatchingError
+
+        found: list[Measurement | MatchingError | None] = [None] * len(lanes)
+        routes: dict[tuple[tuple[int, bool], ...], list[tuple[int, LaneMatch, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
+        for index, (left, right, pose, reference) in enumerate(lanes):
+            try:
+                match = self.match(*(reference or (left, right)), pose)
+                lane = (as_polyline("left border", left), as_polyline("right border", right))
+            except MatchingError as exc:
+                found[index] = exc
+                continue
+            routes.setdefault(match.route_key, []).append((index, match, lane))
+        for members in routes.values():
+            measured = self._measured([match for _, match, _ in members], [lane for _, _, lane in members],
+                                      [lanes[index][2] for index, _, _ in members])
+            for (index, _, _), measurement in zip(members, measured):
+                found[index] = measurement
+        return [item for item in found if item is not None]
+
+    def _measured(self, matches: list[LaneMatch], lanes: list[tuple[NDArrayFloat, NDArrayFloat]],
+                  poses: Sequence[tuple[float, float, float] | None]) -> list[Measurement]:
+        """:meth:`errors` of validated lanes against matches of one GT lanelet sequence."""
+        measured = []
+        distances = self.ground_truth.resampled(matches[0], lanes)
+        for match, (left, right), (left_errors, right_errors), pose in zip(matches, lanes, distances, poses):
+            past = 0
+            figures = []
+            for points, side, errors in ((left, "left", left_errors), (right, "right", right_errors)):
+                past += points_past_ends(points, self._ends(match, side), errors, self.step_m)
+                arc = arc_lengths(points)
+                covered, chords = _covered(points, arc, errors)
+                figures.append((covered, _ahead(points, arc, _chord_lengths(points, arc, 0, len(arc))
+                                                if chords is None else chords, pose)))
+            reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
+            (left_range, left_ahead), (right_range, right_ahead) = figures
+            measured.append(Measurement(left_errors, right_errors, left_range, right_range, match.left_gt,
+                                        match.right_gt, match.matched, reason, left_ahead, right_ahead))
+        return measured
 
     def _ends(self, match: LaneMatch, side: str) -> GtEnds:
         """``gt_ends`` of the ``side`` GT border of ``match`` (kept per route, LRU)."""
