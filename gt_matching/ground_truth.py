@@ -230,6 +230,7 @@ class GroundTruth:
         self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
+        self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
         self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
@@ -343,6 +344,16 @@ class GroundTruth:
                 config.other_border_margin_m,
             )
         return part
+
+    def _neighbours(self, geometry: LaneletGeometry, way: str) -> list[LaneletGeometry]:
+        """The routing graph's ``previous`` or ``following`` lanelets (``way``) of a lanelet,
+        in the graph's order (kept: the graph does not change)."""
+        key = (geometry.key, way)
+        found = self._graph_neighbours.get(key)
+        if found is None:
+            found = self._graph_neighbours[key] = [self._lanelet(g) for g in getattr(self.routing_graph, way)(
+                geometry.lanelet)]
+        return found
 
     def _joined_border(self, lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
         """``_joined_border`` of a lanelet sequence, kept (LRU, ``ROUTE_CACHE_SIZE``): the
@@ -466,7 +477,6 @@ class GroundTruth:
         ``max_distance_m`` of the detection's mid-line samples ``detection`` or join the
         sequence within ``margin_m + max_distance_m`` of the detection's ends."""
         config = self.config
-        graph = self.routing_graph
         cap = config.max_distance_m
         reach = config.margin_m + cap
 
@@ -483,7 +493,7 @@ class GroundTruth:
             first = (behind or [start])[0]
             previous = [
                 g
-                for g in map(self._lanelet, graph.previous(first.lanelet))
+                for g in self._neighbours(first, "previous")
                 if near(g, [start, *behind], g.centre[-1], detection[0])
             ]
             if not previous:
@@ -499,7 +509,7 @@ class GroundTruth:
             if covered < ahead_m:
                 following = [
                     g
-                    for g in map(self._lanelet, graph.following(path[-1].lanelet))
+                    for g in self._neighbours(path[-1], "following")
                     if near(g, behind + path, g.centre[0], detection[-1])
                 ]
             if not following:

@@ -16,15 +16,15 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass, field
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import arc_lengths, as_polyline
+from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch, MatchingError
@@ -51,16 +51,17 @@ points 0.1 m apart lengthens a polyline by about σ²/step² (5 cm: +25 %), alon
 chords by σ²/chord² (1 %); a chord shortens an arc of radius R by chord²/(24 R²) (R 6 m: 0.03 %)."""
 
 
-def _chord_lengths(border: NDArrayFloat, arc: NDArrayFloat, first: int, end: int) -> NDArrayFloat:
-    """Lengths (m) of the chords of about ``RANGE_CHORD_M`` along the points ``first`` to
-    ``end - 1`` of a border (``arc``: its ``arc_lengths``): between the first point, each
-    point that starts another ``RANGE_CHORD_M`` of arc length from the first, and the last."""
-    stations = (arc[first:end] - arc[first]) // RANGE_CHORD_M
+def _chords(border: NDArrayFloat, arc: NDArrayFloat, first: int, end: int) -> tuple[NDArrayInt, NDArrayFloat]:
+    """The chords of about ``RANGE_CHORD_M`` along the points ``first`` to ``end - 1`` of a
+    border (``arc``: its ``arc_lengths``): the indices of their ends (the first point, each
+    point that starts another ``RANGE_CHORD_M`` of arc length from the first, the last)
+    and their lengths (m)."""
+    stations = (arc[first:end] if first == 0 else arc[first:end] - arc[first]) // RANGE_CHORD_M
     ends = np.concatenate(([first], first + 1 + np.flatnonzero(stations[1:] != stations[:-1]), [end - 1]))
     if ends[-1] == ends[-2]:
         ends = ends[:-1]
     lengths: NDArrayFloat = np.hypot(*np.diff(border[ends], axis=0).T)
-    return lengths
+    return ends, lengths
 
 
 def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
@@ -74,28 +75,25 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
 
 
 def _covered(border: NDArrayFloat, arc: NDArrayFloat, errors_m: NDArrayFloat,
-             threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> tuple[float, NDArrayFloat | None]:
-    """:func:`covered_length_m` of a border with arc lengths ``arc``, and its chord lengths
-    (``_chord_lengths`` of all its points) when all of it lies within the threshold."""
+             threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> tuple[float, tuple[NDArrayInt, NDArrayFloat] | None]:
+    """:func:`covered_length_m` of a border with arc lengths ``arc``, and the ``_chords`` of
+    all its points when all of it lies within the threshold."""
     within = errors_m <= threshold_m
     if within.all():
-        whole = _chord_lengths(border, arc, 0, len(arc))
-        return float(np.sum(whole)), whole
+        whole = _chords(border, arc, 0, len(arc))
+        return float(np.sum(whole[1])), whole
     total = 0.0
     edges = np.flatnonzero(np.diff(np.concatenate(([False], within, [False])).astype(np.int8)))
     for first, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
-        total += float(np.sum(_chord_lengths(border, arc, first, end)))
+        total += float(np.sum(_chords(border, arc, first, end)[1]))
     return total, None
 
 
-def _ahead(border: NDArrayFloat, arc: NDArrayFloat, chords: NDArrayFloat,
+def _ahead(border: NDArrayFloat, arc: NDArrayFloat, chords: tuple[NDArrayInt, NDArrayFloat],
            pose: tuple[float, float, float] | None) -> NDArrayFloat:
-    """:func:`ahead_of_m` of a border from its arc lengths and chord lengths (``_chord_lengths``)."""
-    chunks = arc // RANGE_CHORD_M
-    ends = np.concatenate(([0], 1 + np.flatnonzero(chunks[1:] != chunks[:-1])))
-    if ends[-1] != arc.size - 1:
-        ends = np.append(ends, arc.size - 1)
-    stations: NDArrayFloat = np.interp(arc, arc[ends], np.concatenate(([0.0], np.cumsum(chords))))
+    """:func:`ahead_of_m` of a border from its arc lengths and the ``_chords`` of all its points."""
+    ends, lengths = chords
+    stations: NDArrayFloat = np.interp(arc, arc[ends], np.concatenate(([0.0], np.cumsum(lengths))))
     if pose is None:
         return stations
     x, y, yaw = pose
@@ -119,7 +117,7 @@ def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) ->
     the minimum range for a sensor that has one) plus :func:`chord_stations_m`. Without a
     pose, from the first point."""
     arc = arc_lengths(border)
-    return _ahead(border, arc, _chord_lengths(border, arc, 0, len(arc)), pose)
+    return _ahead(border, arc, _chords(border, arc, 0, len(arc)), pose)
 
 
 GT_END_TOLERANCE_M: Final[float] = 0.1
@@ -288,7 +286,7 @@ class GroundTruthMeter:
                 past += points_past_ends(points, self._ends(match, side), errors, self.step_m)
                 arc = arc_lengths(points)
                 covered, chords = _covered(points, arc, errors)
-                figures.append((covered, _ahead(points, arc, _chord_lengths(points, arc, 0, len(arc))
+                figures.append((covered, _ahead(points, arc, _chords(points, arc, 0, len(arc))
                                                 if chords is None else chords, pose)))
             reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
             (left_range, left_ahead), (right_range, right_ahead) = figures
