@@ -9,9 +9,11 @@ preparation within the frame loop counts as it does in a run. Printed: CPU ms pe
 (mean / σ / max over the passes' per-frame sums), and a SHA-256 digest of every
 ``Measurement`` field of every call: the baseline's must be the same.
 
-Each pass runs in a fresh interpreter; with ``--baseline-ref`` the two sides alternate, so
-both see the same load. Usage: ``python tools/bench_measure.py [--map MAP.xodr] [--args
-"--frames 100"] [--repeat 3] [--baseline-ref 0abd8c1] [--save calls.pkl | --calls calls.pkl]``.
+Each pass runs in a fresh interpreter; the sides (this checkout one by one, in
+``GroundTruthMeter.measure_many`` blocks of N frames for each ``--block N``, and the
+``--baseline-ref`` commit) alternate, so all see the same load. Usage: ``python
+tools/bench_measure.py [--map MAP.xodr] [--args "--frames 100"] [--repeat 3]
+[--baseline-ref 0abd8c1] [--block 1 --block 20] [--save calls.pkl | --calls calls.pkl]``.
 """
 
 from __future__ import annotations
@@ -131,10 +133,10 @@ def summary(label: str, per_frame: list[float], digest: str) -> str:
             f"{max(per_frame):7.3f} CPU ms per frame   digest {digest[:16]}")
 
 
-def side_pass(code: Path, map_path: Path, calls_file: Path) -> tuple[list[float], str]:
+def side_pass(code: Path, map_path: Path, calls_file: Path, block: int) -> tuple[list[float], str]:
     """One replay pass on the code in ``code`` (a fresh interpreter with it first on the path)."""
     done = subprocess.run([sys.executable, __file__, "--map", str(map_path), "--replay", str(calls_file),
-                           "--code", str(code)], check=False, capture_output=True, text=True,
+                           "--code", str(code), "--block", str(block)], check=False, capture_output=True, text=True,
                           env={**os.environ, "PYTHONPATH": str(code)})
     if done.returncode:
         raise SystemExit(f"replay on {code} failed: {done.stderr.strip().splitlines()[-1:]}")
@@ -142,33 +144,36 @@ def side_pass(code: Path, map_path: Path, calls_file: Path) -> tuple[list[float]
     return found["per_frame"], found["digest"]
 
 
-def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None) -> list[str]:
-    """Report lines: the calls replayed ``repeat`` times on this checkout and, with ``ref``,
-    on that commit's code (``git archive`` extracted to a temporary folder), the sides
-    alternating so that both see the same load."""
+def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None, blocks: list[int]) -> list[str]:
+    """Report lines: the calls replayed ``repeat`` times on this checkout (one by one, and in
+    ``measure_many`` blocks of each of ``blocks`` frames) and, with ``ref``, one by one on
+    that commit's code (``git archive`` extracted to a temporary folder), the sides
+    alternating so that all see the same load."""
     with tempfile.TemporaryDirectory(prefix="bench-measure-") as folder:
         calls_file = Path(folder) / "calls.pkl"
         with calls_file.open("wb") as stream:
             pickle.dump(calls, stream)
-        sides = {"current": ROOT}
+        sides = {"current": (ROOT, 0), **{f"block {block}": (ROOT, block) for block in blocks}}
         if ref:
             archive = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref], capture_output=True,
                                      check=True).stdout
             with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
                 tar.extractall(Path(folder) / "baseline", filter="tar")
-            sides[ref] = Path(folder) / "baseline"
+            sides[ref] = (Path(folder) / "baseline", 0)
         found: dict[str, tuple[list[float], set[str]]] = {name: ([], set()) for name in sides}
         for _ in range(repeat):
-            for name, code in sides.items():
-                per_frame, digest = side_pass(code, map_path, calls_file)
+            for name, (code, block) in sides.items():
+                per_frame, digest = side_pass(code, map_path, calls_file, block)
                 found[name][0].extend(per_frame)
                 found[name][1].add(digest)
     lines = [summary(name, per_frame, "/".join(sorted(digests))) for name, (per_frame, digests) in found.items()]
     if ref:
-        current, baseline = (statistics.fmean(found[name][0]) for name in sides)
-        same = found["current"][1] == found[ref][1]
-        lines.append(f"  ratio {ref} / current: {baseline / current:.2f}x; results "
-                     f"{'identical' if same else 'DIFFER'}")
+        baseline = statistics.fmean(found[ref][0])
+        for name in sides:
+            if name != ref:
+                same = found[name][1] == found[ref][1]
+                lines.append(f"  ratio {ref} / {name}: {baseline / statistics.fmean(found[name][0]):.2f}x; results "
+                             f"{'identical' if same else 'DIFFER'}")
     return lines
 
 
@@ -180,6 +185,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-ref", help="also replay the calls on this git commit's code")
     parser.add_argument("--calls", type=Path, help="the calls captured earlier (--save), instead of a run")
     parser.add_argument("--save", type=Path, help="keep the captured calls in this file")
+    parser.add_argument("--block", type=int, action="append", default=[],
+                        help="also replay in measure_many blocks of this many frames (repeatable)")
     parser.add_argument("--replay", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--code", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -188,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, args.code)
         with args.replay.open("rb") as stream:
             calls = pickle.load(stream)
-        per_frame, digest = replay(map_path, calls, 1)
+        per_frame, digest = replay(map_path, calls, 1, args.block[0] if args.block else 0)
         print(json.dumps({"per_frame": per_frame, "digest": digest}))
         return 0
     if args.calls:
@@ -201,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
             pickle.dump(calls, stream)
     print(f"{map_path.name} {args.args}: {len(calls)} measure calls over {max(c[0] for c in calls)} frames, "
           f"{args.repeat} passes per side (alternating)", flush=True)
-    print("\n".join(compare(map_path, calls, args.repeat, args.baseline_ref)))
+    print("\n".join(compare(map_path, calls, args.repeat, args.baseline_ref, args.block)))
     return 0
 
 
