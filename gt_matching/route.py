@@ -33,6 +33,12 @@ KD_TREE_SAMPLES: Final = 16384
 #: build costs about as much as it saves over this many such calls; exact distances,
 #: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
+#: ``RouteBorder.resampled`` measures the points of the lanes of a block in passes over
+#: at most about this many points (lanes are not split), bounding its arrays.
+BLOCK_POINTS: Final = 32768
+#: ``RouteBorder.resampled`` searches the whole border for at most this many points at a
+#: time (the search without a KD-tree holds points x coarse samples x a stride of floats).
+NEAREST_CHUNK: Final = 512
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
@@ -509,7 +515,20 @@ class RouteBorder:
         """Per lane (points ``(N >= 2, 2)``, world frame, driving order), the distances (m)
         of its points to the samples: ``distances(points, exact=False, others=False)`` of
         each lane in turn, bit for bit (seeds from each lane's own anchors, the KD-tree from
-        the same call on), in one pass over all their points."""
+        the same call on), in one pass over the points of up to ``BLOCK_POINTS`` of them."""
+        found: list[NDArrayFloat] = []
+        group: list[NDArrayFloat] = []
+        size = 0
+        for points in lanes:
+            if group and size + len(points) > BLOCK_POINTS:
+                found.extend(self._resampled(group))
+                group, size = [], 0
+            group.append(points)
+            size += len(points)
+        return found + self._resampled(group) if group else found
+
+    def _resampled(self, lanes: Sequence[NDArrayFloat]) -> list[NDArrayFloat]:
+        """``resampled`` of a group of lanes in one pass."""
         counts = [len(points) for points in lanes]
         starts = np.cumsum([0, *counts])
         anchors, by_tree = [], []
@@ -525,10 +544,11 @@ class RouteBorder:
         seed = np.interp(np.arange(len(points)), anchors_, seeds)
         resampled, sample, settled = self._nearest_samples(points, seed)
         redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
-        if len(redo):
-            resampled[redo] = self._by_method((points[redo], resampled[redo]),
-                                              np.searchsorted(starts, redo, side="right") - 1, by_tree,
-                                              self._nearest)[0]
+        for first in range(0, len(redo), NEAREST_CHUNK):
+            chunk = redo[first:first + NEAREST_CHUNK]
+            resampled[chunk] = self._by_method((points[chunk], resampled[chunk]),
+                                               np.searchsorted(starts, chunk, side="right") - 1, by_tree,
+                                               self._nearest)[0]
         return [resampled] if len(lanes) == 1 else np.split(resampled, starts[1:-1])
 
     def _by_method(self, arrays: tuple[Any, ...], lane: NDArrayInt, by_tree: list[bool],
