@@ -183,5 +183,6 @@ def test_measure_many_equals_measure_one_by_one_on_the_bundled_maps(name: str, t
     assert checked
     for block in (5, len(calls)):
         meter = fresh()
-        found = [item for first in range(0, len(calls), block) for item in meter.measure_many(calls[first:first + block])]
+        found = [item for first in range(0, len(calls), block)
+                 for item in meter.measure_many(calls[first:first + block])]
         assert all(_same(item, reference) for item, reference in zip(found, expected))

@@ -109,7 +109,7 @@ def replay(map_path: Path, calls: list[Call], repeat: int, block: int = 0) -> tu
             for first in range(1, frames + 1, block):
                 chosen = [call for call in calls if first <= call[0] < first + block]
                 start = time.process_time()
-                found = meter.measure_many([(left, right, pose, reference) for _, left, right, pose, reference in chosen])
+                found = meter.measure_many([call[1:] for call in chosen])
                 spent[first:first + block] += (time.process_time() - start) / len(spent[first:first + block])
                 for measured in found:
                     _digest(str(measured) if isinstance(measured, MatchingError) else measured, hasher)
