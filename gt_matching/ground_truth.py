@@ -28,6 +28,7 @@ from gt_matching.polyline import (
     as_polyline,
     closest_distances,
     mid_line,
+    SegmentIndex,
 )
 from gt_matching.route import BorderPart, RouteBorder
 
@@ -171,15 +172,24 @@ def _walked_arc(lanelets: Sequence[LaneletGeometry], samples: NDArrayFloat, spac
     return min((walk(float(start)) for start in starts), key=lambda found: found[0])[1]
 
 
-def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float) -> float:
+def _joined_border(lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
+    """The ``side`` ("left", "right") borders of ``lanelets`` joined, repeated vertices
+    dropped, indexed for capped distances."""
+    vertices = np.vstack([getattr(g, side) for g in lanelets])
+    distinct = np.concatenate(([True], np.any(np.diff(vertices, axis=0) != 0.0, axis=1)))
+    return SegmentIndex(vertices[distinct])
+
+
+JoinedBorder = Callable[[Sequence[LaneletGeometry], str], SegmentIndex]
+"""``_joined_border`` (or a cached equivalent)."""
+
+
+def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right: NDArrayFloat, cap_m: float,
+                  joined: JoinedBorder = _joined_border) -> float:
     """Mean exact distance (m, each capped at ``cap_m``) of every ``BORDER_FIT_STRIDE``-th
     detected border point to the joined borders of ``lanelets``, both sides."""
-    fits = []
-    for points, side in ((left, "left"), (right, "right")):
-        vertices = np.vstack([getattr(g, side) for g in lanelets])
-        distinct = np.concatenate(([True], np.any(np.diff(vertices, axis=0) != 0.0, axis=1)))
-        distances = closest_distances(points[::BORDER_FIT_STRIDE], vertices[distinct])[0]
-        fits.append(float(np.mean(np.minimum(distances, cap_m))))
+    fits = [float(np.mean(joined(lanelets, side).capped(points[::BORDER_FIT_STRIDE], cap_m)))
+            for points, side in ((left, "left"), (right, "right"))]
     return float(np.mean(fits))
 
 
@@ -220,6 +230,8 @@ class GroundTruth:
         self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
+        self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
+        self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
         for lanelet in lanelet_map.laneletLayer:
             geometry = self._lanelet(lanelet)
             if prepare_all:
@@ -268,6 +280,19 @@ class GroundTruth:
             raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
         route = self._route([self._geometry[key] for key in match.route_key])
         return self._errors(left_xy, right_xy, match, route, exact, others)
+
+    def resampled(self, match: LaneMatch, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat]]
+                  ) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+        """Per lane (left and right borders, ``as_polyline``-valid, world frame, driving
+        order), its points' distances (m) to the GT borders of ``match`` resampled every
+        ``config.step_m``: the ``distances_m`` of ``errors(left, right, match,
+        others=False)`` bit for bit, all lanes in one pass per border."""
+        unknown = [key for key in match.route_key if key not in self._geometry]
+        if unknown:
+            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
+        route = self._route([self._geometry[key] for key in match.route_key])
+        return list(zip(route.left.resampled([left for left, _ in lanes]),
+                        route.right.resampled([right for _, right in lanes])))
 
     def _errors(
         self, left: NDArrayFloat, right: NDArrayFloat, match: LaneMatch, route: _Route, exact: bool, others: bool
@@ -318,6 +343,29 @@ class GroundTruth:
                 config.other_border_margin_m,
             )
         return part
+
+    def _neighbours(self, geometry: LaneletGeometry, way: str) -> list[LaneletGeometry]:
+        """The routing graph's ``previous`` or ``following`` lanelets (``way``) of a lanelet,
+        in the graph's order (kept: the graph does not change)."""
+        key = (geometry.key, way)
+        found = self._graph_neighbours.get(key)
+        if found is None:
+            found = self._graph_neighbours[key] = [self._lanelet(g) for g in getattr(self.routing_graph, way)(
+                geometry.lanelet)]
+        return found
+
+    def _joined_border(self, lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
+        """``_joined_border`` of a lanelet sequence, kept (LRU, ``ROUTE_CACHE_SIZE``): the
+        tied sequences of consecutive frames recur."""
+        key = (tuple(g.key for g in lanelets), side)
+        found = self._joined.get(key)
+        if found is None:
+            found = self._joined[key] = _joined_border(lanelets, side)
+            if len(self._joined) > ROUTE_CACHE_SIZE:
+                self._joined.popitem(last=False)
+        else:
+            self._joined.move_to_end(key)
+        return found
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
         """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose
@@ -394,7 +442,8 @@ class GroundTruth:
         tied = [sequences[i] for i in order if sequences[i].candidate.on_pose
                 and sequences[i].score_m - own.score_m <= TIE_SCORE_M and sequences[i].lanelets != own.lanelets]
         if tied:
-            own = min([own, *tied], key=lambda s: _border_fit_m(s.lanelets, left, right, config.max_distance_m))
+            own = min([own, *tied], key=lambda s: _border_fit_m(s.lanelets, left, right, config.max_distance_m,
+                                                                 self._joined_border))
         pose_ids = tuple(sorted(c.geometry.key[0] for c in candidates if c.on_pose))
         mismatch = None
         if own.score_m - best.score_m > OTHER_LANE_GAIN_M:
@@ -427,7 +476,6 @@ class GroundTruth:
         ``max_distance_m`` of the detection's mid-line samples ``detection`` or join the
         sequence within ``margin_m + max_distance_m`` of the detection's ends."""
         config = self.config
-        graph = self.routing_graph
         cap = config.max_distance_m
         reach = config.margin_m + cap
 
@@ -444,7 +492,7 @@ class GroundTruth:
             first = (behind or [start])[0]
             previous = [
                 g
-                for g in map(self._lanelet, graph.previous(first.lanelet))
+                for g in self._neighbours(first, "previous")
                 if near(g, [start, *behind], g.centre[-1], detection[0])
             ]
             if not previous:
@@ -460,7 +508,7 @@ class GroundTruth:
             if covered < ahead_m:
                 following = [
                     g
-                    for g in map(self._lanelet, graph.following(path[-1].lanelet))
+                    for g in self._neighbours(path[-1], "following")
                     if near(g, behind + path, g.centre[0], detection[-1])
                 ]
             if not following:

@@ -6,7 +6,7 @@ these helpers: the converter, the recording and the lane strips use them too."""
 
 from __future__ import annotations
 
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +19,11 @@ NDArrayBool = npt.NDArray[np.bool_]
 
 #: Segments shorter than this are treated as zero-length (a repeated vertex), m.
 ZERO_LENGTH_M: Final = 1e-12
+#: Longest piece (m) of a segment in ``SegmentIndex``'s KD-tree of piece midpoints.
+INDEX_PIECE_M: Final = 0.5
+#: Slack (m) on ``SegmentIndex.capped``'s search radius: covers the rounding of the
+#: distances it is built from, so the closest segment is never left out.
+CAP_MARGIN_M: Final = 1e-6
 
 
 def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
@@ -95,6 +100,53 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     brute force over all segments: O(N * M), for short inputs."""
     all_segments = np.broadcast_to(np.arange(len(vertices) - 1), (len(points), len(vertices) - 1))
     return segment_distances(points, vertices, all_segments)
+
+
+class SegmentIndex:
+    """The segments of a polyline (``(M >= 2, 2)`` vertices, m) indexed for distances
+    capped at a bound (KD-trees built on first use): :meth:`capped` gives
+    ``np.minimum(closest_distances(points, vertices)[0], cap_m)`` bit for bit while
+    measuring only the segments that can be the closest. Each segment is cut into pieces of
+    at most ``INDEX_PIECE_M`` whose midpoints stand for it in a KD-tree: a segment is no
+    nearer to a point than its nearest piece midpoint minus half a piece."""
+
+    def __init__(self, vertices: NDArrayFloat) -> None:
+        self.vertices = vertices
+        self._trees: tuple[Any, Any, NDArrayInt] | None = None
+
+    def _index(self) -> tuple[Any, Any, NDArrayInt]:
+        """KD-trees of the vertices and of the piece midpoints, and each piece's segment."""
+        if self._trees is None:
+            from scipy.spatial import cKDTree
+
+            start, delta = self.vertices[:-1], np.diff(self.vertices, axis=0)
+            pieces = np.maximum(1, np.ceil(np.hypot(*delta.T) / INDEX_PIECE_M)).astype(np.int64)
+            segment = np.repeat(np.arange(len(delta)), pieces)
+            within = np.arange(len(segment)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+            middles = start[segment] + ((within + 0.5) / pieces[segment])[:, None] * delta[segment]
+            self._trees = cKDTree(self.vertices), cKDTree(middles), segment
+        return self._trees
+
+    def capped(self, points: NDArrayFloat, cap_m: float) -> NDArrayFloat:
+        """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
+        is smaller, m. The closest segment has a piece midpoint within the smaller of
+        ``cap_m`` and the distance to the nearest vertex, plus half a piece (and a micrometre
+        for rounding), of the point; those segments are measured by
+        :func:`segment_distances` (each point's list padded with its last); a point with
+        none is farther than the cap."""
+        by_vertex, by_piece, segment = self._index()
+        radius = np.minimum(by_vertex.query(points)[0], cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
+        near = by_piece.query_ball_point(points, r=radius)
+        counts = np.fromiter((len(found) for found in near), dtype=np.int64, count=len(points))
+        flat = np.fromiter((index for found in near for index in found), dtype=np.int64, count=int(counts.sum()))
+        capped = np.full(len(points), cap_m)
+        rows = np.flatnonzero(counts)  # the others are farther than the cap from every segment
+        if len(rows):
+            counts = counts[rows]
+            starts = np.cumsum(counts) - counts
+            pieces = flat[np.minimum(starts[:, None] + np.arange(int(counts.max())), (starts + counts - 1)[:, None])]
+            capped[rows] = np.minimum(segment_distances(points[rows], self.vertices, segment[pieces])[0], cap_m)
+        return capped
 
 
 def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:

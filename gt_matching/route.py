@@ -3,9 +3,10 @@ closest-point distances of detected points to it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -32,6 +33,12 @@ KD_TREE_SAMPLES: Final = 16384
 #: build costs about as much as it saves over this many such calls; exact distances,
 #: dominated by the segment search, gain nothing from it and do not count.
 KD_TREE_CALLS: Final = 8
+#: ``RouteBorder.resampled`` measures the points of the lanes of a block in passes over
+#: at most about this many points (lanes are not split), bounding its arrays.
+BLOCK_POINTS: Final = 32768
+#: ``RouteBorder.resampled`` searches the whole border for at most this many points at a
+#: time (the search without a KD-tree holds points x coarse samples x a stride of floats).
+NEAREST_CHUNK: Final = 512
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
@@ -306,11 +313,11 @@ class RouteBorder:
         around: NDArrayInt = np.clip(coarse[:, None] + np.arange(-half, half + 1), 0, len(self.samples) - 1)
         return around
 
-    def _seed_sample(self, points: NDArrayFloat) -> NDArrayInt:
+    def _seed_sample(self, points: NDArrayFloat, tree: bool | None = None) -> NDArrayInt:
         """Index of a sample near each point's nearest one: the nearest from the KD-tree of
-        a border that has one (``_uses_tree``), else the nearest within half a stride of the
-        point's nearest coarse sample (exact where the border is smooth)."""
-        if self._uses_tree():
+        a border that has one (``tree``, default ``_uses_tree``), else the nearest within
+        half a stride of the point's nearest coarse sample (exact where the border is smooth)."""
+        if self._uses_tree() if tree is None else tree:
             nearest: NDArrayInt = self._tree.query(points)[1]
             return nearest
         coarse = self._coarse_index[np.argmin(self._squared_distances(points, self._coarse_index[None, :]), axis=1)]
@@ -318,7 +325,8 @@ class RouteBorder:
         sample: NDArrayInt = around[np.arange(len(points)), np.argmin(self._squared_distances(points, around), axis=1)]
         return sample
 
-    def _nearest(self, points: NDArrayFloat, within: NDArrayFloat | None = None) -> tuple[NDArrayFloat, NDArrayInt]:
+    def _nearest(self, points: NDArrayFloat, within: NDArrayFloat | None = None,
+                 tree: bool | None = None) -> tuple[NDArrayFloat, NDArrayInt]:
         """Distance (m) and index of each point's nearest sample over the whole border,
         exactly (ties: the lower index). ``within``: distances to some sample, if known, m.
 
@@ -326,8 +334,9 @@ class RouteBorder:
         (every ``_coarse_stride``-th sample of each part and each part's ends), so the
         nearest one, at distance d, lies within that many samples of a coarse sample within
         d + half a stride of the point, and d is at most the distance to the nearest coarse
-        sample (or ``within``). A border with a KD-tree (``_uses_tree``) asks it instead."""
-        if self._uses_tree():
+        sample (or ``within``). A border with a KD-tree (``tree``, default ``_uses_tree``)
+        asks it instead."""
+        if self._uses_tree() if tree is None else tree:
             distance, sample = self._tree.query(points)
             return distance, sample
         coarse = self._squared_distances(points, self._coarse_index[None, :])
@@ -501,6 +510,64 @@ class RouteBorder:
                 exact_distance[redo], exact_arc[redo] = windowed_distances(points[redo], self.vertices, arc[redo], reach)
             return BorderDistances(distances=exact_distance, arc_m=self._unwrap(exact_arc), other_closer=other_closer)
         return BorderDistances(distances=resampled, arc_m=self._unwrap(arc), other_closer=other_closer)
+
+    def resampled(self, lanes: Sequence[NDArrayFloat]) -> list[NDArrayFloat]:
+        """Per lane (points ``(N >= 2, 2)``, world frame, driving order), the distances (m)
+        of its points to the samples: ``distances(points, exact=False, others=False)`` of
+        each lane in turn, bit for bit (seeds from each lane's own anchors, the KD-tree from
+        the same call on), in one pass over the points of up to ``BLOCK_POINTS`` of them."""
+        found: list[NDArrayFloat] = []
+        group: list[NDArrayFloat] = []
+        size = 0
+        for points in lanes:
+            if group and size + len(points) > BLOCK_POINTS:
+                found.extend(self._resampled(group))
+                group, size = [], 0
+            group.append(points)
+            size += len(points)
+        return found + self._resampled(group) if group else found
+
+    def _resampled(self, lanes: Sequence[NDArrayFloat]) -> list[NDArrayFloat]:
+        """``resampled`` of a group of lanes in one pass."""
+        counts = [len(points) for points in lanes]
+        starts = np.cumsum([0, *counts])
+        anchors, by_tree = [], []
+        for start, count in zip(starts.tolist(), counts):
+            self._calls += 1
+            anchors.extend(range(start, start + count - 1, ANCHOR_STRIDE))
+            anchors.append(start + count - 1)
+            by_tree.append(self._uses_tree())
+        points = lanes[0] if len(lanes) == 1 else np.concatenate(lanes)
+        anchors_ = np.array(anchors)
+        seeds = self._by_method((points[anchors_],), np.searchsorted(starts, anchors_, side="right") - 1, by_tree,
+                                lambda chosen, tree: (self._seed_sample(chosen, tree),))[0]
+        seed = np.interp(np.arange(len(points)), anchors_, seeds)
+        resampled, sample, settled = self._nearest_samples(points, seed)
+        redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
+        for first in range(0, len(redo), NEAREST_CHUNK):
+            chunk = redo[first:first + NEAREST_CHUNK]
+            resampled[chunk] = self._by_method((points[chunk], resampled[chunk]),
+                                               np.searchsorted(starts, chunk, side="right") - 1, by_tree,
+                                               self._nearest)[0]
+        return [resampled] if len(lanes) == 1 else np.split(resampled, starts[1:-1])
+
+    def _by_method(self, arrays: tuple[Any, ...], lane: NDArrayInt, by_tree: list[bool],
+                   method: Callable[..., tuple[Any, ...]]) -> tuple[Any, ...]:
+        """``method(*arrays, tree)`` with each row of ``arrays`` (one of lane ``lane``)
+        answered with its lane's ``tree`` flag (``by_tree``)."""
+        if all(by_tree) or not any(by_tree):
+            return method(*arrays, by_tree[0])
+        flags = np.array(by_tree)[lane]
+        results: list[Any] = []
+        for tree in (False, True):
+            rows = np.flatnonzero(flags == tree)
+            if len(rows) == 0:
+                continue
+            answer = method(*(array[rows] for array in arrays), tree)
+            results = results or [np.empty(len(lane), dtype=part.dtype) for part in answer]
+            for result, part in zip(results, answer):
+                result[rows] = part
+        return tuple(results)
 
     def _unwrap(self, arc: NDArrayFloat) -> NDArrayFloat:
         """On a closed border, arc lengths made continuous across its seam (a jump by more

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
@@ -23,13 +24,21 @@ import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import arc_lengths
+from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline
 
 if TYPE_CHECKING:
-    from gt_matching import GroundTruth, LaneMatch
+    from gt_matching import GroundTruth, LaneMatch, MatchingError
+
+Lane = tuple[NDArrayFloat, NDArrayFloat, tuple[float, float, float],
+             tuple[NDArrayFloat, NDArrayFloat] | None]
+"""A lane to measure: left and right border (``(N, 2)``, world frame, driving order), the
+sender's pose (x m, y m, yaw rad) and the reference lane's borders or None
+(``GroundTruthMeter.measure``)."""
 
 MATCH_CACHE_SIZE: Final[int] = 16
 """Reference lanes whose GT match ``GroundTruthMeter`` keeps (a frame has a handful)."""
+ENDS_CACHE_SIZE: Final[int] = 64
+"""GT borders whose end directions (``gt_ends``) ``GroundTruthMeter`` keeps."""
 RANGE_ERROR_THRESHOLD_M: Final[float] = 1.0
 """A stretch of a detected border counts towards the perception range only where its
 points lie within this distance (m) of the GT: the paper (sec. IV) calls interpolation
@@ -42,6 +51,19 @@ points 0.1 m apart lengthens a polyline by about σ²/step² (5 cm: +25 %), alon
 chords by σ²/chord² (1 %); a chord shortens an arc of radius R by chord²/(24 R²) (R 6 m: 0.03 %)."""
 
 
+def _chords(border: NDArrayFloat, arc: NDArrayFloat, first: int, end: int) -> tuple[NDArrayInt, NDArrayFloat]:
+    """The chords of about ``RANGE_CHORD_M`` along the points ``first`` to ``end - 1`` of a
+    border (``arc``: its ``arc_lengths``): the indices of their ends (the first point, each
+    point that starts another ``RANGE_CHORD_M`` of arc length from the first, the last)
+    and their lengths (m)."""
+    stations = (arc[first:end] if first == 0 else arc[first:end] - arc[first]) // RANGE_CHORD_M
+    ends = np.concatenate(([first], first + 1 + np.flatnonzero(stations[1:] != stations[:-1]), [end - 1]))
+    if ends[-1] == ends[-2]:
+        ends = ends[:-1]
+    lengths: NDArrayFloat = np.hypot(*np.diff(border[ends], axis=0).T)
+    return ends, lengths
+
+
 def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
                      threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> float:
     """Perception range of a detected border (``(N, 2)``, world frame, driving order): the
@@ -49,15 +71,34 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
     (``errors_m``, per point), each measured along chords of about ``RANGE_CHORD_M`` so
     that detection noise does not lengthen it. Never negative; the whole length of a
     border that is everywhere within the threshold."""
-    within = np.concatenate(([False], errors_m <= threshold_m, [False]))
-    edges = np.flatnonzero(np.diff(within.astype(np.int8)))
-    arc = arc_lengths(border)
+    return _covered(border, arc_lengths(border), errors_m, threshold_m)[0]
+
+
+def _covered(border: NDArrayFloat, arc: NDArrayFloat, errors_m: NDArrayFloat,
+             threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> tuple[float, tuple[NDArrayInt, NDArrayFloat] | None]:
+    """:func:`covered_length_m` of a border with arc lengths ``arc``, and the ``_chords`` of
+    all its points when all of it lies within the threshold."""
+    within = errors_m <= threshold_m
+    if within.all():
+        whole = _chords(border, arc, 0, len(arc))
+        return float(np.sum(whole[1])), whole
     total = 0.0
-    for first, end in zip(edges[::2], edges[1::2]):
-        stations = (arc[first:end] - arc[first]) // RANGE_CHORD_M
-        chord_ends = np.concatenate(([first], first + 1 + np.flatnonzero(np.diff(stations)), [end - 1]))
-        total += float(np.sum(np.hypot(*np.diff(border[np.unique(chord_ends)], axis=0).T)))
-    return total
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], within, [False])).astype(np.int8)))
+    for first, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
+        total += float(np.sum(_chords(border, arc, first, end)[1]))
+    return total, None
+
+
+def _ahead(border: NDArrayFloat, arc: NDArrayFloat, chords: tuple[NDArrayInt, NDArrayFloat],
+           pose: tuple[float, float, float] | None) -> NDArrayFloat:
+    """:func:`ahead_of_m` of a border from its arc lengths and the ``_chords`` of all its points."""
+    ends, lengths = chords
+    stations: NDArrayFloat = np.interp(arc, arc[ends], np.concatenate(([0.0], np.cumsum(lengths))))
+    if pose is None:
+        return stations
+    x, y, yaw = pose
+    start = math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y)
+    return stations + max(start, 0.0)
 
 
 def chord_stations_m(border: NDArrayFloat) -> NDArrayFloat:
@@ -65,14 +106,7 @@ def chord_stations_m(border: NDArrayFloat) -> NDArrayFloat:
     measured like ``covered_length_m``: along chords of about ``RANGE_CHORD_M`` between
     which the points are placed by their own arc length, so that detection noise does not
     lengthen it. Non-decreasing, 0 at the first point."""
-    arc = arc_lengths(border)
-    chunks = arc // RANGE_CHORD_M
-    ends = np.concatenate(([0], 1 + np.flatnonzero(chunks[1:] != chunks[:-1])))
-    if ends[-1] != arc.size - 1:
-        ends = np.append(ends, arc.size - 1)
-    chords = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(border[ends], axis=0).T))))
-    stations: NDArrayFloat = np.interp(arc, arc[ends], chords)
-    return stations
+    return ahead_of_m(border, None)
 
 
 def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) -> NDArrayFloat:
@@ -82,12 +116,8 @@ def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) ->
     vehicle frame, 0 when behind; 0 for a detection from the vehicle's own cross-section,
     the minimum range for a sensor that has one) plus :func:`chord_stations_m`. Without a
     pose, from the first point."""
-    stations = chord_stations_m(border)
-    if pose is None or not border.size:
-        return stations
-    x, y, yaw = pose
-    start = math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y)
-    return stations + max(start, 0.0)
+    arc = arc_lengths(border)
+    return _ahead(border, arc, _chords(border, arc, 0, len(arc)), pose)
 
 
 GT_END_TOLERANCE_M: Final[float] = 0.1
@@ -159,15 +189,25 @@ def _end_direction(end: NDArrayFloat, inner: NDArrayFloat) -> NDArrayFloat | Non
     return None
 
 
-def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat, distances_m: NDArrayFloat, step_m: float) -> int:
+GtEnds = tuple[tuple[NDArrayFloat, NDArrayFloat], ...]
+"""The ends of a GT border that have an end direction: (end vertex, unit vector), world frame."""
+
+
+def gt_ends(gt: NDArrayFloat) -> GtEnds:
+    """The last and the first vertex of the polyline ``gt`` with their end directions
+    (``_end_direction``), those that have one."""
+    found = ((end, _end_direction(end, inner)) for end, inner in ((gt[-1], gt[-2::-1]), (gt[0], gt[1:])))
+    return tuple((end, direction) for end, direction in found if direction is not None)
+
+
+def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat | GtEnds, distances_m: NDArrayFloat,
+                     step_m: float) -> int:
     """How many ``points`` (``(N, 2)``, m) lie more than ``GT_END_TOLERANCE_M`` past the
-    first or last vertex of the polyline ``gt`` along its end direction while that vertex is
-    their nearest GT point (within ``step_m`` of their GT distance ``distances_m``)."""
+    first or last vertex of the polyline ``gt`` (or its ``gt_ends``) along its end direction
+    while that vertex is their nearest GT point (within ``step_m`` of their GT distance
+    ``distances_m``)."""
     count = 0
-    for end, inner in ((gt[-1], gt[-2::-1]), (gt[0], gt[1:])):
-        direction = _end_direction(end, inner)
-        if direction is None:
-            continue
+    for end, direction in gt_ends(gt) if isinstance(gt, np.ndarray) else gt:
         offset = points - end
         past = np.flatnonzero(offset @ direction > GT_END_TOLERANCE_M)
         if past.size:
@@ -186,6 +226,7 @@ class GroundTruthMeter:
         self.ground_truth = ground_truth
         self.step_m = ground_truth.config.step_m
         self._matches: OrderedDict[tuple[bytes, bytes, tuple[float, float, float]], LaneMatch] = OrderedDict()
+        self._gt_ends: OrderedDict[tuple[tuple[tuple[int, bool], ...], str], GtEnds] = OrderedDict()
 
     def match(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float]) -> LaneMatch:
         """The GT lanelets and borders of a lane (``gt_matching.GroundTruth.match``), from
@@ -205,17 +246,65 @@ class GroundTruthMeter:
                pose: tuple[float, float, float] | None = None) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``; the
         points' distances from the sender at ``pose`` (x m, y m, yaw rad; None: from the
-        lane's first points) by :func:`ahead_of_m`."""
-        found = self.ground_truth.errors(left, right, match, others=False)
-        past = sum(points_past_ends(np.asarray(points, dtype=np.float64), gt, border.distances_m, self.step_m)
-                   for points, gt, border in ((left, match.left_gt, found.left), (right, match.right_gt, found.right)))
-        reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
-        left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
-        return Measurement(found.left.distances_m, found.right.distances_m,
-                           covered_length_m(left, found.left.distances_m),
-                           covered_length_m(right, found.right.distances_m),
-                           match.left_gt, match.right_gt, match.matched, reason,
-                           ahead_of_m(left, pose), ahead_of_m(right, pose))
+        lane's first points) by :func:`ahead_of_m`. Raises ``gt_matching.MatchingError``."""
+        lane = (as_polyline("left border", left), as_polyline("right border", right))
+        return self._measured([match], [lane], [pose])[0]
+
+    def measure_many(self, lanes: Sequence[Lane]) -> list[Measurement | MatchingError]:
+        """:meth:`measure` of each lane (left, right, pose, reference), or its
+        ``gt_matching.MatchingError``: the lanes matched to the same GT lanelets (the lanes
+        of a block of frames on one route) measured in one pass per GT border, bit for bit
+        as one by one."""
+        from gt_matching import MatchingError
+
+        found: list[Measurement | MatchingError | None] = [None] * len(lanes)
+        routes: dict[tuple[tuple[int, bool], ...], list[tuple[int, LaneMatch, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
+        for index, (left, right, pose, reference) in enumerate(lanes):
+            try:
+                match = self.match(*(reference or (left, right)), pose)
+                lane = (as_polyline("left border", left), as_polyline("right border", right))
+            except MatchingError as exc:
+                found[index] = exc
+                continue
+            routes.setdefault(match.route_key, []).append((index, match, lane))
+        for members in routes.values():
+            measured = self._measured([match for _, match, _ in members], [lane for _, _, lane in members],
+                                      [lanes[index][2] for index, _, _ in members])
+            for (index, _, _), measurement in zip(members, measured):
+                found[index] = measurement
+        return [item for item in found if item is not None]
+
+    def _measured(self, matches: list[LaneMatch], lanes: list[tuple[NDArrayFloat, NDArrayFloat]],
+                  poses: Sequence[tuple[float, float, float] | None]) -> list[Measurement]:
+        """:meth:`errors` of validated lanes against matches of one GT lanelet sequence."""
+        measured = []
+        distances = self.ground_truth.resampled(matches[0], lanes)
+        for match, (left, right), (left_errors, right_errors), pose in zip(matches, lanes, distances, poses):
+            past = 0
+            figures = []
+            for points, side, errors in ((left, "left", left_errors), (right, "right", right_errors)):
+                past += points_past_ends(points, self._ends(match, side), errors, self.step_m)
+                arc = arc_lengths(points)
+                covered, chords = _covered(points, arc, errors)
+                figures.append((covered, _ahead(points, arc, _chords(points, arc, 0, len(arc))
+                                                if chords is None else chords, pose)))
+            reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
+            (left_range, left_ahead), (right_range, right_ahead) = figures
+            measured.append(Measurement(left_errors, right_errors, left_range, right_range, match.left_gt,
+                                        match.right_gt, match.matched, reason, left_ahead, right_ahead))
+        return measured
+
+    def _ends(self, match: LaneMatch, side: str) -> GtEnds:
+        """``gt_ends`` of the ``side`` GT border of ``match`` (kept per route, LRU)."""
+        key = (match.route_key, side)
+        found = self._gt_ends.get(key)
+        if found is None:
+            found = self._gt_ends[key] = gt_ends(match.left_gt if side == "left" else match.right_gt)
+            if len(self._gt_ends) > ENDS_CACHE_SIZE:
+                self._gt_ends.popitem(last=False)
+        else:
+            self._gt_ends.move_to_end(key)
+        return found
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
