@@ -381,14 +381,16 @@ class FusionParams:
             lanes a gap pair is ambiguous when the lane a lane width beside the coop's passes
             the geometric check using less than :data:`fusion.association.SEPARATION_MARGIN`
             more of its lateral limits than the coop's own lane; and the gap d_s ≤ d_i is read
-            to :data:`fusion.fusibility.GAP_TOLERANCE_M`). Opt-in: measured on the map families in docs/fusion/association.md.
+            to :data:`fusion.fusibility.GAP_TOLERANCE_M`). Opt-in: measured on the map
+            families in docs/fusion/association.md and docs/results/association.md.
         min_confidence: lowest association confidence fused with ``association="confidence"``,
             ``"strict"`` or ``"separation"``
             (in [0, 1]; chosen on the tune seeds of ``tools/study_families.py``, see
             docs/fusion/association.md).
         gate_false_rejection: false rejection rate α of the statistical gate of
-            ``association="confidence"``/``"strict"``/``"separation"``, in (0, 1), e.g. 0.01; ``None`` (default:
-            not yet measured with the camera sensor) turns the gate off.
+            ``association="confidence"``/``"strict"``/``"separation"``, in (0, 1), e.g. 0.01;
+            ``None`` (default: with the camera sensor it costs recall at d_s 50 m and adds no
+            precision to ``"separation"``) turns the gate off.
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
             2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).

@@ -80,7 +80,8 @@ def test_one_arc_across_the_gap_fused_neighbours_not(gap_m: float) -> None:
 
 
 @pytest.mark.parametrize("excess_m, legacy_fuses, separation_fuses",
-                         [(-1e-3, True, True), (0.5 * GAP_TOLERANCE_M, False, True), (2.0 * GAP_TOLERANCE_M, False, False)])
+                         [(-1e-3, True, True), (0.5 * GAP_TOLERANCE_M, False, True),
+                          (2.0 * GAP_TOLERANCE_M, False, False)])
 def test_gap_at_d_i_read_to_the_tolerance(excess_m: float, legacy_fuses: bool, separation_fuses: bool) -> None:
     """A straight coop whose detection starts d_i + e after the ego's ends: legacy rejects
     any e > 0, separation up to GAP_TOLERANCE_M (pairs a lane length d_i apart differ from
