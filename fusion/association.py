@@ -30,8 +30,10 @@ and no other shift explains the detections as well:
 What decides (``FusionParams.association``): ``"legacy"`` (default) the rules above alone;
 ``"confidence"`` also rejects a pair below ``FusionParams.min_confidence`` (and, with
 ``gate_false_rejection``, one that fails the σ gate of :mod:`fusion.gate`); ``"strict"`` also
-a single-lane gap pair whose lane a width aside passes the geometry too. Rejections for
-ambiguity start with "ambiguous".
+a single-lane gap pair whose lane a width aside passes the geometry too; ``"separation"``
+instead only one whose lane a width aside passes using less than :data:`SEPARATION_MARGIN`
+more of the lateral limits than the own lane (the geometry does not separate the two).
+Rejections for ambiguity start with "ambiguous".
 """
 
 from __future__ import annotations
@@ -83,6 +85,15 @@ CONFIDENCE_WEAKER_ALTERNATIVE: Final[float] = 0.6
 """Another shift is plausible by geometry but has less road-edge support."""
 CONFIDENCE_LANE_COUNT_CHANGE: Final[float] = 0.5
 """The lane index agrees on one side and not on the other (a lane opens or ends in the gap)."""
+
+
+SEPARATION_MARGIN: Final[float] = 0.1
+"""Under ``association="separation"`` a single-lane gap pair is ambiguous when the coop's
+lane moved a lane width aside passes the geometric check using less than this share of a
+lateral limit (``used`` of :func:`geometry_check`) more than the pair itself. Chosen on the
+tune seeds of ``tools/study_families.py`` (docs/fusion/association.md): the tune false
+fusions left by ``min_confidence`` 0.4 all have a neighbour that uses at most as much of a
+limit (≤ 0); 0.1 keeps a tenth of a limit's buffer, larger margins only lose true pairs."""
 
 
 FORK_TIE: Final[float] = 0.02
@@ -308,7 +319,8 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     if reason:
         return Association(reason, 0.0)
     graded = 1.0 - (1.0 - CONFIDENCE_AT_LIMIT) * used
-    if not _multi_lane(ego, coop):
+    single = not _multi_lane(ego, coop)
+    if single:
         association = Association("", GEOMETRY_CONFIDENCE[evidence] * graded)
     else:
         association = _associate_lanes(ego, coop, own, convoy, evidence, params)
@@ -317,25 +329,30 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
         association = Association("", association.confidence * graded, association.matched)
     if params.association == "legacy":
         return association
+    if params.association == "separation" and single and not convoy:
+        reason = _separation_reason(ego, coop, own, params, fits, used)
+        if reason:
+            return Association(reason, 0.0)
     return _confident(ego, coop, own, convoy, association, params, fits, ends)
 
 
 def _confident(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], convoy: bool,
                association: Association, params: FusionParams, fits: Callable[[], Sequence[EndFit]] | None,
                ends: LaneEnds | None) -> Association:
-    """``association`` (accepted) under ``params.association`` ``"confidence"`` or ``"strict"``:
+    """``association`` (accepted) under ``params.association`` ``"confidence"``, ``"strict"`` or
+    ``"separation"``:
     rejected as ambiguous below ``params.min_confidence``; with ``"strict"`` also a single-lane
-    gap pair whose lane moved a lane width aside would pass too (:func:`_neighbour_passes`);
+    gap pair whose lane moved a lane width aside would pass too (:func:`_neighbour_uses`);
     with ``params.gate_false_rejection`` a spline pair whose detections state σ when it fails
     the gate of :mod:`fusion.gate`."""
     if association.confidence < params.min_confidence:
         return Association(f"ambiguous: association confidence {association.confidence:.2f} below "
                            f"{params.min_confidence:.2f}", 0.0)
     if params.association == "strict" and not convoy and not _multi_lane(ego, coop):
-        side = _neighbour_passes(ego, coop, own, params, fits)
-        if side:
-            return Association(f"ambiguous: the lane a lane width to the {side} of the coop's would pass the "
-                               "geometric check as well", 0.0)
+        passing = _neighbour_uses(ego, coop, own, params, fits)
+        if passing:
+            return Association(f"ambiguous: the lane a lane width to the {passing[0][0]} of the coop's would pass "
+                               "the geometric check as well", 0.0)
     if convoy or params.gate_false_rejection is None:
         return association
     (el, er), (cl, cr) = own
@@ -353,19 +370,39 @@ def _confident(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], 
     return Association(reason, 0.0) if reason else association
 
 
-def _neighbour_passes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], params: FusionParams,
-                      fits: Callable[[], Sequence[EndFit]] | None) -> str:
-    """"left" / "right" when the coop's lane moved a lane width to that side (across its start
-    heading) passes the geometric check of a gap too (:func:`fusion.fusibility.geometric_assessment`,
-    the same end fits: a shift moves no heading or curvature), else "": without neighbour
-    lanes the geometry cannot tell the coop's lane from that one."""
+def _neighbour_uses(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], params: FusionParams,
+                    fits: Callable[[], Sequence[EndFit]] | None) -> list[tuple[str, float]]:
+    """("left" / "right", used) for each side where the coop's lane moved a lane width that
+    way (across its start heading) passes the geometric check of a gap too
+    (:func:`fusion.fusibility.geometric_assessment`, the same end fits: a shift moves no
+    heading or curvature); ``used`` is the share of a lateral limit the moved lane uses
+    (:func:`geometry_check`; infinite when the tightened borders rule rejects it). Without
+    neighbour lanes the geometry cannot tell the coop's lane from a passing one."""
     (el, er), (cl, cr) = own
     ends = lane_ends(el, er, cl, cr)
     normal = np.array([-ends.t_start[1], ends.t_start[0]]) * ends.width_m
+    found = []
     for sign, side in ((1.0, "left"), (-1.0, "right")):
-        moved = lane_ends(el, er, cl + sign * normal, cr + sign * normal)
-        if not geometric_assessment(ego.pose, coop.pose, moved, params, fits)[0]:
-            return side
+        moved_lane = (cl + sign * normal, cr + sign * normal)
+        moved = lane_ends(el, er, *moved_lane)
+        reason, evidence = geometric_assessment(ego.pose, coop.pose, moved, params, fits)
+        if reason:
+            continue
+        reason, used = geometry_check(((el, er), moved_lane), False, evidence, params, fits, None, moved)
+        found.append((side, math.inf if reason else used))
+    return found
+
+
+def _separation_reason(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], params: FusionParams,
+                       fits: Callable[[], Sequence[EndFit]] | None, used: float) -> str:
+    """Why a single-lane gap pair is ambiguous under ``association="separation"`` (""
+    when it is not): the lane a lane width aside passes the geometry using less than
+    :data:`SEPARATION_MARGIN` more of a lateral limit than the pair's own ``used``."""
+    for side, moved_used in _neighbour_uses(ego, coop, own, params, fits):
+        if moved_used < used + SEPARATION_MARGIN:
+            return (f"ambiguous: the lane a lane width to the {side} of the coop's passes the geometric check "
+                    f"using {moved_used:.2f} of a lateral limit, the coop's lane {used:.2f} (separation below "
+                    f"{SEPARATION_MARGIN:.2f})")
     return ""
 
 

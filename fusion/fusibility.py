@@ -25,6 +25,10 @@ _CURVED_SIGMAS: Final[float] = 4.0
 ARC_TOLERANCE_LANES: Final[float] = 0.5
 """Largest mismatch of an arc prediction (rule 4 of :func:`geometric_assessment`), in lane widths."""
 _CONE_DECIDES_LANES: Final[float] = 0.4
+GAP_TOLERANCE_M: Final[float] = 1e-3
+"""Tolerance [m] on d_s ≤ d_i under ``association="separation"``: a coop a lane length d_i
+behind the ego's detection end lies at d_s = d_i up to the detections' rounding (1 µm) and
+floating point; without it half of such pairs fail on d_s − d_i ≈ 1e-8 m."""
 _TANGENT_SLACK_M: Final[float] = 2.0
 """How far [m] an end's arc may meet the other end's heading beyond that end (the arc
 radius ± 2 % + 3σ, clothoid transitions) before the prediction counts as missed."""
@@ -84,7 +88,7 @@ def relative_pose(ego: Pose2D, coop: Pose2D) -> tuple[float, float, float]:
 def _gap_reason(ends: LaneEnds, params: FusionParams) -> str:
     if ends.gap_m <= 0.0:
         return f"no gap: the coop detection starts {-ends.gap_m:.2f} m before the ego detection ends (d_s must be > 0)"
-    if ends.gap_m > params.d_i_m:
+    if ends.gap_m > params.d_i_m + (GAP_TOLERANCE_M if params.association == "separation" else 0.0):
         return f"gap d_s = {ends.gap_m:.2f} m exceeds d_i = {params.d_i_m:.2f} m"
     return ""
 

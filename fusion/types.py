@@ -25,8 +25,8 @@ Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
 MIN_CONFIDENCE: Final[float] = 0.4
 """Default lowest association confidence fused (``FusionParams.min_confidence``)."""
-AssociationRule = Literal["confidence", "strict", "legacy"]
-ASSOCIATION_RULES: Final[tuple[str, ...]] = ("confidence", "strict", "legacy")
+AssociationRule = Literal["confidence", "strict", "separation", "legacy"]
+ASSOCIATION_RULES: Final[tuple[str, ...]] = ("confidence", "strict", "separation", "legacy")
 ConvoyStrategy = Literal["weighted", "mean", "nearest"]
 ConvoyWeights = Literal["paper", "mean", "inverse-variance"]
 CONVOY_WEIGHTS: Final[tuple[str, ...]] = ("paper", "mean", "inverse-variance")
@@ -430,15 +430,20 @@ class FusionParams:
             :mod:`fusion.gate`, as "another lane" or "ambiguous") or ``"strict"`` (as
             ``"confidence"``, and without neighbour lanes a gap pair is ambiguous when the lane
             a lane width beside the coop's would pass the geometric check too: precision
-            before recall). Opt-in: measured on the map families in
-            docs/fusion/association.md, neither keeps the legacy recall.
-        min_confidence: lowest association confidence fused with ``association="confidence"``
-            or ``"strict"``
+            before recall) or ``"separation"`` (as ``"confidence"``, and without neighbour
+            lanes a gap pair is ambiguous when the lane a lane width beside the coop's passes
+            the geometric check using less than :data:`fusion.association.SEPARATION_MARGIN`
+            more of its lateral limits than the coop's own lane; and the gap d_s ≤ d_i is read
+            to :data:`fusion.fusibility.GAP_TOLERANCE_M`). Opt-in: measured on the map
+            families in docs/fusion/association.md and docs/results/association.md.
+        min_confidence: lowest association confidence fused with ``association="confidence"``,
+            ``"strict"`` or ``"separation"``
             (in [0, 1]; chosen on the tune seeds of ``tools/study_families.py``, see
             docs/fusion/association.md).
         gate_false_rejection: false rejection rate α of the statistical gate of
-            ``association="confidence"``/``"strict"``, in (0, 1), e.g. 0.01; ``None`` (default:
-            not yet measured with the camera sensor) turns the gate off.
+            ``association="confidence"``/``"strict"``/``"separation"``, in (0, 1), e.g. 0.01;
+            ``None`` (default: with the camera sensor it costs recall at d_s 50 m and adds no
+            precision to ``"separation"``) turns the gate off.
         heading_window_m: length of the border ends fitted by least squares for
             ``interpolation="hermite"`` [m]; ``None`` (default) picks it per end among
             2–6 m from the detection noise (see :func:`fusion.geometry.fit_ends`).

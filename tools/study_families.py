@@ -16,7 +16,8 @@ how they were made (command, seed set and seeds, version, commit, runtime); the 
 holds each run's notes (routes, lane coverage).
 
 Usage: ``python tools/study_families.py --out out/study --seed-set tune --maps 5 [--frames 60]
-[--family ramps ...] [--config lanes0 ...] [--add-config 'camera=--sensor camera --lanes 1']``
+[--family ramps ...] [--config lanes0 ...] [--add-config 'camera=--sensor camera --lanes 1']
+[--association separation]``
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import map_families  # noqa: E402
 
 from cold_maps.cli.common import positive_int  # noqa: E402
+from fusion.types import ASSOCIATION_RULES  # noqa: E402
 
 PROJECT_ROOT: Final[Path] = Path(__file__).resolve().parents[1]
 SEED_SETS: Final[Mapping[str, range]] = {"tune": range(0, 10_000), "report": range(10_000, 20_000)}
@@ -341,12 +343,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="configuration (repeatable; default: all)")
     parser.add_argument("--add-config", action="append", type=_configuration, default=[], metavar="NAME=OPTIONS",
                         help="another configuration: a name and its cold-eval options")
+    parser.add_argument("--association", choices=ASSOCIATION_RULES, default=None,
+                        help="cold-eval --association added to every configuration (default: cold-eval's)")
     parser.add_argument("--frames", type=positive_int, default=None, help="frames per drive (default: cold-eval's)")
     parser.add_argument("--routes", type=_routes, default=None,
                         help="drives per map, or 'all' to cover every lane (default: cold-eval's)")
     parser.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: the cores)")
     args = parser.parse_args(argv)
     configurations = {name: CONFIGURATIONS[name] for name in args.config or CONFIGURATIONS} | dict(args.add_config)
+    if args.association is not None:
+        configurations = {name: (*options, "--association", args.association)
+                          for name, options in configurations.items()}
     seed_range = SEED_SETS[args.seed_set]
     if args.maps > len(seed_range):
         parser.error(f"--maps: the seed set {args.seed_set} holds {len(seed_range)} seeds")
