@@ -392,7 +392,7 @@ class MapEvaluator:
         if main:
             start = time.perf_counter()
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
-            collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
+            collector.add_check_ms(label, (time.perf_counter() - start) * 1e3)
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None

@@ -1,9 +1,11 @@
 """Work units in worker processes: the drives (routes) of the maps, each cut into frame
 ranges when its frames are independent (:attr:`MapEvaluator.frames_independent`).
 
-A worker evaluates a unit into a fresh :class:`Collector` and a detached ``Recorder``
-(the MCAP messages encoded there); the parent merges the collectors and writes the
-messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
+A worker evaluates a unit into a fresh :class:`Collector` that streams its records into
+the parent collector's spool folder (segment files, :mod:`cold_maps.evaluation.records`)
+and a detached ``Recorder`` (the MCAP messages encoded there); the parent merges the
+collectors (adopting the segments: what comes back is their names, the unit's counters,
+check runtimes and overlays) and writes the messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
 same records in the same (frame) order as a run in one process. After the evaluation the
 same workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
 
@@ -31,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable, Final, Iterator, Sequence
 
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.evaluation.records import Spool
 from cold_maps.evaluation.scenarios import MapPlan
 
 if TYPE_CHECKING:
@@ -179,11 +182,11 @@ class UnitResult:
     messages: list[EncodedMessage]
 
 
-def run_unit(unit: WorkUnit, recording: Callable[[], Recorder] | None) -> UnitResult:
+def run_unit(unit: WorkUnit, recording: Callable[[], Recorder] | None, spool: Path | None = None) -> UnitResult:
     """Evaluates ``unit`` (in a worker); ``recording`` makes its detached ``Recorder``
     (picklable, e.g. a ``functools.partial`` of ``Recorder.detached``), None when nothing is
-    recorded."""
-    collector = Collector()
+    recorded; the records are spooled into the folder ``spool`` (None: a temporary one)."""
+    collector = Collector(spool=Spool(spool))
     recorder = None if recording is None else recording()
     _evaluator(unit.map_index).run_drive(unit.drive, collector, recorder=recorder, frame_offset=unit.frame_offset,
                                          frames=range(unit.first, unit.stop))
@@ -232,12 +235,12 @@ class SubmittedUnits:
 
 
 def submit_units(executor: Executor, evaluators: Sequence[MapEvaluator], workers: int,
-                 recording: Callable[[], Recorder] | None) -> SubmittedUnits:
+                 recording: Callable[[], Recorder] | None, spool: Path | None = None) -> SubmittedUnits:
     """Starts every unit of ``evaluators`` on ``executor`` (the first submission starts the
-    workers); ``recording`` as in :func:`run_unit`."""
+    workers); ``recording`` and ``spool`` (the parent collector's folder) as in :func:`run_unit`."""
     units = work_units(evaluators, workers)
     return SubmittedUnits(evaluators, units,
-                          {executor.submit(run_unit, unit, recording): n for n, unit in enumerate(units)})
+                          {executor.submit(run_unit, unit, recording, spool): n for n, unit in enumerate(units)})
 
 
 def merge_units(submitted: SubmittedUnits, collector: Collector, recorder: Any,

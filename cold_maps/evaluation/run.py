@@ -1,5 +1,5 @@
 """A ``cold-eval`` run: evaluators for the maps, the MCAP recording, the progress bar and
-the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``plots/*.png``,
+the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``frames.parquet``, ``plots/*.png``,
 ``run.mcap``).
 
 Everything that can fail on bad input (maps, routes, ground truth, the output folder) is
@@ -38,6 +38,7 @@ from cold_maps.evaluation.report import (
     scenario_label,
     summary_markdown,
     write_frames_csv,
+    write_frames_parquet,
     write_metrics_json,
 )
 from cold_maps.evaluation.scenarios import MapPlan
@@ -216,13 +217,14 @@ def false_fusion_markdown(collector: Collector) -> str:
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
                   plots: bool = True, results: Sequence[ScenarioResult] | None = None,
                   program: str = "cold-eval", provenance: Provenance | None = None) -> list[ScenarioResult]:
-    """``frames.csv``, ``summary.md`` of the command ``program`` (how it was made:
+    """``frames.csv`` and ``frames.parquet``, ``summary.md`` of the command ``program`` (how it was made:
     ``provenance``, the per-scenario table, notes, then ``sections``: (title, markdown)),
     ``metrics.json`` (with the same ``provenance``) and the plots; returns the scenario
     results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
+    write_frames_parquet(out / "frames.parquet", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
                             provenance=provenance, check_ms=collector.check_ms)
     if collector.notes:
@@ -414,7 +416,8 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
     if executor is not None:
         from cold_maps.evaluation.parallel import submit_units
 
-        submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns))
+        submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns),
+                                 collector.spool.path)
         if options.plots:
             from cold_maps.evaluation.plots import preload
 
