@@ -261,9 +261,9 @@ class MapEvaluator:
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""
         plan = self.plan
-        unmatched = sum(r.rejected == "no_ground_truth" for key, a in collector.accumulators.items()
+        unmatched = sum(rejected == "no_ground_truth" for key, a in collector.accumulators.items()
                         if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
-                        for r in a.records)
+                        for rejected in a.records.values("rejected"))
         if unmatched:
             note = (f"{plan.name}: no ground truth for {unmatched} of {self.total_frames} ego detections (no "
                     "Lanelet2 lanelet at the pose: the converted map does not overlay the OpenDRIVE map there)")

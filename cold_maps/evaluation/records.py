@@ -43,7 +43,9 @@ READ_POINTS: Final[int] = 1 << 16
 SELECT_BINS: Final[int] = 1024
 """Value bins of one narrowing pass of the exact order-statistic search."""
 PAIRWISE_BLOCK: Final[int] = 8
-"""numpy's pairwise summation splits a sum at a multiple of this many elements."""
+"""numpy's pairwise summation splits a sum at a multiple of this many elements..."""
+PAIRWISE_LEAF: Final[int] = 128
+"""... when it has more than this many (numpy's ``PW_BLOCKSIZE``)."""
 
 
 _FILE_NUMBERS = itertools.count()
@@ -242,6 +244,11 @@ class RecordStore:
             batch = records_to_batch(self.pending)
             yield batch if columns is None else batch.select(list(columns))
 
+    def values(self, column: str) -> Iterator[Any]:
+        """The Python values of one scalar column, in order."""
+        for batch in self.batches((column,)):
+            yield from batch.column(0).to_pylist()
+
     def __iter__(self) -> Iterator[FrameRecord]:
         for batch in self.batches():
             yield from batch_records(batch)
@@ -261,8 +268,8 @@ class RecordStore:
 def pairwise_sum(read: Callable[[int, int], NDArrayFloat], start: int, count: int) -> float:
     """``np.sum`` of the ``count`` samples from ``start`` that ``read(start, count)`` returns,
     bit for bit: numpy's pairwise summation, split as numpy splits it, with the blocks of at
-    most :data:`READ_POINTS` summed by numpy itself."""
-    if count <= READ_POINTS:
+    most :data:`READ_POINTS` (or numpy's unsplit :data:`PAIRWISE_LEAF`) summed by numpy itself."""
+    if count <= max(READ_POINTS, PAIRWISE_LEAF):
         return float(np.add.reduce(read(start, count))) if count else 0.0
     half = count // 2
     half -= half % PAIRWISE_BLOCK
@@ -277,11 +284,12 @@ def numpy_lerp(low: float, high: float, gamma: float) -> float:
 
 
 class PointPool:
-    """Float samples pooled in order (module docstring); ``folder`` takes the spill file."""
+    """Float samples pooled in order (module docstring); ``spool`` takes the spill file, past
+    ``limit`` samples (default :data:`POOL_MEMORY_POINTS`)."""
 
-    def __init__(self, spool: Spool, limit: int = POOL_MEMORY_POINTS) -> None:
+    def __init__(self, spool: Spool, limit: int | None = None) -> None:
         self._spool = spool
-        self._limit = limit
+        self._limit = POOL_MEMORY_POINTS if limit is None else limit
         self._chunks: list[NDArrayFloat] = []
         self._file: Any = None
         self._path: Path | None = None
