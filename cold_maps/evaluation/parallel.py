@@ -52,6 +52,9 @@ UNITS_PER_WORKER: Final[int] = 6
 finish together."""
 MIN_UNIT_FRAMES: Final[int] = 10
 """Frames of a drive's range below which it is not cut further."""
+MAX_UNIT_FRAMES: Final[int] = 1000
+"""Frames of a drive's range above which it is cut further when it can be: what a unit hands
+back (its MCAP messages, held until the parent writes them) does not grow with the drive."""
 TERMINATE_WAIT_S: Final[float] = 5.0
 """How long :func:`terminate` waits for each terminated worker to exit [s]."""
 
@@ -206,13 +209,14 @@ def most_units(evaluators: Sequence[MapEvaluator]) -> int:
 def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUnit]:
     """Every drive of every evaluator, global frame indices continuing across them; a drive
     with independent frames cut into ranges (about :data:`UNITS_PER_WORKER` units per
-    worker over the run, none shorter than :data:`MIN_UNIT_FRAMES` frames)."""
+    worker over the run, none shorter than :data:`MIN_UNIT_FRAMES` frames, none longer than
+    :data:`MAX_UNIT_FRAMES` when that many can be cut)."""
     drives = sum(len(e.drives) for e in evaluators)
     pieces = math.ceil(UNITS_PER_WORKER * workers / max(drives, 1))
     units, offset = [], 0
     for map_index, evaluator in enumerate(evaluators):
         for index, drive in enumerate(evaluator.drives):
-            count = min(pieces, _most_pieces(evaluator, drive.frames))
+            count = min(max(pieces, math.ceil(drive.frames / MAX_UNIT_FRAMES)), _most_pieces(evaluator, drive.frames))
             bounds = [round(k * drive.frames / count) for k in range(count + 1)]
             units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in pairwise(bounds))
             offset += drive.frames
