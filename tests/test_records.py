@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from cold_maps.evaluation import records as records_module
 from cold_maps.evaluation.collector import Collector
-from cold_maps.evaluation.records import PointPool, Spool, batch_records, records_to_batch
+from cold_maps.evaluation.records import PointPool, Spool
 from cold_maps.evaluation.report import (
     CONFIDENCE_THRESHOLDS,
     FRAMES_CSV_COLUMNS,
@@ -33,6 +33,8 @@ from cold_maps.evaluation.report import (
     ScenarioAccumulator,
     ScenarioKey,
     ScenarioResult,
+    batch_records,
+    records_to_batch,
     write_frames_csv,
     write_frames_parquet,
 )

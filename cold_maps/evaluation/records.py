@@ -1,7 +1,7 @@
 """Frame records streamed to columnar files, and exact statistics over spilled points.
 
-A :class:`RecordStore` keeps the :class:`~cold_maps.evaluation.report.FrameRecord` s of one
-scenario: a few in memory, the rest in Arrow IPC segment files (one record batch each) in a
+A :class:`RecordStore` keeps the records of one scenario (``report.FrameRecord`` s, encoded
+by ``report.records_to_batch``): a few in memory, the rest in Arrow IPC segment files (one record batch each) in a
 spool folder, so a run's memory does not grow with its frames. A worker process spools into
 the run's folder and the parent adopts its segments in order (no copy).
 
@@ -29,8 +29,6 @@ from cold_maps.network.lane_strip import NDArrayFloat
 
 if TYPE_CHECKING:
     import pyarrow as pa
-
-    from cold_maps.evaluation.report import FrameRecord
 
 FLUSH_RECORDS: Final[int] = 2048
 """Records a store holds in memory before it writes them as one segment."""
@@ -88,24 +86,7 @@ class Spool:
         self.__init__(state["path"])  # type: ignore[misc]
 
 
-def record_schema() -> pa.Schema:
-    """The columns of a segment: the fields of a ``FrameRecord`` (the stopping distance as its
-    speed and rule, null without one) and the per-record figures of ``frames.csv``
-    (``mean_error_m``, ``max_error_m``, ``near_max_error_m``, ``far_max_error_m``; NaN
-    where the CSV leaves them empty)."""
-    import pyarrow as pa
-
-    f64, text, flag = pa.float64(), pa.string(), pa.bool_()
-    return pa.schema([
-        ("frame", pa.int64()), ("stamp_s", f64), ("ego", text), ("coop", text), ("errors_m", pa.list_(f64)),
-        ("perception_range_m", f64), ("runtime_ms", f64), ("rejected", text), ("predicted_fusible", flag),
-        ("truly_fusible", flag), ("gt_unmatched", text), ("relation", text), ("confidence", f64),
-        ("end_reason", text), ("near_points", pa.int64()), ("known_to_m", f64), ("stopping_speed_mps", f64),
-        ("stopping_reaction_time_s", f64), ("stopping_deceleration_mps2", f64), ("sigma_m", pa.list_(f64)),
-        ("mean_error_m", f64), ("max_error_m", f64), ("near_max_error_m", f64), ("far_max_error_m", f64)])
-
-
-def _list_array(arrays: Sequence[NDArrayFloat | None]) -> pa.Array:
+def list_array(arrays: Sequence[NDArrayFloat | None]) -> pa.Array:
     """A list<float64> column of ``arrays`` (None: null) without a Python loop over values."""
     import pyarrow as pa
 
@@ -117,46 +98,6 @@ def _list_array(arrays: Sequence[NDArrayFloat | None]) -> pa.Array:
     return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values, type=pa.float64()), mask=mask)
 
 
-def _record_figures(record: FrameRecord) -> tuple[float, float, float, float]:
-    """(mean, max, near max, far max) error of a record (m), NaN where ``frames.csv`` is empty."""
-    errors = record.errors_m
-    if not errors.size:
-        return math.nan, math.nan, math.nan, math.nan
-    near, far = record.split_errors()
-    return (float(np.mean(errors)), float(np.max(errors)), float(np.max(near)) if near.size else math.nan,
-            float(np.max(far)) if far.size else math.nan)
-
-
-def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
-    """The records as one batch of :func:`record_schema`."""
-    import pyarrow as pa
-
-    stop = [r.stopping for r in records]
-    figures = list(zip(*(_record_figures(r) for r in records))) or [(), (), (), ()]
-    columns: dict[str, Any] = {
-        "frame": [r.frame for r in records], "stamp_s": [r.stamp_s for r in records],
-        "ego": [r.ego for r in records], "coop": [r.coop for r in records],
-        "errors_m": _list_array([r.errors_m for r in records]),
-        "perception_range_m": [r.perception_range_m for r in records],
-        "runtime_ms": [r.runtime_ms for r in records], "rejected": [r.rejected for r in records],
-        "predicted_fusible": [r.predicted_fusible for r in records],
-        "truly_fusible": [r.truly_fusible for r in records], "gt_unmatched": [r.gt_unmatched for r in records],
-        "relation": [r.relation for r in records], "confidence": [r.confidence for r in records],
-        "end_reason": [r.end_reason for r in records], "near_points": [r.near_points for r in records],
-        "known_to_m": [r.known_to_m for r in records],
-        "stopping_speed_mps": [None if s is None else s.speed_mps for s in stop],
-        "stopping_reaction_time_s": [None if s is None else s.rule.reaction_time_s for s in stop],
-        "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
-        "sigma_m": _list_array([r.sigma_m for r in records]),
-        "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
-        "far_max_error_m": figures[3],
-    }
-    schema = record_schema()
-    return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)
-                                       else pa.array(columns[name], type=schema.field(name).type)
-                                       for name in schema.names], schema=schema)
-
-
 def list_values(column: pa.Array) -> tuple[NDArrayFloat, np.ndarray]:
     """(flat values, offsets ``(N + 1,)``) of a list<float64> column (a null list is empty)."""
     offsets = np.asarray(column.offsets, dtype=np.int64)
@@ -164,44 +105,24 @@ def list_values(column: pa.Array) -> tuple[NDArrayFloat, np.ndarray]:
     return values, offsets
 
 
-def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
-    """The ``FrameRecord`` s of a batch of :func:`record_schema` (exact inverse of
-    :func:`records_to_batch`)."""
-    from cold_maps.evaluation.report import FrameRecord
-    from cold_maps.evaluation.safety import StoppingRule
-
-    data = {name: batch.column(name).to_pylist() for name in batch.schema.names
-            if name not in ("errors_m", "sigma_m")}
-    errors, error_offsets = list_values(batch.column("errors_m"))
-    sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
-    sigma_null = batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
-    for i in range(batch.num_rows):
-        speed = data["stopping_speed_mps"][i]
-        yield FrameRecord(
-            frame=data["frame"][i], stamp_s=data["stamp_s"][i], ego=data["ego"][i], coop=data["coop"][i],
-            errors_m=errors[error_offsets[i]:error_offsets[i + 1]],
-            perception_range_m=data["perception_range_m"][i], runtime_ms=data["runtime_ms"][i],
-            rejected=data["rejected"][i], predicted_fusible=data["predicted_fusible"][i],
-            truly_fusible=data["truly_fusible"][i], gt_unmatched=data["gt_unmatched"][i],
-            relation=data["relation"][i], confidence=data["confidence"][i], end_reason=data["end_reason"][i],
-            near_points=data["near_points"][i], known_to_m=data["known_to_m"][i],
-            stopping=None if speed is None else StoppingRule(
-                data["stopping_reaction_time_s"][i], data["stopping_deceleration_mps2"][i]).at(speed),
-            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]])
-
-
 class RecordStore:
     """The records of one scenario, in order: segment files in a :class:`Spool` and the
-    latest few in memory (module docstring). Iterating yields ``FrameRecord`` s."""
+    latest few in memory (module docstring). ``encode`` turns records into one record batch
+    (each record's error samples in its list column ``errors_m``), ``decode`` a batch back
+    into records (both module-level functions: a store is pickled with them); iterating
+    yields the records."""
 
-    def __init__(self, spool: Spool) -> None:
+    def __init__(self, spool: Spool, encode: Callable[[Sequence[Any]], pa.RecordBatch],
+                 decode: Callable[[pa.RecordBatch], Iterator[Any]]) -> None:
         self.spool = spool
+        self.encode = encode
+        self.decode = decode
         self.segments: list[Path] = []
-        self.pending: list[FrameRecord] = []
+        self.pending: list[Any] = []
         self.count = 0
         self._pending_points = 0
 
-    def add(self, record: FrameRecord) -> None:
+    def add(self, record: Any) -> None:
         """Appends one record (written out with the pending ones past the flush limits)."""
         self.pending.append(record)
         self.count += 1
@@ -215,7 +136,7 @@ class RecordStore:
             return
         import pyarrow as pa
 
-        batch = records_to_batch(self.pending)
+        batch = self.encode(self.pending)
         path = self.spool.new_file(".arrow")
         with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(sink, batch.schema) as writer:
             writer.write_batch(batch)
@@ -241,7 +162,7 @@ class RecordStore:
                     batch = reader.get_batch(index)
                     yield batch if columns is None else batch.select(list(columns))
         if self.pending:
-            batch = records_to_batch(self.pending)
+            batch = self.encode(self.pending)
             yield batch if columns is None else batch.select(list(columns))
 
     def values(self, column: str) -> Iterator[Any]:
@@ -249,19 +170,20 @@ class RecordStore:
         for batch in self.batches((column,)):
             yield from batch.column(0).to_pylist()
 
-    def __iter__(self) -> Iterator[FrameRecord]:
+    def __iter__(self) -> Iterator[Any]:
         for batch in self.batches():
-            yield from batch_records(batch)
+            yield from self.decode(batch)
 
     def __len__(self) -> int:
         return self.count
 
     def __getstate__(self) -> dict[str, Any]:
         self.flush()
-        return {"spool": self.spool, "segments": self.segments, "count": self.count}
+        return {"spool": self.spool, "encode": self.encode, "decode": self.decode, "segments": self.segments,
+                "count": self.count}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["spool"])  # type: ignore[misc]
+        self.__init__(state["spool"], state["encode"], state["decode"])  # type: ignore[misc]
         self.segments, self.count = state["segments"], state["count"]
 
 

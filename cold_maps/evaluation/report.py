@@ -92,7 +92,7 @@ import os
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, Iterable, Iterator, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Final, Iterable, Iterator, Literal, Mapping, Sequence
 
 import numpy as np
 
@@ -106,8 +106,11 @@ from cold_maps.evaluation.safety import (
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
-from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_values, pools
+from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_array, list_values, pools
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, P95, Calibration, ErrorStats
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -558,6 +561,87 @@ class ScenarioResult:
             raise ReportError(f"{where}: malformed record: {exc}") from exc
 
 
+def record_schema() -> pa.Schema:
+    """The columns of a segment: the fields of a ``FrameRecord`` (the stopping distance as its
+    speed and rule, null without one) and the per-record figures of ``frames.csv``
+    (``mean_error_m``, ``max_error_m``, ``near_max_error_m``, ``far_max_error_m``; NaN
+    where the CSV leaves them empty)."""
+    import pyarrow as pa
+
+    f64, text, flag = pa.float64(), pa.string(), pa.bool_()
+    return pa.schema([
+        ("frame", pa.int64()), ("stamp_s", f64), ("ego", text), ("coop", text), ("errors_m", pa.list_(f64)),
+        ("perception_range_m", f64), ("runtime_ms", f64), ("rejected", text), ("predicted_fusible", flag),
+        ("truly_fusible", flag), ("gt_unmatched", text), ("relation", text), ("confidence", f64),
+        ("end_reason", text), ("near_points", pa.int64()), ("known_to_m", f64), ("stopping_speed_mps", f64),
+        ("stopping_reaction_time_s", f64), ("stopping_deceleration_mps2", f64), ("sigma_m", pa.list_(f64)),
+        ("mean_error_m", f64), ("max_error_m", f64), ("near_max_error_m", f64), ("far_max_error_m", f64)])
+
+
+def _record_figures(record: FrameRecord) -> tuple[float, float, float, float]:
+    """(mean, max, near max, far max) error of a record (m), NaN where ``frames.csv`` is empty."""
+    errors = record.errors_m
+    if not errors.size:
+        return math.nan, math.nan, math.nan, math.nan
+    near, far = record.split_errors()
+    return (float(np.mean(errors)), float(np.max(errors)), float(np.max(near)) if near.size else math.nan,
+            float(np.max(far)) if far.size else math.nan)
+
+
+def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
+    """The records as one batch of :func:`record_schema`."""
+    import pyarrow as pa
+
+    stop = [r.stopping for r in records]
+    figures = list(zip(*(_record_figures(r) for r in records))) or [(), (), (), ()]
+    columns: dict[str, Any] = {
+        "frame": [r.frame for r in records], "stamp_s": [r.stamp_s for r in records],
+        "ego": [r.ego for r in records], "coop": [r.coop for r in records],
+        "errors_m": list_array([r.errors_m for r in records]),
+        "perception_range_m": [r.perception_range_m for r in records],
+        "runtime_ms": [r.runtime_ms for r in records], "rejected": [r.rejected for r in records],
+        "predicted_fusible": [r.predicted_fusible for r in records],
+        "truly_fusible": [r.truly_fusible for r in records], "gt_unmatched": [r.gt_unmatched for r in records],
+        "relation": [r.relation for r in records], "confidence": [r.confidence for r in records],
+        "end_reason": [r.end_reason for r in records], "near_points": [r.near_points for r in records],
+        "known_to_m": [r.known_to_m for r in records],
+        "stopping_speed_mps": [None if s is None else s.speed_mps for s in stop],
+        "stopping_reaction_time_s": [None if s is None else s.rule.reaction_time_s for s in stop],
+        "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
+        "sigma_m": list_array([r.sigma_m for r in records]),
+        "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
+        "far_max_error_m": figures[3],
+    }
+    schema = record_schema()
+    return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)
+                                       else pa.array(columns[name], type=schema.field(name).type)
+                                       for name in schema.names], schema=schema)
+
+
+def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
+    """The :class:`FrameRecord` s of a batch of :func:`record_schema` (exact inverse of
+    :func:`records_to_batch`)."""
+    data = {name: batch.column(name).to_pylist() for name in batch.schema.names
+            if name not in ("errors_m", "sigma_m")}
+    errors, error_offsets = list_values(batch.column("errors_m"))
+    sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
+    sigma_null = batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
+    for i in range(batch.num_rows):
+        speed = data["stopping_speed_mps"][i]
+        yield FrameRecord(
+            frame=data["frame"][i], stamp_s=data["stamp_s"][i], ego=data["ego"][i], coop=data["coop"][i],
+            errors_m=errors[error_offsets[i]:error_offsets[i + 1]],
+            perception_range_m=data["perception_range_m"][i], runtime_ms=data["runtime_ms"][i],
+            rejected=data["rejected"][i], predicted_fusible=data["predicted_fusible"][i],
+            truly_fusible=data["truly_fusible"][i], gt_unmatched=data["gt_unmatched"][i],
+            relation=data["relation"][i], confidence=data["confidence"][i], end_reason=data["end_reason"][i],
+            near_points=data["near_points"][i], known_to_m=data["known_to_m"][i],
+            stopping=None if speed is None else StoppingRule(
+                data["stopping_reaction_time_s"][i], data["stopping_deceleration_mps2"][i]).at(speed),
+            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]])
+
+
+
 def _ratio(numerator: int, denominator: int) -> float:
     return numerator / denominator if denominator else math.nan
 
@@ -592,7 +676,7 @@ class ScenarioAccumulator:
 
     def __init__(self, key: ScenarioKey, records: Iterable[FrameRecord] = (), *, spool: Spool | None = None) -> None:
         self.key = key
-        self.records = RecordStore(spool if spool is not None else Spool())
+        self.records = RecordStore(spool if spool is not None else Spool(), records_to_batch, batch_records)
         self.messages = 0
         self.message_bytes = 0
         self.sender_ns = 0
