@@ -1,8 +1,8 @@
 """Frame records streamed to columnar files, and exact statistics over spilled points.
 
 A :class:`RecordStore` keeps the records of one scenario (``report.FrameRecord`` s, encoded
-by ``report.records_to_batch``): a few in memory, the rest in Arrow IPC segment files (one record batch each) in a
-spool folder, so a run's memory does not grow with its frames. A worker process spools into
+by ``report.records_to_batch``): a few in memory, the rest in Arrow IPC segment files (one
+record batch each) in a spool folder, so a run's memory does not grow with its frames. A worker process spools into
 the run's folder and the parent adopts its segments in order (no copy).
 
 A :class:`PointPool` pools float samples (error distances, σ) in order and gives the same
@@ -37,7 +37,7 @@ FLUSH_POINTS: Final[int] = 1 << 16
 POOL_MEMORY_POINTS: Final[int] = 1 << 18
 """Samples (8 bytes each) a :class:`PointPool` holds in memory before it spills to a file."""
 READ_POINTS: Final[int] = 1 << 16
-"""Samples a spilled pool reads at a time (a power of two: numpy's pairwise blocks)."""
+"""Samples a spilled pool reads at a time."""
 SELECT_BINS: Final[int] = 1024
 """Value bins of one narrowing pass of the exact order-statistic search."""
 PAIRWISE_BLOCK: Final[int] = 8
@@ -152,7 +152,7 @@ class RecordStore:
         self.count += later.count
 
     def batches(self, columns: Sequence[str] | None = None) -> Iterator[pa.RecordBatch]:
-        """The records as batches of :func:`record_schema` (``columns`` only), in order."""
+        """The records as batches of ``encode``'s schema (``columns`` only), in order."""
         import pyarrow as pa
 
         for path in self.segments:
