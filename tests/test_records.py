@@ -317,3 +317,13 @@ def test_pairwise_sum_replays_numpy_on_a_large_array() -> None:
     values = np.random.default_rng(7).exponential(0.1, 1_234_567)
     total = records_module.pairwise_sum(lambda start, count: values[start:start + count], 0, values.size)
     assert total == float(np.sum(values)) and total != math.fsum(values)  # numpy's rounding, not the exact sum
+
+
+def test_result_columns_own_their_memory(tiny_limits: None) -> None:
+    """The per-record columns loaded for a result are copies: a view would keep every segment's
+    points in memory until the result is done (a 10 000-frame Town04 run peaked 150 MB higher)."""
+    accumulator = ScenarioAccumulator(ScenarioKey("m", "convoy", "", 0.0, "left"), make_records(2, 60, sigma=False))
+    assert len(accumulator.records.segments) > 1
+    arrays = [v for v in accumulator._scalars().values() if isinstance(v, np.ndarray)]
+    assert arrays and all(a.base is None for a in arrays)
+    assert all(r.errors_m.base is None for r in accumulator.records)

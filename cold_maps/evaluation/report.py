@@ -630,7 +630,7 @@ def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
         speed = data["stopping_speed_mps"][i]
         yield FrameRecord(
             frame=data["frame"][i], stamp_s=data["stamp_s"][i], ego=data["ego"][i], coop=data["coop"][i],
-            errors_m=errors[error_offsets[i]:error_offsets[i + 1]],
+            errors_m=errors[error_offsets[i]:error_offsets[i + 1]].copy(),
             perception_range_m=data["perception_range_m"][i], runtime_ms=data["runtime_ms"][i],
             rejected=data["rejected"][i], predicted_fusible=data["predicted_fusible"][i],
             truly_fusible=data["truly_fusible"][i], gt_unmatched=data["gt_unmatched"][i],
@@ -638,7 +638,7 @@ def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
             near_points=data["near_points"][i], known_to_m=data["known_to_m"][i],
             stopping=None if speed is None else StoppingRule(
                 data["stopping_reaction_time_s"][i], data["stopping_deceleration_mps2"][i]).at(speed),
-            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]])
+            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]].copy())
 
 
 
@@ -705,10 +705,10 @@ class ScenarioAccumulator:
         ``points`` per record, the (known, value) flags ``predicted`` and ``truly``."""
         parts: dict[str, list[Any]] = {name: [] for name in (*SCALAR_COLUMNS, "points", "predicted", "truly")}
         for batch in self.records.batches((*SCALAR_COLUMNS, "errors_m", "predicted_fusible", "truly_fusible")):
-            for name in SCALAR_COLUMNS:
+            for name in SCALAR_COLUMNS:  # copies: a view would keep the whole segment (its points) in memory
                 column = batch.column(name)
                 parts[name].append(column.to_pylist() if str(column.type) == "string" else
-                                   column.to_numpy(zero_copy_only=False))
+                                   column.to_numpy(zero_copy_only=False).copy())
             parts["points"].append(np.diff(np.asarray(batch.column("errors_m").offsets, dtype=np.int64)))
             parts["predicted"].append(_flags(batch.column("predicted_fusible")))
             parts["truly"].append(_flags(batch.column("truly_fusible")))
