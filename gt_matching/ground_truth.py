@@ -34,8 +34,11 @@ from gt_matching.route import BorderPart, RouteBorder
 
 #: More candidate lanelet sequences than this for one detection is an error.
 MAX_SEQUENCES: Final = 4096
-#: Assembled routes kept per ``GroundTruth`` (consecutive frames of a drive reuse them).
-ROUTE_CACHE_SIZE: Final = 256
+#: Assembled routes kept per ``GroundTruth`` (consecutive frames of a drive reuse them; a
+#: route holds its resampled borders and KD-trees, about 0.7 MB on Town04, so the cache
+#: bounds a long drive's memory: 600 frames on Town04 touch 154 routes, and an LRU of 16
+#: already misses no more than one of any size).
+ROUTE_CACHE_SIZE: Final = 32
 #: Poses whose candidate lanelets a ``GroundTruth`` keeps (every lane measured in a frame
 #: is matched at the same pose, the ego's).
 CANDIDATE_CACHE_SIZE: Final = 8

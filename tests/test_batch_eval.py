@@ -91,6 +91,16 @@ def test_drives_with_independent_frames_are_cut_into_frame_ranges():
                                                                                             (1, 0, 45, 45)]
 
 
+def test_long_drives_are_cut_into_units_of_at_most_max_unit_frames(monkeypatch):
+    from cold_maps.evaluation import parallel
+
+    monkeypatch.setattr(parallel, "MIN_UNIT_FRAMES", 1)
+    monkeypatch.setattr(parallel, "MAX_UNIT_FRAMES", 5)
+    evaluators = _evaluators("--map", str(bundled_map("straight")), "--frames", "45", "--routes", "2")
+    units = parallel.work_units(evaluators, 2)  # 2 drives, 2 workers: 6 units per drive without the cap
+    assert [(u.drive, u.first, u.stop) for u in units] == [(d, k * 5, k * 5 + 5) for d in (0, 1) for k in range(9)]
+
+
 def test_two_workers_agree_with_one_when_drives_are_cut_into_frame_ranges(tmp_path):
     """One drive, cut into 4 frame ranges on the 2 workers."""
     common = ("--frames", "40", "--routes", "1", "--gaps", "20")

@@ -99,7 +99,7 @@ def test_report_files_schema_and_round_trip(tmp_path):
         local.add(FrameRecord(i, 0.1 * i, "ego", "", np.full(4, 0.005 * (i + 1)), 30.0, 0.5 + i,
                               predicted_fusible=True, truly_fusible=i != 1))
     results = write_report(tmp_path, [worked_example(), local])
-    assert sorted(os.listdir(tmp_path)) == ["frames.csv", "metrics.json", "summary.md"]  # no temp files
+    assert sorted(os.listdir(tmp_path)) == ["frames.csv", "frames.parquet", "metrics.json", "summary.md"]  # no temp files
     document = json.loads((tmp_path / "metrics.json").read_text())
     assert document["schema_version"] == 1 and document["partial"] is False
     required = {"map", "fusion", "interpolation", "d_s", "boundary", "mean_error_m", "rmse_m", "max_error_m",

@@ -6,8 +6,10 @@ the plots and the paper tables, also after an interrupt.
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass, field
 
+from cold_maps.evaluation.records import Spool
 from cold_maps.evaluation.report import FrameRecord, ScenarioAccumulator, ScenarioKey
 from cold_maps.network.lane_strip import NDArrayFloat
 
@@ -35,7 +37,7 @@ class Collector:
     Fields:
         accumulators: one per scenario key, in insertion order.
         check_ms: (map, scenario label) → runtimes of the fusibility check alone, the
-            overlap check for convoy (ms).
+            overlap check for convoy (ms; 8 bytes each).
         overlays: (map, scenario label) → the frame with the largest error of any of its
             pairs (distractors included: the summary's max error).
         notes: lines for the summary (routes, lane coverage, what did not fit a map).
@@ -45,16 +47,19 @@ class Collector:
         frames_done: frames evaluated.
         drives: (map, drive index) → (global index of the drive's frame 0, its frames):
             where each route starts on the frame axis of the plots.
+        spool: where the accumulators stream their records (a temporary folder by default;
+            a worker's collector spools into its parent's).
     """
 
     accumulators: dict[ScenarioKey, ScenarioAccumulator] = field(default_factory=dict)
-    check_ms: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    check_ms: dict[tuple[str, str], array[float]] = field(default_factory=dict)
     overlays: dict[tuple[str, str], Overlay] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     reduced_maps: list[str] = field(default_factory=list)
     gt_warnings: list[str] = field(default_factory=list)
     frames_done: int = 0
     drives: dict[tuple[str, int], tuple[int, int]] = field(default_factory=dict)
+    spool: Spool = field(default_factory=Spool)
 
     def add(self, key: ScenarioKey, record: FrameRecord) -> None:
         """Adds one evaluation to the scenario ``key``."""
@@ -65,24 +70,24 @@ class Collector:
         ``sent_bytes`` in it (0: no message)."""
         self._accumulator(key).add_traffic(sent_bytes, seconds)
 
+    def add_check_ms(self, label: tuple[str, str], runtime_ms: float) -> None:
+        """Counts one runtime (ms) of the fusibility check alone of the scenario ``label``."""
+        self.check_ms.setdefault(label, array("d")).append(runtime_ms)
+
     def _accumulator(self, key: ScenarioKey) -> ScenarioAccumulator:
         accumulator = self.accumulators.get(key)
         if accumulator is None:
-            accumulator = self.accumulators[key] = ScenarioAccumulator(key)
+            accumulator = self.accumulators[key] = ScenarioAccumulator(key, spool=self.spool)
         return accumulator
 
     def merge(self, later: Collector) -> None:
         """Appends what ``later`` measured after everything in this collector (a work unit
-        run elsewhere): the same state as if its frames had been evaluated into this one."""
+        run elsewhere): the same state as if its frames had been evaluated into this one. Its
+        records' segment files are adopted, not copied: they must stay where they are."""
         for key, accumulator in later.accumulators.items():
-            mine = self._accumulator(key)
-            for record in accumulator.records:
-                mine.add(record)
-            mine.messages += accumulator.messages
-            mine.message_bytes += accumulator.message_bytes
-            mine.sender_ns += accumulator.sender_ns
+            self._accumulator(key).merge(accumulator)
         for label, runtimes in later.check_ms.items():
-            self.check_ms.setdefault(label, []).extend(runtimes)
+            self.check_ms.setdefault(label, array("d")).extend(runtimes)
         for label, overlay in later.overlays.items():
             kept = self.overlays.get(label)
             if kept is None or overlay.max_error_m > kept.max_error_m:

@@ -271,9 +271,9 @@ class MapEvaluator:
     def note_unmatched(self, collector: Collector) -> None:
         """Notes (and logs) the ego detections of this map without ground truth, if any."""
         plan = self.plan
-        unmatched = sum(r.rejected == NO_GROUND_TRUTH for key, a in collector.accumulators.items()
+        unmatched = sum(rejected == NO_GROUND_TRUTH for key, a in collector.accumulators.items()
                         if key.map == plan.name and key.fusion == "local" and key.boundary == "left"
-                        for r in a.records)
+                        for rejected in a.records.values("rejected"))
         if unmatched:
             note = (f"{plan.name}: no ground truth for {unmatched} of {self.total_frames} ego detections (no "
                     "Lanelet2 lanelet at the pose: the converted map does not overlay the OpenDRIVE map there)")
@@ -397,7 +397,7 @@ class MapEvaluator:
         if main:
             start = time.perf_counter()
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
-            collector.check_ms.setdefault(label, []).append((time.perf_counter() - start) * 1e3)
+            collector.add_check_ms(label, (time.perf_counter() - start) * 1e3)
         if result.kind == "none":
             reject(reason_category(result.reason), False, runtime, 0.0)
             return None

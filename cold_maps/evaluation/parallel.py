@@ -1,9 +1,11 @@
 """Work units in worker processes: the drives (routes) of the maps, each cut into frame
 ranges when its frames are independent (:attr:`MapEvaluator.frames_independent`).
 
-A worker evaluates a unit into a fresh :class:`Collector` and a detached ``Recorder``
-(the MCAP messages encoded there); the parent merges the collectors and writes the
-messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
+A worker evaluates a unit into a fresh :class:`Collector` that streams its records into
+the parent collector's spool folder (segment files, :mod:`cold_maps.evaluation.records`)
+and a detached ``Recorder`` (the MCAP messages encoded there); the parent merges the
+collectors (adopting the segments: what comes back is their names, the unit's counters,
+check runtimes and overlays) and writes the messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
 same records in the same (frame) order as a run in one process. After the evaluation the
 same workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
 
@@ -31,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable, Final, Iterator, Sequence
 
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.evaluation.records import Spool
 from cold_maps.evaluation.scenarios import MapPlan
 
 if TYPE_CHECKING:
@@ -49,6 +52,9 @@ UNITS_PER_WORKER: Final[int] = 6
 finish together."""
 MIN_UNIT_FRAMES: Final[int] = 10
 """Frames of a drive's range below which it is not cut further."""
+MAX_UNIT_FRAMES: Final[int] = 1000
+"""Frames of a drive's range above which it is cut further when it can be: what a unit hands
+back (its MCAP messages, held until the parent writes them) does not grow with the drive."""
 TERMINATE_WAIT_S: Final[float] = 5.0
 """How long :func:`terminate` waits for each terminated worker to exit [s]."""
 
@@ -179,11 +185,11 @@ class UnitResult:
     messages: list[EncodedMessage]
 
 
-def run_unit(unit: WorkUnit, recording: Callable[[], Recorder] | None) -> UnitResult:
+def run_unit(unit: WorkUnit, recording: Callable[[], Recorder] | None, spool: Path | None = None) -> UnitResult:
     """Evaluates ``unit`` (in a worker); ``recording`` makes its detached ``Recorder``
     (picklable, e.g. a ``functools.partial`` of ``Recorder.detached``), None when nothing is
-    recorded."""
-    collector = Collector()
+    recorded; the records are spooled into the folder ``spool`` (None: a temporary one)."""
+    collector = Collector(spool=Spool(spool))
     recorder = None if recording is None else recording()
     _evaluator(unit.map_index).run_drive(unit.drive, collector, recorder=recorder, frame_offset=unit.frame_offset,
                                          frames=range(unit.first, unit.stop))
@@ -203,13 +209,14 @@ def most_units(evaluators: Sequence[MapEvaluator]) -> int:
 def work_units(evaluators: Sequence[MapEvaluator], workers: int) -> list[WorkUnit]:
     """Every drive of every evaluator, global frame indices continuing across them; a drive
     with independent frames cut into ranges (about :data:`UNITS_PER_WORKER` units per
-    worker over the run, none shorter than :data:`MIN_UNIT_FRAMES` frames)."""
+    worker over the run, none shorter than :data:`MIN_UNIT_FRAMES` frames, none longer than
+    :data:`MAX_UNIT_FRAMES` when that many can be cut)."""
     drives = sum(len(e.drives) for e in evaluators)
     pieces = math.ceil(UNITS_PER_WORKER * workers / max(drives, 1))
     units, offset = [], 0
     for map_index, evaluator in enumerate(evaluators):
         for index, drive in enumerate(evaluator.drives):
-            count = min(pieces, _most_pieces(evaluator, drive.frames))
+            count = min(max(pieces, math.ceil(drive.frames / MAX_UNIT_FRAMES)), _most_pieces(evaluator, drive.frames))
             bounds = [round(k * drive.frames / count) for k in range(count + 1)]
             units.extend(WorkUnit(map_index, index, first, stop, offset) for first, stop in pairwise(bounds))
             offset += drive.frames
@@ -232,12 +239,12 @@ class SubmittedUnits:
 
 
 def submit_units(executor: Executor, evaluators: Sequence[MapEvaluator], workers: int,
-                 recording: Callable[[], Recorder] | None) -> SubmittedUnits:
+                 recording: Callable[[], Recorder] | None, spool: Path | None = None) -> SubmittedUnits:
     """Starts every unit of ``evaluators`` on ``executor`` (the first submission starts the
-    workers); ``recording`` as in :func:`run_unit`."""
+    workers); ``recording`` and ``spool`` (the parent collector's folder) as in :func:`run_unit`."""
     units = work_units(evaluators, workers)
     return SubmittedUnits(evaluators, units,
-                          {executor.submit(run_unit, unit, recording): n for n, unit in enumerate(units)})
+                          {executor.submit(run_unit, unit, recording, spool): n for n, unit in enumerate(units)})
 
 
 def merge_units(submitted: SubmittedUnits, collector: Collector, recorder: Any,

@@ -16,16 +16,19 @@ Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import math
 import os
 import struct
 import zlib
 from dataclasses import dataclass
-from typing import Any, Final, Mapping, Sequence
+from typing import Any, Final, Iterator, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
+from cold_maps.evaluation.records import list_values
 from cold_maps.evaluation.report import ScenarioAccumulator, atomic_write_bytes
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.recording.recorder import COLOR_COOP, COLOR_EGO, COLOR_FUSED, COLOR_GT
@@ -144,18 +147,33 @@ class ErrorSeries:
         return cls.pooled(f"{scenario.key.fusion} {scenario.key.boundary}", [scenario])
 
     @classmethod
-    def pooled(cls, label: str, scenarios: Sequence[ScenarioAccumulator]) -> ErrorSeries:
-        """One series over the records of ``scenarios`` (usually both borders of one method):
-        per frame the mean and the max of all their errors."""
-        pooled: dict[int, list[NDArrayFloat]] = {}
-        for scenario in scenarios:
-            for r in scenario.records:
-                pooled.setdefault(r.frame, []).append(r.errors_m)
-        frames = sorted(pooled)
-        errors = [np.concatenate(pooled[f]) for f in frames]
-        return cls(label, np.array(frames, dtype=float),
-                   np.array([e.mean() if e.size else np.nan for e in errors]),
-                   np.array([e.max() if e.size else np.nan for e in errors]))
+    def pooled(cls, label: str, scenarios: Sequence[ScenarioAccumulator], *, own_only: bool = False) -> ErrorSeries:
+        """One series over the records of ``scenarios`` (usually both borders of one method;
+        ``own_only``: only the ego's own coops, :func:`is_own_coop`): per frame the mean and the
+        max of all their errors. Streamed from the records' columns, a frame at a time (each
+        scenario's records are in frame order)."""
+        frames, means, maxima = [], [], []
+        merged = heapq.merge(*(_frame_errors(s, own_only) for s in scenarios), key=lambda item: item[0])
+        for frame, group in itertools.groupby(merged, key=lambda item: item[0]):
+            errors = np.concatenate([e for _, e in group])
+            frames.append(frame)
+            means.append(errors.mean() if errors.size else np.nan)
+            maxima.append(errors.max() if errors.size else np.nan)
+        return cls(label, np.array(frames, dtype=float), np.array(means, dtype=float), np.array(maxima, dtype=float))
+
+
+def is_own_coop(coop: str) -> bool:
+    """Whether a record's coop is the ego alone ("") or one of its own coops (not a distractor)."""
+    return coop == "" or coop.startswith("coop")
+
+
+def _frame_errors(scenario: ScenarioAccumulator, own_only: bool) -> Iterator[tuple[int, NDArrayFloat]]:
+    """(frame, errors m) of each of a scenario's records, in order."""
+    for batch in scenario.records.batches(("frame", "coop", "errors_m")):
+        values, offsets = list_values(batch.column("errors_m"))
+        for i, (frame, coop) in enumerate(zip(batch.column("frame").to_pylist(), batch.column("coop").to_pylist())):
+            if not own_only or is_own_coop(coop):
+                yield frame, values[offsets[i]:offsets[i + 1]]
 
 
 def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "",
@@ -250,12 +268,17 @@ def plot_frame_overlay(path: str | os.PathLike[str], *, gt: Mapping[str, NDArray
 def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayFloat]:
     """Per vehicle count (chain length): (perception range m, max error m, 1.0 if the pair
     is truly on one lane else 0.0) of every fused evaluation with a finite range, ``(N, 3)``."""
-    groups: dict[int, list[tuple[float, float, bool]]] = {}
+    groups: dict[int, list[NDArrayFloat]] = {}
     for scenario in scenarios:
-        groups.setdefault(scenario.key.vehicles, []).extend(
-            (r.perception_range_m, float(r.errors_m.max()), bool(r.truly_fusible)) for r in scenario.records
-            if r.fused and np.isfinite(r.perception_range_m))
-    return {vehicles: np.array(points, dtype=float).reshape(-1, 3) for vehicles, points in groups.items()}
+        points = groups.setdefault(scenario.key.vehicles, [])
+        for batch in scenario.records.batches(("perception_range_m", "max_error_m", "truly_fusible", "errors_m")):
+            ranges = batch.column("perception_range_m").to_numpy(zero_copy_only=False)
+            chosen = (np.diff(list_values(batch.column("errors_m"))[1]) > 0) & np.isfinite(ranges)
+            truly = batch.column("truly_fusible").fill_null(False).to_numpy(zero_copy_only=False).astype(float)
+            maxima = batch.column("max_error_m").to_numpy(zero_copy_only=False)
+            points.append(np.column_stack((ranges[chosen], maxima[chosen], truly[chosen])))
+    return {vehicles: np.concatenate(points).reshape(-1, 3) if points else np.empty((0, 3))
+            for vehicles, points in groups.items()}
 
 
 def plot_error_vs_range(path: str | os.PathLike[str], groups: Mapping[int, NDArrayFloat], title: str = "") -> None:
@@ -285,20 +308,23 @@ def reliability_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[str, ND
     """Per scenario label (boundaries pooled): ``(K, 2)`` stated coverage of ±kσ for Gaussian
     errors, erf(k/√2), and the observed share of the points whose error is at most kσ, for k
     in :data:`RELIABILITY_SIGMAS`; only scenarios whose fused records state σ."""
-    pooled: dict[str, tuple[list[NDArrayFloat], list[NDArrayFloat]]] = {}
+    within: dict[str, tuple[list[int], list[int]]] = {}  # label -> (count within kσ per k, [points])
     for scenario in scenarios:
-        for record in scenario.records:
-            if record.fused and record.sigma_m is not None:
-                errors, sigmas = pooled.setdefault(scenario.key.label, ([], []))
-                errors.append(record.errors_m)
-                sigmas.append(record.sigma_m)
-    stated = np.array([math.erf(k / math.sqrt(2.0)) for k in RELIABILITY_SIGMAS])
-    out = {}
-    for label, (errors, sigmas) in pooled.items():
-        e, s = np.concatenate(errors), np.concatenate(sigmas)
-        observed = np.array([np.mean(e <= k * s) for k in RELIABILITY_SIGMAS])
-        out[label] = np.column_stack((stated, observed))
-    return out
+        for batch in scenario.records.batches(("errors_m", "sigma_m")):
+            errors, offsets = list_values(batch.column("errors_m"))
+            sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
+            stated = (np.diff(offsets) > 0) & ~batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
+            if not stated.any():
+                continue
+            e = errors[offsets[0]:offsets[-1]][np.repeat(stated, np.diff(offsets))]
+            s = sigmas[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(stated, np.diff(sigma_offsets))]
+            counts, total = within.setdefault(scenario.key.label, ([0] * len(RELIABILITY_SIGMAS), [0]))
+            for index, k in enumerate(RELIABILITY_SIGMAS):
+                counts[index] += int(np.count_nonzero(e <= k * s))
+            total[0] += e.size
+    stated_share = np.array([math.erf(k / math.sqrt(2.0)) for k in RELIABILITY_SIGMAS])
+    return {label: np.column_stack((stated_share, np.array(counts, dtype=float) / total[0]))
+            for label, (counts, total) in within.items()}
 
 
 def plot_reliability(path: str | os.PathLike[str], curves: Mapping[str, NDArrayFloat], title: str = "") -> None:

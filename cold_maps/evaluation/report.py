@@ -90,9 +90,9 @@ import json
 import math
 import os
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, Iterable, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Final, Iterable, Iterator, Literal, Mapping, Sequence
 
 import numpy as np
 
@@ -106,7 +106,11 @@ from cold_maps.evaluation.safety import (
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
-from gt_matching.metrics import NEAR_FAR_SPLIT_M, Calibration, ErrorStats
+from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_array, list_values, pools
+from gt_matching.metrics import NEAR_FAR_SPLIT_M, P95, Calibration, ErrorStats
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 Fusion = Literal["local", "convoy", "spline"]
 Boundary = Literal["left", "right"]
@@ -340,12 +344,9 @@ class RouteErrors:
     p95_error_m: float
 
     @classmethod
-    def of(cls, records: Sequence[FrameRecord]) -> RouteErrors:
-        """The statistics over the errors of ``records``."""
-        errors = np.concatenate([r.errors_m for r in records]) if records else np.empty(0)
-        if not errors.size:
-            return cls(len(records), math.nan, math.nan, math.nan)
-        return cls(len(records), float(errors.mean()), float(errors.max()), float(np.percentile(errors, P95_PERCENT)))
+    def of_pool(cls, fused: int, errors: PointPool) -> RouteErrors:
+        """The statistics over the pooled errors of ``fused`` fusions."""
+        return cls(fused, errors.mean(), errors.max(), errors.percentile(P95_PERCENT))
 
 
 @dataclass(frozen=True, slots=True)
@@ -560,41 +561,131 @@ class ScenarioResult:
             raise ReportError(f"{where}: malformed record: {exc}") from exc
 
 
-def _calibration(fused: Sequence[FrameRecord]) -> Calibration | None:
-    """:class:`Calibration` of the pooled points of the ``fused`` records that state a σ."""
-    stated = [r for r in fused if r.sigma_m is not None]
-    if not stated:
-        return None
-    return Calibration.from_errors(np.concatenate([r.errors_m for r in stated]),
-                                   np.concatenate([r.sigma_m for r in stated if r.sigma_m is not None]))
+def record_schema() -> pa.Schema:
+    """The columns of a segment: the fields of a ``FrameRecord`` (the stopping distance as its
+    speed and rule, null without one) and the per-record figures of ``frames.csv``
+    (``mean_error_m``, ``max_error_m``, ``near_max_error_m``, ``far_max_error_m``; NaN
+    where the CSV leaves them empty)."""
+    import pyarrow as pa
+
+    f64, text, flag = pa.float64(), pa.string(), pa.bool_()
+    return pa.schema([
+        ("frame", pa.int64()), ("stamp_s", f64), ("ego", text), ("coop", text), ("errors_m", pa.list_(f64)),
+        ("perception_range_m", f64), ("runtime_ms", f64), ("rejected", text), ("predicted_fusible", flag),
+        ("truly_fusible", flag), ("gt_unmatched", text), ("relation", text), ("confidence", f64),
+        ("end_reason", text), ("near_points", pa.int64()), ("known_to_m", f64), ("stopping_speed_mps", f64),
+        ("stopping_reaction_time_s", f64), ("stopping_deceleration_mps2", f64), ("sigma_m", pa.list_(f64)),
+        ("mean_error_m", f64), ("max_error_m", f64), ("near_max_error_m", f64), ("far_max_error_m", f64)])
+
+
+def _record_figures(record: FrameRecord) -> tuple[float, float, float, float]:
+    """(mean, max, near max, far max) error of a record (m), NaN where ``frames.csv`` is empty."""
+    errors = record.errors_m
+    if not errors.size:
+        return math.nan, math.nan, math.nan, math.nan
+    near, far = record.split_errors()
+    return (float(np.mean(errors)), float(np.max(errors)), float(np.max(near)) if near.size else math.nan,
+            float(np.max(far)) if far.size else math.nan)
+
+
+def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
+    """The records as one batch of :func:`record_schema`."""
+    import pyarrow as pa
+
+    stop = [r.stopping for r in records]
+    figures = list(zip(*(_record_figures(r) for r in records))) or [(), (), (), ()]
+    columns: dict[str, Any] = {
+        "frame": [r.frame for r in records], "stamp_s": [r.stamp_s for r in records],
+        "ego": [r.ego for r in records], "coop": [r.coop for r in records],
+        "errors_m": list_array([r.errors_m for r in records]),
+        "perception_range_m": [r.perception_range_m for r in records],
+        "runtime_ms": [r.runtime_ms for r in records], "rejected": [r.rejected for r in records],
+        "predicted_fusible": [r.predicted_fusible for r in records],
+        "truly_fusible": [r.truly_fusible for r in records], "gt_unmatched": [r.gt_unmatched for r in records],
+        "relation": [r.relation for r in records], "confidence": [r.confidence for r in records],
+        "end_reason": [r.end_reason for r in records], "near_points": [r.near_points for r in records],
+        "known_to_m": [r.known_to_m for r in records],
+        "stopping_speed_mps": [None if s is None else s.speed_mps for s in stop],
+        "stopping_reaction_time_s": [None if s is None else s.rule.reaction_time_s for s in stop],
+        "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
+        "sigma_m": list_array([r.sigma_m for r in records]),
+        "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
+        "far_max_error_m": figures[3],
+    }
+    schema = record_schema()
+    return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)
+                                       else pa.array(columns[name], type=schema.field(name).type)
+                                       for name in schema.names], schema=schema)
+
+
+def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
+    """The :class:`FrameRecord` s of a batch of :func:`record_schema` (exact inverse of
+    :func:`records_to_batch`)."""
+    data = {name: batch.column(name).to_pylist() for name in batch.schema.names
+            if name not in ("errors_m", "sigma_m")}
+    errors, error_offsets = list_values(batch.column("errors_m"))
+    sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
+    sigma_null = batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
+    for i in range(batch.num_rows):
+        speed = data["stopping_speed_mps"][i]
+        yield FrameRecord(
+            frame=data["frame"][i], stamp_s=data["stamp_s"][i], ego=data["ego"][i], coop=data["coop"][i],
+            errors_m=errors[error_offsets[i]:error_offsets[i + 1]].copy(),
+            perception_range_m=data["perception_range_m"][i], runtime_ms=data["runtime_ms"][i],
+            rejected=data["rejected"][i], predicted_fusible=data["predicted_fusible"][i],
+            truly_fusible=data["truly_fusible"][i], gt_unmatched=data["gt_unmatched"][i],
+            relation=data["relation"][i], confidence=data["confidence"][i], end_reason=data["end_reason"][i],
+            near_points=data["near_points"][i], known_to_m=data["known_to_m"][i],
+            stopping=None if speed is None else StoppingRule(
+                data["stopping_reaction_time_s"][i], data["stopping_deceleration_mps2"][i]).at(speed),
+            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]].copy())
+
 
 
 def _ratio(numerator: int, denominator: int) -> float:
     return numerator / denominator if denominator else math.nan
 
 
-@dataclass
+def _flags(column: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(known, value) boolean arrays of a nullable bool column."""
+    known = ~column.is_null().to_numpy(zero_copy_only=False)
+    return known, column.fill_null(False).to_numpy(zero_copy_only=False).astype(bool)
+
+
+SCALAR_COLUMNS: Final[tuple[str, ...]] = (
+    "frame", "perception_range_m", "runtime_ms", "rejected", "gt_unmatched", "relation", "confidence", "end_reason",
+    "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s", "stopping_deceleration_mps2", "max_error_m")
+"""The per-record columns :meth:`ScenarioAccumulator.result` loads whole (one scenario's)."""
+POINT_POOLS: Final[tuple[str, ...]] = ("all", "correct", "near", "far", "sigma_errors", "sigmas",
+                                       *(f"route_{group}" for group in ROUTE_GROUPS))
+"""The pooled point errors :meth:`ScenarioAccumulator.result` builds in one pass."""
+
+
 class ScenarioAccumulator:
-    """Collects the :class:`FrameRecord` s of one scenario and aggregates them.
+    """Collects the :class:`FrameRecord` s of one scenario (streamed to a
+    :class:`~cold_maps.evaluation.records.RecordStore`) and aggregates them from its columns.
 
     Fields:
         key: the scenario.
-        records: the evaluations added so far, in order.
+        records: the evaluations added so far, in order (iterable, ``len``).
         messages: lane messages its senders sent.
         message_bytes: their bytes.
         sender_ns: time its senders were counted, integer ns (a sum independent of the
             order the frames are added in, so parallel runs give the same rates).
     """
 
-    key: ScenarioKey
-    records: list[FrameRecord] = field(default_factory=list)
-    messages: int = 0
-    message_bytes: int = 0
-    sender_ns: int = 0
+    def __init__(self, key: ScenarioKey, records: Iterable[FrameRecord] = (), *, spool: Spool | None = None) -> None:
+        self.key = key
+        self.records = RecordStore(spool if spool is not None else Spool(), records_to_batch, batch_records)
+        self.messages = 0
+        self.message_bytes = 0
+        self.sender_ns = 0
+        for record in records:
+            self.add(record)
 
     def add(self, record: FrameRecord) -> None:
         """Adds one evaluation."""
-        self.records.append(record)
+        self.records.add(record)
 
     def add_traffic(self, sent_bytes: int, seconds: float) -> None:
         """Counts one sender-frame of ``seconds`` (s) in which ``sent_bytes`` were sent (0: none)."""
@@ -602,105 +693,276 @@ class ScenarioAccumulator:
         self.message_bytes += sent_bytes
         self.sender_ns += round(seconds * 1e9)
 
+    def merge(self, later: ScenarioAccumulator) -> None:
+        """Appends the records and the traffic of ``later`` (its segments adopted)."""
+        self.records.extend(later.records)
+        self.messages += later.messages
+        self.message_bytes += later.message_bytes
+        self.sender_ns += later.sender_ns
+
+    def _scalars(self) -> dict[str, Any]:
+        """The :data:`SCALAR_COLUMNS` of every record (numpy arrays, text as lists), the
+        ``points`` per record, the (known, value) flags ``predicted`` and ``truly``."""
+        parts: dict[str, list[Any]] = {name: [] for name in (*SCALAR_COLUMNS, "points", "predicted", "truly")}
+        for batch in self.records.batches((*SCALAR_COLUMNS, "errors_m", "predicted_fusible", "truly_fusible")):
+            for name in SCALAR_COLUMNS:  # copies: a view would keep the whole segment (its points) in memory
+                column = batch.column(name)
+                parts[name].append(column.to_pylist() if str(column.type) == "string" else
+                                   column.to_numpy(zero_copy_only=False).copy())
+            parts["points"].append(np.diff(np.asarray(batch.column("errors_m").offsets, dtype=np.int64)))
+            parts["predicted"].append(_flags(batch.column("predicted_fusible")))
+            parts["truly"].append(_flags(batch.column("truly_fusible")))
+        out: dict[str, Any] = {}
+        for name, chunks in parts.items():
+            if name in ("predicted", "truly"):
+                out[name] = tuple(np.concatenate([c[i] for c in chunks]) if chunks else np.empty(0, dtype=bool)
+                                  for i in range(2))
+            elif chunks and isinstance(chunks[0], list):
+                out[name] = [value for chunk in chunks for value in chunk]
+            else:
+                out[name] = np.concatenate(chunks) if chunks else np.empty(0)
+        return out
+
+    def _pools(self, spool: Spool) -> tuple[dict[str, PointPool], int, int]:
+        """The :data:`POINT_POOLS` in one pass over the points, and how many σ-stating points
+        lie within 1σ and 2σ."""
+        pooled = pools(spool, POINT_POOLS)
+        within = [0, 0]
+        for batch in self.records.batches(("errors_m", "sigma_m", "near_points", "predicted_fusible",
+                                           "truly_fusible", "relation")):
+            values, offsets = list_values(batch.column("errors_m"))
+            lengths = np.diff(offsets)
+            start = offsets[:-1]
+            fused = lengths > 0
+            pooled["all"].append(values[offsets[0]:offsets[-1]])
+            predicted_known, predicted = _flags(batch.column("predicted_fusible"))
+            truly_known, truly = _flags(batch.column("truly_fusible"))
+            relation = np.array(batch.column("relation").to_pylist(), dtype=object)
+
+            def points(mask: np.ndarray) -> NDArrayFloat:
+                chosen = np.repeat(mask, lengths)
+                return values[offsets[0]:offsets[-1]][chosen]
+
+            if self.key.vehicles > 0:
+                pooled["correct"].append(points(fused & truly))
+            pairs = fused & predicted & predicted_known & truly_known & truly & (relation != "")
+            for group, kind in ROUTE_GROUPS.items():
+                pooled[f"route_{group}"].append(points(pairs & (relation == kind)))
+            near_column = batch.column("near_points")
+            split = fused & ~near_column.is_null().to_numpy(zero_copy_only=False)
+            near_points = near_column.fill_null(0).to_numpy(zero_copy_only=False)
+            position = np.arange(offsets[-1] - offsets[0]) - np.repeat(start - offsets[0], lengths)
+            near = np.repeat(split, lengths) & (position < np.repeat(near_points, lengths))
+            far = np.repeat(split, lengths) & ~near
+            pooled["near"].append(values[offsets[0]:offsets[-1]][near])
+            pooled["far"].append(values[offsets[0]:offsets[-1]][far])
+            sigma_column = batch.column("sigma_m")
+            stated = fused & ~sigma_column.is_null().to_numpy(zero_copy_only=False)
+            if stated.any():
+                sigma_values, sigma_offsets = list_values(sigma_column)
+                sigma_lengths = np.diff(sigma_offsets)
+                errors = points(stated)
+                sigmas = sigma_values[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(stated, sigma_lengths)]
+                within[0] += int(np.count_nonzero(errors <= sigmas))
+                within[1] += int(np.count_nonzero(errors <= 2.0 * sigmas))
+                pooled["sigma_errors"].append(errors)
+                pooled["sigmas"].append(sigmas)
+        return pooled, within[0], within[1]
+
     def result(self) -> ScenarioResult:
-        """The aggregate over all records (pooled distances, see the module docstring)."""
-        fused = [r for r in self.records if r.fused]
-        errors = np.concatenate([r.errors_m for r in fused]) if fused else np.empty(0)
+        """The aggregate over all records (pooled distances, see the module docstring),
+        computed from the store's columns: the per-record columns loaded whole, the points
+        pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory."""
+        spool = Spool()
+        try:
+            pooled, within_1, within_2 = self._pools(spool)
+            return self._result(self._scalars(), pooled, within_1, within_2)
+        finally:
+            for pool in pooled.values() if "pooled" in locals() else ():
+                pool.close()
+            spool.close()
+
+    def _result(self, c: Mapping[str, Any], pooled: Mapping[str, PointPool], within_1: int,
+                within_2: int) -> ScenarioResult:
         nan = math.nan
-        ranges = [r.perception_range_m for r in fused if math.isfinite(r.perception_range_m)]
-        ranges += [0.0] * len({r.frame for r in self.records if r.rejected in NO_EGO_LANE})
-        runtimes = np.array([r.runtime_ms for r in self.records if math.isfinite(r.runtime_ms)])
-        decided = [(r.predicted_fusible, r.truly_fusible) for r in self.records
-                   if r.predicted_fusible is not None and r.truly_fusible is not None]
-        true_positive = sum(p and t for p, t in decided)
-        correct = [r.errors_m for r in fused if r.truly_fusible] if self.key.vehicles > 0 else []
-        right = np.concatenate(correct) if correct else np.empty(0)
-        fused_pairs = [r for r in self.records if r.predicted_fusible and r.truly_fusible is not None and r.relation]
-        scored = [(r.confidence if r.predicted_fusible else -math.inf, bool(r.truly_fusible)) for r in self.records
-                  if r.predicted_fusible is not None and r.truly_fusible is not None
-                  and (not r.predicted_fusible or math.isfinite(r.confidence))]
+        points, frame = c["points"], c["frame"]
+        fused = points > 0
+        count = len(points)
+        rejected, relation = c["rejected"], np.array(c["relation"], dtype=object)
+        no_ego = {int(f) for f, why in zip(frame.tolist(), rejected) if why in NO_EGO_LANE}
+        ranges_fused = c["perception_range_m"][fused]
+        ranges = np.concatenate((ranges_fused[np.isfinite(ranges_fused)], np.zeros(len(no_ego))))
+        runtimes = c["runtime_ms"][np.isfinite(c["runtime_ms"])]
+        predicted_known, predicted = c["predicted"]
+        truly_known, truly = c["truly"]
+        decided = predicted_known & truly_known
+        true_positive = int(np.count_nonzero(decided & predicted & truly))
+        fused_pairs = predicted_known & predicted & truly_known & (relation != "")
+        confidence = c["confidence"]
+        scored = decided & (~predicted | np.isfinite(confidence))
+        score = np.where(predicted, confidence, -math.inf)[scored]
+        truth = truly[scored]
         by_confidence = tuple(
-            (t, _ratio(sum(c >= t and truth for c, truth in scored), sum(c >= t for c, _ in scored)),
-             _ratio(sum(c >= t and truth for c, truth in scored), sum(truth for _, truth in scored)))
-            for t in CONFIDENCE_THRESHOLDS) if any(math.isfinite(r.confidence) for r in self.records) else ()
+            (t, _ratio(int(np.count_nonzero((score >= t) & truth)), int(np.count_nonzero(score >= t))),
+             _ratio(int(np.count_nonzero((score >= t) & truth)), int(np.count_nonzero(truth))))
+            for t in CONFIDENCE_THRESHOLDS) if np.isfinite(confidence).any() else ()
+        errors, right = pooled["all"], pooled["correct"]
+        maxima = c["max_error_m"][fused]
         return ScenarioResult(
-            **self._added_result(fused, ranges),
+            **self._added_result(c, fused, pooled, ranges),
             key=self.key,
-            points=int(errors.size),
-            mean_error_m=float(errors.mean()) if errors.size else nan,
-            rmse_m=float(np.sqrt(np.mean(errors**2))) if errors.size else nan,
-            max_error_m=float(errors.max()) if errors.size else nan,
-            p95_error_m=float(np.percentile(errors, P95_PERCENT)) if errors.size else nan,
-            mean_frame_max_error_m=float(np.mean([r.errors_m.max() for r in fused])) if fused else nan,
-            perception_range_m=float(np.mean(ranges)) if ranges else nan,
-            frames=len(self.records),
-            fused_frames=len(fused),
-            rejected=tuple(sorted(Counter(r.rejected for r in self.records if r.rejected).items())),
+            points=errors.size,
+            mean_error_m=errors.mean(),
+            rmse_m=float(np.sqrt(errors.mean(np.square))) if errors.size else nan,
+            max_error_m=errors.max(),
+            p95_error_m=errors.percentile(P95_PERCENT),
+            mean_frame_max_error_m=float(np.mean(maxima)) if maxima.size else nan,
+            perception_range_m=float(np.mean(ranges)) if ranges.size else nan,
+            frames=count,
+            fused_frames=int(np.count_nonzero(fused)),
+            rejected=tuple(sorted(Counter(r for r in rejected if r).items())),
             runtime_ms=RuntimeStats(
                 mean=float(runtimes.mean()) if runtimes.size else nan,
                 std=float(runtimes.std(ddof=1)) if runtimes.size > 1 else nan,
                 max=float(runtimes.max()) if runtimes.size else nan),
-            fusibility_precision=_ratio(true_positive, sum(p for p, _ in decided)),
-            fusibility_recall=_ratio(true_positive, sum(t for _, t in decided)),
-            correct_mean_error_m=float(right.mean()) if right.size else nan,
-            correct_max_error_m=float(right.max()) if right.size else nan,
-            correct_p95_error_m=float(np.percentile(right, P95_PERCENT)) if right.size else nan,
+            fusibility_precision=_ratio(true_positive, int(np.count_nonzero(decided & predicted))),
+            fusibility_recall=_ratio(true_positive, int(np.count_nonzero(decided & truly))),
+            correct_mean_error_m=right.mean(),
+            correct_max_error_m=right.max(),
+            correct_p95_error_m=right.percentile(P95_PERCENT),
             bytes_per_message=self.message_bytes / self.messages if self.messages else nan,
             bytes_per_second=self.message_bytes * 1e9 / self.sender_ns if self.sender_ns > 0 else nan,
-            gt_unmatched=tuple(sorted(Counter(r.gt_unmatched for r in self.records if r.gt_unmatched).items())),
-            fused_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if r.truly_fusible).items())),
-            false_by_relation=tuple(sorted(Counter(r.relation for r in fused_pairs if not r.truly_fusible).items())),
+            gt_unmatched=tuple(sorted(Counter(r for r in c["gt_unmatched"] if r).items())),
+            fused_by_relation=tuple(sorted(Counter(relation[fused_pairs & truly].tolist()).items())),
+            false_by_relation=tuple(sorted(Counter(relation[fused_pairs & ~truly].tolist()).items())),
             by_confidence=by_confidence,
-            by_route=tuple((group, RouteErrors.of([r for r in fused_pairs if r.fused and r.truly_fusible
-                                                   and r.relation == kind]))
-                           for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
-            calibration=_calibration(fused),
+            by_route=tuple((group, RouteErrors.of_pool(int(np.count_nonzero(fused_pairs & fused & truly
+                                                                             & (relation == kind))),
+                                                       pooled[f"route_{group}"]))
+                           for group, kind in ROUTE_GROUPS.items()) if fused_pairs.any() else (),
+            calibration=None if not pooled["sigmas"].size else Calibration(
+                points=pooled["sigmas"].size, within_1sigma=_ratio(within_1, pooled["sigmas"].size),
+                within_2sigma=_ratio(within_2, pooled["sigmas"].size), mean_sigma_m=pooled["sigmas"].mean(),
+                mean_error_m=pooled["sigma_errors"].mean()),
         )
 
-    def _added_result(self, fused: Sequence[FrameRecord], ranges: Sequence[float]) -> dict[str, Any]:
+    def _added_result(self, c: Mapping[str, Any], fused: np.ndarray, pooled: Mapping[str, PointPool],
+                      ranges: NDArrayFloat) -> dict[str, Any]:
         """The :class:`ScenarioResult` fields of the range distribution, the near / far
         errors, the stopping distance and the detection ends."""
-        splits = [r.split_errors() for r in fused]
-        measured = [r for r in self.records if r.stopping is not None]
-        stoppings = {r.stopping for r in measured}
-        if len(stoppings) > 1:
+        speed = c["stopping_speed_mps"]
+        measured = ~np.isnan(speed)
+        rules = {(float(v), float(t), float(a)) for v, t, a in zip(
+            speed[measured], c["stopping_reaction_time_s"][measured], c["stopping_deceleration_mps2"][measured])}
+        if len(rules) > 1:
             raise ReportError(f"{self.key.map} {self.key.label} {self.key.boundary}: records scored against "
-                              f"{len(stoppings)} different stopping distances")
+                              f"{len(rules)} different stopping distances")
+        stopping = None
+        if rules:
+            speed_mps, reaction_s, deceleration_mps2 = rules.pop()
+            stopping = StoppingRule(reaction_s, deceleration_mps2).at(speed_mps)
+        frames = c["frame"][measured]
+        known = c["known_to_m"][measured] >= stopping.distance_m if stopping is not None else np.empty(0, dtype=bool)
         return {
-            "range_percentiles_m": tuple(float(np.percentile(ranges, q)) for q in RANGE_PERCENTS) if ranges
+            "range_percentiles_m": tuple(float(np.percentile(ranges, q)) for q in RANGE_PERCENTS) if ranges.size
             else (math.nan,) * len(RANGE_PERCENTS),
-            "near": ErrorStats.of(np.concatenate([near for near, _ in splits]) if splits else np.empty(0)),
-            "far": ErrorStats.of(np.concatenate([far for _, far in splits]) if splits else np.empty(0)),
-            "stopping": stoppings.pop() if stoppings else None,
-            "stopping_frames": len({r.frame for r in measured}),
-            "stopping_known_frames": len({r.frame for r in measured if r.known_to_stop}),
-            "end_reasons": tuple(sorted(Counter(r.end_reason for r in self.records if r.end_reason).items())),
+            "near": _error_stats(pooled["near"]),
+            "far": _error_stats(pooled["far"]),
+            "stopping": stopping,
+            "stopping_frames": len(set(frames.tolist())),
+            "stopping_known_frames": len(set(frames[known].tolist())),
+            "end_reasons": tuple(sorted(Counter(r for r in c["end_reason"] if r).items())),
         }
 
-    def csv_rows(self) -> list[dict[str, Any]]:
-        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`)."""
-        def flag(value: bool | None) -> str:
-            return "" if value is None else str(int(value))
+    def csv_rows(self) -> Iterator[dict[str, Any]]:
+        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`), from the columns."""
+        for batch in self.frames_batches():
+            yield from frames_rows(batch)
 
-        def number(value: float) -> str:
-            return "" if not math.isfinite(value) else repr(float(value))
+    def frames_batches(self) -> Iterator[Any]:
+        """The scenario's ``frames.parquet`` rows (:func:`frames_batch`), batch by batch."""
+        for batch in self.records.batches(FRAMES_COLUMNS_STORED):
+            yield frames_batch(self.key, batch)
 
-        return [{
-            "map": self.key.map, "fusion": self.key.fusion, "interpolation": self.key.interpolation,
-            "d_s": repr(float(self.key.d_s)), "boundary": self.key.boundary, "frame": r.frame,
-            "stamp_s": number(r.stamp_s), "ego": r.ego, "coop": r.coop, "fused": int(r.fused),
-            "rejected": r.rejected, "points": len(r.errors_m),
-            "mean_error_m": number(float(np.mean(r.errors_m))) if r.fused else "",
-            "max_error_m": number(float(np.max(r.errors_m))) if r.fused else "",
-            "perception_range_m": number(r.perception_range_m), "runtime_ms": number(r.runtime_ms),
-            "predicted_fusible": flag(r.predicted_fusible), "truly_fusible": flag(r.truly_fusible),
-            "relation": r.relation, "confidence": number(r.confidence),
-            "end_reason": r.end_reason, "near_points": "" if r.near_points is None else r.near_points,
-            "near_max_error_m": number(float(np.max(near))) if near.size else "",
-            "far_max_error_m": number(float(np.max(far))) if far.size else "",
-            "known_to_m": number(r.known_to_m),
-            "stopping_distance_m": "" if r.stopping is None else number(r.stopping.distance_m),
-        } for r, (near, far) in ((r, r.split_errors()) for r in self.records)]
+
+def _error_stats(pool: PointPool) -> ErrorStats:
+    """``ErrorStats.of`` the pooled samples."""
+    if not pool.size:
+        return ErrorStats(0, math.nan, math.nan, math.nan)
+    return ErrorStats(pool.size, pool.mean(), pool.max(), pool.partition_percentile(P95))
+
+
+FRAMES_COLUMNS_STORED: Final[tuple[str, ...]] = (
+    "frame", "stamp_s", "ego", "coop", "errors_m", "rejected", "mean_error_m", "max_error_m", "perception_range_m",
+    "runtime_ms", "predicted_fusible", "truly_fusible", "relation", "confidence", "end_reason", "near_points",
+    "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s",
+    "stopping_deceleration_mps2")
+"""The stored columns ``frames.csv`` and ``frames.parquet`` are made from."""
+
+
+def frames_schema() -> Any:
+    """The ``frames.parquet`` schema: the :data:`FRAMES_CSV_COLUMNS`, typed (null where
+    ``frames.csv`` is empty)."""
+    import pyarrow as pa
+
+    text, f64, i64, flag = pa.string(), pa.float64(), pa.int64(), pa.bool_()
+    types = {"map": text, "fusion": text, "interpolation": text, "d_s": f64, "boundary": text, "frame": i64,
+             "stamp_s": f64, "ego": text, "coop": text, "fused": flag, "rejected": text, "points": i64,
+             "mean_error_m": f64, "max_error_m": f64, "perception_range_m": f64, "runtime_ms": f64,
+             "predicted_fusible": flag, "truly_fusible": flag, "relation": text, "confidence": f64,
+             "end_reason": text, "near_points": i64, "near_max_error_m": f64, "far_max_error_m": f64,
+             "known_to_m": f64, "stopping_distance_m": f64}
+    return pa.schema([(name, types[name]) for name in FRAMES_CSV_COLUMNS])
+
+
+def frames_batch(key: ScenarioKey, batch: Any) -> Any:
+    """The ``frames.parquet`` rows of a batch of stored records (:data:`FRAMES_COLUMNS_STORED`)
+    of the scenario ``key``."""
+    import pyarrow as pa
+
+    rows = batch.num_rows
+
+    def finite(values: Any) -> Any:
+        array = np.asarray(values, dtype=np.float64)
+        return pa.array(array, type=pa.float64(), mask=~np.isfinite(array))
+
+    lengths = np.diff(np.asarray(batch.column("errors_m").offsets, dtype=np.int64))
+    speed = batch.column("stopping_speed_mps").to_pylist()
+    reaction = batch.column("stopping_reaction_time_s").to_pylist()
+    deceleration = batch.column("stopping_deceleration_mps2").to_pylist()
+    distance = [math.nan if v is None else StoppingRule(t, a).distance_m(v)
+                for v, t, a in zip(speed, reaction, deceleration)]
+    columns = {
+        "map": pa.array([key.map] * rows, pa.string()), "fusion": pa.array([key.fusion] * rows, pa.string()),
+        "interpolation": pa.array([key.interpolation] * rows, pa.string()),
+        "d_s": pa.array([float(key.d_s)] * rows, pa.float64()),
+        "boundary": pa.array([key.boundary] * rows, pa.string()), "frame": batch.column("frame"),
+        "stamp_s": finite(batch.column("stamp_s")), "ego": batch.column("ego"), "coop": batch.column("coop"),
+        "fused": pa.array(lengths > 0), "rejected": batch.column("rejected"), "points": pa.array(lengths),
+        "stopping_distance_m": finite(distance),
+    }
+    for name in ("mean_error_m", "max_error_m", "perception_range_m", "runtime_ms", "confidence",
+                 "near_max_error_m", "far_max_error_m", "known_to_m"):
+        columns[name] = finite(batch.column(name))
+    for name in ("predicted_fusible", "truly_fusible", "relation", "end_reason", "near_points"):
+        columns[name] = batch.column(name)
+    schema = frames_schema()
+    return pa.RecordBatch.from_arrays([columns[name] for name in schema.names], schema=schema)
+
+
+def frames_rows(batch: Any) -> Iterator[dict[str, Any]]:
+    """The ``frames.csv`` rows of a :func:`frames_batch`: numbers as ``repr``, flags 0 / 1,
+    empty where null."""
+    def text(value: Any) -> Any:
+        if value is None:
+            return ""
+        if isinstance(value, bool):
+            return int(value)
+        return repr(value) if isinstance(value, float) else value
+
+    names = batch.schema.names
+    for values in zip(*(batch.column(name).to_pylist() for name in names)):
+        yield {name: text(value) for name, value in zip(names, values)}
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
@@ -751,13 +1013,39 @@ def read_metrics_json(path: str | os.PathLike[str]) -> tuple[list[ScenarioResult
 
 
 def write_frames_csv(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
-    """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) atomically."""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for accumulator in accumulators:
-        writer.writerows(accumulator.csv_rows())
-    atomic_write_text(path, buffer.getvalue())
+    """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) atomically,
+    streamed batch by batch from the records' columns."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise ReportError(f"{path}: cannot write: no folder {path.parent}")
+    with atomic_output(path, "wb") as stream:
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS, lineterminator="\n")
+        writer.writeheader()
+        for accumulator in accumulators:
+            for batch in accumulator.frames_batches():
+                writer.writerows(frames_rows(batch))
+                stream.write(buffer.getvalue().encode("utf-8"))
+                buffer.seek(0)
+                buffer.truncate()
+        stream.write(buffer.getvalue().encode("utf-8"))
+
+
+def write_frames_parquet(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
+    """Writes ``frames.parquet`` atomically: the rows of ``frames.csv``, typed
+    (:func:`frames_schema`), streamed batch by batch."""
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise ReportError(f"{path}: cannot write: no folder {path.parent}")
+    schema = frames_schema().with_metadata({"made_by": "cold-maps cold_maps.evaluation.report.write_frames_parquet",
+                                            "rows": "as frames.csv: one per frame, vehicle pair and scenario; "
+                                                    "null where frames.csv is empty"})
+    with atomic_output(path, "wb") as stream, pq.ParquetWriter(stream, schema) as writer:
+        for accumulator in accumulators:
+            for batch in accumulator.frames_batches():
+                writer.write_batch(batch.replace_schema_metadata(schema.metadata))
 
 
 def _fmt(value: float, digits: int = 3) -> str:
@@ -1058,13 +1346,14 @@ def write_summary_md(path: str | os.PathLike[str], results: Sequence[ScenarioRes
 
 def write_report(out_dir: str | os.PathLike[str], accumulators: Sequence[ScenarioAccumulator], *,
                  partial: bool = False, road_types: Mapping[str, str] | None = None) -> list[ScenarioResult]:
-    """Writes ``metrics.json``, ``summary.md`` and ``frames.csv`` into ``out_dir``; returns
+    """Writes ``metrics.json``, ``summary.md``, ``frames.csv`` and ``frames.parquet`` into ``out_dir``; returns
     the results. ``partial`` marks the report of an interrupted run."""
     out = Path(out_dir)
     if not out.is_dir():
         raise ReportError(f"{out}: output folder does not exist")
     results = [a.result() for a in accumulators]
     write_frames_csv(out / "frames.csv", accumulators)
+    write_frames_parquet(out / "frames.parquet", accumulators)
     write_summary_md(out / "summary.md", results, partial=partial, road_types=road_types)
     write_metrics_json(out / "metrics.json", results, partial=partial)
     return results

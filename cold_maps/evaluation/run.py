@@ -1,5 +1,5 @@
 """A ``cold-eval`` run: evaluators for the maps, the MCAP recording, the progress bar and
-the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``plots/*.png``,
+the output folder (``summary.md``, ``metrics.json``, ``frames.csv``, ``frames.parquet``, ``plots/*.png``,
 ``run.mcap``).
 
 Everything that can fail on bad input (maps, routes, ground truth, the output folder) is
@@ -31,6 +31,7 @@ from cold_maps.common.provenance import Provenance
 from cold_maps.common.signals import signals_ignored
 from cold_maps.evaluation.collector import Collector
 from cold_maps.evaluation.evaluator import MapEvaluator
+from cold_maps.evaluation.records import PointPool, Spool, list_values
 from cold_maps.evaluation.report import (
     ScenarioAccumulator,
     ScenarioResult,
@@ -38,6 +39,7 @@ from cold_maps.evaluation.report import (
     scenario_label,
     summary_markdown,
     write_frames_csv,
+    write_frames_parquet,
     write_metrics_json,
 )
 from cold_maps.evaluation.scenarios import MapPlan
@@ -104,14 +106,14 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
     jobs = []
     groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
-        own = [r for r in accumulator.records if r.coop == "" or r.coop.startswith("coop")]
-        groups.setdefault((key.map, key.label), []).append(ScenarioAccumulator(key, own))
+        groups.setdefault((key.map, key.label), []).append(accumulator)
     methods: dict[tuple[str, str], dict[str, list[ScenarioAccumulator]]] = {}
     for (map_name, label), accumulators in groups.items():
-        if not any(r.fused for a in accumulators for r in a.records):
+        series = [ErrorSeries.pooled(f"{a.key.fusion} {a.key.boundary}", [a], own_only=True) for a in accumulators]
+        if not any(np.isfinite(line.means).any() for line in series):
             continue
         path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
-        jobs.append(functools.partial(plot_error_series, path, [ErrorSeries.of(a) for a in accumulators],
+        jobs.append(functools.partial(plot_error_series, path, series,
                                       title=f"{map_name}: {label}, error per frame (own coop)",
                                       route_starts=collector.route_starts(map_name)))
         key = accumulators[0].key
@@ -123,12 +125,13 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
             continue
         path = folder / f"methods_{_file_part(map_name)}_{_file_part(kind)}.png"
         jobs.append(functools.partial(
-            plot_error_series, path, [ErrorSeries.pooled(method, a) for method, a in by_method.items()],
+            plot_error_series, path, [ErrorSeries.pooled(method, a, own_only=True) for method, a in by_method.items()],
             title=f"{map_name}: {kind}, methods, error per frame (own coop, both borders)",
             route_starts=collector.route_starts(map_name)))
     extended: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
-        if key.vehicles > 1 and any(r.fused for r in accumulator.records):
+        if key.vehicles > 1 and any(np.diff(batch.column(0).offsets.to_numpy()).any()
+                                    for batch in accumulator.records.batches(("errors_m",))):
             extended.setdefault(key.map, []).append(accumulator)
     for map_name, accumulators in extended.items():
         path = folder / f"error_vs_range_{_file_part(map_name)}.png"
@@ -183,6 +186,23 @@ UNKNOWN_RELATIONS: Final[str] = ("Not determined: {fused} fused pairs, none with
 """Body of the false-fusion section when pairs were fused but none can be judged."""
 
 
+def _judged_fusions(accumulator: ScenarioAccumulator, spool: Spool) -> tuple[int, int, PointPool]:
+    """Of a scenario's fused records with a known true relation: how many, how many false,
+    and the pooled errors of the correct ones (close the pool after use)."""
+    fused = wrong = 0
+    right = PointPool(spool)
+    for batch in accumulator.records.batches(("errors_m", "truly_fusible")):
+        values, offsets = list_values(batch.column("errors_m"))
+        lengths = np.diff(offsets)
+        column = batch.column("truly_fusible")
+        judged = (lengths > 0) & ~column.is_null().to_numpy(zero_copy_only=False)
+        truly = column.fill_null(False).to_numpy(zero_copy_only=False).astype(bool)
+        fused += int(np.count_nonzero(judged))
+        wrong += int(np.count_nonzero(judged & ~truly))
+        right.append(values[offsets[0]:offsets[-1]][np.repeat(judged & truly, lengths)])
+    return fused, wrong, right
+
+
 def false_fusion_markdown(collector: Collector) -> str:
     """Per scenario with fusibility decisions (a vehicles column when chains run): the fusions
     of pairs that are not on one lane (their errors are in the main table) and the errors of
@@ -190,20 +210,19 @@ def false_fusion_markdown(collector: Collector) -> str:
     :data:`UNKNOWN_RELATIONS` when pairs were fused but none has a known true relation; ""
     when no pair was fused."""
     rows = []
-    fused_pairs = sum(1 for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
-                      if key.fusion != "local" and key.boundary == "left" for r in accumulator.records if r.fused)
+    fused_pairs = sum(int(np.count_nonzero(np.diff(batch.column(0).offsets.to_numpy()) > 0))
+                      for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
+                      if key.fusion != "local" and key.boundary == "left"
+                      for batch in accumulator.records.batches(("errors_m",)))
     chains = any(key.vehicles > 0 for key in collector.accumulators)
     for key, accumulator in collector.accumulators.items():
-        fused = [r for r in accumulator.records if r.fused and r.truly_fusible is not None]
-        if not fused:
-            continue
-        wrong = sum(1 for r in fused if not r.truly_fusible)
-        right = [r.errors_m for r in fused if r.truly_fusible]
-        errors = np.concatenate(right) if right else np.empty(0)
-        stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
-        vehicles = f"{key.vehicles} | " if chains else ""
-        rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {vehicles}{key.boundary} | "
-                    f"{len(fused)} | {wrong} | {stats} |")
+        fused, wrong, errors = _judged_fusions(accumulator, collector.spool)
+        if fused:
+            stats = f"{errors.mean():.3f} | {errors.max():.3f}" if errors.size else "– | –"
+            vehicles = f"{key.vehicles} | " if chains else ""
+            rows.append(f"| {key.map} | {key.fusion} | {key.interpolation or '–'} | {key.d_s:g} | {vehicles}"
+                        f"{key.boundary} | {fused} | {wrong} | {stats} |")
+        errors.close()
     if not rows:
         return UNKNOWN_RELATIONS.format(fused=fused_pairs) if fused_pairs else ""
     return ("Fused pairs whose vehicles are not on one lane (true lane relation from the lane graph) count as "
@@ -216,13 +235,14 @@ def false_fusion_markdown(collector: Collector) -> str:
 def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: Sequence[tuple[str, str]] = (),
                   plots: bool = True, results: Sequence[ScenarioResult] | None = None,
                   program: str = "cold-eval", provenance: Provenance | None = None) -> list[ScenarioResult]:
-    """``frames.csv``, ``summary.md`` of the command ``program`` (how it was made:
+    """``frames.csv`` and ``frames.parquet``, ``summary.md`` of the command ``program`` (how it was made:
     ``provenance``, the per-scenario table, notes, then ``sections``: (title, markdown)),
     ``metrics.json`` (with the same ``provenance``) and the plots; returns the scenario
     results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
     write_frames_csv(out / "frames.csv", accumulators)
+    write_frames_parquet(out / "frames.parquet", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
                             provenance=provenance, check_ms=collector.check_ms)
     if collector.notes:
@@ -414,7 +434,8 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
     if executor is not None:
         from cold_maps.evaluation.parallel import submit_units
 
-        submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns))
+        submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns),
+                                 collector.spool.path)
         if options.plots:
             from cold_maps.evaluation.plots import preload
 

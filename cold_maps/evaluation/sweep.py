@@ -197,9 +197,12 @@ def run_cell(cell: Cell, map_bytes: bytes | None = None) -> list[dict[str, Any]]
 
     path = _local_map(cell) if map_bytes is None else _shipped_map(cell, map_bytes)
     collector = Collector()
-    cached_evaluator(cell_plan(cell, path)).run(collector)
-    made = cell_provenance(cell)
-    return [{**flat_record(a.result().to_dict()), **cell.params(), **made} for a in collector.accumulators.values()]
+    try:
+        cached_evaluator(cell_plan(cell, path)).run(collector)
+        made = cell_provenance(cell)
+        return [{**flat_record(a.result().to_dict()), **cell.params(), **made} for a in collector.accumulators.values()]
+    finally:
+        collector.spool.close()  # its records' files: a long sweep leaves none behind
 
 
 def cell_provenance(cell: Cell) -> dict[str, str]:

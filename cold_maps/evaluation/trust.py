@@ -162,9 +162,10 @@ def unmatched_warnings(collector: Collector) -> list[str]:
     unmatched: dict[str, Counter[str]] = {}
     for key, accumulator in collector.accumulators.items():
         totals[key.map] += len(accumulator.records)
-        for record in accumulator.records:
-            if record.rejected in UNSCORED:
-                unmatched.setdefault(key.map, Counter())[record.gt_unmatched or record.rejected] += 1
+        for batch in accumulator.records.batches(("rejected", "gt_unmatched")):
+            for rejected, why in zip(*(column.to_pylist() for column in batch.columns)):
+                if rejected in UNSCORED:
+                    unmatched.setdefault(key.map, Counter())[why or rejected] += 1
     warnings = []
     for name, reasons in unmatched.items():
         count = sum(reasons.values())
