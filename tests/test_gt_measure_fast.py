@@ -107,20 +107,21 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
 
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
-    """The ``GroundTruthMeter.measure`` calls of a short ``cold-eval`` run (with coops and
-    lanes on), in order."""
+    """The lanes a short ``cold-eval`` run (with coops and lanes on) measures
+    (``GroundTruthMeter.measure_many``, one call per frame), in order."""
     from cold_maps.cli import evaluate
 
     calls = []
-    measure = GroundTruthMeter.measure
+    measure_many = GroundTruthMeter.measure_many
 
-    def recorded(self, left, right, pose, *, reference=None):  # type: ignore[no-untyped-def]
-        calls.append((np.array(left), np.array(right), tuple(pose),
-                      None if reference is None else tuple(np.array(side) for side in reference)))
-        return measure(self, left, right, pose, reference=reference)
+    def recorded(self, lanes):  # type: ignore[no-untyped-def]
+        calls.extend((np.array(left), np.array(right), tuple(pose),
+                      None if reference is None else tuple(np.array(side) for side in reference))
+                     for left, right, pose, reference in lanes)
+        return measure_many(self, lanes)
 
     with monkeypatch.context() as patch:
-        patch.setattr(GroundTruthMeter, "measure", recorded)
+        patch.setattr(GroundTruthMeter, "measure_many", recorded)
         status = evaluate.main(["--map", str(map_path), "--frames", "12", "--workers", "1", "--no-plots",
                                 "--no-mcap", "--no-progress", "--out", str(tmp_path / "out")])
     assert status == 0 and calls

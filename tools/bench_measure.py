@@ -45,7 +45,8 @@ Call = tuple[int, Any, Any, tuple[float, float, float], Any]
 
 
 def capture(map_path: Path, extra: list[str]) -> list[Call]:
-    """The ``measure`` calls of one in-process ``cold-eval`` run of ``map_path``."""
+    """The lanes one in-process ``cold-eval`` run of ``map_path`` measures (its
+    ``measure_many`` calls, one per frame), as ``measure`` calls."""
     sys.path.insert(0, str(ROOT))
     from cold_maps.cli import evaluate
     from cold_maps.evaluation.evaluator import MapEvaluator
@@ -53,24 +54,25 @@ def capture(map_path: Path, extra: list[str]) -> list[Call]:
 
     calls: list[Call] = []
     frames = [0]
-    measure, frame = GroundTruthMeter.measure, MapEvaluator._frame
+    measure_many, frame = GroundTruthMeter.measure_many, MapEvaluator._frame
 
-    def recorded(self: Any, left: Any, right: Any, pose: Any, *, reference: Any = None) -> Any:
-        copy = None if reference is None else tuple(np.array(side) for side in reference)
-        calls.append((frames[0], np.array(left), np.array(right), tuple(pose), copy))
-        return measure(self, left, right, pose, reference=reference)
+    def recorded(self: Any, lanes: Any) -> Any:
+        for left, right, pose, reference in lanes:
+            copy = None if reference is None else tuple(np.array(side) for side in reference)
+            calls.append((frames[0], np.array(left), np.array(right), tuple(pose), copy))
+        return measure_many(self, lanes)
 
     def counted(self: Any, *args: Any, **kwargs: Any) -> Any:
         frames[0] += 1
         return frame(self, *args, **kwargs)
 
-    GroundTruthMeter.measure, MapEvaluator._frame = recorded, counted  # type: ignore[method-assign]
+    GroundTruthMeter.measure_many, MapEvaluator._frame = recorded, counted  # type: ignore[method-assign]
     try:
         with tempfile.TemporaryDirectory(prefix="bench-measure-") as out:
             status = evaluate.main(["--map", str(map_path), "--workers", "1", "--no-plots", "--no-mcap",
                                     "--no-progress", "--out", out, *extra])
     finally:
-        GroundTruthMeter.measure, MapEvaluator._frame = measure, frame  # type: ignore[method-assign]
+        GroundTruthMeter.measure_many, MapEvaluator._frame = measure_many, frame  # type: ignore[method-assign]
     if status:
         raise SystemExit(f"cold-eval failed with status {status}")
     return calls

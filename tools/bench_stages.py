@@ -52,6 +52,7 @@ STAGE_TARGETS: Final[dict[str, tuple[str, ...]]] = {
                 "cold_maps.simulation.detection:obstacles_of"),
     "fusion": ("fusion:fuse", "fusion:fuse_history", "fusion:fuse_chain", "fusion:is_fusible"),
     "ground truth": ("cold_maps.groundtruth.meter:GroundTruthMeter.measure",
+                     "cold_maps.groundtruth.meter:GroundTruthMeter.measure_many",
                      "cold_maps.evaluation.trust:BrokenStretches.over"),
     "records": ("cold_maps.evaluation.collector:Collector.add", "cold_maps.evaluation.collector:Collector.add_traffic",
                 "cold_maps.evaluation.collector:Collector.add_check_ms",

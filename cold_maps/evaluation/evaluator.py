@@ -43,7 +43,7 @@ from cold_maps.evaluation.trust import (
     check_driven,
     driven_lanes,
 )
-from cold_maps.groundtruth.meter import GroundTruthMeter, Measurement
+from cold_maps.groundtruth.meter import GroundTruthMeter, Lane, Measurement
 from cold_maps.network.lane_graph import LaneGraph, load_graph
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.network.routing import longest_route_lengths
@@ -80,6 +80,9 @@ RELATION_MARGIN_M: Final[float] = 5.0
 BLOCK_FRAMES: Final[int] = 100
 """Frames of a drive whose vehicle states and detections are computed at once, as arrays
 (:meth:`Drive.states_block`, :func:`sense_block`); the fusion stays per frame."""
+Finish = Callable[[Measurement | str | None], dict[str, NDArrayFloat]]
+"""Records a frame's scenario from its lane's measurement (None when it has no lane to
+measure) and gives the lines the MCAP shows for it (name → ``(N, 2)`` world frame)."""
 
 
 class MapEvaluator:
@@ -283,7 +286,8 @@ class MapEvaluator:
     def _frame(self, collector: Collector, drive_index: int, index: int, recorder: Recorder | None,
                sensed: dict[str, Sensed]) -> None:
         """One frame (global index ``index``) of drive ``drive_index`` from its vehicles'
-        detections ``sensed`` (:func:`sense_block`): the pairs fused, measured, recorded."""
+        detections ``sensed`` (:func:`sense_block`): all pairs fused, all their lanes measured
+        in one :meth:`GroundTruthMeter.measure_many`, then recorded in scenario order."""
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
         self._relations.clear()
@@ -295,13 +299,13 @@ class MapEvaluator:
         metrics: dict[str, float | None] = {}
         fused_lines: dict[str, NDArrayFloat] = {}
         gt_lines: dict[str, NDArrayFloat] = {}
+        steps: list[tuple[dict[str, NDArrayFloat], Lane | None, Finish]] = []
         for scenario in plan.scenarios:
             if scenario.fusion == "local":
-                lines = self._local(collector, scenario, ego, index, stamp, metrics)
-                gt_lines.update(lines)
+                steps.append((gt_lines, *self._local(collector, scenario, ego, index, stamp, metrics)))
                 continue
             if scenario.vehicles > 2:
-                self._chain(collector, scenario, sensed, index, stamp, sent)
+                steps.append((fused_lines, *self._chain(collector, scenario, sensed, index, stamp, sent)))
                 continue
             for name, other in sensed.items():
                 if name == "ego" or abs(abs(other.state.lead_m) - scenario.lead_m) > 1e-9:
@@ -309,9 +313,10 @@ class MapEvaluator:
                 if name in sent:
                     for key in self._keys(scenario):
                         collector.add_traffic(key, sent[name], 1.0 / FRAME_RATE_HZ)
-                fused = self._pair(collector, scenario, ego, other, index, stamp, metrics)
-                if fused is not None:
-                    fused_lines[f"{scenario.label}-left"], fused_lines[f"{scenario.label}-right"] = fused
+                steps.append((fused_lines, *self._pair(collector, scenario, ego, other, index, stamp, metrics)))
+        measured = iter(self._measure_many([lane for _, lane, _ in steps if lane is not None]))
+        for lines, lane, finish in steps:
+            lines.update(finish(None if lane is None else next(measured)))
         if recorder is not None:
             for name, item in sensed.items():
                 if item.detection is not None:
@@ -323,48 +328,60 @@ class MapEvaluator:
             recorder.write_metrics(stamp, index, metrics)
 
     def _local(self, collector: Collector, scenario: Scenario, ego: Sensed, index: int, stamp: float,
-               metrics: dict[str, float | None]) -> dict[str, NDArrayFloat]:
+               metrics: dict[str, float | None]) -> tuple[Lane | None, Finish]:
+        """The ego's own detection: the lane to measure (None when there is no detection) and
+        what records its measurement, giving the GT lines of the MCAP."""
         keys = self._keys(scenario)
-        if ego.detection is None:
-            for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=ego.missing("ego"),
-                                               end_reason=ego.end_reason, stopping=self.stopping))
-            return {}
-        left, right = world_borders(ego.detection)
-        state = ego.state
-        truth = state.track.borders_between(state.station, state.station + self.sensor.range_m)
-        measured = self._measure(left, right, detection_pose(ego.detection), truth)
-        if isinstance(measured, str) or measured.gt_unmatched:
-            rejected, why = _rejection(measured)
+
+        def reject(rejected: str, why: str = "") -> dict[str, NDArrayFloat]:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", "", np.empty(0), rejected=rejected,
                                                gt_unmatched=why, end_reason=ego.end_reason, stopping=self.stopping))
             return {}
-        own = own_variances(ego.detection)
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics,
-                     end_reason=ego.end_reason,
-                     sigmas=(None, None) if own is None else (np.sqrt(own[0].world), np.sqrt(own[1].world)))
-        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection}, {})
-        shown = np.vstack((left, right))
-        low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
-        return {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
 
-    def _measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float],
-                 reference: tuple[NDArrayFloat, NDArrayFloat]) -> Measurement | str:
+        if ego.detection is None:
+            return None, lambda _: reject(ego.missing("ego"))
+        detection = ego.detection
+        left, right = world_borders(detection)
+        state = ego.state
+        truth = state.track.borders_between(state.station, state.station + self.sensor.range_m)
+
+        def finish(measured: Measurement | str | None) -> dict[str, NDArrayFloat]:
+            assert measured is not None
+            if isinstance(measured, str) or measured.gt_unmatched:
+                return reject(*_rejection(measured))
+            own = own_variances(detection)
+            self._record(collector, scenario, keys, measured, index, stamp, "ego", "", math.nan, None, None, metrics,
+                         end_reason=ego.end_reason,
+                         sigmas=(None, None) if own is None else (np.sqrt(own[0].world), np.sqrt(own[1].world)))
+            self._keep_overlay(collector, scenario, index, measured, {"ego": detection}, {})
+            shown = np.vstack((left, right))
+            low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
+            return {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
+
+        return (left, right, detection_pose(detection), truth), finish
+
+    def _measure_many(self, lanes: list[Lane]) -> list[Measurement | str]:
+        """The measurement of each lane (:meth:`GroundTruthMeter.measure_many`), or why it has
+        none: ``NO_GROUND_TRUTH`` when no GT matches, ``MAP_BROKEN`` over a broken map."""
         from gt_matching import MatchingError
 
         assert self.meter is not None
-        try:
-            measured = self.meter.measure(left, right, pose, reference=reference)
-        except MatchingError as exc:
-            LOG.debug("no ground truth: %s", exc)
-            return NO_GROUND_TRUTH
-        if not measured.gt_unmatched and self.plan.ground_truth == "engine" and self.broken.over(left, right):
-            return replace(measured, gt_unmatched=MAP_BROKEN)
-        return measured
+        found: list[Measurement | str] = []
+        for (left, right, _, _), measured in zip(lanes, self.meter.measure_many(lanes)):
+            if isinstance(measured, MatchingError):
+                LOG.debug("no ground truth: %s", measured)
+                found.append(NO_GROUND_TRUTH)
+            elif not measured.gt_unmatched and self.plan.ground_truth == "engine" and self.broken.over(left, right):
+                found.append(replace(measured, gt_unmatched=MAP_BROKEN))
+            else:
+                found.append(measured)
+        return found
 
     def _pair(self, collector: Collector, scenario: Scenario, ego: Sensed, other: Sensed, index: int, stamp: float,
-              metrics: dict[str, float | None]) -> tuple[NDArrayFloat, NDArrayFloat] | None:
+              metrics: dict[str, float | None]) -> tuple[Lane | None, Finish]:
+        """The fusion of ``other`` into the ego: the fused lane to measure (None when there is
+        none) and what records its measurement, giving the fused lines of the MCAP."""
         plan = self.plan
         keys = self._keys(scenario)
         truth, relation = self._relation(ego.state, other.state)
@@ -372,16 +389,17 @@ class MapEvaluator:
         label = (plan.name, scenario.label)
 
         def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
-                   confidence: float = math.nan, why: str = "") -> None:
+                   confidence: float = math.nan, why: str = "") -> dict[str, NDArrayFloat]:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
                                                gt_unmatched=why, relation=relation, confidence=confidence,
                                                stopping=self.stopping))
+            return {}
 
         if ego.detection is None or other.detection is None:
-            reject(ego.missing("ego") if ego.detection is None else other.missing("coop"))
-            return None
+            return None, lambda _: reject(ego.missing("ego") if ego.detection is None else other.missing("coop"))
+        ego_detection, other_detection = ego.detection, other.detection
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
         start = time.perf_counter()
@@ -399,32 +417,35 @@ class MapEvaluator:
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
             collector.add_check_ms(label, (time.perf_counter() - start) * 1e3)
         if result.kind == "none":
-            reject(reason_category(result.reason), False, runtime, 0.0)
-            return None
-        measured = self._measure(result.left, result.right, detection_pose(ego.detection),
-                                 self._frame_true_lane(ego.state, other.state))
-        if isinstance(measured, str) or measured.gt_unmatched:
-            rejected, why = _rejection(measured)
-            reject(rejected, True, runtime, result.confidence, why)
-            return None
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
-                     truth, metrics if main else None, relation=relation, confidence=result.confidence,
-                     sigmas=(result.left_sigma, result.right_sigma))
-        self._keep_overlay(collector, scenario, index, measured,
-                           {"ego": ego.detection, other.state.name: other.detection},
-                           {"left": result.left, "right": result.right})
-        return result.left, result.right
+            return None, lambda _: reject(reason_category(result.reason), False, runtime, 0.0)
+
+        def finish(measured: Measurement | str | None) -> dict[str, NDArrayFloat]:
+            assert measured is not None
+            if isinstance(measured, str) or measured.gt_unmatched:
+                rejected, why = _rejection(measured)
+                return reject(rejected, True, runtime, result.confidence, why)
+            self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
+                         truth, metrics if main else None, relation=relation, confidence=result.confidence,
+                         sigmas=(result.left_sigma, result.right_sigma))
+            self._keep_overlay(collector, scenario, index, measured,
+                               {"ego": ego_detection, other.state.name: other_detection},
+                               {"left": result.left, "right": result.right})
+            return {f"{scenario.label}-left": result.left, f"{scenario.label}-right": result.right}
+
+        return ((result.left, result.right, detection_pose(ego.detection),
+                 self._frame_true_lane(ego.state, other.state)), finish)
 
     def _chain(self, collector: Collector, scenario: Scenario, sensed: dict[str, Sensed], index: int, stamp: float,
-               sent: dict[str, int]) -> None:
+               sent: dict[str, int]) -> tuple[Lane | None, Finish]:
         """A chain of the ego and the scenario's coops (:func:`fusion.fuse_chain`), when all of
-        them are present; a chain that ends early is rejected with its failing link's reason."""
+        them are present; a chain that ends early is rejected with its failing link's reason.
+        The chained lane to measure (None when there is none) and what records its measurement."""
         plan = self.plan
         keys = self._keys(scenario)
         members = [sensed.get(f"coop{lead:g}") for lead in scenario.chain_leads_m]
         ego = sensed["ego"]
         if any(member is None for member in members):
-            return
+            return None, lambda _: {}
         coops = [member for member in members if member is not None]
         for coop in coops:
             if coop.state.name in sent:
@@ -435,35 +456,41 @@ class MapEvaluator:
                     for a, b in zip(states, states[1:]))
         last = coops[-1].state.name
 
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan, why: str = "") -> None:
+        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
+                   why: str = "") -> dict[str, NDArrayFloat]:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", last, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
                                                gt_unmatched=why, stopping=self.stopping))
+            return {}
 
         if ego.detection is None or any(c.detection is None for c in coops):
-            reject(ego.missing("ego") if ego.detection is None
-                   else next(c for c in coops if c.detection is None).missing("coop"))
-            return
+            reason = (ego.missing("ego") if ego.detection is None
+                      else next(c for c in coops if c.detection is None).missing("coop"))
+            return None, lambda _: reject(reason)
+        ego_detection = ego.detection
         start = time.perf_counter()
         chain = fusion.fuse_chain(ego.detection, [c.detection for c in coops if c.detection is not None],
                                   mode=scenario.fusion, interpolation=scenario.interpolation or "paper",
                                   params=plan.params)
         runtime = (time.perf_counter() - start) * 1e3
         if chain.vehicles < scenario.vehicles:
-            reject(reason_category(chain.reason), False, runtime)
-            return
-        measured = self._measure(chain.left, chain.right, detection_pose(ego.detection),
-                                 self._frame_true_lane(ego.state, coops[-1].state))
-        if isinstance(measured, str) or measured.gt_unmatched:
-            rejected, why = _rejection(measured)
-            reject(rejected, True, runtime, why)
-            return
-        self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None,
-                     sigmas=(chain.left_sigma, chain.right_sigma))
-        detections = {c.state.name: c.detection for c in coops if c.detection is not None}
-        self._keep_overlay(collector, scenario, index, measured, {"ego": ego.detection, **detections},
-                           {"left": chain.left, "right": chain.right})
+            return None, lambda _: reject(reason_category(chain.reason), False, runtime)
+
+        def finish(measured: Measurement | str | None) -> dict[str, NDArrayFloat]:
+            assert measured is not None
+            if isinstance(measured, str) or measured.gt_unmatched:
+                rejected, why = _rejection(measured)
+                return reject(rejected, True, runtime, why)
+            self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None,
+                         sigmas=(chain.left_sigma, chain.right_sigma))
+            detections = {c.state.name: c.detection for c in coops if c.detection is not None}
+            self._keep_overlay(collector, scenario, index, measured, {"ego": ego_detection, **detections},
+                               {"left": chain.left, "right": chain.right})
+            return {}
+
+        return ((chain.left, chain.right, detection_pose(ego.detection),
+                 self._frame_true_lane(ego.state, coops[-1].state)), finish)
 
     def _keys(self, scenario: Scenario) -> tuple[ScenarioKey, ScenarioKey]:
         """The report keys of the scenario's left and right boundary on this map."""
