@@ -3,7 +3,7 @@
 A :class:`RecordStore` keeps the records of one scenario (``report.FrameRecord`` s, encoded
 by ``report.records_to_batch``): a few in memory, the rest in Arrow IPC segment files (one
 record batch each) in a spool folder, so a run's memory does not grow with its frames. A worker process spools into
-the run's folder and the parent adopts its segments in order (no copy).
+the run's folder and the parent adopts its segments in order (no copy) and its pending records.
 
 A :class:`PointPool` pools float samples (error distances, σ) in order and gives the same
 statistics as numpy over the whole array (``np.mean``, ``np.percentile``, ...), bit for bit,
@@ -121,10 +121,12 @@ class RecordStore:
         self.pending: list[Any] = []
         self.count = 0
         self._pending_points = 0
+        self._pending_batch: pa.RecordBatch | None = None
 
     def add(self, record: Any) -> None:
         """Appends one record (written out with the pending ones past the flush limits)."""
         self.pending.append(record)
+        self._pending_batch = None
         self.count += 1
         self._pending_points += len(record.errors_m)
         if len(self.pending) >= FLUSH_RECORDS or self._pending_points >= FLUSH_POINTS:
@@ -143,13 +145,18 @@ class RecordStore:
         self.segments.append(path)
         self.pending = []
         self._pending_points = 0
+        self._pending_batch = None
 
     def extend(self, later: RecordStore) -> None:
-        """Appends the records of ``later`` (its segments adopted as they are)."""
-        self.flush()
-        later.flush()
-        self.segments.extend(later.segments)
-        self.count += later.count
+        """Appends the records of ``later``: its segments adopted as they are, its pending
+        records added (a worker's store hands those back unencoded: a small work unit then
+        never loads pyarrow, whose first array conversion imports pandas)."""
+        if later.segments:
+            self.flush()
+            self.segments.extend(later.segments)
+            self.count += later.count - len(later.pending)
+        for record in later.pending:
+            self.add(record)
 
     def batches(self, columns: Sequence[str] | None = None) -> Iterator[pa.RecordBatch]:
         """The records as batches of ``encode``'s schema (``columns`` only), in order."""
@@ -162,7 +169,9 @@ class RecordStore:
                     batch = reader.get_batch(index)
                     yield batch if columns is None else batch.select(list(columns))
         if self.pending:
-            batch = self.encode(self.pending)
+            if self._pending_batch is None:
+                self._pending_batch = self.encode(self.pending)
+            batch = self._pending_batch
             yield batch if columns is None else batch.select(list(columns))
 
     def values(self, column: str) -> Iterator[Any]:
@@ -178,13 +187,13 @@ class RecordStore:
         return self.count
 
     def __getstate__(self) -> dict[str, Any]:
-        self.flush()
         return {"spool": self.spool, "encode": self.encode, "decode": self.decode, "segments": self.segments,
-                "count": self.count}
+                "count": self.count, "pending": self.pending, "pending_points": self._pending_points}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["spool"], state["encode"], state["decode"])  # type: ignore[misc]
         self.segments, self.count = state["segments"], state["count"]
+        self.pending, self._pending_points = state["pending"], state["pending_points"]
 
 
 def pairwise_sum(read: Callable[[int, int], NDArrayFloat], start: int, count: int) -> float:

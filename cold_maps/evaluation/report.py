@@ -950,19 +950,28 @@ def frames_batch(key: ScenarioKey, batch: Any) -> Any:
     return pa.RecordBatch.from_arrays([columns[name] for name in schema.names], schema=schema)
 
 
-def frames_rows(batch: Any) -> Iterator[dict[str, Any]]:
-    """The ``frames.csv`` rows of a :func:`frames_batch`: numbers as ``repr``, flags 0 / 1,
-    empty where null."""
-    def text(value: Any) -> Any:
-        if value is None:
-            return ""
-        if isinstance(value, bool):
-            return int(value)
-        return repr(value) if isinstance(value, float) else value
+def _csv_cells(column: Any) -> list[Any]:
+    """The ``frames.csv`` cells of one column: floats as ``repr``, flags 0 / 1, empty where null."""
+    values = column.to_pylist()
+    kind = str(column.type)
+    if kind == "double":
+        return ["" if v is None else repr(v) for v in values]
+    if kind == "bool":
+        return ["" if v is None else int(v) for v in values]
+    return ["" if v is None else v for v in values]
 
+
+def frames_csv_rows(batch: Any) -> Iterator[tuple[Any, ...]]:
+    """The ``frames.csv`` rows of a :func:`frames_batch` as tuples in its column order
+    (:data:`FRAMES_CSV_COLUMNS`), converted a column at a time (:func:`_csv_cells`)."""
+    return zip(*(_csv_cells(column) for column in batch.columns))
+
+
+def frames_rows(batch: Any) -> Iterator[dict[str, Any]]:
+    """The ``frames.csv`` rows of a :func:`frames_batch` as dicts (see :func:`frames_csv_rows`)."""
     names = batch.schema.names
-    for values in zip(*(batch.column(name).to_pylist() for name in names)):
-        yield {name: text(value) for name, value in zip(names, values)}
+    for row in frames_csv_rows(batch):
+        yield dict(zip(names, row))
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
@@ -1020,11 +1029,11 @@ def write_frames_csv(path: str | os.PathLike[str], accumulators: Iterable[Scenar
         raise ReportError(f"{path}: cannot write: no folder {path.parent}")
     with atomic_output(path, "wb") as stream:
         buffer = io.StringIO()
-        writer = csv.DictWriter(buffer, fieldnames=FRAMES_CSV_COLUMNS, lineterminator="\n")
-        writer.writeheader()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(FRAMES_CSV_COLUMNS)
         for accumulator in accumulators:
             for batch in accumulator.frames_batches():
-                writer.writerows(frames_rows(batch))
+                writer.writerows(frames_csv_rows(batch))
                 stream.write(buffer.getvalue().encode("utf-8"))
                 buffer.seek(0)
                 buffer.truncate()
