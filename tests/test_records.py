@@ -35,8 +35,7 @@ from cold_maps.evaluation.report import (
     ScenarioResult,
     batch_records,
     records_to_batch,
-    write_frames_csv,
-    write_frames_parquet,
+    write_frames,
 )
 from cold_maps.evaluation.safety import StoppingRule
 from gt_matching.metrics import P95, Calibration, ErrorStats, _percentile
@@ -234,11 +233,10 @@ def test_frames_csv_from_columns_equals_the_record_rows(tiny_limits: None, tmp_p
     writer.writeheader()
     for key, records in zip(keys, lists):
         writer.writerows(reference_csv_rows(key, records))
-    write_frames_csv(tmp_path / "frames.csv", accumulators)
+    write_frames(tmp_path / "frames.csv", tmp_path / "frames.parquet", accumulators)
     assert (tmp_path / "frames.csv").read_text(encoding="utf-8") == buffer.getvalue()
     import pyarrow.parquet as pq
 
-    write_frames_parquet(tmp_path / "frames.parquet", accumulators)
     table = pq.read_table(tmp_path / "frames.parquet")
     assert table.column_names == list(FRAMES_CSV_COLUMNS) and table.num_rows == 120
     rows = list(csv.DictReader(io.StringIO(buffer.getvalue())))

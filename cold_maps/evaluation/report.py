@@ -874,11 +874,6 @@ class ScenarioAccumulator:
             "end_reasons": tuple(sorted(Counter(r for r in c["end_reason"] if r).items())),
         }
 
-    def csv_rows(self) -> Iterator[dict[str, Any]]:
-        """One ``frames.csv`` row per record (columns :data:`FRAMES_CSV_COLUMNS`), from the columns."""
-        for batch in self.frames_batches():
-            yield from frames_rows(batch)
-
     def frames_batches(self) -> Iterator[Any]:
         """The scenario's ``frames.parquet`` rows (:func:`frames_batch`), batch by batch."""
         for batch in self.records.batches(FRAMES_COLUMNS_STORED):
@@ -967,13 +962,6 @@ def frames_csv_rows(batch: Any) -> Iterator[tuple[Any, ...]]:
     return zip(*(_csv_cells(column) for column in batch.columns))
 
 
-def frames_rows(batch: Any) -> Iterator[dict[str, Any]]:
-    """The ``frames.csv`` rows of a :func:`frames_batch` as dicts (see :func:`frames_csv_rows`)."""
-    names = batch.schema.names
-    for row in frames_csv_rows(batch):
-        yield dict(zip(names, row))
-
-
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     """Writes ``data`` to ``path`` atomically (:func:`converters.atomic_io.atomic_output`)."""
     path = Path(path)
@@ -1021,40 +1009,33 @@ def read_metrics_json(path: str | os.PathLike[str]) -> tuple[list[ScenarioResult
     return results, bool(document.get("partial", False))
 
 
-def write_frames_csv(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
-    """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) atomically,
-    streamed batch by batch from the records' columns."""
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise ReportError(f"{path}: cannot write: no folder {path.parent}")
-    with atomic_output(path, "wb") as stream:
+def write_frames(csv_path: str | os.PathLike[str], parquet_path: str | os.PathLike[str],
+                 accumulators: Iterable[ScenarioAccumulator]) -> None:
+    """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) and
+    ``frames.parquet`` (the same rows, typed by :func:`frames_schema`, null where
+    ``frames.csv`` is empty) atomically, both streamed from one pass over the records'
+    columns: neither file is written when either fails."""
+    import pyarrow.parquet as pq
+
+    for path in (Path(csv_path), Path(parquet_path)):
+        if not path.parent.is_dir():
+            raise ReportError(f"{path}: cannot write: no folder {path.parent}")
+    schema = frames_schema().with_metadata({"made_by": "cold-maps cold_maps.evaluation.report.write_frames",
+                                            "rows": "as frames.csv: one per frame, vehicle pair and scenario; "
+                                                    "null where frames.csv is empty"})
+    with (atomic_output(csv_path, "wb") as csv_stream, atomic_output(parquet_path, "wb") as parquet_stream,
+          pq.ParquetWriter(parquet_stream, schema) as parquet):
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(FRAMES_CSV_COLUMNS)
         for accumulator in accumulators:
             for batch in accumulator.frames_batches():
                 writer.writerows(frames_csv_rows(batch))
-                stream.write(buffer.getvalue().encode("utf-8"))
+                csv_stream.write(buffer.getvalue().encode("utf-8"))
                 buffer.seek(0)
                 buffer.truncate()
-        stream.write(buffer.getvalue().encode("utf-8"))
-
-
-def write_frames_parquet(path: str | os.PathLike[str], accumulators: Iterable[ScenarioAccumulator]) -> None:
-    """Writes ``frames.parquet`` atomically: the rows of ``frames.csv``, typed
-    (:func:`frames_schema`), streamed batch by batch."""
-    import pyarrow.parquet as pq
-
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise ReportError(f"{path}: cannot write: no folder {path.parent}")
-    schema = frames_schema().with_metadata({"made_by": "cold-maps cold_maps.evaluation.report.write_frames_parquet",
-                                            "rows": "as frames.csv: one per frame, vehicle pair and scenario; "
-                                                    "null where frames.csv is empty"})
-    with atomic_output(path, "wb") as stream, pq.ParquetWriter(stream, schema) as writer:
-        for accumulator in accumulators:
-            for batch in accumulator.frames_batches():
-                writer.write_batch(batch.replace_schema_metadata(schema.metadata))
+                parquet.write_batch(batch.replace_schema_metadata(schema.metadata))
+        csv_stream.write(buffer.getvalue().encode("utf-8"))
 
 
 def _fmt(value: float, digits: int = 3) -> str:
@@ -1361,8 +1342,7 @@ def write_report(out_dir: str | os.PathLike[str], accumulators: Sequence[Scenari
     if not out.is_dir():
         raise ReportError(f"{out}: output folder does not exist")
     results = [a.result() for a in accumulators]
-    write_frames_csv(out / "frames.csv", accumulators)
-    write_frames_parquet(out / "frames.parquet", accumulators)
+    write_frames(out / "frames.csv", out / "frames.parquet", accumulators)
     write_summary_md(out / "summary.md", results, partial=partial, road_types=road_types)
     write_metrics_json(out / "metrics.json", results, partial=partial)
     return results

@@ -38,8 +38,7 @@ from cold_maps.evaluation.report import (
     atomic_write_text,
     scenario_label,
     summary_markdown,
-    write_frames_csv,
-    write_frames_parquet,
+    write_frames,
     write_metrics_json,
 )
 from cold_maps.evaluation.scenarios import MapPlan
@@ -241,8 +240,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
     results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
     results = [a.result() for a in accumulators] if results is None else list(results)
-    write_frames_csv(out / "frames.csv", accumulators)
-    write_frames_parquet(out / "frames.parquet", accumulators)
+    write_frames(out / "frames.csv", out / "frames.parquet", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
                             provenance=provenance, check_ms=collector.check_ms)
     if collector.notes:
