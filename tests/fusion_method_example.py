@@ -60,3 +60,29 @@ def stated_sigma(ego: fusion.LaneDetection, coop: fusion.LaneDetection,
     ego, coop = (replace(d, left_sigma=np.full(len(d.left), STATED_SIGMA_M),
                          right_sigma=np.full(len(d.right), STATED_SIGMA_M)) for d in (ego, coop))
     return fusion.fuse(ego, coop, mode="spline", interpolation="paper", params=params)
+
+
+STALL_DIR_ENV = "COLD_TEST_STALL_DIR"
+"""Environment variable naming the folder where :func:`stalls` marks a stalled process."""
+STALL_AFTER_CALLS = 500
+"""Calls of :func:`stalls` in one process before it stalls."""
+STALL_S = 120.0
+"""How long a stalled call waits before it gives up (s): longer than any test waits."""
+_calls = 0
+
+
+def stalls(ego: fusion.LaneDetection, coop: fusion.LaneDetection,
+           params: fusion.FusionParams) -> fusion.FusionResult:
+    """Rejects every pair, and at the :data:`STALL_AFTER_CALLS`-th call in a process writes a
+    file named by the process id into the folder ``$COLD_TEST_STALL_DIR`` and sleeps: a run
+    that a test interrupts is then surely still running, whatever the machine's load."""
+    import os
+    import time
+    from pathlib import Path
+
+    global _calls
+    _calls += 1
+    if _calls == STALL_AFTER_CALLS:
+        (Path(os.environ[STALL_DIR_ENV]) / str(os.getpid())).touch()
+        time.sleep(STALL_S)
+    return _rejected(ego, "stalls on principle")

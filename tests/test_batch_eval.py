@@ -4,11 +4,10 @@ fusion methods named on the command line or registered as entry points."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
-from batch_outputs import default_sigint, frames_without_runtimes, mcap_messages, metrics_without_runtimes
+from batch_outputs import frames_without_runtimes, mcap_messages, metrics_without_runtimes, stalled_run
 from conftest import BUNDLED_MAPS_DIR, bundled_map
 
 from cold_maps.cli import evaluate
@@ -117,15 +116,8 @@ def test_sigint_with_workers_leaves_partial_outputs(tmp_path):
     import time
 
     out = tmp_path / "out"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "cold_maps.cli.evaluate", "--map", str(bundled_map("rural")), "--frames", "600",
-         "--routes", "3", "--workers", "2", "--no-plots", "--out", str(out)],
-        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1],
-        preexec_fn=default_sigint)
-    deadline = time.monotonic() + 60
-    while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
-        time.sleep(0.05)
-    time.sleep(3.0)
+    process = stalled_run(["--map", str(bundled_map("rural")), "--frames", "600", "--routes", "3", "--workers", "2",
+                           "--no-plots", "--out", str(out)], tmp_path / "stalled", processes=2)
     children = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(process.pid)], capture_output=True,
                                                    text=True).stdout.split()]
     assert len(children) >= 2  # the two workers (and multiprocessing's resource tracker)

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 import pytest
-from batch_outputs import default_sigint
+from batch_outputs import stalled_run
 from conftest import bundled_map
 
 from cold_maps.cli import evaluate
@@ -216,19 +216,10 @@ def test_signal_finalises_the_recording(tmp_path, signal_name, status, word):
     report marked partial."""
     import os
     import signal
-    import subprocess
-    import sys
-    import time
 
     out = tmp_path / "out"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "cold_maps.cli.evaluate", "--map", str(bundled_map("rural")), "--frames", "1500",
-         "--routes", "1", "--no-plots", "--out", str(out)],
-        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1], preexec_fn=default_sigint)
-    deadline = time.monotonic() + 60
-    while not (out / "run.mcap.partial").exists() and time.monotonic() < deadline and process.poll() is None:
-        time.sleep(0.05)
-    time.sleep(0.5)
+    process = stalled_run(["--map", str(bundled_map("rural")), "--frames", "1500", "--routes", "1", "--no-plots",
+                           "--out", str(out)], tmp_path / "stalled", processes=1)
     os.kill(process.pid, getattr(signal, signal_name))
     _, err = process.communicate(timeout=60)
     assert process.returncode == status, err
