@@ -28,6 +28,7 @@ from typing import Any, Final, Iterator, Mapping, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from cold_maps.evaluation.columns import nulls, to_numpy
 from cold_maps.evaluation.records import list_values
 from cold_maps.evaluation.report import ScenarioAccumulator, atomic_write_bytes
 from cold_maps.network.lane_strip import NDArrayFloat
@@ -272,10 +273,10 @@ def range_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[int, NDArrayF
     for scenario in scenarios:
         points = groups.setdefault(scenario.key.vehicles, [])
         for batch in scenario.records.batches(("perception_range_m", "max_error_m", "truly_fusible", "errors_m")):
-            ranges = batch.column("perception_range_m").to_numpy(zero_copy_only=False)
+            ranges = to_numpy(batch.column("perception_range_m"))
             chosen = (np.diff(list_values(batch.column("errors_m"))[1]) > 0) & np.isfinite(ranges)
-            truly = batch.column("truly_fusible").fill_null(False).to_numpy(zero_copy_only=False).astype(float)
-            maxima = batch.column("max_error_m").to_numpy(zero_copy_only=False)
+            truly = to_numpy(batch.column("truly_fusible"), fill=False).astype(float)
+            maxima = to_numpy(batch.column("max_error_m"))
             points.append(np.column_stack((ranges[chosen], maxima[chosen], truly[chosen])))
     return {vehicles: np.concatenate(points).reshape(-1, 3) if points else np.empty((0, 3))
             for vehicles, points in groups.items()}
@@ -313,7 +314,7 @@ def reliability_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[str, ND
         for batch in scenario.records.batches(("errors_m", "sigma_m")):
             errors, offsets = list_values(batch.column("errors_m"))
             sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
-            stated = (np.diff(offsets) > 0) & ~batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
+            stated = (np.diff(offsets) > 0) & ~nulls(batch.column("sigma_m"))
             if not stated.any():
                 continue
             e = errors[offsets[0]:offsets[-1]][np.repeat(stated, np.diff(offsets))]

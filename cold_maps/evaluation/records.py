@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable, Final, Iterable, Iterator, Sequ
 
 import numpy as np
 
+from cold_maps.evaluation.columns import to_numpy
 from cold_maps.network.lane_strip import NDArrayFloat
 
 if TYPE_CHECKING:
@@ -86,23 +87,9 @@ class Spool:
         self.__init__(state["path"])  # type: ignore[misc]
 
 
-def list_array(arrays: Sequence[NDArrayFloat | None]) -> pa.Array:
-    """A list<float64> column of ``arrays`` (None: null) without a Python loop over values."""
-    import pyarrow as pa
-
-    lengths = np.array([0 if a is None else len(a) for a in arrays], dtype=np.int32)
-    offsets = np.concatenate(([0], np.cumsum(lengths, dtype=np.int64))).astype(np.int32)
-    present = [a for a in arrays if a is not None and len(a)]
-    values = np.concatenate(present) if present else np.empty(0)
-    mask = pa.array([a is None for a in arrays]) if any(a is None for a in arrays) else None
-    return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values, type=pa.float64()), mask=mask)
-
-
 def list_values(column: pa.Array) -> tuple[NDArrayFloat, np.ndarray]:
     """(flat values, offsets ``(N + 1,)``) of a list<float64> column (a null list is empty)."""
-    offsets = np.asarray(column.offsets, dtype=np.int64)
-    values = np.asarray(column.values, dtype=np.float64)
-    return values, offsets
+    return to_numpy(column.values), to_numpy(column.offsets).astype(np.int64)
 
 
 class RecordStore:

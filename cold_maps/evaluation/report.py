@@ -106,7 +106,8 @@ from cold_maps.evaluation.safety import (
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
-from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_array, list_values, pools
+from cold_maps.evaluation.columns import from_lists, from_numpy, from_strings, from_values, nulls, to_numpy
+from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_values, pools
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, P95, Calibration, ErrorStats
 
 if TYPE_CHECKING:
@@ -597,7 +598,7 @@ def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
     columns: dict[str, Any] = {
         "frame": [r.frame for r in records], "stamp_s": [r.stamp_s for r in records],
         "ego": [r.ego for r in records], "coop": [r.coop for r in records],
-        "errors_m": list_array([r.errors_m for r in records]),
+        "errors_m": from_lists([r.errors_m for r in records]),
         "perception_range_m": [r.perception_range_m for r in records],
         "runtime_ms": [r.runtime_ms for r in records], "rejected": [r.rejected for r in records],
         "predicted_fusible": [r.predicted_fusible for r in records],
@@ -608,13 +609,13 @@ def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
         "stopping_speed_mps": [None if s is None else s.speed_mps for s in stop],
         "stopping_reaction_time_s": [None if s is None else s.rule.reaction_time_s for s in stop],
         "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
-        "sigma_m": list_array([r.sigma_m for r in records]),
+        "sigma_m": from_lists([r.sigma_m for r in records]),
         "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
         "far_max_error_m": figures[3],
     }
     schema = record_schema()
     return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)
-                                       else pa.array(columns[name], type=schema.field(name).type)
+                                       else from_values(columns[name], schema.field(name).type)
                                        for name in schema.names], schema=schema)
 
 
@@ -625,7 +626,7 @@ def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
             if name not in ("errors_m", "sigma_m")}
     errors, error_offsets = list_values(batch.column("errors_m"))
     sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
-    sigma_null = batch.column("sigma_m").is_null().to_numpy(zero_copy_only=False)
+    sigma_null = nulls(batch.column("sigma_m"))
     for i in range(batch.num_rows):
         speed = data["stopping_speed_mps"][i]
         yield FrameRecord(
@@ -646,10 +647,9 @@ def _ratio(numerator: int, denominator: int) -> float:
     return numerator / denominator if denominator else math.nan
 
 
-def _flags(column: Any) -> tuple[np.ndarray, np.ndarray]:
+def flags(column: Any) -> tuple[np.ndarray, np.ndarray]:
     """(known, value) boolean arrays of a nullable bool column."""
-    known = ~column.is_null().to_numpy(zero_copy_only=False)
-    return known, column.fill_null(False).to_numpy(zero_copy_only=False).astype(bool)
+    return ~nulls(column), to_numpy(column, fill=False)
 
 
 SCALAR_COLUMNS: Final[tuple[str, ...]] = (
@@ -708,10 +708,10 @@ class ScenarioAccumulator:
             for name in SCALAR_COLUMNS:  # copies: a view would keep the whole segment (its points) in memory
                 column = batch.column(name)
                 parts[name].append(column.to_pylist() if str(column.type) == "string" else
-                                   column.to_numpy(zero_copy_only=False).copy())
-            parts["points"].append(np.diff(np.asarray(batch.column("errors_m").offsets, dtype=np.int64)))
-            parts["predicted"].append(_flags(batch.column("predicted_fusible")))
-            parts["truly"].append(_flags(batch.column("truly_fusible")))
+                                   to_numpy(column).copy())
+            parts["points"].append(np.diff(list_values(batch.column("errors_m"))[1]))
+            parts["predicted"].append(flags(batch.column("predicted_fusible")))
+            parts["truly"].append(flags(batch.column("truly_fusible")))
         out: dict[str, Any] = {}
         for name, chunks in parts.items():
             if name in ("predicted", "truly"):
@@ -735,8 +735,8 @@ class ScenarioAccumulator:
             start = offsets[:-1]
             fused = lengths > 0
             pooled["all"].append(values[offsets[0]:offsets[-1]])
-            predicted_known, predicted = _flags(batch.column("predicted_fusible"))
-            truly_known, truly = _flags(batch.column("truly_fusible"))
+            predicted_known, predicted = flags(batch.column("predicted_fusible"))
+            truly_known, truly = flags(batch.column("truly_fusible"))
             relation = np.array(batch.column("relation").to_pylist(), dtype=object)
 
             def points(mask: np.ndarray) -> NDArrayFloat:
@@ -749,15 +749,15 @@ class ScenarioAccumulator:
             for group, kind in ROUTE_GROUPS.items():
                 pooled[f"route_{group}"].append(points(pairs & (relation == kind)))
             near_column = batch.column("near_points")
-            split = fused & ~near_column.is_null().to_numpy(zero_copy_only=False)
-            near_points = near_column.fill_null(0).to_numpy(zero_copy_only=False)
+            split = fused & ~nulls(near_column)
+            near_points = to_numpy(near_column, fill=0)
             position = np.arange(offsets[-1] - offsets[0]) - np.repeat(start - offsets[0], lengths)
             near = np.repeat(split, lengths) & (position < np.repeat(near_points, lengths))
             far = np.repeat(split, lengths) & ~near
             pooled["near"].append(values[offsets[0]:offsets[-1]][near])
             pooled["far"].append(values[offsets[0]:offsets[-1]][far])
             sigma_column = batch.column("sigma_m")
-            stated = fused & ~sigma_column.is_null().to_numpy(zero_copy_only=False)
+            stated = fused & ~nulls(sigma_column)
             if stated.any():
                 sigma_values, sigma_offsets = list_values(sigma_column)
                 sigma_lengths = np.diff(sigma_offsets)
@@ -918,22 +918,23 @@ def frames_batch(key: ScenarioKey, batch: Any) -> Any:
     rows = batch.num_rows
 
     def finite(values: Any) -> Any:
-        array = np.asarray(values, dtype=np.float64)
-        return pa.array(array, type=pa.float64(), mask=~np.isfinite(array))
+        array = to_numpy(values) if isinstance(values, pa.Array) else np.asarray(values, dtype=np.float64)
+        return from_numpy(array, pa.float64(), valid=np.isfinite(array))
 
-    lengths = np.diff(np.asarray(batch.column("errors_m").offsets, dtype=np.int64))
+    lengths = np.diff(list_values(batch.column("errors_m"))[1])
     speed = batch.column("stopping_speed_mps").to_pylist()
     reaction = batch.column("stopping_reaction_time_s").to_pylist()
     deceleration = batch.column("stopping_deceleration_mps2").to_pylist()
     distance = [math.nan if v is None else StoppingRule(t, a).distance_m(v)
                 for v, t, a in zip(speed, reaction, deceleration)]
     columns = {
-        "map": pa.array([key.map] * rows, pa.string()), "fusion": pa.array([key.fusion] * rows, pa.string()),
-        "interpolation": pa.array([key.interpolation] * rows, pa.string()),
-        "d_s": pa.array([float(key.d_s)] * rows, pa.float64()),
-        "boundary": pa.array([key.boundary] * rows, pa.string()), "frame": batch.column("frame"),
+        "map": from_strings([key.map] * rows), "fusion": from_strings([key.fusion] * rows),
+        "interpolation": from_strings([key.interpolation] * rows),
+        "d_s": from_numpy(np.full(rows, float(key.d_s)), pa.float64()),
+        "boundary": from_strings([key.boundary] * rows), "frame": batch.column("frame"),
         "stamp_s": finite(batch.column("stamp_s")), "ego": batch.column("ego"), "coop": batch.column("coop"),
-        "fused": pa.array(lengths > 0), "rejected": batch.column("rejected"), "points": pa.array(lengths),
+        "fused": from_numpy(lengths > 0, pa.bool_()), "rejected": batch.column("rejected"),
+        "points": from_numpy(lengths, pa.int64()),
         "stopping_distance_m": finite(distance),
     }
     for name in ("mean_error_m", "max_error_m", "perception_range_m", "runtime_ms", "confidence",

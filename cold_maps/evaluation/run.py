@@ -36,6 +36,7 @@ from cold_maps.evaluation.report import (
     ScenarioAccumulator,
     ScenarioResult,
     atomic_write_text,
+    flags,
     scenario_label,
     summary_markdown,
     write_frames,
@@ -129,7 +130,7 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
             route_starts=collector.route_starts(map_name)))
     extended: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
-        if key.vehicles > 1 and any(np.diff(batch.column(0).offsets.to_numpy()).any()
+        if key.vehicles > 1 and any(np.diff(list_values(batch.column(0))[1]).any()
                                     for batch in accumulator.records.batches(("errors_m",))):
             extended.setdefault(key.map, []).append(accumulator)
     for map_name, accumulators in extended.items():
@@ -194,8 +195,8 @@ def _judged_fusions(accumulator: ScenarioAccumulator, spool: Spool) -> tuple[int
         values, offsets = list_values(batch.column("errors_m"))
         lengths = np.diff(offsets)
         column = batch.column("truly_fusible")
-        judged = (lengths > 0) & ~column.is_null().to_numpy(zero_copy_only=False)
-        truly = column.fill_null(False).to_numpy(zero_copy_only=False).astype(bool)
+        known, truly = flags(column)
+        judged = (lengths > 0) & known
         fused += int(np.count_nonzero(judged))
         wrong += int(np.count_nonzero(judged & ~truly))
         right.append(values[offsets[0]:offsets[-1]][np.repeat(judged & truly, lengths)])
@@ -209,7 +210,7 @@ def false_fusion_markdown(collector: Collector) -> str:
     :data:`UNKNOWN_RELATIONS` when pairs were fused but none has a known true relation; ""
     when no pair was fused."""
     rows = []
-    fused_pairs = sum(int(np.count_nonzero(np.diff(batch.column(0).offsets.to_numpy()) > 0))
+    fused_pairs = sum(int(np.count_nonzero(np.diff(list_values(batch.column(0))[1]) > 0))
                       for key, accumulator in collector.accumulators.items()  # a pair fuses both borders
                       if key.fusion != "local" and key.boundary == "left"
                       for batch in accumulator.records.batches(("errors_m",)))
