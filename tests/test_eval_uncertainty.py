@@ -14,7 +14,7 @@ from fusion_method_example import STATED_SIGMA_M
 
 from cold_maps.cli import evaluate
 from cold_maps.evaluation.report import FrameRecord, ReportError, ScenarioAccumulator, ScenarioKey, read_metrics_json
-from fusion.uncertainty import BRIDGE_SIGMA_PER_M
+from fusion.uncertainty import BRIDGE_SIGMA_FLOOR_PER_M
 from gt_matching.metrics import Calibration
 
 METHOD = "fusion_method_example:stated_sigma"
@@ -128,8 +128,8 @@ def test_cold_eval_reports_calibration_only_for_lanes_that_state_sigma(tmp_path)
         calibration = record["calibration"]
         assert calibration["points"] == record["points"] > 0  # every fused point states its σ
         assert calibration["within_1sigma"] == calibration["within_2sigma"] == 1.0  # noise-free straight: exact
-        # ego and coop points state 0.05 m, the 30 m bridge more (its k·d term): the mean lies between
-        assert STATED_SIGMA_M < calibration["mean_sigma_m"] < STATED_SIGMA_M + BRIDGE_SIGMA_PER_M["paper"] * 15.0
+        # ego and coop points state 0.05 m, the straight 30 m bridge more (its k₀·d term): the mean lies between
+        assert STATED_SIGMA_M < calibration["mean_sigma_m"] < STATED_SIGMA_M + BRIDGE_SIGMA_FLOOR_PER_M["paper"] * 15.0
         assert calibration["mean_error_m"] == pytest.approx(record["mean_error_m"])
         assert record["calibration_correct"] == calibration  # one straight lane: every fusion is correct
     results, _ = read_metrics_json(out / "metrics.json")
