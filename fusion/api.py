@@ -18,8 +18,8 @@ from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_c
 from fusion.geometry import to_world, transform
 from fusion.spline import EndFits, hermite_lane, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
-from fusion.uncertainty import (BRIDGE_SCALES_WITH_BEND, BRIDGE_SIGMA_PER_M, PairUncertainty, bridge_end,
-                                bridge_variance, gap_bend, has_sigma, own_variances, pair_uncertainty)
+from fusion.uncertainty import (PairUncertainty, bridge_end, bridge_variance, gap_bend, has_sigma, own_variances,
+                                pair_uncertainty)
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
@@ -210,22 +210,21 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
     parts = (el, gap_left, cl, er, gap_right, cr)
     if uncertainty is None:
         return parts, _SPLINE_SOURCES, None
-    bend = gap_bend(fits.arcs()) if BRIDGE_SCALES_WITH_BEND[interpolation] else None
-    return parts, _SPLINE_SOURCES, _spline_variances(parts, uncertainty, BRIDGE_SIGMA_PER_M[interpolation], bend)
+    return parts, _SPLINE_SOURCES, _spline_variances(parts, uncertainty, interpolation, gap_bend(fits.arcs()))
 
 
-def _spline_variances(parts: Sequence[NDArrayFloat], uncertainty: PairUncertainty, sigma_per_m: float,
-                      bend: tuple[float, float, float] | None) -> list[NDArrayFloat]:
+def _spline_variances(parts: Sequence[NDArrayFloat], uncertainty: PairUncertainty, interpolation: str,
+                      bend: tuple[float, float, float]) -> list[NDArrayFloat]:
     """World variances of the parts (ego, gap, coop per border) of a spline fusion: the
-    detections' own, and :func:`fusion.uncertainty.bridge_variance` across the gap (``bend``
-    from :func:`fusion.uncertainty.gap_bend`, or None)."""
+    detections' own, and :func:`fusion.uncertainty.bridge_variance` of ``interpolation``
+    across the gap (``bend`` from :func:`fusion.uncertainty.gap_bend`)."""
     out = []
     for side in (0, 1):
         ego, gap, coop = parts[3 * side: 3 * side + 3]
         ego_var, coop_var = uncertainty.borders[side], uncertainty.borders[2 + side]
         ends = (bridge_end(ego, ego_var, True, (0.0, 0.0), uncertainty.ego_cov),
                 bridge_end(coop, coop_var, False, uncertainty.coop_xy, uncertainty.coop_cov))
-        out += [ego_var.world, bridge_variance(gap, ego[-1], coop[0], *ends, sigma_per_m, bend),
+        out += [ego_var.world, bridge_variance(gap, ego[-1], coop[0], *ends, interpolation, bend),
                 coop_var.world]
     return out
 

@@ -26,10 +26,10 @@ frame (a scalar, the same in any frame). Sources and how they combine:
 - **Gap bridge** (spline fusion): see :func:`bridge_variance`: the errors at the two ends
   propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
   turning the end tangents by h10/h11 times the gap length) plus an interpolation term
-  k·F·d growing with the distance d from the nearer end, for ``hermite`` also with the
-  road's bend F across the gap that one arc does not follow (:func:`bridge_bend`; F = 1
-  for ``paper``), k per interpolation from :data:`BRIDGE_SIGMA_PER_M` (calibrated on the
-  analytic roads).
+  sqrt(k₀² + (k₁·F)²)·d growing with the distance d from the nearer end and with the bend F
+  (:func:`interpolation_bend`: for ``hermite`` the road's bend across the gap that one arc
+  does not follow, :func:`bridge_bend`; for ``paper`` the ends' turn), k₀ and k₁ per
+  interpolation from :data:`BRIDGE_SIGMA_FLOOR_PER_M` and :data:`BRIDGE_SIGMA_PER_M`.
 - **History** (:func:`fusion.fuse_history`): a history point's σ fades linearly from the
   ego seam's σ to the coop seam's, like the seam offsets (:func:`seam_sigma`).
 """
@@ -45,20 +45,30 @@ import numpy as np
 from fusion.geometry import EndFit
 from fusion.types import LaneDetection, NDArrayFloat
 
-BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.0485, "hermite": 0.0388}
-"""Interpolation error k of a gap bridge per interpolation (1σ): the bridge's interpolation
-term is k·F·d at distance d [m] from its nearer end, F [rad] the road's bend across the gap
-that one arc does not follow (:func:`bridge_bend`) for ``hermite`` (exact on lines and arcs;
-k in m/(m·rad)) and F = 1 for ``paper`` (k in m/m: its natural spline errs on arcs too, and
-its end tangents from two points 0.2 m apart turn with the detection's point noise on any
-road). k = sqrt(Σe² / Σ(F·d)²) over every gap point of 40 noise-free pairs of each of the
-four analytic road families (:data:`fusion.analytic.FAMILIES`: corners with and without
-clothoids, arcs, S-bends; seed 123), e the point's true error;
-``tools/calibrate_bridge_sigma.py`` reproduces it and reports the coverage on another seed."""
+BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.075, "hermite": 0.0388}
+"""Interpolation error k₁ of a gap bridge per interpolation (1σ, m/(m·rad)): the bridge's
+interpolation term is sqrt(k₀² + (k₁·F)²)·d at distance d [m] from its nearer end
+(:data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀), F [rad] the bend :func:`interpolation_bend`. ``hermite``
+(exact on lines and arcs, k₀ = 0): F the road's bend across the gap that one arc does not
+follow (:func:`bridge_bend`), k₁ = sqrt(Σe² / Σ(F·d)²) over every gap point of 40 noise-free
+pairs of each of the four analytic road families (:data:`fusion.analytic.FAMILIES`: corners
+with and without clothoids, arcs, S-bends; seed 123), e the point's true error
+(``tools/calibrate_bridge_sigma.py`` reproduces it). ``paper``: F the turn between the two
+ends' fitted tangents |Δψ| (its natural spline through an estimated apex errs on any turn,
+arcs included); k₀ and k₁ chosen together on camera drives (``tools/calibrate_bridge_sigma.py
+--drives``)."""
 
-BRIDGE_SCALES_WITH_BEND: Final[dict[str, bool]] = {"paper": False, "hermite": True}
-"""Per interpolation: whether its interpolation term scales with the bend F
-(:data:`BRIDGE_SIGMA_PER_M`)."""
+BRIDGE_SIGMA_FLOOR_PER_M: Final[dict[str, float]] = {"paper": 0.0475, "hermite": 0.0}
+"""Interpolation error k₀ of a gap bridge that does not scale with the bend (1σ, m/m; see
+:data:`BRIDGE_SIGMA_PER_M`): ``paper``'s end tangents, from two points 0.2 m apart, turn with
+the detection's point noise on any road."""
+
+
+def interpolation_bend(interpolation: str, bend: tuple[float, float, float], length_m: float) -> float:
+    """The bend F [rad] that scales the interpolation term of a gap bridge of length L [m]
+    (:data:`BRIDGE_SIGMA_PER_M`) from the ends' (Δψ, κ̄, Δκ) (:func:`gap_bend`): ``hermite``
+    :func:`bridge_bend`, ``paper`` |Δψ|."""
+    return bridge_bend(*bend, length_m) if interpolation == "hermite" else abs(bend[0])
 
 
 @dataclass(frozen=True)
@@ -226,8 +236,7 @@ def gap_bend(arcs: Sequence[EndFit]) -> tuple[float, float, float]:
 
 
 def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, ego_end: BridgeEnd,
-                    coop_start: BridgeEnd, sigma_per_m: float,
-                    bend: tuple[float, float, float] | None = None) -> NDArrayFloat:
+                    coop_start: BridgeEnd, interpolation: str, bend: tuple[float, float, float]) -> NDArrayFloat:
     """Lateral world variance [m²] of the gap points ``gap`` (``(K, 2)``) of a bridge from
     ``start`` to ``stop`` (the ego border's last and the coop border's first point).
 
@@ -236,9 +245,9 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     the sensor parts of the ends' variances as (h00·σ_E)² + (h01·σ_C)², each sender's pose
     error δ as ((h00·J_E + h10·L·e_ψ)·δ)² for the ego end and ((h01·J_C + h11·L·e_ψ)·δ)² for
     the coop end (a yaw error turns that end's tangent, e_ψ = (0, 0, 1)); the interpolation
-    error adds (``sigma_per_m``·F·d)² (:data:`BRIDGE_SIGMA_PER_M`), F = :func:`bridge_bend` of
-    ``bend`` (the ends' heading change [rad], mean curvature and curvature change [1/m],
-    :func:`gap_bend`), or F = 1 when ``bend`` is None.
+    error adds (k₀² + (k₁·F)²)·d² (``interpolation``'s :data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀ and
+    :data:`BRIDGE_SIGMA_PER_M` k₁), F = :func:`interpolation_bend` of ``bend`` (the ends'
+    heading change [rad], mean curvature and curvature change [1/m], :func:`gap_bend`).
     """
     if gap.shape[0] == 0:
         return np.empty(0)
@@ -249,8 +258,9 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     t2, t3 = tau * tau, tau * tau * tau
     h00, h01 = 2.0 * t3 - 3.0 * t2 + 1.0, 3.0 * t2 - 2.0 * t3
     h10, h11 = t3 - 2.0 * t2 + tau, t3 - t2
-    scale = 1.0 if bend is None else bridge_bend(*bend, length)
-    out = (sigma_per_m * scale * length * np.minimum(tau, 1.0 - tau)) ** 2
+    per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation],
+                       BRIDGE_SIGMA_PER_M[interpolation] * interpolation_bend(interpolation, bend, length))
+    out = (per_m * length * np.minimum(tau, 1.0 - tau)) ** 2
     for end, h_offset, h_turn in ((ego_end, h00, h10), (coop_start, h01, h11)):
         out += h_offset * h_offset * end.sensor
         if end.covariance.any():

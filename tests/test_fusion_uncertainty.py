@@ -15,7 +15,7 @@ import fusion
 from fusion import FusionParams, InvalidParameterError, LaneDetection, Source
 from fusion.analytic import AnalyticRoad, Segment, detect, with_history
 from fusion.geometry import transform
-from fusion.uncertainty import BRIDGE_SIGMA_PER_M
+from fusion.uncertainty import BRIDGE_SIGMA_FLOOR_PER_M, BRIDGE_SIGMA_PER_M
 
 WIDTH_M = 3.5
 DETERMINISTIC = settings(max_examples=40, deadline=None, derandomize=True, database=None,
@@ -172,9 +172,9 @@ def test_inverse_variance_weights_hold_to_the_overlap_ends_and_the_seams_fade_ou
 
 def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
     """Hermite propagation of the end errors, with the coop's pose error: at arc fraction τ of
-    a bridge of length L (ego exact), σ² = (k·F·d)² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
-    (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend, F = 0 for ``hermite``,
-    F = 1 for ``paper``."""
+    a bridge of length L (ego exact), σ² = (k₀² + (k₁·F)²)·d² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
+    (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend or turn, F = 0: only
+    ``paper``'s k₀·d is left (``hermite`` has none)."""
     road = straight(-0.3)
     sigma_e, sigma_c, sxy, syaw = 0.12, 0.05, 0.06, 0.004
     ego = sensed(road, 10.0, sigma_e)
@@ -185,9 +185,8 @@ def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None
         gap = result.left_source == Source.INTERPOLATED
         tau = (along_m(result.left[gap], road) - 40.0) / 30.0
         h00, h01, h11 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3, tau**3 - tau**2
-        bend = 0.0 if interpolation == "hermite" else 1.0
         d = 30.0 * np.minimum(tau, 1.0 - tau)
-        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma_e) ** 2
+        expected = np.sqrt((BRIDGE_SIGMA_FLOOR_PER_M[interpolation] * d) ** 2 + (h00 * sigma_e) ** 2
                            + (h01 * sigma_c) ** 2 + (h01 * sxy) ** 2 + (h11 * 30.0 * syaw) ** 2)
         np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=2e-3)
 
@@ -195,9 +194,9 @@ def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None
 @pytest.mark.parametrize("interpolation", ["paper", "hermite"])
 def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpolation: str) -> None:
     """A right-angle corner of radius 20 m inside the gap between two straights: the bend is
-    F = π/2 (both ends straight) for ``hermite``, 1 for ``paper``; the interpolation term
-    k·F·d at distance d from the nearer end, on top of the ends' σ carried by h00, h01
-    (exact poses)."""
+    F = π/2 for both (``hermite``: both ends straight, no arc follows the turn; ``paper``: the
+    ends' turn); the interpolation term sqrt(k₀² + (k₁·F)²)·d at distance d from the nearer
+    end, on top of the ends' σ carried by h00, h01 (exact poses)."""
     sigma = 0.02
     arc = Segment(20.0 * math.pi / 2.0, 1.0 / 20.0)
     road = AnalyticRoad([Segment(80.0), arc, Segment(80.0)], yaw0=0.3)
@@ -212,9 +211,8 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
     tau = s[1:-1] / s[-1]
     h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
     d = s[-1] * np.minimum(tau, 1.0 - tau)
-    k = BRIDGE_SIGMA_PER_M[interpolation]
-    bend = math.pi / 2.0 if interpolation == "hermite" else 1.0
-    expected = np.sqrt((k * bend * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
+    k0, k1 = BRIDGE_SIGMA_FLOOR_PER_M[interpolation], BRIDGE_SIGMA_PER_M[interpolation]
+    expected = np.sqrt((k0 * d) ** 2 + (k1 * math.pi / 2.0 * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
     np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=1e-3)
     assert result.left_sigma[gap].max() > 0.5  # k·F·d at mid-bridge, d ≥ 15 m
 
@@ -222,11 +220,12 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
 def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
     """A gap inside an arc of radius 150 m: the ends' turn is the arc's own (F = |Δψ − L·κ̄| +
     L·|Δκ| ≈ 0), so hermite's bridge σ is the ends' σ carried by h00, h01 alone, while the
-    paper's keeps k·d (F = 1)."""
+    paper's keeps sqrt(k₀² + (k₁·F)²)·d with F = |Δψ| = 30 m / 150 m, the arc's turn between
+    the ends."""
     sigma = 0.03
     road = AnalyticRoad([Segment(20.0), Segment(200.0, 1.0 / 150.0)], yaw0=-0.5)
     ego, coop = sensed(road, 40.0, sigma), sensed(road, 100.0, sigma)  # a 30 m gap
-    for interpolation, bend in (("hermite", 0.0), ("paper", 1.0)):
+    for interpolation, bend in (("hermite", 0.0), ("paper", 30.0 / 150.0)):
         result = fusion.fuse(ego, coop, interpolation=interpolation)
         assert result.kind == "spline"
         inside = np.flatnonzero(result.left_source == Source.INTERPOLATED)
@@ -235,8 +234,8 @@ def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
         tau = s[1:-1] / s[-1]
         h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
         d = s[-1] * np.minimum(tau, 1.0 - tau)
-        expected = np.sqrt((BRIDGE_SIGMA_PER_M[interpolation] * bend * d) ** 2 + (h00 * sigma) ** 2
-                           + (h01 * sigma) ** 2)
+        per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation], BRIDGE_SIGMA_PER_M[interpolation] * bend)
+        expected = np.sqrt((per_m * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
         np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-2)
 
 

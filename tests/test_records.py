@@ -63,6 +63,14 @@ def _reference_calibration(fused: list[FrameRecord]) -> Calibration | None:
                                    np.concatenate([r.sigma_m for r in stated if r.sigma_m is not None]))
 
 
+def _reference_calibration_correct(records: list[FrameRecord]) -> Calibration | None:
+    fused = [r for r in records if r.fused]
+    if _reference_calibration(fused) is None or all(r.truly_fusible is None for r in records):
+        return None
+    return _reference_calibration([r for r in fused if r.truly_fusible]) or Calibration(
+        0, math.nan, math.nan, math.nan, math.nan)
+
+
 def reference_result(key: ScenarioKey, records: list[FrameRecord]) -> ScenarioResult:
     """``ScenarioAccumulator.result`` as it was computed from the records in memory."""
     fused = [r for r in records if r.fused]
@@ -120,7 +128,7 @@ def reference_result(key: ScenarioKey, records: list[FrameRecord]) -> ScenarioRe
         by_route=tuple((group, _reference_route([r for r in fused_pairs if r.fused and r.truly_fusible
                                                  and r.relation == kind]))
                        for group, kind in ROUTE_GROUPS.items()) if fused_pairs else (),
-        calibration=_reference_calibration(fused))
+        calibration=_reference_calibration(fused), calibration_correct=_reference_calibration_correct(records))
 
 
 def reference_csv_rows(key: ScenarioKey, records: list[FrameRecord]) -> list[dict[str, Any]]:

@@ -1,24 +1,36 @@
-"""Calibration of the gap bridge's interpolation σ (``fusion.uncertainty.BRIDGE_SIGMA_PER_M``).
+"""Calibration of the gap bridge's interpolation σ (``fusion.uncertainty.BRIDGE_SIGMA_PER_M``
+k₁ and ``BRIDGE_SIGMA_FLOOR_PER_M`` k₀; the term is sqrt(k₀² + (k₁·F)²)·d at distance d from
+the bridge's nearer end, F = ``fusion.uncertainty.interpolation_bend``).
 
-On noise-free pairs of the analytic road families (``fusion.analytic.FAMILIES``), every
-interpolated point of a spline fusion gives its true error e (distance from the true
-border), its distance d from the nearer end of the bridge and the bridge's bend F
-(``fusion.uncertainty.bridge_bend`` of ``gap_bend`` of the pair's end fits, as the fusion
-computes it; F = 1 for an interpolation whose term does not scale with the bend,
-``BRIDGE_SCALES_WITH_BEND``). The model σ = k·F·d is fitted in the second moment on the tune seed,
-k = sqrt(Σe² / Σ(F·d)²), per interpolation; printed with the coverage of e ≤ k·F·d and
-e ≤ 2k·F·d (68 % / 95 % for Gaussian errors) on the tune and on the report seed, overall and
-per family. No sensor noise and exact poses: the interpolation's own error only.
+Without ``--drives`` (``hermite``, k₀ = 0): on noise-free pairs of the analytic road families
+(``fusion.analytic.FAMILIES``) every interpolated point gives its true error e (distance from
+the true border), d and the bridge's bend F (of ``gap_bend`` of the pair's end fits, as the
+fusion computes it); k₁ = sqrt(Σe² / Σ(F·d)²) on the tune seed, printed with the coverage of
+e ≤ k₁·F·d and e ≤ 2k₁·F·d (68 % / 95 % for Gaussian errors) on the tune and on the report
+seed, overall and per family. No sensor noise and exact poses: the interpolation's own error.
+
+With ``--drives MAP ...`` (``paper``, whose error comes from the detections' noise as well as
+from the road's turn): ``cold-eval --sensor camera --pose-xy 0.05 --pose-yaw 0.002
+--interpolation paper --seed DRIVE_SEED`` on each map, every interpolated point of a correct
+fusion (truly fusible) with its error, d, F and the variance its ends carry in (the bridge's σ²
+without the interpolation term); (k₀, k₁) on a grid (steps 0.0025 m/m, 0.005 m/(m·rad)) with
+the least squared deviation of the share within 1σ and 2σ from 68.3 % and 95.4 % over six
+equally filled bins of F.
 
     .venv/bin/python tools/calibrate_bridge_sigma.py [--pairs 40] [--seed 123] [--report-seed 7]
+    .venv/bin/python tools/calibrate_bridge_sigma.py --drives ../shared/maps/carla/Town01.xodr \\
+        ../shared/maps/carla/Town04.xodr maps/rural.xodr [--drive-seed 0]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
+import tempfile
 from pathlib import Path
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -28,16 +40,16 @@ from fusion.analytic import FAMILIES, detect, family_case  # noqa: E402
 from fusion.api import DEFAULT_PARAMS, ego_frame_borders, end_fits, fuse  # noqa: E402
 from fusion.geometry import cumulative_length, distance_to_polyline  # noqa: E402
 from fusion.types import Source  # noqa: E402
-from fusion.uncertainty import BRIDGE_SCALES_WITH_BEND, bridge_bend, gap_bend  # noqa: E402
+from fusion.uncertainty import gap_bend, interpolation_bend  # noqa: E402
 
-INTERPOLATIONS = ("paper", "hermite")
 OFFSETS_M = (0.0, -4.0)
+COVERAGE = (0.683, 0.954)
 Sample = tuple[str, np.ndarray, np.ndarray]  # family, F·d [rad·m], e [m] of one bridge border's points
 
 
-def samples(pairs: int, seed: int) -> dict[str, list[Sample]]:
-    """Per interpolation: (family, F·d, e) of every bridge border of ``pairs`` pairs per family."""
-    out: dict[str, list[Sample]] = {name: [] for name in INTERPOLATIONS}
+def samples(pairs: int, seed: int) -> list[Sample]:
+    """(family, F·d, e) of every ``hermite`` bridge border of ``pairs`` pairs per family."""
+    out: list[Sample] = []
     for family in FAMILIES:
         rng = np.random.default_rng(seed)
         for _ in range(pairs):
@@ -46,19 +58,18 @@ def samples(pairs: int, seed: int) -> dict[str, list[Sample]]:
             coop = detect(road, s_coop, 30.0, *OFFSETS_M)
             borders, _ = ego_frame_borders(ego, coop)
             ends = gap_bend(end_fits(ego, coop, borders, DEFAULT_PARAMS).arcs())
-            for name in INTERPOLATIONS:
-                result = fuse(ego, coop, mode="spline", interpolation=name)
-                if result.kind != "spline":
+            result = fuse(ego, coop, mode="spline", interpolation="hermite")
+            if result.kind != "spline":
+                continue
+            for points, source, offset in ((result.left, result.left_source, OFFSETS_M[0]),
+                                           (result.right, result.right_source, OFFSETS_M[1])):
+                inside = np.flatnonzero(source == Source.INTERPOLATED)
+                if inside.size == 0:
                     continue
-                for points, source, offset in ((result.left, result.left_source, OFFSETS_M[0]),
-                                               (result.right, result.right_source, OFFSETS_M[1])):
-                    inside = np.flatnonzero(source == Source.INTERPOLATED)
-                    if inside.size == 0:
-                        continue
-                    s = cumulative_length(points[inside[0] - 1: inside[-1] + 2])
-                    d = np.minimum(s, s[-1] - s)[1:-1]
-                    bend = bridge_bend(*ends, float(s[-1])) if BRIDGE_SCALES_WITH_BEND[name] else 1.0
-                    out[name].append((family, bend * d, distance_to_polyline(points[inside], road.border(offset))))
+                s = cumulative_length(points[inside[0] - 1: inside[-1] + 2])
+                d = np.minimum(s, s[-1] - s)[1:-1]
+                bend = interpolation_bend("hermite", ends, float(s[-1]))
+                out.append((family, bend * d, distance_to_polyline(points[inside], road.border(offset))))
     return out
 
 
@@ -70,21 +81,112 @@ def coverage(rows: list[Sample], k: float) -> str:
     return f"{shares(rows)} (" + ", ".join(f"{f} {shares([r for r in rows if r[0] == f])}" for f in FAMILIES) + ")"
 
 
+@contextlib.contextmanager
+def recorded_bridges() -> Iterator[list[tuple[np.ndarray, ...]]]:
+    """While open, every ``paper`` bridge border the evaluator records as a correct fusion:
+    (e, d, F, variance of the ends) per interpolated point."""
+    import fusion
+    import fusion.api as api
+    from cold_maps.evaluation import evaluator
+
+    rows: list[tuple[np.ndarray, ...]] = []
+    pending: list[tuple[np.ndarray, ...]] = []
+    fused: dict[int, tuple[Any, np.ndarray, tuple[np.ndarray, ...] | None]] = {}
+    bridge, fuse_pair, record = api.bridge_variance, fusion.fuse, evaluator.MapEvaluator._record
+
+    def bridge_parts(gap, start, stop, ego_end, coop_start, interpolation, bend):  # type: ignore[no-untyped-def]
+        chain = np.concatenate((start[None, :], gap, stop[None, :]))
+        s = cumulative_length(chain)
+        d = np.minimum(s, s[-1] - s)[1:-1]
+        straight = (0.0, 0.0, 0.0)
+        ends = bridge(gap, start, stop, ego_end, coop_start, "hermite", straight)  # hermite: k₀ = 0, F(0) = 0
+        pending.append((d, np.full(d.size, interpolation_bend(interpolation, bend, float(s[-1]) or 1.0)), ends))
+        return bridge(gap, start, stop, ego_end, coop_start, interpolation, bend)
+
+    def fuse_and_keep(*args, **kwargs):  # type: ignore[no-untyped-def]
+        pending.clear()
+        result = fuse_pair(*args, **kwargs)
+        calls = list(pending)
+        for index, side in enumerate(("left", "right")):
+            sigma = getattr(result, f"{side}_sigma")
+            inside = getattr(result, f"{side}_source") == Source.INTERPOLATED
+            if sigma is not None and kwargs.get("interpolation") == "paper" and len(calls) == 2:
+                fused[id(sigma)] = (sigma, inside, calls[index] if calls[index][0].size == inside.sum() else None)
+        return result
+
+    def record_bridges(self, collector, scenario, keys, measured, *args, **kwargs):  # type: ignore[no-untyped-def]
+        truth = args[6]
+        for errors, sigma in zip((measured.left_errors_m, measured.right_errors_m), kwargs.get("sigmas", ())):
+            found = fused.pop(id(sigma), None) if sigma is not None else None
+            if truth and found is not None and found[0] is sigma and found[2] is not None:
+                rows.append((errors[found[1]], *found[2]))
+        return record(self, collector, scenario, keys, measured, *args, **kwargs)
+
+    api.bridge_variance, fusion.fuse, evaluator.MapEvaluator._record = bridge_parts, fuse_and_keep, record_bridges
+    try:
+        yield rows
+    finally:
+        api.bridge_variance, fusion.fuse, evaluator.MapEvaluator._record = bridge, fuse_pair, record
+
+
+def drive_samples(maps: list[Path], seed: int) -> tuple[np.ndarray, ...]:
+    """(e, d, F, ends' variance) of every interpolated point of the correct ``paper`` fusions
+    of ``cold-eval`` camera drives on ``maps``."""
+    from cold_maps.cli import evaluate
+
+    with recorded_bridges() as rows, tempfile.TemporaryDirectory() as folder:
+        for index, path in enumerate(maps):
+            status = evaluate.main(["--map", str(path), "--sensor", "camera", "--pose-xy", "0.05", "--pose-yaw",
+                                    "0.002", "--interpolation", "paper", "--seed", str(seed), "--workers", "1",
+                                    "--no-mcap", "--no-plots", "-q", "--out", str(Path(folder) / str(index))])
+            if status != 0:
+                raise SystemExit(f"cold-eval failed on {path}")
+    return tuple(np.concatenate(column) for column in zip(*rows))
+
+
+def fit_drives(e: np.ndarray, d: np.ndarray, bend: np.ndarray, ends: np.ndarray) -> tuple[float, float, str]:
+    """(k₀, k₁) of the grid with the least squared deviation from :data:`COVERAGE` over six
+    equally filled bins of F, and the shares per bin."""
+    edges = np.quantile(bend, np.linspace(0.0, 1.0, 7))
+    index = np.clip(np.searchsorted(edges, bend, side="right") - 1, 0, 5)
+    counts = np.bincount(index, minlength=6)
+    best: tuple[float, float, float, np.ndarray, np.ndarray] | None = None
+    for k0 in np.arange(0.0, 0.08, 0.0025):
+        for k1 in np.arange(0.0, 0.25, 0.005):
+            z = e / np.sqrt(ends + (k0 * d) ** 2 + (k1 * bend * d) ** 2)
+            within = [np.bincount(index, z <= k, 6) / counts for k in (1.0, 2.0)]
+            cost = float(sum(np.sum((w - c) ** 2) for w, c in zip(within, COVERAGE)))
+            if best is None or cost < best[0]:
+                best = (cost, float(k0), float(k1), *within)
+    assert best is not None
+    _, k0, k1, one, two = best
+    bins = ", ".join(f"F {lo:.3f}–{hi:.3f}: {a:.3f} / {b:.3f}" for lo, hi, a, b in zip(edges[:-1], edges[1:], one, two))
+    return k0, k1, bins
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pairs", type=int, default=40, help="pairs per family (default 40)")
     parser.add_argument("--seed", type=int, default=123, help="seed of the road draws k is fitted on (default 123)")
     parser.add_argument("--report-seed", type=int, default=7, help="seed of the road draws reported (default 7)")
+    parser.add_argument("--drives", type=Path, nargs="+", metavar="MAP", help="fit paper's k₀, k₁ on these maps' drives")
+    parser.add_argument("--drive-seed", type=int, default=0, help="cold-eval --seed of the drives (default 0)")
     args = parser.parse_args()
+    if args.drives:
+        e, d, bend, ends = drive_samples(args.drives, args.drive_seed)
+        k0, k1, bins = fit_drives(e, d, bend, ends)
+        z = e / np.sqrt(ends + (k0 * d) ** 2 + (k1 * bend * d) ** 2)
+        print(f"paper: k0 = {k0:.4f} m/m, k1 = {k1:.4f} m/(m·rad) over {e.size} points; "
+              f"within 1σ / 2σ {np.mean(z <= 1):.3f} / {np.mean(z <= 2):.3f}")
+        print(f"  per bin: {bins}")
+        return 0
     tune, report = samples(args.pairs, args.seed), samples(args.pairs, args.report_seed)
-    for name in INTERPOLATIONS:
-        fd = np.concatenate([row[1] for row in tune[name]])
-        e = np.concatenate([row[2] for row in tune[name]])
-        k = math.sqrt(float((e * e).sum() / (fd * fd).sum()))
-        unit = "m/(m·rad)" if BRIDGE_SCALES_WITH_BEND[name] else "m/m"
-        print(f"{name}: k = {k:.4f} {unit} over {e.size} points")
-        print(f"  within 1σ / 2σ, tune seed {args.seed}: {coverage(tune[name], k)}")
-        print(f"  within 1σ / 2σ, report seed {args.report_seed}: {coverage(report[name], k)}")
+    fd = np.concatenate([row[1] for row in tune])
+    e = np.concatenate([row[2] for row in tune])
+    k = math.sqrt(float((e * e).sum() / (fd * fd).sum()))
+    print(f"hermite: k1 = {k:.4f} m/(m·rad) over {e.size} points")
+    print(f"  within 1σ / 2σ, tune seed {args.seed}: {coverage(tune, k)}")
+    print(f"  within 1σ / 2σ, report seed {args.report_seed}: {coverage(report, k)}")
     return 0
 
 

@@ -9,7 +9,7 @@
 - :func:`plot_frame_overlay`: GT, ego and cooperative detections and the fused lane of one
   frame in the world frame, equal aspect (the paper's Fig. 8).
 - :func:`plot_reliability`: observed against stated coverage of the lanes' stated σ (only
-  where they state one).
+  where they state one), of all fused points and of the correct fusions'.
 
 Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 """
@@ -49,6 +49,8 @@ labels, axis labels and title, fixed instead of measuring the text (``tight_layo
 
 RELIABILITY_SIGMAS: Final[NDArrayFloat] = np.linspace(0.1, 3.0, 30)
 """The multiples k of the stated σ at which the reliability plot compares coverages."""
+CORRECT_SUFFIX: Final[str] = ", correct fusions"
+"""Appended to a scenario's label for the reliability curve of its correct fusions alone."""
 LOG_SPAN_RATIO: Final[float] = 100.0
 """Errors whose largest and smallest positive value differ by this factor or more are drawn
 on a log scale."""
@@ -308,37 +310,50 @@ def plot_error_vs_range(path: str | os.PathLike[str], groups: Mapping[int, NDArr
 def reliability_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[str, NDArrayFloat]:
     """Per scenario label (boundaries pooled): ``(K, 2)`` stated coverage of ±kσ for Gaussian
     errors, erf(k/√2), and the observed share of the points whose error is at most kσ, for k
-    in :data:`RELIABILITY_SIGMAS`; only scenarios whose fused records state σ."""
+    in :data:`RELIABILITY_SIGMAS`; only scenarios whose fused records state σ. Scenarios whose
+    records know their truth (fusions) add the label + :data:`CORRECT_SUFFIX`: the correct
+    fusions' points alone (absent when none states σ)."""
     within: dict[str, tuple[list[int], list[int]]] = {}  # label -> (count within kσ per k, [points])
     for scenario in scenarios:
-        for batch in scenario.records.batches(("errors_m", "sigma_m")):
+        for batch in scenario.records.batches(("errors_m", "sigma_m", "truly_fusible")):
             errors, offsets = list_values(batch.column("errors_m"))
             sigmas, sigma_offsets = list_values(batch.column("sigma_m"))
             stated = (np.diff(offsets) > 0) & ~nulls(batch.column("sigma_m"))
             if not stated.any():
                 continue
-            e = errors[offsets[0]:offsets[-1]][np.repeat(stated, np.diff(offsets))]
-            s = sigmas[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(stated, np.diff(sigma_offsets))]
-            counts, total = within.setdefault(scenario.key.label, ([0] * len(RELIABILITY_SIGMAS), [0]))
-            for index, k in enumerate(RELIABILITY_SIGMAS):
-                counts[index] += int(np.count_nonzero(e <= k * s))
-            total[0] += e.size
+            truth = batch.column("truly_fusible")
+            chosen = {scenario.key.label: stated}
+            if truth.null_count < len(truth):
+                chosen[scenario.key.label + CORRECT_SUFFIX] = stated & truth.fill_null(False).to_numpy(
+                    zero_copy_only=False).astype(bool)
+            for label, mask in chosen.items():
+                e = errors[offsets[0]:offsets[-1]][np.repeat(mask, np.diff(offsets))]
+                s = sigmas[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(mask, np.diff(sigma_offsets))]
+                counts, total = within.setdefault(label, ([0] * len(RELIABILITY_SIGMAS), [0]))
+                for index, k in enumerate(RELIABILITY_SIGMAS):
+                    counts[index] += int(np.count_nonzero(e <= k * s))
+                total[0] += e.size
     stated_share = np.array([math.erf(k / math.sqrt(2.0)) for k in RELIABILITY_SIGMAS])
     return {label: np.column_stack((stated_share, np.array(counts, dtype=float) / total[0]))
-            for label, (counts, total) in within.items()}
+            for label, (counts, total) in within.items() if total[0]}
 
 
 def plot_reliability(path: str | os.PathLike[str], curves: Mapping[str, NDArrayFloat], title: str = "") -> None:
     """Reliability of the stated σ: observed against stated coverage of ±kσ, one line per
-    scenario (``curves``: :func:`reliability_points`), the diagonal where they are calibrated
-    (above it: the σ is conservative, below: overconfident)."""
+    scenario (``curves``: :func:`reliability_points`; its correct fusions dashed in the same
+    colour), the diagonal where they are calibrated (above it: the σ is conservative, below:
+    overconfident)."""
     if not curves:
         raise ValueError("plot_reliability: no scenario states σ")
     figure = _figure(boxed=False)
     axes = figure.add_subplot()
     axes.plot([0.0, 1.0], [0.0, 1.0], color="0.5", linestyle=":", label="calibrated")
-    for index, (label, points) in enumerate(sorted(curves.items())):
-        axes.plot(points[:, 0], points[:, 1], color=f"C{index}", marker=".", label=label)
+    colours = {label: f"C{index}" for index, label in enumerate(sorted(
+        {label.removesuffix(CORRECT_SUFFIX) for label in curves}))}
+    for label, points in sorted(curves.items()):
+        correct = label.endswith(CORRECT_SUFFIX)
+        axes.plot(points[:, 0], points[:, 1], color=colours[label.removesuffix(CORRECT_SUFFIX)],
+                  marker="" if correct else ".", linestyle="--" if correct else "-", label=label)
     axes.set_xlabel("stated coverage of ±kσ (Gaussian)")
     axes.set_ylabel("observed share within kσ")
     axes.set_xlim(0.0, 1.0)

@@ -65,9 +65,14 @@
           "end_reasons": {"range": 300},     # why the ego's own detections ended (local scenarios; {} elsewhere)
           # only when the lanes evaluated state their σ (fusion.FusionResult.left_sigma):
           "calibration": {"points": 12000, "within_1sigma": 0.69, "within_2sigma": 0.95,
-                          "mean_sigma_m": 0.08, "mean_error_m": 0.06}
+                          "mean_sigma_m": 0.08, "mean_error_m": 0.06},
                                      # share of points whose error is within 1σ / 2σ of their stated σ
                                      # (68 % / 95 % when calibrated), mean stated σ beside the mean error
+          "calibration_correct": {"points": 11500, "within_1sigma": 0.70, "within_2sigma": 0.96,
+                                  "mean_sigma_m": 0.08, "mean_error_m": 0.05}
+                                     # the same over the correct fusions alone (truly fusible pairs);
+                                     # beside "calibration" in fusion scenarios; points 0 and nulls
+                                     # when no correct fusion states σ
         }
       ]
     }
@@ -392,6 +397,9 @@ class ScenarioResult:
         end_reasons: (reason, count) of why the ego's own detections ended, sorted by reason.
         calibration: the errors of the fused points that state a σ against it
             (:class:`gt_matching.metrics.Calibration`), None when none does.
+        calibration_correct: the same over the correct fusions alone (records truly
+            fusible), None without ``calibration`` or when no record knows its truth (local
+            scenarios); no points (NaN shares) when no correct fusion states σ.
     """
 
     key: ScenarioKey
@@ -426,6 +434,7 @@ class ScenarioResult:
     stopping_known_frames: int = 0
     end_reasons: tuple[tuple[str, int], ...] = ()
     calibration: Calibration | None = None
+    calibration_correct: Calibration | None = None
 
     @property
     def stopping_share(self) -> float:
@@ -458,10 +467,11 @@ class ScenarioResult:
         } | extended | ({"gt_unmatched": dict(self.gt_unmatched)} if self.gt_unmatched else {}) | (
             {"by_route": {group: {"fused": e.fused, "mean_error_m": f(e.mean_error_m), "max_error_m": f(e.max_error_m),
                                   "p95_error_m": f(e.p95_error_m)} for group, e in self.by_route}}
-            if self.by_route else {}) | self._added_dict() | ({"calibration": {
-                "points": self.calibration.points, "within_1sigma": self.calibration.within_1sigma,
-                "within_2sigma": self.calibration.within_2sigma, "mean_sigma_m": self.calibration.mean_sigma_m,
-                "mean_error_m": self.calibration.mean_error_m}} if self.calibration is not None else {})
+            if self.by_route else {}) | self._added_dict() | {
+                name: {"points": c.points, "within_1sigma": f(c.within_1sigma), "within_2sigma": f(c.within_2sigma),
+                       "mean_sigma_m": f(c.mean_sigma_m), "mean_error_m": f(c.mean_error_m)}
+                for name, c in (("calibration", self.calibration), ("calibration_correct", self.calibration_correct))
+                if c is not None}
 
     def _added_dict(self) -> dict[str, Any]:
         """The keys of the range distribution, the near / far errors, the stopping distance
@@ -541,19 +551,17 @@ class ScenarioResult:
                 _none_to_nan(errors[name], f"{where}.by_route.{group}.{name}")
                 for name in ("mean_error_m", "max_error_m", "p95_error_m"))))
                 for group, errors in record.get("by_route", {}).items())
-            calibration = None
-            if "calibration" in record:
-                found = record["calibration"]
-                calibration = Calibration(int(found["points"]), *(
-                    _none_to_nan(found[name], f"{where}.calibration.{name}")
-                    for name in ("within_1sigma", "within_2sigma", "mean_sigma_m", "mean_error_m")))
+            calibration = {name: Calibration(int(record[name]["points"]), *(
+                _none_to_nan(record[name][field], f"{where}.{name}.{field}")
+                for field in ("within_1sigma", "within_2sigma", "mean_sigma_m", "mean_error_m")))
+                for name in ("calibration", "calibration_correct") if name in record}
             return cls(key=key, points=int(record["points"]), frames=int(record["frames"]),
                        fused_frames=int(record["fused_frames"]), rejected=rejected, gt_unmatched=gt_unmatched,
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
-                       by_route=by_route, calibration=calibration, **num, **cls._added_fields(record, where))
+                       by_route=by_route, **calibration, **num, **cls._added_fields(record, where))
         except ReportError:
             raise
         except KeyError as exc:
@@ -657,6 +665,7 @@ SCALAR_COLUMNS: Final[tuple[str, ...]] = (
     "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s", "stopping_deceleration_mps2", "max_error_m")
 """The per-record columns :meth:`ScenarioAccumulator.result` loads whole (one scenario's)."""
 POINT_POOLS: Final[tuple[str, ...]] = ("all", "correct", "near", "far", "sigma_errors", "sigmas",
+                                       "correct_sigma_errors", "correct_sigmas",
                                        *(f"route_{group}" for group in ROUTE_GROUPS))
 """The pooled point errors :meth:`ScenarioAccumulator.result` builds in one pass."""
 
@@ -723,11 +732,12 @@ class ScenarioAccumulator:
                 out[name] = np.concatenate(chunks) if chunks else np.empty(0)
         return out
 
-    def _pools(self, spool: Spool) -> tuple[dict[str, PointPool], int, int]:
+    def _pools(self, spool: Spool) -> tuple[dict[str, PointPool], dict[str, list[int]]]:
         """The :data:`POINT_POOLS` in one pass over the points, and how many σ-stating points
-        lie within 1σ and 2σ."""
+        lie within 1σ and 2σ: of all fused records (``"sigma"``) and of the correct fusions
+        (``"correct_sigma"``, truly fusible)."""
         pooled = pools(spool, POINT_POOLS)
-        within = [0, 0]
+        within = {"sigma": [0, 0], "correct_sigma": [0, 0]}
         for batch in self.records.batches(("errors_m", "sigma_m", "near_points", "predicted_fusible",
                                            "truly_fusible", "relation")):
             values, offsets = list_values(batch.column("errors_m"))
@@ -761,13 +771,14 @@ class ScenarioAccumulator:
             if stated.any():
                 sigma_values, sigma_offsets = list_values(sigma_column)
                 sigma_lengths = np.diff(sigma_offsets)
-                errors = points(stated)
-                sigmas = sigma_values[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(stated, sigma_lengths)]
-                within[0] += int(np.count_nonzero(errors <= sigmas))
-                within[1] += int(np.count_nonzero(errors <= 2.0 * sigmas))
-                pooled["sigma_errors"].append(errors)
-                pooled["sigmas"].append(sigmas)
-        return pooled, within[0], within[1]
+                for name, chosen in (("sigma", stated), ("correct_sigma", stated & truly)):
+                    errors = points(chosen)
+                    sigmas = sigma_values[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(chosen, sigma_lengths)]
+                    within[name][0] += int(np.count_nonzero(errors <= sigmas))
+                    within[name][1] += int(np.count_nonzero(errors <= 2.0 * sigmas))
+                    pooled[f"{name}_errors"].append(errors)
+                    pooled[f"{name}s"].append(sigmas)
+        return pooled, within
 
     def result(self) -> ScenarioResult:
         """The aggregate over all records (pooled distances, see the module docstring),
@@ -775,15 +786,15 @@ class ScenarioAccumulator:
         pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory."""
         spool = Spool()
         try:
-            pooled, within_1, within_2 = self._pools(spool)
-            return self._result(self._scalars(), pooled, within_1, within_2)
+            pooled, within = self._pools(spool)
+            return self._result(self._scalars(), pooled, within)
         finally:
             for pool in pooled.values() if "pooled" in locals() else ():
                 pool.close()
             spool.close()
 
-    def _result(self, c: Mapping[str, Any], pooled: Mapping[str, PointPool], within_1: int,
-                within_2: int) -> ScenarioResult:
+    def _result(self, c: Mapping[str, Any], pooled: Mapping[str, PointPool],
+                within: Mapping[str, list[int]]) -> ScenarioResult:
         nan = math.nan
         points, frame = c["points"], c["frame"]
         fused = points > 0
@@ -840,10 +851,9 @@ class ScenarioAccumulator:
                                                                              & (relation == kind))),
                                                        pooled[f"route_{group}"]))
                            for group, kind in ROUTE_GROUPS.items()) if fused_pairs.any() else (),
-            calibration=None if not pooled["sigmas"].size else Calibration(
-                points=pooled["sigmas"].size, within_1sigma=_ratio(within_1, pooled["sigmas"].size),
-                within_2sigma=_ratio(within_2, pooled["sigmas"].size), mean_sigma_m=pooled["sigmas"].mean(),
-                mean_error_m=pooled["sigma_errors"].mean()),
+            calibration=None if not pooled["sigmas"].size else _calibration(pooled, within, "sigma"),
+            calibration_correct=None if not pooled["sigmas"].size or not truly_known.any()
+            else _calibration(pooled, within, "correct_sigma"),
         )
 
     def _added_result(self, c: Mapping[str, Any], fused: np.ndarray, pooled: Mapping[str, PointPool],
@@ -878,6 +888,15 @@ class ScenarioAccumulator:
         """The scenario's ``frames.parquet`` rows (:func:`frames_batch`), batch by batch."""
         for batch in self.records.batches(FRAMES_COLUMNS_STORED):
             yield frames_batch(self.key, batch)
+
+
+def _calibration(pooled: Mapping[str, PointPool], within: Mapping[str, list[int]], name: str) -> Calibration:
+    """The :class:`Calibration` of the pools ``{name}s`` (stated σ) and ``{name}_errors`` with
+    ``within[name]`` points within 1σ and 2σ (NaN shares and means without points)."""
+    sigmas, count = pooled[f"{name}s"], pooled[f"{name}s"].size
+    return Calibration(points=count, within_1sigma=_ratio(within[name][0], count),
+                       within_2sigma=_ratio(within[name][1], count), mean_sigma_m=sigmas.mean(),
+                       mean_error_m=pooled[f"{name}_errors"].mean())
 
 
 def _error_stats(pool: PointPool) -> ErrorStats:
@@ -1224,17 +1243,24 @@ def cold_adds_markdown(results: Sequence[ScenarioResult]) -> str:
 
 def calibration_markdown(results: Sequence[ScenarioResult]) -> str:
     """The scenarios whose lanes state σ: share of points within 1σ / 2σ (68 % / 95 % when
-    calibrated), mean stated σ beside the mean error; "" when none does."""
+    calibrated), mean stated σ beside the mean error, of all fused points and of the correct
+    fusions' ("–" for local scenarios); "" when none states σ."""
+    def cells(c: Calibration | None) -> list[str]:
+        if c is None:
+            return ["–"] * 5
+        return [str(c.points), _fmt(100.0 * c.within_1sigma, 1), _fmt(100.0 * c.within_2sigma, 1),
+                _fmt(c.mean_sigma_m), _fmt(c.mean_error_m)]
+
     rows = [[r.key.map, r.key.fusion, r.key.interpolation or "–", _fmt(r.key.d_s, 1), r.key.boundary,
-             str(c.points), _fmt(100.0 * c.within_1sigma, 1), _fmt(100.0 * c.within_2sigma, 1), _fmt(c.mean_sigma_m),
-             _fmt(c.mean_error_m)]
-            for r in sorted(results, key=_sort_key) if (c := r.calibration) is not None]
+             *cells(r.calibration), *cells(r.calibration_correct)]
+            for r in sorted(results, key=_sort_key) if r.calibration is not None]
     if not rows:
         return ""
-    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", "points", "within 1σ [%]", "within 2σ [%]",
-              "mean σ [m]", "mean error [m]"]
-    return "Errors of the points against the lateral 1σ the fusion states for them (68 % / 95 % when calibrated).\n\n" + \
-        _table(header, rows)
+    columns = ["points", "within 1σ [%]", "within 2σ [%]", "mean σ [m]", "mean error [m]"]
+    header = ["map", "fusion", "interp.", "d_s [m]", "boundary", *columns, *(f"correct {c}" for c in columns)]
+    return ("Errors of the points against the lateral 1σ the fusion states for them (68 % / 95 % when calibrated): "
+            "all fused points, and the correct fusions' alone (the coop truly continues the ego's lane; a false "
+            "fusion's association error is no part of any stated σ).\n\n" + _table(header, rows))
 
 
 def extended_markdown(results: Sequence[ScenarioResult]) -> str:
