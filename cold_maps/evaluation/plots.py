@@ -324,8 +324,7 @@ def reliability_points(scenarios: Sequence[ScenarioAccumulator]) -> dict[str, ND
             truth = batch.column("truly_fusible")
             chosen = {scenario.key.label: stated}
             if truth.null_count < len(truth):
-                chosen[scenario.key.label + CORRECT_SUFFIX] = stated & truth.fill_null(False).to_numpy(
-                    zero_copy_only=False).astype(bool)
+                chosen[scenario.key.label + CORRECT_SUFFIX] = stated & to_numpy(truth, fill=False)
             for label, mask in chosen.items():
                 e = errors[offsets[0]:offsets[-1]][np.repeat(mask, np.diff(offsets))]
                 s = sigmas[sigma_offsets[0]:sigma_offsets[-1]][np.repeat(mask, np.diff(sigma_offsets))]
