@@ -123,6 +123,16 @@ def _chord_errors(points: NDArrayFloat, checked: NDArrayFloat, open_: npt.NDArra
     return np.sqrt(np.square(checked - chord).sum(axis=3)).max(axis=(0, 1), initial=0.0)
 
 
+def _check_stations(
+    stations: NDArrayFloat,
+) -> tuple[npt.NDArray[np.bool_], NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Which intervals between ``stations`` (m) are open (longer than 0), their ends (m),
+    and the stations at ``CHECK_FRACTIONS`` of each (m, fraction by fraction)."""
+    open_ = stations[1:] > stations[:-1]
+    low, high = stations[:-1][open_], stations[1:][open_]
+    return open_, low, high, np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
+
+
 def adaptive_section_samples(
     road: Road, section_index: int, lane_ids: Sequence[int], tolerance_m: float = CHORD_TOLERANCE_M
 ) -> list[LaneBorderSamples]:
@@ -139,12 +149,16 @@ def adaptive_section_samples(
                                   np.asarray(ends, dtype=np.float64))))
     joints = record_joints(road, section_index)
     for _ in range(MAX_ROUNDS):
-        stations, points = section_points(road, section_index, s, lane_ids, joints)
+        if len(joints.boundaries):  # record ends add stations: evaluate them before the checks
+            stations, points = section_points(road, section_index, s, lane_ids, joints)
+            open_, low, high, checks = _check_stations(stations)
+            checked = section_points(road, section_index, checks, lane_ids)[1]
+        else:  # the stations are s: stations and checks in one evaluation
+            stations = s
+            open_, low, high, checks = _check_stations(stations)
+            both = section_points(road, section_index, np.concatenate((stations, checks)), lane_ids)[1]
+            points, checked = np.ascontiguousarray(both[:, :, :len(stations)]), both[:, :, len(stations):]
         borders = points.reshape(-1, len(stations), 3)
-        open_ = stations[1:] > stations[:-1]
-        low, high = stations[:-1][open_], stations[1:][open_]
-        checks = np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
-        checked = section_points(road, section_index, checks, lane_ids)[1]
         errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3), open_)
         refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
         if not refine.any():
@@ -215,9 +229,11 @@ def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner
     owners = marking.owner - marking.owner.min()
     marks = marking.mark_index - NO_MARK
     keys = (marking.type * (int(owners.max()) + 1) + owners) * (int(marks.max()) + 1) + marks
-    unique, inverse = np.unique(keys, return_inverse=True)
-    best = int(np.argmax(np.bincount(inverse, weights=_station_weights(s), minlength=len(unique))))
-    at = int(np.argmax(inverse == best))
+    at = 0
+    if (keys != keys[0]).any():
+        unique, inverse = np.unique(keys, return_inverse=True)
+        best = int(np.argmax(np.bincount(inverse, weights=_station_weights(s), minlength=len(unique))))
+        at = int(np.argmax(inverse == best))
     kind, owner = int(marking.type[at]), int(marking.owner[at])
     if kind in _EDGE_TAGS:
         return tuple(_EDGE_TAGS[kind].items())
@@ -281,13 +297,13 @@ def engine_lanelets(
                 if not _is_zero_width(samples):
                     sampled.append((road, samples, kinds[samples.lane_id]))
     ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
-    stations: dict[tuple[str, int], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
     lanelets = []
+    section_key: tuple[str, int] | None = None
     for road, samples, lane_type in sampled:
-        if (road.id, samples.section) not in stations:
-            at = mark_stations(road, samples.section)
-            stations[road.id, samples.section] = at, section_borders(road, samples.section, at)
-        mark_s, mark_borders = stations[road.id, samples.section]
+        if section_key != (road.id, samples.section):  # a section's lanes come one after the other
+            section_key = road.id, samples.section
+            mark_s = mark_stations(road, samples.section)
+            mark_borders = section_borders(road, samples.section, mark_s)
         key = LaneKey(samples.road_id, samples.section, samples.lane_id)
         along = road.drives_along_s(samples.lane_id, samples.section)
         left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
