@@ -126,11 +126,9 @@ class MapLines:
         line_start = np.repeat(np.cumsum(sizes) - sizes, chunks)
         self._chunk_start = line_start + within
         self._chunk_stop = line_start + np.minimum(within + CHUNK_SAMPLES, np.repeat(sizes, chunks))
-        centres = np.array([self.coarse[a:b].mean(axis=0) for a, b in zip(self._chunk_start, self._chunk_stop)])
-        self._chunk_radius = max(
-            float(np.max(np.hypot(*(self.coarse[a:b] - centre).T)))
-            for a, b, centre in zip(self._chunk_start, self._chunk_stop, centres)
-        )
+        counts = self._chunk_stop - self._chunk_start
+        centres = np.add.reduceat(self.coarse, self._chunk_start, axis=0) / counts[:, None].astype(np.float64)
+        self._chunk_radius = float(np.max(np.hypot(*(self.coarse - np.repeat(centres, counts, axis=0)).T)))
         self._chunk_tree = cKDTree(centres)
         self._samples: dict[tuple[int, float], NDArrayFloat] = {}
         self._trees: dict[tuple[int, float], cKDTree] = {}

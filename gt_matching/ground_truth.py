@@ -201,8 +201,8 @@ class GroundTruth:
 
     Construction extracts every lanelet's geometry, border samples and the borders'
     clearances to other lines, and every line string's samples and KD-tree (with
-    ``prepare_all=False`` the border samples, clearances and KD-trees are built on first
-    use instead: the same results, cheaper when frames match few of the map's lanelets); lanelet
+    ``prepare_all=False`` the lanelets' geometry, border samples, clearances and KD-trees
+    are built on first use instead: the same results, cheaper when frames match few of the map's lanelets); lanelet
     sequences matched by frames are assembled from them on first use (joining arrays) and
     kept (LRU, ``ROUTE_CACHE_SIZE``).
 
@@ -235,12 +235,11 @@ class GroundTruth:
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
         self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
-        for lanelet in lanelet_map.laneletLayer:
-            geometry = self._lanelet(lanelet)
-            if prepare_all:
+        if prepare_all:
+            for lanelet in lanelet_map.laneletLayer:
+                geometry = self._lanelet(lanelet)
                 for side in ("left", "right"):
                     self._part(geometry, side).clearances
-        if prepare_all:
             for slot in range(len(self.lines.vertices)):
                 self.lines.tree(slot, self.config.step_m)
 
@@ -278,10 +277,7 @@ class GroundTruth:
         the GT: ``unmatched`` then marks only points beyond ``max_distance_m``.
         """
         left_xy, right_xy = as_polyline("left border", left), as_polyline("right border", right)
-        unknown = [key for key in match.route_key if key not in self._geometry]
-        if unknown:
-            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
-        route = self._route([self._geometry[key] for key in match.route_key])
+        route = self._route(self._route_geometry(match))
         return self._errors(left_xy, right_xy, match, route, exact, others)
 
     def resampled(self, match: LaneMatch, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat]]
@@ -290,10 +286,7 @@ class GroundTruth:
         order), its points' distances (m) to the GT borders of ``match`` resampled every
         ``config.step_m``: the ``distances_m`` of ``errors(left, right, match,
         others=False)`` bit for bit, all lanes in one pass per border."""
-        unknown = [key for key in match.route_key if key not in self._geometry]
-        if unknown:
-            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
-        route = self._route([self._geometry[key] for key in match.route_key])
+        route = self._route(self._route_geometry(match))
         return list(zip(route.left.resampled([left for left, _ in lanes]),
                         route.right.resampled([right for _, right in lanes])))
 
@@ -323,6 +316,16 @@ class GroundTruth:
         self, left: npt.ArrayLike, right: npt.ArrayLike, pose: Sequence[float]
     ) -> tuple[NDArrayFloat, NDArrayFloat, Pose]:
         return as_polyline("left border", left), as_polyline("right border", right), _pose(pose)
+
+    def _route_geometry(self, match: LaneMatch) -> list[LaneletGeometry]:
+        """The geometry of each lanelet of ``match``'s route; MatchingError naming those
+        not in this GroundTruth's map."""
+        layer = self.lanelet_map.laneletLayer
+        unknown = [key for key in match.route_key if key not in self._geometry and not layer.exists(key[0])]
+        if unknown:
+            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
+        return [self._geometry.get(key) or self._lanelet(layer[key[0]].invert() if key[1] else layer[key[0]])
+                for key in match.route_key]
 
     def _lanelet(self, lanelet: Any) -> LaneletGeometry:
         key = (int(lanelet.id), bool(lanelet.inverted()))

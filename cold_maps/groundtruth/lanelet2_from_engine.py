@@ -51,7 +51,7 @@ from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
-from cold_maps.opendrive.road_marks import BoundaryType, classify_border
+from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
 from cold_maps.opendrive.sampling import LaneBorderSamples, record_joints, sample_s, section_points
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
@@ -93,9 +93,6 @@ MERGE_TOLERANCE_M: Final[float] = 0.0
 """Only equal border points become one node: the borders neighbours share are computed
 once, bit-identical; linked ends are joined (``converters.joins``) whatever their gap."""
 
-GRAPH_LENGTH_STEP_M: Final[float] = 1e9
-"""The lane graph's length sampling step here (m): the builder needs its edges, not its lengths."""
-
 ZERO_WIDTH_M: Final[float] = 1e-3
 """A lane never wider than this (m) over its section gets no lanelet."""
 
@@ -120,12 +117,20 @@ def _chord_errors(points: NDArrayFloat, checked: NDArrayFloat, open_: npt.NDArra
     """Per open interval, the largest distance (m, 3-D) of a border point at one of
     ``CHECK_FRACTIONS`` (``checked``: (borders, fractions, intervals, 3)) from the chord's
     point at the same fraction (``points``: (borders, stations, 3))."""
-    low, high = points[:, :-1][:, open_], points[:, 1:][:, open_]
-    errors = np.zeros(int(open_.sum()))
-    for k, fraction in enumerate(CHECK_FRACTIONS):
-        chord = (1.0 - fraction) * low + fraction * high
-        errors = np.maximum(errors, np.linalg.norm(checked[:, k] - chord, axis=2).max(axis=0, initial=0.0))
-    return errors
+    low, high = points[:, None, :-1][:, :, open_], points[:, None, 1:][:, :, open_]
+    fractions = np.asarray(CHECK_FRACTIONS)[:, None, None]
+    chord = (1.0 - fractions) * low + fractions * high
+    return np.sqrt(np.square(checked - chord).sum(axis=3)).max(axis=(0, 1), initial=0.0)
+
+
+def _check_stations(
+    stations: NDArrayFloat,
+) -> tuple[npt.NDArray[np.bool_], NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Which intervals between ``stations`` (m) are open (longer than 0), their ends (m),
+    and the stations at ``CHECK_FRACTIONS`` of each (m, fraction by fraction)."""
+    open_ = stations[1:] > stations[:-1]
+    low, high = stations[:-1][open_], stations[1:][open_]
+    return open_, low, high, np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
 
 
 def adaptive_section_samples(
@@ -144,12 +149,16 @@ def adaptive_section_samples(
                                   np.asarray(ends, dtype=np.float64))))
     joints = record_joints(road, section_index)
     for _ in range(MAX_ROUNDS):
-        stations, points = section_points(road, section_index, s, lane_ids, joints)
+        if len(joints.boundaries):  # record ends add stations: evaluate them before the checks
+            stations, points = section_points(road, section_index, s, lane_ids, joints)
+            open_, low, high, checks = _check_stations(stations)
+            checked = section_points(road, section_index, checks, lane_ids)[1]
+        else:  # the stations are s: stations and checks in one evaluation
+            stations = s
+            open_, low, high, checks = _check_stations(stations)
+            both = section_points(road, section_index, np.concatenate((stations, checks)), lane_ids)[1]
+            points, checked = np.ascontiguousarray(both[:, :, :len(stations)]), both[:, :, len(stations):]
         borders = points.reshape(-1, len(stations), 3)
-        open_ = stations[1:] > stations[:-1]
-        low, high = stations[:-1][open_], stations[1:][open_]
-        checks = np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
-        checked = section_points(road, section_index, checks, lane_ids)[1]
         errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3), open_)
         refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
         if not refine.any():
@@ -199,6 +208,16 @@ def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
     return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
 
 
+def _station_weights(s: NDArrayFloat) -> NDArrayFloat:
+    """Length (m) each station stands for: ``np.gradient(s)`` (1 for a single station)."""
+    if len(s) < 2:
+        return np.ones(len(s))
+    weights = np.empty(len(s))
+    weights[1:-1] = (s[2:] - s[:-2]) / 2.0
+    weights[0], weights[-1] = s[1] - s[0], s[-1] - s[-2]
+    return weights
+
+
 def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
               way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
               ) -> tuple[tuple[str, str], ...]:
@@ -206,14 +225,18 @@ def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner
     ``section_borders`` there) whose way runs along s when ``way_along_s``: the boundary
     kind covering most of its length (module docstring)."""
     marking = classify_border(road, section_index, lane_id, side, s, borders)
-    weights = np.gradient(s) if len(s) > 1 else np.ones(len(s))
-    keys = np.column_stack((marking.type, marking.owner, marking.mark_index))
-    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
-    best = int(np.argmax(np.bincount(inverse.ravel(), weights=weights)))
-    kind, owner = int(unique[best][0]), int(unique[best][1])
+    # (type, owner, mark index) as one integer in the same lexicographic order
+    owners = marking.owner - marking.owner.min()
+    marks = marking.mark_index - NO_MARK
+    keys = (marking.type * (int(owners.max()) + 1) + owners) * (int(marks.max()) + 1) + marks
+    at = 0
+    if (keys != keys[0]).any():
+        unique, inverse = np.unique(keys, return_inverse=True)
+        best = int(np.argmax(np.bincount(inverse, weights=_station_weights(s), minlength=len(unique))))
+        at = int(np.argmax(inverse == best))
+    kind, owner = int(marking.type[at]), int(marking.owner[at])
     if kind in _EDGE_TAGS:
         return tuple(_EDGE_TAGS[kind].items())
-    at = int(np.flatnonzero(inverse.ravel() == best)[0])
     mark = marking.mark(road, section_index, at)
     if mark is None:
         return (("type", "virtual"),)
@@ -274,13 +297,13 @@ def engine_lanelets(
                 if not _is_zero_width(samples):
                     sampled.append((road, samples, kinds[samples.lane_id]))
     ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
-    stations: dict[tuple[str, int], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
     lanelets = []
+    section_key: tuple[str, int] | None = None
     for road, samples, lane_type in sampled:
-        if (road.id, samples.section) not in stations:
-            at = mark_stations(road, samples.section)
-            stations[road.id, samples.section] = at, section_borders(road, samples.section, at)
-        mark_s, mark_borders = stations[road.id, samples.section]
+        if section_key != (road.id, samples.section):  # a section's lanes come one after the other
+            section_key = road.id, samples.section
+            mark_s = mark_stations(road, samples.section)
+            mark_borders = section_borders(road, samples.section, mark_s)
         key = LaneKey(samples.road_id, samples.section, samples.lane_id)
         along = road.drives_along_s(samples.lane_id, samples.section)
         left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
@@ -331,7 +354,7 @@ def engine_converter(odr_map: OpenDriveMap | None = None) -> Converter:
             raise ConversionError(str(path), f"cannot read the map: {exc.strerror or exc}") from exc
         try:
             engine_map = odr_map if same and odr_map is not None else load_opendrive(path)
-            graph = build_lane_graph(engine_map, LANE_TYPES, length_step=GRAPH_LENGTH_STEP_M)
+            graph = build_lane_graph(engine_map, LANE_TYPES, length_step=None)  # its edges, not its lengths
             rules = read_road_rules(engine_map, graph)
             result = engine_lanelets(engine_map, graph, rules.road_types, rules.regulations, rules.priority)
         except (OpenDriveError, ValueError) as exc:

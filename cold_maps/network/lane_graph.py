@@ -21,6 +21,7 @@ that name missing roads, junctions or lanes, are reported in ``LaneGraph.issues`
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -64,7 +65,8 @@ class LaneGraph:
     Fields:
         odr_map: the map the graph was built from.
         lane_types: OpenDRIVE lane types included as nodes.
-        lengths: node → length of the lane's centreline polyline (m, world frame).
+        lengths: node → length of the lane's centreline polyline (m, world frame; NaN when
+            built without measuring them, ``build_lane_graph(length_step=None)``).
         successors: node → lanes a vehicle can drive into from its end, sorted.
         predecessors: node → lanes from which a vehicle drives into it, sorted.
         issues: human-readable reports of links that name missing roads, junctions or
@@ -116,15 +118,16 @@ def build_lane_graph(
     odr_map: OpenDriveMap,
     lane_types: Sequence[str] | None = VEHICLE_LANE_TYPES,
     *,
-    length_step: float = LENGTH_STEP_M,
+    length_step: float | None = LENGTH_STEP_M,
 ) -> LaneGraph:
     """Build the lane graph of ``odr_map`` over the lanes of ``lane_types`` (None → all).
 
     Lane lengths are the lengths of the centreline polylines sampled every
     ``length_step`` metres (the chord error on a curve of radius R is about
-    L·step²/(24·R²)).
+    L·step²/(24·R²)); ``length_step`` None: not measured (every length NaN), for a
+    caller that needs the lanes and their links only.
     """
-    if not length_step > 0:
+    if length_step is not None and not length_step > 0:
         raise ValueError(f"length_step must be > 0 m, got {length_step!r}")
     types = None if lane_types is None else tuple(lane_types)
     nodes = _nodes(odr_map, types)
@@ -146,7 +149,8 @@ def build_lane_graph(
     return LaneGraph(
         odr_map=odr_map,
         lane_types=types if types is not None else tuple(sorted(set(nodes.values()))),
-        lengths=MappingProxyType(_lane_lengths(odr_map, nodes, types, length_step)),
+        lengths=MappingProxyType(dict.fromkeys(nodes, math.nan) if length_step is None
+                                 else _lane_lengths(odr_map, nodes, types, length_step)),
         successors=MappingProxyType({k: tuple(sorted(v)) for k, v in successors.items()}),
         predecessors=MappingProxyType({k: tuple(sorted(v)) for k, v in predecessors.items()}),
         issues=tuple(issues),

@@ -56,6 +56,8 @@ def evaluate(
     records: Sequence[CubicPoly], s: NDArrayFloat, *, s_offset: float = 0.0, before: float | None = None
 ) -> NDArrayFloat:
     """The profile value at each s (unit of the records' ``a``); 0 where no record applies."""
+    if not records:
+        return np.zeros(np.shape(s))
     c, ds, applies = _locate(records, s, s_offset, before)
     value = c[..., 0] + ds * (c[..., 1] + ds * (c[..., 2] + ds * c[..., 3]))
     return np.where(applies, value, 0.0)

@@ -193,7 +193,7 @@ def section_points(
     its record ends are added as in ``sample_road``. ValueError naming road, section,
     lane and s where a border point is not finite."""
     section = section_of(road, section_index)
-    if joints is not None:
+    if joints is not None and len(joints.boundaries):
         s, x, y, hdg = _reference_with_record_ends(road, section, s, joints)
     else:
         x, y, hdg = reference_pose(road, s, before=section.s_end)
