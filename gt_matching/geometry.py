@@ -3,6 +3,7 @@ mid-lines, and every border line string of the map with its bounding box and sam
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
 
@@ -102,9 +103,10 @@ class LaneletGeometry:
 class MapLines:
     """Every border line string of a map, each once, in its stored orientation: vertices,
     samples every ``COARSE_STEP_M`` grouped in chunks of ``CHUNK_SAMPLES`` (to find the
-    pieces of lines near a place), and samples every ``step_m`` with their KD-trees."""
+    pieces of lines near a place), and samples every ``step_m`` with their KD-trees (of at
+    most ``cache_size`` lines, the latest used, when given)."""
 
-    def __init__(self, lanelet_map: Any) -> None:
+    def __init__(self, lanelet_map: Any, *, cache_size: int | None = None) -> None:
         from scipy.spatial import cKDTree
 
         self.slot_of_line: dict[int, int] = {}
@@ -130,8 +132,9 @@ class MapLines:
         centres = np.add.reduceat(self.coarse, self._chunk_start, axis=0) / counts[:, None].astype(np.float64)
         self._chunk_radius = float(np.max(np.hypot(*(self.coarse - np.repeat(centres, counts, axis=0)).T)))
         self._chunk_tree = cKDTree(centres)
-        self._samples: dict[tuple[int, float], NDArrayFloat] = {}
-        self._trees: dict[tuple[int, float], cKDTree] = {}
+        self._samples: OrderedDict[tuple[int, float], NDArrayFloat] = OrderedDict()
+        self._trees: OrderedDict[tuple[int, float], cKDTree] = OrderedDict()
+        self._cache_size = cache_size
 
     def slots(self, lines: set[int]) -> NDArrayInt:
         """Slots of the given line string ids that belong to the map."""
@@ -156,6 +159,7 @@ class MapLines:
         found = self._trees.get(key)
         if found is None:
             found = self._trees[key] = cKDTree(self.samples(slot, step_m))
+        self._keep(self._trees, key)
         return found
 
     def samples(self, slot: int, step_m: float) -> NDArrayFloat:
@@ -164,4 +168,12 @@ class MapLines:
         found = self._samples.get(key)
         if found is None:
             found = self._samples[key] = resample(self.vertices[slot], step_m)[0]
+        self._keep(self._samples, key)
         return found
+
+    def _keep(self, cache: OrderedDict[tuple[int, float], Any], key: tuple[int, float]) -> None:
+        """Marks ``key`` used last and drops the least recently used beyond ``cache_size``."""
+        if self._cache_size is not None:
+            cache.move_to_end(key)
+            if len(cache) > self._cache_size:
+                cache.popitem(last=False)

@@ -39,6 +39,11 @@ MAX_SEQUENCES: Final = 4096
 #: bounds a long drive's memory: 600 frames on Town04 touch 154 routes, and an LRU of 16
 #: already misses no more than one of any size).
 ROUTE_CACHE_SIZE: Final = 32
+#: Lanelet borders a ``GroundTruth`` prepared on first use keeps (LRU; with their clearances
+#: about 160 kB each on Town04, 1746 of them), and line strings whose samples and KD-tree it
+#: keeps (``MapLines``, about 80 kB each): a long drive touching much of a map stays bounded;
+#: one prepared whole keeps all.
+PART_CACHE_SIZE: Final = 256
 #: Poses whose candidate lanelets a ``GroundTruth`` keeps (every lane measured in a frame
 #: is matched at the same pose, the ego's).
 CANDIDATE_CACHE_SIZE: Final = 8
@@ -228,9 +233,10 @@ class GroundTruth:
         self.traffic_rules = traffic_rules or lanelet2.traffic_rules.create(
             lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
         )
-        self.lines = MapLines(lanelet_map)
+        self.lines = MapLines(lanelet_map, cache_size=None if prepare_all else PART_CACHE_SIZE)
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
-        self._parts: dict[tuple[LaneletKey, str], BorderPart] = {}
+        self._parts: OrderedDict[tuple[LaneletKey, str], BorderPart] = OrderedDict()
+        self._parts_kept = None if prepare_all else PART_CACHE_SIZE
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
@@ -335,7 +341,8 @@ class GroundTruth:
         return geometry
 
     def _part(self, geometry: LaneletGeometry, side: str) -> BorderPart:
-        """A lanelet border ("left" or "right") prepared for routes (cached)."""
+        """A lanelet border ("left" or "right") prepared for routes (cached; LRU of
+        ``PART_CACHE_SIZE`` when prepared on first use)."""
         key = (geometry.key, side)
         part = self._parts.get(key)
         if part is None:
@@ -348,6 +355,10 @@ class GroundTruth:
                 2.0 * config.max_distance_m + config.other_border_margin_m,
                 config.other_border_margin_m,
             )
+            if self._parts_kept is not None and len(self._parts) > self._parts_kept:
+                self._parts.popitem(last=False)
+        elif self._parts_kept is not None:
+            self._parts.move_to_end(key)
         return part
 
     def _neighbours(self, geometry: LaneletGeometry, way: str) -> list[LaneletGeometry]:

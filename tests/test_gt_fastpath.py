@@ -138,9 +138,18 @@ def test_sequence_arc_equals_per_point_search(grid: tuple[Any, Any, GroundTruth]
         np.testing.assert_allclose(found, expected, rtol=0, atol=TOLERANCE_M)
 
 
-def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[Any, Any, GroundTruth]) -> None:
+@pytest.mark.parametrize("kept", [None, 3])
+def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[Any, Any, GroundTruth],
+                                                                  kept: int | None,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     """prepare_all=False builds border samples, clearances and KD-trees only for the lanelets
-    and lines a frame needs; matches and errors (other-lane check included) are bit-identical."""
+    and lines a frame needs, keeping the latest ``PART_CACHE_SIZE`` (``kept``: so few that
+    they are dropped and built again); matches and errors (other-lane check included) are
+    bit-identical."""
+    from gt_matching import ground_truth
+
+    if kept is not None:
+        monkeypatch.setattr(ground_truth, "PART_CACHE_SIZE", kept)
     lanelet_map, graph, prepared = grid
     lazy = GroundTruth(lanelet_map, graph, prepare_all=False)
     assert not lazy._parts
@@ -158,6 +167,8 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
                 np.testing.assert_array_equal(a.unmatched, b.unmatched)
     built = sum("clearances" in vars(part) for part in lazy._parts.values())
     assert 0 < built <= len(lazy._parts) < len(prepared._parts)
+    if kept is not None:
+        assert len(lazy._parts) == len(lazy.lines._trees) == len(lazy.lines._samples) == kept
 
 
 def test_lanes_matched_at_one_pose_share_its_candidates(grid: tuple[Any, Any, GroundTruth]) -> None:

@@ -256,6 +256,23 @@ def test_frames_csv_from_columns_equals_the_record_rows(tiny_limits: None, tmp_p
             assert text == row[name], (name, value, row[name])
 
 
+def test_frames_parquet_gathers_segments_into_row_groups(tiny_limits: None, tmp_path: Any,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    import pyarrow.parquet as pq
+
+    from cold_maps.evaluation import report as report_module
+
+    monkeypatch.setattr(report_module, "ROW_GROUP_ROWS", 25)
+    keys = [ScenarioKey("m", "convoy", "", 0.0, "left"), ScenarioKey("m", "convoy", "", 0.0, "right")]
+    accumulators = [ScenarioAccumulator(key, make_records(20 + k, 60, sigma=True)) for k, key in enumerate(keys)]
+    segments = sum(len(a.records.segments) + bool(a.records.pending) for a in accumulators)
+    write_frames(tmp_path / "frames.csv", tmp_path / "frames.parquet", accumulators)
+    metadata = pq.ParquetFile(tmp_path / "frames.parquet").metadata
+    rows = [metadata.row_group(i).num_rows for i in range(metadata.num_row_groups)]
+    assert segments > 12 and sum(rows) == 120  # segments of at most 7 records (tiny_limits)
+    assert all(25 <= n < 25 + 7 for n in rows[:-1]) and 0 < rows[-1] < 25 + 7 and len(rows) <= 120 // 25 + 1
+
+
 def test_records_round_trip_through_a_segment() -> None:
     records = make_records(3, 50, sigma=True)
     back = list(batch_records(records_to_batch(records)))

@@ -912,6 +912,9 @@ FRAMES_COLUMNS_STORED: Final[tuple[str, ...]] = (
     "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s",
     "stopping_deceleration_mps2")
 """The stored columns ``frames.csv`` and ``frames.parquet`` are made from."""
+ROW_GROUP_ROWS: Final[int] = 1 << 15
+"""Rows ``frames.parquet`` gathers into one row group (a record segment holds far fewer: a
+row group per segment would make the writer's footer grow with the run, ~20 kB each)."""
 
 
 def frames_schema() -> Any:
@@ -1033,8 +1036,9 @@ def write_frames(csv_path: str | os.PathLike[str], parquet_path: str | os.PathLi
                  accumulators: Iterable[ScenarioAccumulator]) -> None:
     """Writes ``frames.csv`` (one row per frame, vehicle pair and scenario) and
     ``frames.parquet`` (the same rows, typed by :func:`frames_schema`, null where
-    ``frames.csv`` is empty) atomically, both streamed from one pass over the records'
-    columns: neither file is written when either fails."""
+    ``frames.csv`` is empty; row groups of about :data:`ROW_GROUP_ROWS` rows) atomically, both
+    streamed from one pass over the records' columns: neither file is written when either fails."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     for path in (Path(csv_path), Path(parquet_path)):
@@ -1048,13 +1052,22 @@ def write_frames(csv_path: str | os.PathLike[str], parquet_path: str | os.PathLi
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(FRAMES_CSV_COLUMNS)
+        group: list[Any] = []
+        rows = 0
         for accumulator in accumulators:
             for batch in accumulator.frames_batches():
                 writer.writerows(frames_csv_rows(batch))
                 csv_stream.write(buffer.getvalue().encode("utf-8"))
                 buffer.seek(0)
                 buffer.truncate()
-                parquet.write_batch(batch.replace_schema_metadata(schema.metadata))
+                # copies: the columns are views of the record segment, which holds the points too
+                group.append(pa.RecordBatch.from_arrays([pa.concat_arrays([c]) for c in batch.columns], schema=schema))
+                rows += batch.num_rows
+                if rows >= ROW_GROUP_ROWS:
+                    parquet.write_table(pa.Table.from_batches(group, schema))
+                    group, rows = [], 0
+        if group:
+            parquet.write_table(pa.Table.from_batches(group, schema))
         csv_stream.write(buffer.getvalue().encode("utf-8"))
 
 

@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
+from cold_maps.network.route import route_from_lanes
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.opendrive.road_marks import classify_border
 from cold_maps.simulation.drive import Track
@@ -65,8 +66,8 @@ ANGLE_TOLERANCE_RAD: Final[float] = 1e-9
 
 @dataclass(frozen=True)
 class BorderSurface:
-    """A track's two borders at the cross-sections of its route (index-aligned with
-    ``Track.route``).
+    """A track's two borders at the cross-sections of the route through its lanes
+    (``route_from_lanes``, index-aligned with it).
 
     Fields:
         station: (N,) centreline station (m), non-decreasing.
@@ -88,10 +89,11 @@ class BorderSurface:
 
 
 def border_surface(graph: LaneGraph, track: Track) -> BorderSurface:
-    """The :class:`BorderSurface` of ``track`` (ValueError when it has no route)."""
-    route = track.route
-    if route is None:
+    """The :class:`BorderSurface` of ``track`` (ValueError when it has no lanes), from the
+    route through its lanes (``route_from_lanes``, the one ``Track.build`` made its strip of)."""
+    if not track.lanes:
         raise ValueError("the camera sensor needs a track built from lanes (Track.build)")
+    route = route_from_lanes(graph, track.lanes)
     detectable = np.zeros((2, len(route.s)), dtype=bool)
     for index, piece in enumerate(route.pieces):
         road = graph.odr_map.roads[piece.road_id]

@@ -30,7 +30,7 @@ import numpy.typing as npt
 from cold_maps.network.lane_area import offset_inside
 from cold_maps.network.lane_graph import LaneGraph, LaneKey
 from cold_maps.network.lane_strip import LaneStrip, NDArrayFloat
-from cold_maps.network.route import Route, route_from_lanes
+from cold_maps.network.route import route_from_lanes
 from cold_maps.network.routing import (
     LENGTH_TOLERANCE_M,
     longest_route_lengths,
@@ -83,15 +83,15 @@ class Track:
         strip: their centreline and borders by station (m).
         lane_starts: (L + 1,) station (m) where each lane begins; the last entry is the
             track length. From the graph's lane lengths scaled to the strip length.
-        route: the route the strip was built from (road s, heights and lanes of its
-            cross-sections, whose ``distance`` is the station), None for a track built
-            from borders alone.
+
+    A track built from lanes (:meth:`build`) keeps only its strip: the route it came from
+    (road s, heights, ``route_from_lanes(graph, lanes)``) is made again where needed (the
+    camera's road surface), so a long drive holds one copy of its geometry.
     """
 
     lanes: tuple[LaneKey, ...]
     strip: LaneStrip
     lane_starts: NDArrayFloat
-    route: Route | None = None
 
     @classmethod
     def build(cls, graph: LaneGraph, lanes: Sequence[LaneKey]) -> Track:
@@ -99,7 +99,7 @@ class Track:
         route = route_from_lanes(graph, lanes)
         strip = LaneStrip.from_borders(route.left, route.right)
         cumulative = np.concatenate(([0.0], np.cumsum([graph.lengths[lane] for lane in lanes])))
-        return cls(tuple(lanes), strip, cumulative * (strip.length / cumulative[-1]), route)
+        return cls(tuple(lanes), strip, cumulative * (strip.length / cumulative[-1]))
 
     @property
     def length(self) -> float:
