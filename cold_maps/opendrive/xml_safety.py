@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import re
+import sys
 from typing import Final, Iterable, Iterator
 
 from lxml import etree
@@ -76,29 +77,32 @@ def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[et
 
     Raises ``OpenDriveError`` naming ``path`` and the line for malformed XML and for a
     DOCTYPE that declares entities or references an external DTD; ``MemoryError`` when
-    libxml2 runs out of memory.
+    libxml2 runs out of memory (see ``_ParserMemory``, in effect until the stream ends or
+    is closed: close it when you stop early).
     """
     line = _doctype_line(data, path)
     events = etree.iterparse(io.BytesIO(data), events=("end",), tag=[f"{{*}}{tag}" for tag in tags], **_HARDENED)
     root: etree._Element | None = None
-    try:
-        for _, element in events:
+    with _ParserMemory() as memory:
+        try:
+            for _, element in events:
+                if root is None:
+                    root = element.getroottree().getroot()
+                    _check_doctype(root, path, line)
+                    yield root
+                if element.getparent() is not root:
+                    continue  # the root itself, or nested in another child: dropped with that
+                while element.getprevious() is not None:
+                    del root[0]
+                yield element
+                element.clear()
+                root.remove(element)
             if root is None:
-                root = element.getroottree().getroot()
-                _check_doctype(root, path, line)
-                yield root
-            if element.getparent() is not root:
-                continue  # the root itself, or nested in another child: dropped with that
-            while element.getprevious() is not None:
-                del root[0]
-            yield element
-            element.clear()
-            root.remove(element)
-        if root is None:
-            _check_doctype(events.root, path, line)
-            yield events.root
-    except etree.XMLSyntaxError as exc:
-        raise _syntax_error(exc, path) from None
+                _check_doctype(events.root, path, line)
+                yield events.root
+        except etree.XMLSyntaxError as exc:
+            raise memory.error(exc, path) from None
+        memory.check()
 
 
 def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
@@ -106,21 +110,60 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     that need every element at once (the ground truth's road rules); the map reader
     streams instead."""
     line = _doctype_line(data, path)
-    try:
-        root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
-    except etree.XMLSyntaxError as exc:
-        raise _syntax_error(exc, path) from None
+    with _ParserMemory() as memory:
+        try:
+            root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
+        except etree.XMLSyntaxError as exc:
+            raise memory.error(exc, path) from None
+        memory.check()
     _check_doctype(root, path, line)
     return root
 
 
-def _syntax_error(exc: etree.XMLSyntaxError, path: str) -> Exception:
-    """What a libxml2 syntax error means: ``MemoryError`` when it ran out of memory, else
-    ``OpenDriveError`` naming the line (1 for an error before the first line ended)."""
-    if exc.code == _XML_ERR_NO_MEMORY:
-        return MemoryError("libxml2 ran out of memory parsing the XML")
-    reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
-    return OpenDriveError(reason, path=path, line=exc.lineno or 1)
+class _ParserMemory:
+    """Context of a parse that tells libxml2 running out of memory from malformed XML.
+
+    Besides the error code libxml2 gives for a failed allocation, lxml's error log can
+    itself fail to record a libxml2 error; Python then prints "Exception ignored" and a
+    traceback, and the parse fails with a vague syntax error (or none, the error lost).
+    Inside the context such ``MemoryError``s are caught silently (``sys.unraisablehook``)
+    and the parse ends with ``MemoryError``."""
+
+    def __init__(self) -> None:
+        self._seen = False
+        self._previous = sys.unraisablehook
+
+    def __enter__(self) -> _ParserMemory:
+        self._previous = sys.unraisablehook
+        sys.unraisablehook = self._hook
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        sys.unraisablehook = self._previous
+
+    def _hook(self, unraisable: sys.UnraisableHookArgs) -> None:
+        if isinstance(unraisable.exc_value, MemoryError):
+            self._seen = True
+        else:
+            self._previous(unraisable)
+
+    def check(self) -> None:
+        """Raise ``MemoryError`` if memory ran out while parsing, though the parse ended."""
+        if self._seen:
+            raise _out_of_memory()
+
+    def error(self, exc: etree.XMLSyntaxError, path: str) -> Exception:
+        """What a libxml2 syntax error means: ``MemoryError`` when it ran out of memory,
+        else ``OpenDriveError`` naming the line (1 for an error before the first line
+        ended)."""
+        if self._seen or exc.code == _XML_ERR_NO_MEMORY:
+            return _out_of_memory()
+        reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
+        return OpenDriveError(reason, path=path, line=exc.lineno or 1)
+
+
+def _out_of_memory() -> MemoryError:
+    return MemoryError("libxml2 ran out of memory parsing the XML")
 
 
 def _check_doctype(root: etree._Element, path: str, line: int | None) -> None:
