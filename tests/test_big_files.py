@@ -91,6 +91,26 @@ def test_an_error_lost_for_memory_is_a_memory_error(then: str, monkeypatch: pyte
     assert capsys.readouterr().err == "" and sys.unraisablehook is hook
 
 
+def test_other_unraisable_exceptions_while_parsing_reach_the_hook_after(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Only ``MemoryError``s are kept back: another exception Python cannot raise during the
+    parse goes to the hook in place once the parse ends, and the map is read."""
+    real_iterparse = etree.iterparse
+    seen = []
+
+    class Broken:
+        def __del__(self) -> None:
+            raise ValueError("from __del__")
+
+    def with_broken(*args, **kwargs):
+        Broken()
+        yield from real_iterparse(*args, **kwargs)
+
+    monkeypatch.setattr(etree, "iterparse", with_broken)
+    monkeypatch.setattr(sys, "unraisablehook", lambda unraisable: seen.append(unraisable.exc_value))
+    assert len(parse_opendrive(many_roads(2)).roads) == 2
+    assert [str(error) for error in seen] == ["from __del__"]
+
+
 def test_out_of_memory_is_one_line_naming_the_limit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "m.xodr"

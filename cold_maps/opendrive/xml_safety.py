@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import re
 import sys
+from collections import deque
 from typing import Final, Iterable, Iterator
 
 from lxml import etree
@@ -34,6 +35,9 @@ _HARDENED: Final[dict[str, bool]] = {
 """Options of every parse: no entity, DTD or network, libxml2's size limits on."""
 _XML_ERR_NO_MEMORY: Final[int] = 2
 """libxml2's error code for a failed allocation (reported as a syntax error)."""
+_UNRAISABLE_KEPT: Final[int] = 32
+"""Unraisable exceptions a parse keeps, the last ones (CPython's deque fills its first block
+with the first 32 appends: they allocate nothing)."""
 
 
 def _reject_entity_declarations(data: bytes, doctype: int, path: str) -> None:
@@ -126,26 +130,29 @@ class _ParserMemory:
     Besides the error code libxml2 gives for a failed allocation, lxml's error log can
     itself fail to record a libxml2 error; Python then prints "Exception ignored" and a
     traceback, and the parse fails with a vague syntax error (or none, the error lost).
-    Inside the context such ``MemoryError``s are caught silently (``sys.unraisablehook``)
-    and the parse ends with ``MemoryError``."""
+    Inside the context such ``MemoryError``s are kept silently (``sys.unraisablehook`` is
+    a deque's ``append``: no Python frame, nothing allocated, so it works where memory ran
+    out) and the parse ends with ``MemoryError``; other unraisable
+    exceptions go to the previous hook at the end."""
 
     def __init__(self) -> None:
-        self._seen = False
+        self._caught: deque[sys.UnraisableHookArgs] = deque(maxlen=_UNRAISABLE_KEPT)
         self._previous = sys.unraisablehook
 
     def __enter__(self) -> _ParserMemory:
         self._previous = sys.unraisablehook
-        sys.unraisablehook = self._hook
+        sys.unraisablehook = self._caught.append
         return self
 
     def __exit__(self, *exc_info: object) -> None:
         sys.unraisablehook = self._previous
+        for unraisable in self._caught:
+            if not isinstance(unraisable.exc_value, MemoryError):
+                self._previous(unraisable)
 
-    def _hook(self, unraisable: sys.UnraisableHookArgs) -> None:
-        if isinstance(unraisable.exc_value, MemoryError):
-            self._seen = True
-        else:
-            self._previous(unraisable)
+    @property
+    def _seen(self) -> bool:
+        return any(isinstance(unraisable.exc_value, MemoryError) for unraisable in self._caught)
 
     def check(self) -> None:
         """Raise ``MemoryError`` if memory ran out while parsing, though the parse ended."""
