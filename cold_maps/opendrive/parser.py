@@ -46,6 +46,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+from contextlib import closing
 from dataclasses import replace
 from typing import Final, Iterable, Iterator, NamedTuple
 
@@ -105,8 +106,9 @@ def load_opendrive(
     """Read and parse the OpenDRIVE file at ``path`` (``strict``: see ``parse_opendrive``).
 
     Files larger than ``max_bytes`` are rejected before they are read (size from
-    ``os.stat``, and the read itself stops at ``max_bytes + 1``). Unreadable files and
-    invalid content raise ``OpenDriveError``; ``strict``: see ``parse_opendrive``.
+    ``os.stat``, and the read itself stops at ``max_bytes + 1``; it reserves the file's
+    size, not ``max_bytes``, so a small map reads under a tight ``ulimit -v``). Unreadable
+    files and invalid content raise ``OpenDriveError``; ``strict``: see ``parse_opendrive``.
     """
     name = os.fspath(path)
     try:
@@ -114,7 +116,9 @@ def load_opendrive(
         if size > max_bytes:
             raise OpenDriveError(f"file is {size} bytes, more than the limit of {max_bytes} bytes", path=name)
         with open(name, "rb") as stream:
-            data = stream.read(max_bytes + 1)
+            data = stream.read(size + 1)  # not max_bytes + 1: read(n) reserves n bytes of address space
+            if len(data) > size:  # grown since, or no size (a pipe)
+                data += stream.read(max_bytes + 1 - len(data))
     except OSError as exc:
         raise OpenDriveError(f"cannot read file: {exc.strerror or exc}", path=name) from None
     if len(data) > max_bytes:
@@ -131,8 +135,9 @@ def parse_opendrive(data: bytes, *, path: str = "", strict: bool = False) -> Ope
     warning each, ``links.repair_contact_points``), and links to roads or junctions not in
     the file (else dropped with one warning).
     """
-    elements = iter_xml(data, ("header", "road", "junction"), path=path)
-    return repair_contact_points(_Reader(path, strict).read_map(elements), strict=strict)
+    with closing(iter_xml(data, ("header", "road", "junction"), path=path)) as elements:
+        odr_map = _Reader(path, strict).read_map(elements)
+    return repair_contact_points(odr_map, strict=strict)
 
 
 def _strip_namespaces(root: etree._Element) -> None:

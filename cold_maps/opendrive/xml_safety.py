@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import io
 import re
+import sys
+from collections import deque
 from typing import Final, Iterable, Iterator
 
 from lxml import etree
@@ -33,6 +35,9 @@ _HARDENED: Final[dict[str, bool]] = {
 """Options of every parse: no entity, DTD or network, libxml2's size limits on."""
 _XML_ERR_NO_MEMORY: Final[int] = 2
 """libxml2's error code for a failed allocation (reported as a syntax error)."""
+_UNRAISABLE_KEPT: Final[int] = 32
+"""Unraisable exceptions a parse keeps, the last ones (CPython's deque fills its first block
+with the first 32 appends: they allocate nothing)."""
 
 
 def _reject_entity_declarations(data: bytes, doctype: int, path: str) -> None:
@@ -76,29 +81,32 @@ def iter_xml(data: bytes, tags: Iterable[str], *, path: str = "") -> Iterator[et
 
     Raises ``OpenDriveError`` naming ``path`` and the line for malformed XML and for a
     DOCTYPE that declares entities or references an external DTD; ``MemoryError`` when
-    libxml2 runs out of memory.
+    libxml2 runs out of memory (see ``_ParserMemory``, in effect until the stream ends or
+    is closed: close it when you stop early).
     """
     line = _doctype_line(data, path)
     events = etree.iterparse(io.BytesIO(data), events=("end",), tag=[f"{{*}}{tag}" for tag in tags], **_HARDENED)
     root: etree._Element | None = None
-    try:
-        for _, element in events:
+    with _ParserMemory() as memory:
+        try:
+            for _, element in events:
+                if root is None:
+                    root = element.getroottree().getroot()
+                    _check_doctype(root, path, line)
+                    yield root
+                if element.getparent() is not root:
+                    continue  # the root itself, or nested in another child: dropped with that
+                while element.getprevious() is not None:
+                    del root[0]
+                yield element
+                element.clear()
+                root.remove(element)
             if root is None:
-                root = element.getroottree().getroot()
-                _check_doctype(root, path, line)
-                yield root
-            if element.getparent() is not root:
-                continue  # the root itself, or nested in another child: dropped with that
-            while element.getprevious() is not None:
-                del root[0]
-            yield element
-            element.clear()
-            root.remove(element)
-        if root is None:
-            _check_doctype(events.root, path, line)
-            yield events.root
-    except etree.XMLSyntaxError as exc:
-        raise _syntax_error(exc, path) from None
+                _check_doctype(events.root, path, line)
+                yield events.root
+        except etree.XMLSyntaxError as exc:
+            raise memory.error(exc, path) from None
+        memory.check()
 
 
 def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
@@ -106,21 +114,63 @@ def parse_xml(data: bytes, *, path: str = "") -> etree._Element:
     that need every element at once (the ground truth's road rules); the map reader
     streams instead."""
     line = _doctype_line(data, path)
-    try:
-        root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
-    except etree.XMLSyntaxError as exc:
-        raise _syntax_error(exc, path) from None
+    with _ParserMemory() as memory:
+        try:
+            root = etree.fromstring(data, etree.XMLParser(**_HARDENED))
+        except etree.XMLSyntaxError as exc:
+            raise memory.error(exc, path) from None
+        memory.check()
     _check_doctype(root, path, line)
     return root
 
 
-def _syntax_error(exc: etree.XMLSyntaxError, path: str) -> Exception:
-    """What a libxml2 syntax error means: ``MemoryError`` when it ran out of memory, else
-    ``OpenDriveError`` naming the line (1 for an error before the first line ended)."""
-    if exc.code == _XML_ERR_NO_MEMORY:
-        return MemoryError("libxml2 ran out of memory parsing the XML")
-    reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
-    return OpenDriveError(reason, path=path, line=exc.lineno or 1)
+class _ParserMemory:
+    """Context of a parse that tells libxml2 running out of memory from malformed XML.
+
+    Besides the error code libxml2 gives for a failed allocation, lxml's error log can
+    itself fail to record a libxml2 error; Python then prints "Exception ignored" and a
+    traceback, and the parse fails with a vague syntax error (or none, the error lost).
+    Inside the context such ``MemoryError``s are kept silently (``sys.unraisablehook`` is
+    a deque's ``append``: no Python frame, nothing allocated, so it works where memory ran
+    out) and the parse ends with ``MemoryError``; other unraisable
+    exceptions go to the previous hook at the end."""
+
+    def __init__(self) -> None:
+        self._caught: deque[sys.UnraisableHookArgs] = deque(maxlen=_UNRAISABLE_KEPT)
+        self._previous = sys.unraisablehook
+
+    def __enter__(self) -> _ParserMemory:
+        self._previous = sys.unraisablehook
+        sys.unraisablehook = self._caught.append
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        sys.unraisablehook = self._previous
+        for unraisable in self._caught:
+            if not isinstance(unraisable.exc_value, MemoryError):
+                self._previous(unraisable)
+
+    @property
+    def _seen(self) -> bool:
+        return any(isinstance(unraisable.exc_value, MemoryError) for unraisable in self._caught)
+
+    def check(self) -> None:
+        """Raise ``MemoryError`` if memory ran out while parsing, though the parse ended."""
+        if self._seen:
+            raise _out_of_memory()
+
+    def error(self, exc: etree.XMLSyntaxError, path: str) -> Exception:
+        """What a libxml2 syntax error means: ``MemoryError`` when it ran out of memory,
+        else ``OpenDriveError`` naming the line (1 for an error before the first line
+        ended)."""
+        if self._seen or exc.code == _XML_ERR_NO_MEMORY:
+            return _out_of_memory()
+        reason = f"malformed XML: {exc.msg}" if exc.msg else "malformed XML"
+        return OpenDriveError(reason, path=path, line=exc.lineno or 1)
+
+
+def _out_of_memory() -> MemoryError:
+    return MemoryError("libxml2 ran out of memory parsing the XML")
 
 
 def _check_doctype(root: etree._Element, path: str, line: int | None) -> None:
