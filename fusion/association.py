@@ -106,13 +106,15 @@ this make a branch and the ego's own lane equally good continuations: the coop's
 ambiguous (lanes that still overlap just past a fork)."""
 
 
-FORK_SEEN_M: Final[float] = 1.0
+FORK_SEEN_M: Final[float] = 0.3
 """Under ``association="fork"`` a branch the ego's detection end lies inside counts as a lane
 the detection lies on only when the detection runs at least this far [m] past the branch's
-start (along the ego's end heading). A camera's detection ends where the markings stop at a
-junction: its branches start at its end (within the 0.1 m sampling) or beyond it, so the fork
-is not seen past; a sensor that sees through the junction runs along the branch up to its
-range. Chosen on the tune seeds (docs/fusion/association.md)."""
+start (along the ego's end heading, :func:`branch_seen_m`). A camera's detection ends where
+the markings stop at a junction: its branches start at its end (within the 0.1 m sampling)
+or beyond it, so the fork is not seen past; a sensor that sees through the junction runs
+along the branch. Chosen on the tune seeds (docs/fusion/association.md): the camera's
+branches the ego end lies in start at most 0.09 m before it, the ideal sensor's at least
+0.6 m."""
 
 
 @dataclass(frozen=True)

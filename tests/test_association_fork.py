@@ -76,8 +76,9 @@ def test_coop_on_the_other_turn_of_a_fork_at_the_detection_end_is_ambiguous(past
 
 
 def test_a_fork_the_detection_runs_past_keeps_the_branch() -> None:
-    """A detection that runs FORK_SEEN_M + 1 m past the fork (the lanes 0.1 m apart at its end,
-    inside each other) lies on both: "fork" fuses the coop on the right turn as "separation" does."""
+    """A detection that runs FORK_SEEN_M + 1 m past the fork (1.3 m into the turns of R 12 m:
+    their centres 2R(1 − cos(1.3/R)) = 0.14 m apart at its end, inside each other) lies on
+    both: "fork" fuses the coop on the right turn as "separation" does."""
     ego = _ego(20.0 + FORK_SEEN_M + 1.0)
     other = _coop(-1.0, 25.0)
     assert fusion.fuse(ego, other, params=PARAMS["separation"]).kind == "spline"
