@@ -32,7 +32,11 @@ What decides (``FusionParams.association``): ``"legacy"`` (default) the rules ab
 ``gate_false_rejection``, one that fails the σ gate of :mod:`fusion.gate`); ``"strict"`` also
 a single-lane gap pair whose lane a width aside passes the geometry too; ``"separation"``
 instead only one whose lane a width aside passes using less than :data:`SEPARATION_MARGIN`
-more of the lateral limits than the own lane (the geometry does not separate the two).
+more of the lateral limits than the own lane (the geometry does not separate the two);
+``"fork"`` as ``"separation"``, and a branch the ego's detection ends at (runs less than
+:data:`FORK_SEEN_M` along) is not a lane the detection lies on: a camera's detection ends where
+the markings stop at a junction, so which way the ego's lane goes is not seen, and a coop that
+continues such a branch as well as or better than the ego's lane is rejected.
 Rejections for ambiguity start with "ambiguous".
 """
 
@@ -59,9 +63,9 @@ from fusion.fusibility import (
     s_bend_shift,
 )
 from fusion.gate import GateBorder, gate_reason
-from fusion.geometry import EndFit, foot_point, transform
+from fusion.geometry import EndFit, end_direction, foot_point, transform
 from fusion.spline import EndFits
-from fusion.types import FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
+from fusion.types import SEPARATION_RULES, FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 from fusion.uncertainty import pair_uncertainty
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
@@ -100,6 +104,17 @@ FORK_TIE: Final[float] = 0.02
 """Costs (:func:`_fit_cost`: m for a convoy, rad + lane widths across a gap) closer than
 this make a branch and the ego's own lane equally good continuations: the coop's lane is
 ambiguous (lanes that still overlap just past a fork)."""
+
+
+FORK_SEEN_M: Final[float] = 0.3
+"""Under ``association="fork"`` a branch the ego's detection end lies inside counts as a lane
+the detection lies on only when the detection runs at least this far [m] past the branch's
+start (along the ego's end heading, :func:`branch_seen_m`). A camera's detection ends where
+the markings stop at a junction: its branches start at its end (within the 0.1 m sampling)
+or beyond it, so the fork is not seen past; a sensor that sees through the junction runs
+along the branch. Chosen on the tune seeds (docs/fusion/association.md): the camera's
+branches the ego end lies in start at most 0.09 m before it, the ideal sensor's at least
+0.6 m."""
 
 
 @dataclass(frozen=True)
@@ -203,20 +218,38 @@ def _end_inside(ego_lane: Lane, other: Lane) -> bool:
     return offset <= half_width
 
 
-def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool) -> str:
+def branch_seen_m(ego_lane: Lane, branch: Lane) -> float:
+    """How far [m] the ego's detection runs past the start of a branch (ego frame): the
+    ego's end centre minus the branch's start centre along the ego's end heading (the chord
+    over its last 2 m of each border); negative when the branch starts beyond the end."""
+    (el, er), (bl, br) = ego_lane, branch
+    (lx, ly), (rx, ry) = end_direction(el, True, 2.0), end_direction(er, True, 2.0)
+    tx, ty = lx + rx, ly + ry
+    norm = math.hypot(tx, ty) or 1.0
+    dx, dy = (0.5 * (el[-1] + er[-1]) - 0.5 * (bl[0] + br[0])).tolist()
+    return (dx * tx + dy * ty) / norm
+
+
+def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool, fork_at_end: bool = False) -> str:
     """Why the coop lane continues a lane leaving the ego's inside its detection as well as
     or better than the ego's own lane (:func:`_fit_cost`, within :data:`FORK_TIE`), or "". A
     branch that has not yet drifted away from the ego's detection end (the end lies inside
     it, :func:`overlap_end_offset`) is a lane the detection lies on as well: the coop may
-    continue it or the ego's own lane, whichever is better."""
+    continue it or the ego's own lane, whichever is better; with ``fork_at_end``
+    (``association="fork"``) only when the detection also runs :data:`FORK_SEEN_M` past the
+    branch's start (:func:`branch_seen_m`): a fork at the detection's end is not seen past."""
     lanes = [(branch.left, branch.right) for branch in ego.branches]
-    inside = [lane for lane in lanes if _end_inside(own[0], lane)]
+    inside = [lane for lane in lanes if _end_inside(own[0], lane)
+              and not (fork_at_end and branch_seen_m(own[0], lane) < FORK_SEEN_M)]
     main = min(_fit_cost(lane, own[1], convoy) for lane in (own[0], *inside))
     for lane in lanes:
         if any(lane is other for other in inside):
             continue
         cost = _fit_cost(lane, own[1], convoy)
         if cost <= main + FORK_TIE:
+            if _end_inside(own[0], lane):
+                return (f"ambiguous: a lane leaves the ego's lane at a fork at the end of the ego detection and the "
+                        f"coop lane continues it as well or better ({cost:.2f} vs {main:.2f}): branch unknown")
             what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"
             return (f"coop lane continues the lane that leaves the ego's lane at a fork inside the ego detection "
                     f"{what} ({cost:.2f} vs {main:.2f}), another lane")
@@ -329,7 +362,7 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
         association = Association("", association.confidence * graded, association.matched)
     if params.association == "legacy":
         return association
-    if params.association == "separation" and single and not convoy:
+    if params.association in SEPARATION_RULES and single and not convoy:
         reason = _separation_reason(ego, coop, own, params, fits, used)
         if reason:
             return Association(reason, 0.0)
@@ -419,7 +452,7 @@ def _associate_lanes(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, L
     x_rel, y_rel, psi_rel = relative_pose(ego.pose, coop.pose)
     ego_lanes = _lanes(ego, own[0], True, lambda points: points)
     coop_lanes = _lanes(coop, own[1], False, lambda points: transform(points, x_rel, y_rel, psi_rel))
-    reason = _branch_reason(ego, own, convoy)
+    reason = _branch_reason(ego, own, convoy, params.association == "fork")
     if reason:
         return Association(reason, 0.0)
     ego_edges, coop_edges = ego.road_edges, coop.road_edges

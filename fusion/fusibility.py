@@ -14,7 +14,7 @@ from typing import Callable, Final, Literal, Sequence
 
 
 from fusion.geometry import EndFit, end_direction, wrap_angle
-from fusion.types import FusionParams, NDArrayFloat, Pose2D
+from fusion.types import SEPARATION_RULES, FusionParams, NDArrayFloat, Pose2D
 
 CHORD_WINDOW_M: Final[float] = 4.0
 _MIN_GAP_M: Final[float] = 1e-6
@@ -26,7 +26,7 @@ ARC_TOLERANCE_LANES: Final[float] = 0.5
 """Largest mismatch of an arc prediction (rule 4 of :func:`geometric_assessment`), in lane widths."""
 _CONE_DECIDES_LANES: Final[float] = 0.4
 GAP_TOLERANCE_M: Final[float] = 1e-3
-"""Tolerance [m] on d_s ≤ d_i under ``association="separation"``: a coop a lane length d_i
+"""Tolerance [m] on d_s ≤ d_i under ``association="separation"`` and ``"fork"``: a coop a lane length d_i
 behind the ego's detection end lies at d_s = d_i up to the detections' rounding (1 µm) and
 floating point; without it half of such pairs fail on d_s − d_i ≈ 1e-8 m."""
 _TANGENT_SLACK_M: Final[float] = 2.0
@@ -88,7 +88,7 @@ def relative_pose(ego: Pose2D, coop: Pose2D) -> tuple[float, float, float]:
 def _gap_reason(ends: LaneEnds, params: FusionParams) -> str:
     if ends.gap_m <= 0.0:
         return f"no gap: the coop detection starts {-ends.gap_m:.2f} m before the ego detection ends (d_s must be > 0)"
-    if ends.gap_m > params.d_i_m + (GAP_TOLERANCE_M if params.association == "separation" else 0.0):
+    if ends.gap_m > params.d_i_m + (GAP_TOLERANCE_M if params.association in SEPARATION_RULES else 0.0):
         return f"gap d_s = {ends.gap_m:.2f} m exceeds d_i = {params.d_i_m:.2f} m"
     return ""
 

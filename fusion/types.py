@@ -25,8 +25,11 @@ Interpolation = Literal["paper", "hermite"]
 Fusibility = Literal["geometric", "paper"]
 MIN_CONFIDENCE: Final[float] = 0.4
 """Default lowest association confidence fused (``FusionParams.min_confidence``)."""
-AssociationRule = Literal["confidence", "strict", "separation", "legacy"]
-ASSOCIATION_RULES: Final[tuple[str, ...]] = ("confidence", "strict", "separation", "legacy")
+AssociationRule = Literal["confidence", "strict", "separation", "fork", "legacy"]
+ASSOCIATION_RULES: Final[tuple[str, ...]] = ("confidence", "strict", "separation", "fork", "legacy")
+SEPARATION_RULES: Final[tuple[str, ...]] = ("separation", "fork")
+"""The association rules that apply the separation test and read d_s ≤ d_i to
+:data:`fusion.fusibility.GAP_TOLERANCE_M`."""
 ConvoyStrategy = Literal["weighted", "mean", "nearest"]
 ConvoyWeights = Literal["paper", "mean", "inverse-variance"]
 CONVOY_WEIGHTS: Final[tuple[str, ...]] = ("paper", "mean", "inverse-variance")
@@ -434,8 +437,12 @@ class FusionParams:
             lanes a gap pair is ambiguous when the lane a lane width beside the coop's passes
             the geometric check using less than :data:`fusion.association.SEPARATION_MARGIN`
             more of its lateral limits than the coop's own lane; and the gap d_s ≤ d_i is read
-            to :data:`fusion.fusibility.GAP_TOLERANCE_M`). Opt-in: measured on the map
-            families in docs/fusion/association.md and docs/results/association.md.
+            to :data:`fusion.fusibility.GAP_TOLERANCE_M`) or ``"fork"`` (as ``"separation"``, and a
+            lane branching off where the ego's detection ends — the detection runs less than
+            :data:`fusion.association.FORK_SEEN_M` along it — is a fork whose way the ego's
+            lane takes is not seen: a coop that continues that branch as well as or better
+            than the ego's lane is rejected). Opt-in: measured on the map families in
+            docs/fusion/association.md and docs/results/association.md.
         min_confidence: lowest association confidence fused with ``association="confidence"``,
             ``"strict"`` or ``"separation"``
             (in [0, 1]; chosen on the tune seeds of ``tools/study_families.py``, see

@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="lane association decision: the geometric and lane rules alone (legacy), also reject "
                              "pairs below the association confidence 0.4 as ambiguous (confidence), and also "
                              "single-lane gap pairs whose lane a width aside passes the geometry too (strict) or "
-                             "passes it about as well (separation, which also reads d_s <= d_i to 1 mm); see "
+                             "passes it about as well (separation, which also reads d_s <= d_i to 1 mm), and also "
+                             "coops that continue a lane branching off where the ego's detection ends (fork); see "
                              "docs/fusion/association.md (default legacy)")
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "
