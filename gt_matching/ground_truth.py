@@ -201,8 +201,9 @@ class GroundTruth:
 
     Construction extracts every lanelet's geometry, border samples and the borders'
     clearances to other lines, and every line string's samples and KD-tree (with
-    ``prepare_all=False`` the border samples, clearances and KD-trees are built on first
-    use instead: the same results, cheaper when frames match few of the map's lanelets); lanelet
+    ``prepare_all=False`` the lanelets' geometry, border samples, clearances and KD-trees
+    are built on first use instead: the same results, cheaper when frames match few of the
+    map's lanelets); lanelet
     sequences matched by frames are assembled from them on first use (joining arrays) and
     kept (LRU, ``ROUTE_CACHE_SIZE``).
 
@@ -241,12 +242,11 @@ class GroundTruth:
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
         self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
-        for lanelet in lanelet_map.laneletLayer:
-            geometry = self._lanelet(lanelet)
-            if prepare_all:
+        if prepare_all:
+            for lanelet in lanelet_map.laneletLayer:
+                geometry = self._lanelet(lanelet)
                 for side in ("left", "right"):
                     self._part(geometry, side).clearances
-        if prepare_all:
             for slot in range(len(self.lines.vertices)):
                 self.lines.tree(slot, self.config.step_m)
 
@@ -284,11 +284,7 @@ class GroundTruth:
         the GT: ``unmatched`` then marks only points beyond ``max_distance_m``.
         """
         left_xy, right_xy = as_polyline("left border", left), as_polyline("right border", right)
-        unknown = [key for key in match.route_key if key not in self._geometry]
-        if unknown:
-            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
-        route = self._route([self._geometry[key] for key in match.route_key])
-        return self._errors(left_xy, right_xy, match, route, exact, others)
+        return self._errors(left_xy, right_xy, match, self._route(self._keyed(match.route_key)), exact, others)
 
     def resampled(self, match: LaneMatch, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat]]
                   ) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
@@ -296,10 +292,7 @@ class GroundTruth:
         order), its points' distances (m) to the GT borders of ``match`` resampled every
         ``config.step_m``: the ``distances_m`` of ``errors(left, right, match,
         others=False)`` bit for bit, all lanes in one pass per border."""
-        unknown = [key for key in match.route_key if key not in self._geometry]
-        if unknown:
-            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
-        route = self._route([self._geometry[key] for key in match.route_key])
+        route = self._route(self._keyed(match.route_key))
         return list(zip(route.left.resampled([left for left, _ in lanes]),
                         route.right.resampled([right for _, right in lanes])))
 
@@ -336,6 +329,19 @@ class GroundTruth:
         if geometry is None:
             geometry = self._geometry[key] = LaneletGeometry.of(lanelet)
         return geometry
+
+    def _keyed(self, keys: Sequence[LaneletKey]) -> list[LaneletGeometry]:
+        """The geometries of lanelet keys of a match: those matched here before, or a
+        lanelet of the map in its stored orientation (MatchingError naming the others)."""
+        layer = self.lanelet_map.laneletLayer
+        found = {key: self._geometry.get(key) for key in keys}
+        for key, geometry in found.items():
+            if geometry is None and not key[1] and layer.exists(key[0]):
+                found[key] = self._lanelet(layer[key[0]])
+        unknown = [key for key, geometry in found.items() if geometry is None]
+        if unknown:
+            raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
+        return [found[key] for key in keys]
 
     def _part(self, geometry: LaneletGeometry, side: str) -> BorderPart:
         """A lanelet border ("left" or "right") prepared for routes (cached)."""
