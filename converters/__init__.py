@@ -2,15 +2,23 @@
 lanelets from commonroad-scenario-designer (or from any ``Converter``, e.g. the map
 engine's in ``cold_maps.groundtruth``) through one Lanelet2 writer (``osm``).
 
-Entry points: ``load_lanelet2`` (map + routing graph), ``convert`` (write an OSM file,
-get its ``LoadRecipe``), ``configure_convert`` (the ``cold-maps convert`` subcommand's arguments),
+Entry points: ``load_lanelet2`` (map + routing graph), ``load_lanelet_map`` (the map alone),
+``convert`` (write an OSM file, get its ``LoadRecipe``), ``configure_convert`` (the
+``cold-maps convert`` subcommand's arguments),
 ``clear_cache``; lanelet ↔ OpenDRIVE lane (``opendrive_lanes``, ``lanelets_by_opendrive_lane``),
 ``vehicle_lanelets`` and ``route_between`` two OpenDRIVE lanes (``converters.lanes``).
 crdesigner and lanelet2 are imported lazily, inside the functions that use them. This
 package never imports ``cold_maps``.
 """
 
-from converters.api import Converter, configure_convert, convert, crdesigner_converter, load_lanelet2
+from converters.api import (
+    Converter,
+    configure_convert,
+    convert,
+    crdesigner_converter,
+    load_lanelet2,
+    load_lanelet_map,
+)
 from converters.cache import clear_cache
 from converters.errors import ConversionError
 from converters.frame import LoadRecipe
@@ -33,6 +41,7 @@ __all__ = [
     "crdesigner_converter",
     "lanelets_by_opendrive_lane",
     "load_lanelet2",
+    "load_lanelet_map",
     "opendrive_lanes",
     "route_between",
     "routing_graph",

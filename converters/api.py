@@ -120,9 +120,21 @@ def load_lanelet2(
     verbose: bool = False,
     converter: Converter | None = None,
 ) -> tuple[lanelet2.core.LaneletMap, lanelet2.routing.RoutingGraph]:
-    """Lanelet2 map (inertial frame, m) and vehicle routing graph of an ``.xodr`` map
-    (converted by ``converter``, default crdesigner; cached unless ``cache=False``) or of
-    an ``.osm`` file we wrote.
+    """``load_lanelet_map`` and the map's vehicle routing graph (``routing_graph``)."""
+    lanelet_map = load_lanelet_map(path, cache=cache, cache_dir=cache_dir, verbose=verbose, converter=converter)
+    return lanelet_map, routing_graph(lanelet_map)
+
+
+def load_lanelet_map(
+    path: PathLike,
+    *,
+    cache: bool = True,
+    cache_dir: PathLike | None = None,
+    verbose: bool = False,
+    converter: Converter | None = None,
+) -> lanelet2.core.LaneletMap:
+    """Lanelet2 map (inertial frame, m) of an ``.xodr`` map (converted by ``converter``,
+    default crdesigner; cached unless ``cache=False``) or of an ``.osm`` file we wrote.
 
     Raises ConversionError naming the file for an unreadable map, a converter crash, an
     empty result or an OSM file not written by this converter (its frame is unknown).
@@ -154,9 +166,7 @@ def load_lanelet2(
         return _load_osm(osm, source=source)
 
 
-def _load_osm(
-    osm: Path, *, source: Path | None = None
-) -> tuple[lanelet2.core.LaneletMap, lanelet2.routing.RoutingGraph]:
+def _load_osm(osm: Path, *, source: Path | None = None) -> lanelet2.core.LaneletMap:
     import lanelet2.io
 
     named = str(source or osm)
@@ -166,7 +176,7 @@ def _load_osm(
         raise ConversionError(named, f"lanelet2 cannot load {osm}: {exc}") from exc
     if len(lanelet_map.laneletLayer) == 0:
         raise ConversionError(named, "the converted map has no lanelets")
-    return lanelet_map, routing_graph(lanelet_map)
+    return lanelet_map
 
 
 def configure_convert(parser: argparse.ArgumentParser) -> None:

@@ -217,22 +217,28 @@ class GroundTruth:
     def __init__(
         self,
         lanelet_map: Any,
-        routing_graph: Any,
+        routing_graph: Any = None,
         *,
         traffic_rules: Any = None,
         config: MatchingConfig | None = None,
         prepare_all: bool = True,
     ) -> None:
         """``traffic_rules`` (default: Lanelet2 Germany, vehicle) should be those of
-        ``routing_graph``; they remove matches against the allowed driving direction."""
+        ``routing_graph``; they remove matches against the allowed driving direction.
+        ``routing_graph``: lanelet2's ``RoutingGraph`` of the map under those rules, or
+        None: the same relations computed per lanelet on first use
+        (``relations.LaneletRelations``; no cost for the lanelets no frame reaches)."""
         import lanelet2
 
+        from gt_matching.relations import LaneletRelations
+
         self.lanelet_map = lanelet_map
-        self.routing_graph = routing_graph
         self.config = config or MatchingConfig()
         self.traffic_rules = traffic_rules or lanelet2.traffic_rules.create(
             lanelet2.traffic_rules.Locations.Germany, lanelet2.traffic_rules.Participants.Vehicle
         )
+        self.routing_graph = routing_graph if routing_graph is not None else LaneletRelations(
+            lanelet_map, self.traffic_rules)
         self.lines = MapLines(lanelet_map, cache_size=None if prepare_all else PART_CACHE_SIZE)
         self._geometry: dict[LaneletKey, LaneletGeometry] = {}
         self._parts: OrderedDict[tuple[LaneletKey, str], BorderPart] = OrderedDict()

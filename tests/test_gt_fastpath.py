@@ -142,31 +142,42 @@ def test_sequence_arc_equals_per_point_search(grid: tuple[Any, Any, GroundTruth]
 def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[Any, Any, GroundTruth],
                                                                   kept: int | None,
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
-    """prepare_all=False builds border samples, clearances and KD-trees only for the lanelets
-    and lines a frame needs, keeping the latest ``PART_CACHE_SIZE`` (``kept``: so few that
-    they are dropped and built again); matches and errors (other-lane check included) are
-    bit-identical."""
-    from gt_matching import ground_truth
+    """prepare_all=False builds lanelet geometry, border samples, clearances and KD-trees
+    only for the lanelets and lines a frame needs, keeping the latest ``PART_CACHE_SIZE``
+    (``kept``: so few that they are dropped and built again), and without a routing graph
+    the relations only for the lanelets a frame reaches; matches and errors (other-lane
+    check included) are bit-identical, also for a match made by another GroundTruth of the map."""
+    from dataclasses import replace
+
+    from gt_matching import MatchingError, ground_truth
 
     if kept is not None:
         monkeypatch.setattr(ground_truth, "PART_CACHE_SIZE", kept)
     lanelet_map, graph, prepared = grid
     lazy = GroundTruth(lanelet_map, graph, prepare_all=False)
-    assert not lazy._parts
+    no_graph = GroundTruth(lanelet_map, prepare_all=False)
+    assert not lazy._parts and not lazy._geometry
     assert not lazy.lines._trees
     for left, right, pose in random_frames(lanelet_map, graph, 12, seed=7):
-        match, lazy_match = prepared.match(left, right, pose), lazy.match(left, right, pose)
-        assert lazy_match.route_key == match.route_key
-        np.testing.assert_array_equal(lazy_match.left_gt, match.left_gt)
-        for exact in (True, False):
-            expected, found = prepared.errors(left, right, match, exact=exact), lazy.errors(left, right, lazy_match,
-                                                                                              exact=exact)
-            for a, b in ((found.left, expected.left), (found.right, expected.right)):
-                np.testing.assert_array_equal(a.distances_m, b.distances_m)
-                np.testing.assert_array_equal(a.arc_m, b.arc_m)
-                np.testing.assert_array_equal(a.unmatched, b.unmatched)
+        match = prepared.match(left, right, pose)
+        for first_use in (lazy, no_graph):
+            lazy_match = first_use.match(left, right, pose)
+            assert lazy_match.route_key == match.route_key
+            np.testing.assert_array_equal(lazy_match.left_gt, match.left_gt)
+            for exact in (True, False):
+                expected = prepared.errors(left, right, match, exact=exact)
+                found = first_use.errors(left, right, lazy_match, exact=exact)
+                unseen = GroundTruth(lanelet_map, prepare_all=False).errors(left, right, match, exact=exact)
+                for a, b, c in ((found.left, expected.left, unseen.left), (found.right, expected.right, unseen.right)):
+                    for field in ("distances_m", "arc_m", "unmatched"):
+                        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+                        np.testing.assert_array_equal(getattr(c, field), getattr(b, field))
     built = sum("clearances" in vars(part) for part in lazy._parts.values())
     assert 0 < built <= len(lazy._parts) < len(prepared._parts)
+    assert 0 < len(lazy._geometry) < len(prepared._geometry)
+    missing = max(lanelet.id for lanelet in lanelet_map.laneletLayer) + 1
+    with pytest.raises(MatchingError, match=f"lanelets \\[\\({missing}, False\\)\\] of the match are not"):
+        lazy.errors(left, right, replace(match, route_key=(*match.route_key, (missing, False))))
     if kept is not None:
         assert len(lazy._parts) == len(lazy.lines._trees) == len(lazy.lines._samples) == kept
 

@@ -84,10 +84,10 @@ def _meter(map_path: Path | None) -> Any:
         return None
     from cold_maps.groundtruth.lanelet2_from_engine import engine_converter
     from cold_maps.groundtruth.meter import GroundTruthMeter
-    from converters import load_lanelet2
+    from converters import load_lanelet_map
     from gt_matching import GroundTruth
 
-    return GroundTruthMeter(GroundTruth(*load_lanelet2(map_path, converter=engine_converter()), prepare_all=False))
+    return GroundTruthMeter(GroundTruth(load_lanelet_map(map_path, converter=engine_converter()), prepare_all=False))
 
 
 class Refuser:

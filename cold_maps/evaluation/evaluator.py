@@ -5,7 +5,7 @@ plan's sensor profile: the ideal ``LaneSensor``, or a ``CameraSensor`` the other
 can hide the lane from; optional seeded error models), the ego's detection is measured
 alone (``local``) and fused with every other present vehicle for each scenario (``convoy``;
 ``spline`` per interpolation and gap d_s). Fused lanes are measured against Lanelet2
-ground truth (``converters.load_lanelet2`` of the plan's converter, by default built from
+ground truth (``converters.load_lanelet_map`` of the plan's converter, by default built from
 the map engine, matched by ``gt_matching``) by closest-point
 distances to the GT borders resampled every 0.02 m; the fusion's decision is scored
 against the true lane relation of the pair (:func:`cold_maps.simulation.drive.lane_relation`).
@@ -160,12 +160,11 @@ class MapEvaluator:
             return
         if self._ground_truth is None:
             from cold_maps.groundtruth.lanelet2_from_engine import converter_named
-            from converters import load_lanelet2
+            from converters import load_lanelet_map
             from gt_matching import GroundTruth
 
             converter = converter_named(self.plan.ground_truth, self.graph.odr_map)
-            lanelet_map, routing = load_lanelet2(self.plan.path, converter=converter)
-            self._ground_truth = GroundTruth(lanelet_map, routing, prepare_all=False)
+            self._ground_truth = GroundTruth(load_lanelet_map(self.plan.path, converter=converter), prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
 
     @cached_property
