@@ -43,7 +43,7 @@ ROUTE_CACHE_SIZE: Final = 32
 #: about 160 kB each on Town04, 1746 of them), and line strings whose samples and KD-tree it
 #: keeps (``MapLines``, about 80 kB each): a long drive touching much of a map stays bounded;
 #: one prepared whole keeps all.
-PART_CACHE_SIZE: Final = 256
+PART_CACHE_SIZE: Final = 64
 #: Poses whose candidate lanelets a ``GroundTruth`` keeps (every lane measured in a frame
 #: is matched at the same pose, the ego's).
 CANDIDATE_CACHE_SIZE: Final = 8
