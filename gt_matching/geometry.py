@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from gt_matching.errors import MatchingError
+from gt_matching.lru import lru_get
 from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, mid_line, resample
 
 if TYPE_CHECKING:
@@ -155,25 +156,9 @@ class MapLines:
         """KD-tree of the samples every ``step_m`` of line ``slot`` (cached)."""
         from scipy.spatial import cKDTree
 
-        key = (slot, step_m)
-        found = self._trees.get(key)
-        if found is None:
-            found = self._trees[key] = cKDTree(self.samples(slot, step_m))
-        self._keep(self._trees, key)
-        return found
+        return lru_get(self._trees, (slot, step_m), lambda: cKDTree(self.samples(slot, step_m)), self._cache_size)
 
     def samples(self, slot: int, step_m: float) -> NDArrayFloat:
         """Points every ``step_m`` along line ``slot`` (cached)."""
-        key = (slot, step_m)
-        found = self._samples.get(key)
-        if found is None:
-            found = self._samples[key] = resample(self.vertices[slot], step_m)[0]
-        self._keep(self._samples, key)
-        return found
-
-    def _keep(self, cache: OrderedDict[tuple[int, float], Any], key: tuple[int, float]) -> None:
-        """Marks ``key`` used last and drops the least recently used beyond ``cache_size``."""
-        if self._cache_size is not None:
-            cache.move_to_end(key)
-            if len(cache) > self._cache_size:
-                cache.popitem(last=False)
+        return lru_get(self._samples, (slot, step_m), lambda: resample(self.vertices[slot], step_m)[0],
+                       self._cache_size)

@@ -19,6 +19,7 @@ from gt_matching.config import MatchingConfig
 from gt_matching.errors import MatchingError
 from gt_matching.geometry import LaneletGeometry, LaneletKey, MapLines
 from gt_matching.lane_match import LaneMatch
+from gt_matching.lru import lru_get
 from gt_matching.metrics import BorderErrors, LaneErrors, LaneMetrics
 from gt_matching.polyline import (
     NDArrayFloat,
@@ -349,23 +350,15 @@ class GroundTruth:
     def _part(self, geometry: LaneletGeometry, side: str) -> BorderPart:
         """A lanelet border ("left" or "right") prepared for routes (cached; LRU of
         ``PART_CACHE_SIZE`` when prepared on first use)."""
-        key = (geometry.key, side)
-        part = self._parts.get(key)
-        if part is None:
-            config = self.config
-            part = self._parts[key] = BorderPart.of(
-                getattr(geometry, side),
-                getattr(geometry, f"{side}_line"),
-                self.lines,
-                config.step_m,
-                2.0 * config.max_distance_m + config.other_border_margin_m,
-                config.other_border_margin_m,
-            )
-            if self._parts_kept is not None and len(self._parts) > self._parts_kept:
-                self._parts.popitem(last=False)
-        elif self._parts_kept is not None:
-            self._parts.move_to_end(key)
-        return part
+        config = self.config
+        return lru_get(self._parts, (geometry.key, side), lambda: BorderPart.of(
+            getattr(geometry, side),
+            getattr(geometry, f"{side}_line"),
+            self.lines,
+            config.step_m,
+            2.0 * config.max_distance_m + config.other_border_margin_m,
+            config.other_border_margin_m,
+        ), self._parts_kept)
 
     def _neighbours(self, geometry: LaneletGeometry, way: str) -> list[LaneletGeometry]:
         """The routing graph's ``previous`` or ``following`` lanelets (``way``) of a lanelet,
@@ -380,27 +373,13 @@ class GroundTruth:
     def _joined_border(self, lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
         """``_joined_border`` of a lanelet sequence, kept (LRU, ``ROUTE_CACHE_SIZE``): the
         tied sequences of consecutive frames recur."""
-        key = (tuple(g.key for g in lanelets), side)
-        found = self._joined.get(key)
-        if found is None:
-            found = self._joined[key] = _joined_border(lanelets, side)
-            if len(self._joined) > ROUTE_CACHE_SIZE:
-                self._joined.popitem(last=False)
-        else:
-            self._joined.move_to_end(key)
-        return found
+        return lru_get(self._joined, (tuple(g.key for g in lanelets), side), lambda: _joined_border(lanelets, side),
+                       ROUTE_CACHE_SIZE)
 
     def _candidates(self, pose: Pose) -> list[_Candidate]:
         """Heading-consistent, rule-compliant lanelets within ``search_radius_m`` of the pose
         (those of the last ``CANDIDATE_CACHE_SIZE`` poses kept)."""
-        found = self._near_pose.get(pose)
-        if found is None:
-            found = self._near_pose[pose] = self._find_candidates(pose)
-            if len(self._near_pose) > CANDIDATE_CACHE_SIZE:
-                self._near_pose.popitem(last=False)
-        else:
-            self._near_pose.move_to_end(pose)
-        return found
+        return lru_get(self._near_pose, pose, lambda: self._find_candidates(pose), CANDIDATE_CACHE_SIZE)
 
     def _find_candidates(self, pose: Pose) -> list[_Candidate]:
         """``_candidates`` of a pose, from Lanelet2's matching."""
@@ -557,27 +536,22 @@ class GroundTruth:
 
     def _route(self, lanelets: Sequence[LaneletGeometry]) -> _Route:
         keys = tuple(g.key for g in lanelets)
-        route = self._routes.get(keys)
-        if route is None:
-            overlapping = {
-                int(line.id)
-                for g in lanelets
-                for other in self.routing_graph.conflicting(g.lanelet)
-                if hasattr(other, "leftBound")
-                for line in (other.leftBound, other.rightBound)
-            }
+        return lru_get(self._routes, keys, lambda: self._build_route(keys, lanelets), ROUTE_CACHE_SIZE)
 
-            def border(side: str) -> RouteBorder:
-                own = {getattr(g, f"{side}_line") for g in lanelets}
-                return RouteBorder(self.lines, [self._part(g, side) for g in lanelets], own | overlapping)
+    def _build_route(self, keys: tuple[LaneletKey, ...], lanelets: Sequence[LaneletGeometry]) -> _Route:
+        overlapping = {
+            int(line.id)
+            for g in lanelets
+            for other in self.routing_graph.conflicting(g.lanelet)
+            if hasattr(other, "leftBound")
+            for line in (other.leftBound, other.rightBound)
+        }
 
-            route = _Route(keys=keys, left=border("left"), right=border("right"))
-            self._routes[keys] = route
-            if len(self._routes) > ROUTE_CACHE_SIZE:
-                self._routes.popitem(last=False)
-        else:
-            self._routes.move_to_end(keys)
-        return route
+        def border(side: str) -> RouteBorder:
+            own = {getattr(g, f"{side}_line") for g in lanelets}
+            return RouteBorder(self.lines, [self._part(g, side) for g in lanelets], own | overlapping)
+
+        return _Route(keys=keys, left=border("left"), right=border("right"))
 
 
 _GROUND_TRUTHS: OrderedDict[tuple[int, int, MatchingConfig], tuple[Any, Any, GroundTruth]] = OrderedDict()

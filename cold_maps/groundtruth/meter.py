@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from cold_maps.network.lane_strip import NDArrayFloat
+from gt_matching.lru import lru_get
 from gt_matching.metrics import known_distance_m, near_count
 from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline
 
@@ -233,14 +234,7 @@ class GroundTruthMeter:
         the cache when the same borders and pose were matched lately."""
         left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
         key = (left.tobytes(), right.tobytes(), tuple(pose))
-        found = self._matches.get(key)
-        if found is None:
-            found = self._matches[key] = self.ground_truth.match(left, right, pose)
-            if len(self._matches) > MATCH_CACHE_SIZE:
-                self._matches.popitem(last=False)
-        else:
-            self._matches.move_to_end(key)
-        return found
+        return lru_get(self._matches, key, lambda: self.ground_truth.match(left, right, pose), MATCH_CACHE_SIZE)
 
     def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat,
                pose: tuple[float, float, float] | None = None) -> Measurement:
@@ -296,15 +290,8 @@ class GroundTruthMeter:
 
     def _ends(self, match: LaneMatch, side: str) -> GtEnds:
         """``gt_ends`` of the ``side`` GT border of ``match`` (kept per route, LRU)."""
-        key = (match.route_key, side)
-        found = self._gt_ends.get(key)
-        if found is None:
-            found = self._gt_ends[key] = gt_ends(match.left_gt if side == "left" else match.right_gt)
-            if len(self._gt_ends) > ENDS_CACHE_SIZE:
-                self._gt_ends.popitem(last=False)
-        else:
-            self._gt_ends.move_to_end(key)
-        return found
+        return lru_get(self._gt_ends, (match.route_key, side),
+                       lambda: gt_ends(match.left_gt if side == "left" else match.right_gt), ENDS_CACHE_SIZE)
 
     def measure(self, left: NDArrayFloat, right: NDArrayFloat, pose: tuple[float, float, float], *,
                 reference: tuple[NDArrayFloat, NDArrayFloat] | None = None) -> Measurement:
