@@ -239,15 +239,15 @@ def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool, for
     (``association="fork"``) only when the detection also runs :data:`FORK_SEEN_M` past the
     branch's start (:func:`branch_seen_m`): a fork at the detection's end is not seen past."""
     lanes = [(branch.left, branch.right) for branch in ego.branches]
-    inside = [lane for lane in lanes if _end_inside(own[0], lane)
-              and not (fork_at_end and branch_seen_m(own[0], lane) < FORK_SEEN_M)]
+    end_inside = [lane for lane in lanes if _end_inside(own[0], lane)]
+    inside = [lane for lane in end_inside if not (fork_at_end and branch_seen_m(own[0], lane) < FORK_SEEN_M)]
     main = min(_fit_cost(lane, own[1], convoy) for lane in (own[0], *inside))
     for lane in lanes:
         if any(lane is other for other in inside):
             continue
         cost = _fit_cost(lane, own[1], convoy)
         if cost <= main + FORK_TIE:
-            if _end_inside(own[0], lane):
+            if any(lane is other for other in end_inside):
                 return (f"ambiguous: a lane leaves the ego's lane at a fork at the end of the ego detection and the "
                         f"coop lane continues it as well or better ({cost:.2f} vs {main:.2f}): branch unknown")
             what = "as well: ambiguous at a fork" if cost > main - FORK_TIE else "better: other branch"

@@ -208,16 +208,6 @@ def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
     return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
 
 
-def _station_weights(s: NDArrayFloat) -> NDArrayFloat:
-    """Length (m) each station stands for: ``np.gradient(s)`` (1 for a single station)."""
-    if len(s) < 2:
-        return np.ones(len(s))
-    weights = np.empty(len(s))
-    weights[1:-1] = (s[2:] - s[:-2]) / 2.0
-    weights[0], weights[-1] = s[1] - s[0], s[-1] - s[-2]
-    return weights
-
-
 def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
               way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
               ) -> tuple[tuple[str, str], ...]:
@@ -232,7 +222,7 @@ def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner
     at = 0
     if (keys != keys[0]).any():
         unique, inverse = np.unique(keys, return_inverse=True)
-        best = int(np.argmax(np.bincount(inverse, weights=_station_weights(s), minlength=len(unique))))
+        best = int(np.argmax(np.bincount(inverse, weights=np.gradient(s), minlength=len(unique))))
         at = int(np.argmax(inverse == best))
     kind, owner = int(marking.type[at]), int(marking.owner[at])
     if kind in _EDGE_TAGS:
