@@ -126,6 +126,24 @@ def test_out_of_memory_is_one_line_naming_the_limit(tmp_path: Path, monkeypatch:
     assert "GiB" in error
 
 
+def test_out_of_memory_while_reporting_it_still_writes_one_line(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]) -> None:
+    """At the very edge of a limit even formatting the error line can run out of memory: the
+    line prepared in advance is written to file descriptor 2, no exception escapes."""
+    from cold_maps.cli import common
+
+    path = tmp_path / "m.xodr"
+    path.write_bytes(many_roads(1))
+
+    def exhausted(*args):
+        raise MemoryError
+
+    monkeypatch.setattr(maps, "map_info", exhausted)
+    monkeypatch.setattr(common, "memory_limit", exhausted)
+    assert maps.main(["info", str(path)]) == 1
+    assert capfd.readouterr().err == "cold-maps: error: out of memory\n"
+
+
 def _info_under_address_space_limit(path: Path, extra_mib: int) -> subprocess.CompletedProcess[str]:
     """``cold-maps info PATH`` in a process whose address space may grow ``extra_mib`` MiB
     past what it holds once the commands' modules are imported (a real ``ulimit -v``)."""

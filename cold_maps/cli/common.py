@@ -68,6 +68,29 @@ def interruption(exc: BaseException) -> tuple[str, int]:
 CliBody = Callable[[Sequence[str] | None], int]
 
 
+def _out_of_memory_line(prog: str) -> bytes:
+    """The out-of-memory line without the limit, encoded in advance: written when even
+    formatting the full line runs out of memory."""
+    program, _, command = prog.partition(" ")
+    where = f"{command}: " if command else ""
+    return f"{program}: error: {where}out of memory\n".encode()
+
+
+def _fail_out_of_memory(prog: str, last_resort: bytes) -> int:
+    """One line for a run that ran out of memory, naming the limit; ``last_resort`` written
+    straight to file descriptor 2 when the line cannot be formatted or printed either (at
+    the very edge of a limit), never an exception reaching the interpreter, whose
+    traceback printing would fail and dump the exception object instead."""
+    try:
+        return fail(prog, f"out of memory ({memory_limit()})")
+    except MemoryError:
+        try:
+            os.write(2, last_resort)
+        except OSError:
+            pass
+        return EXIT_FAILURE
+
+
 def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
     """Wraps the entry point of the command ``prog``: SIGTERM raises :class:`Terminated`
     while it runs (the previous handler is restored after); an interruption the command
@@ -78,6 +101,8 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
     (:func:`_exit_now`); called with ``argv`` (tests, other Python code) it returns. Running
     out of memory ends it with one line naming the memory limit (:func:`memory_limit`),
     written once the failed work's data is freed."""
+
+    last_resort = _out_of_memory_line(prog)
 
     def wrap(body: CliBody) -> CliBody:
         @functools.wraps(body)
@@ -99,7 +124,7 @@ def cli_entry(prog: str) -> Callable[[CliBody], CliBody]:
             finally:
                 signal.signal(signal.SIGTERM, previous)
             if out_of_memory:
-                status = fail(prog, f"out of memory ({memory_limit()})")
+                status = _fail_out_of_memory(prog, last_resort)
             if argv is None and status in (EXIT_INTERRUPTED, EXIT_TERMINATED):
                 _exit_now(status)
             return status
