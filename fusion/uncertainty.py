@@ -27,9 +27,10 @@ frame (a scalar, the same in any frame). Sources and how they combine:
   propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
   turning the end tangents by h10/h11 times the gap length) plus an interpolation term
   sqrt(k₀² + (k₁·F)²)·d growing with the distance d from the nearer end and with the bend F
-  (:func:`interpolation_bend`: for ``hermite`` the road's bend across the gap that one arc
-  does not follow, :func:`bridge_bend`; for ``paper`` the ends' turn), k₀ and k₁ per
-  interpolation from :data:`BRIDGE_SIGMA_FLOOR_PER_M` and :data:`BRIDGE_SIGMA_PER_M`.
+  (:func:`interpolation_bend`: for ``hermite`` the road's bend across the gap that no line
+  and arc of the ends' curvatures follows, :func:`bridge_bend`; for ``paper`` the ends'
+  turn), k₀ and k₁ per interpolation from :data:`BRIDGE_SIGMA_FLOOR_PER_M` and
+  :data:`BRIDGE_SIGMA_PER_M`.
 - **History** (:func:`fusion.fuse_history`): a history point's σ fades linearly from the
   ego seam's σ to the coop seam's, like the seam offsets (:func:`seam_sigma`).
 """
@@ -45,28 +46,26 @@ import numpy as np
 from fusion.geometry import EndFit
 from fusion.types import LaneDetection, NDArrayFloat
 
-BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.075, "hermite": 0.0388}
+BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.075, "hermite": 0.0425}
 """Interpolation error k₁ of a gap bridge per interpolation (1σ, m/(m·rad)): the bridge's
 interpolation term is sqrt(k₀² + (k₁·F)²)·d at distance d [m] from its nearer end
 (:data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀), F [rad] the bend :func:`interpolation_bend`. ``hermite``
-(exact on lines and arcs, k₀ = 0): F the road's bend across the gap that one arc does not
-follow (:func:`bridge_bend`), k₁ = sqrt(Σe² / Σ(F·d)²) over every gap point of 40 noise-free
-pairs of each of the four analytic road families (:data:`fusion.analytic.FAMILIES`: corners
-with and without clothoids, arcs, S-bends; seed 123), e the point's true error
-(``tools/calibrate_bridge_sigma.py`` reproduces it). ``paper``: F the turn between the two
-ends' fitted tangents |Δψ| (its natural spline through an estimated apex errs on any turn,
-arcs included); k₀ and k₁ chosen together on camera drives (``tools/calibrate_bridge_sigma.py
---drives``)."""
+(line and arc): F the road's bend across the gap that no line-and-arc curve of the ends'
+curvatures follows (:func:`bridge_bend`); ``paper``: F the turn between the two ends' fitted
+tangents |Δψ| (its natural spline through an estimated apex errs on any turn, arcs
+included). k₀ and k₁ of each chosen together on camera drives with pose errors
+(``tools/calibrate_bridge_sigma.py --drives``)."""
 
-BRIDGE_SIGMA_FLOOR_PER_M: Final[dict[str, float]] = {"paper": 0.0475, "hermite": 0.0}
+BRIDGE_SIGMA_FLOOR_PER_M: Final[dict[str, float]] = {"paper": 0.0475, "hermite": 0.0025}
 """Interpolation error k₀ of a gap bridge that does not scale with the bend (1σ, m/m; see
 :data:`BRIDGE_SIGMA_PER_M`): ``paper``'s end tangents, from two points 0.2 m apart, turn with
-the detection's point noise on any road."""
+the detection's point noise on any road; ``hermite``'s fitted ends miss what changes inside
+the gap without bending it (lane width, gentle curvature)."""
 
 
 def interpolation_bend(interpolation: str, bend: tuple[float, float, float], length_m: float) -> float:
     """The bend F [rad] that scales the interpolation term of a gap bridge of length L [m]
-    (:data:`BRIDGE_SIGMA_PER_M`) from the ends' (Δψ, κ̄, Δκ) (:func:`gap_bend`): ``hermite``
+    (:data:`BRIDGE_SIGMA_PER_M`) from the ends' (Δψ, κ_E, κ_C) (:func:`gap_bend`): ``hermite``
     :func:`bridge_bend`, ``paper`` |Δψ|."""
     return bridge_bend(*bend, length_m) if interpolation == "hermite" else abs(bend[0])
 
@@ -214,25 +213,29 @@ def bridge_end(points: NDArrayFloat, variance: BorderVariance, at_end: bool, sen
     return BridgeEnd(float(variance.sensor[k]), jacobian, covariance)
 
 
-def bridge_bend(turn_rad: float, mean_curvature_per_m: float, curvature_change_per_m: float,
-                length_m: float) -> float:
-    """The bend F [rad] of a gap bridge of length L [m] that scales its interpolation error:
-    F = |Δψ − L·κ̄| + L·|κ_C − κ_E|, the heading change between the two ends' tangents that an
-    arc of the ends' mean curvature κ̄ does not make, plus the turn the change of curvature
-    between the ends would make over the bridge. Zero on a straight road and on an arc, where
-    ``hermite`` (line and arc) is exact; π/2 for a right-angle corner between two straights."""
-    return abs(turn_rad - length_m * mean_curvature_per_m) + length_m * abs(curvature_change_per_m)
+def bridge_bend(turn_rad: float, ego_curvature_per_m: float, coop_curvature_per_m: float, length_m: float) -> float:
+    """The bend F [rad] of a gap bridge of length L [m] that scales ``hermite``'s interpolation
+    error, from the ends' heading change Δψ and curvatures κ_E (ego end), κ_C (coop start):
+    F = dist(Δψ, L·[min(κ_E, κ_C), max(κ_E, κ_C)]) + L·min(|κ_E|, |κ_C|, |κ_C − κ_E|).
+
+    The first term is the turn that no curve switching once from κ_E to κ_C inside the gap
+    makes (such a curve turns by between L·κ_E and L·κ_C); the second the curvature step that
+    a line and an arc cannot make (two different curvatures, neither zero). Zero on a straight
+    road, on an arc and where a straight meets an arc inside the gap, all of which ``hermite``
+    (line and arc) follows exactly; π/2 for a right-angle corner between two straights."""
+    low, high = sorted((length_m * ego_curvature_per_m, length_m * coop_curvature_per_m))
+    step = min(abs(ego_curvature_per_m), abs(coop_curvature_per_m), abs(coop_curvature_per_m - ego_curvature_per_m))
+    return max(low - turn_rad, turn_rad - high, 0.0) + length_m * step
 
 
 def gap_bend(arcs: Sequence[EndFit]) -> tuple[float, float, float]:
-    """(Δψ [rad], κ̄ [1/m], κ_C − κ_E [1/m]) across a gap from the end fits of (ego left, ego
-    right, coop left, coop right), one frame: the turn from the ego end's tangent to the coop
-    start's, the mean curvature of the four ends and the change of curvature from the ego's
-    end to the coop's start, each end's two borders averaged."""
+    """(Δψ [rad], κ_E [1/m], κ_C [1/m]) across a gap from the end fits of (ego left, ego right,
+    coop left, coop right), one frame: the turn from the ego end's tangent to the coop start's,
+    and the curvature of the ego's end and of the coop's start, each end's two borders
+    averaged."""
     ego_dir, coop_dir = (np.add(arcs[i].direction, arcs[i + 1].direction) for i in (0, 2))
     turn = math.atan2(ego_dir[0] * coop_dir[1] - ego_dir[1] * coop_dir[0], float(ego_dir @ coop_dir))
-    return (turn, 0.25 * sum(fit.curvature for fit in arcs),
-            0.5 * (arcs[2].curvature + arcs[3].curvature - arcs[0].curvature - arcs[1].curvature))
+    return turn, 0.5 * (arcs[0].curvature + arcs[1].curvature), 0.5 * (arcs[2].curvature + arcs[3].curvature)
 
 
 def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, ego_end: BridgeEnd,
@@ -247,24 +250,36 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     the coop end (a yaw error turns that end's tangent, e_ψ = (0, 0, 1)); the interpolation
     error adds (k₀² + (k₁·F)²)·d² (``interpolation``'s :data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀ and
     :data:`BRIDGE_SIGMA_PER_M` k₁), F = :func:`interpolation_bend` of ``bend`` (the ends'
-    heading change [rad], mean curvature and curvature change [1/m], :func:`gap_bend`).
+    heading change [rad] and curvatures [1/m], :func:`gap_bend`).
     """
     if gap.shape[0] == 0:
         return np.empty(0)
+    tau, length = bridge_fraction(gap, start, stop)
+    per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation],
+                       BRIDGE_SIGMA_PER_M[interpolation] * interpolation_bend(interpolation, bend, length))
+    return (per_m * length * np.minimum(tau, 1.0 - tau)) ** 2 + bridge_ends_variance(tau, length, ego_end, coop_start)
+
+
+def bridge_fraction(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat) -> tuple[NDArrayFloat, float]:
+    """(τ, L): the arc-length fraction of each gap point (``(K, 2)``) along the bridge from
+    ``start`` to ``stop`` and its length L [m] (1 when zero)."""
     chain = np.concatenate((start[None, :], gap, stop[None, :]))
     s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
     length = float(s[-1]) or 1.0
-    tau = s[1:-1] / length
+    return s[1:-1] / length, length
+
+
+def bridge_ends_variance(tau: NDArrayFloat, length_m: float, ego_end: BridgeEnd, coop_start: BridgeEnd) -> NDArrayFloat:
+    """The part of :func:`bridge_variance` [m²] the two ends carry in at arc fractions ``tau``
+    of a bridge of length ``length_m`` [m] (no interpolation term)."""
     t2, t3 = tau * tau, tau * tau * tau
     h00, h01 = 2.0 * t3 - 3.0 * t2 + 1.0, 3.0 * t2 - 2.0 * t3
     h10, h11 = t3 - 2.0 * t2 + tau, t3 - t2
-    per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation],
-                       BRIDGE_SIGMA_PER_M[interpolation] * interpolation_bend(interpolation, bend, length))
-    out = (per_m * length * np.minimum(tau, 1.0 - tau)) ** 2
+    out = np.zeros(tau.shape)
     for end, h_offset, h_turn in ((ego_end, h00, h10), (coop_start, h01, h11)):
         out += h_offset * h_offset * end.sensor
         if end.covariance.any():
-            a = h_offset[:, None] * end.jacobian + (h_turn * length)[:, None] * np.array([0.0, 0.0, 1.0])
+            a = h_offset[:, None] * end.jacobian + (h_turn * length_m)[:, None] * np.array([0.0, 0.0, 1.0])
             out += np.maximum(np.einsum("ij,jk,ik->i", a, end.covariance, a), 0.0)
     return out
 

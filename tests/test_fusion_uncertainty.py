@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 import fusion
 from fusion import FusionParams, InvalidParameterError, LaneDetection, Source
 from fusion.analytic import AnalyticRoad, Segment, detect, with_history
-from fusion.geometry import transform
-from fusion.uncertainty import BRIDGE_SIGMA_FLOOR_PER_M, BRIDGE_SIGMA_PER_M
+from fusion.geometry import distance_to_polyline, transform
+from fusion.uncertainty import BRIDGE_SIGMA_FLOOR_PER_M, BRIDGE_SIGMA_PER_M, bridge_bend
 
 WIDTH_M = 3.5
 DETERMINISTIC = settings(max_examples=40, deadline=None, derandomize=True, database=None,
@@ -174,7 +174,7 @@ def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None
     """Hermite propagation of the end errors, with the coop's pose error: at arc fraction τ of
     a bridge of length L (ego exact), σ² = (k₀² + (k₁·F)²)·d² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
     (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend or turn, F = 0: only
-    ``paper``'s k₀·d is left (``hermite`` has none)."""
+    k₀·d is left."""
     road = straight(-0.3)
     sigma_e, sigma_c, sxy, syaw = 0.12, 0.05, 0.06, 0.004
     ego = sensed(road, 10.0, sigma_e)
@@ -218,8 +218,8 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
 
 
 def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
-    """A gap inside an arc of radius 150 m: the ends' turn is the arc's own (F = |Δψ − L·κ̄| +
-    L·|Δκ| ≈ 0), so hermite's bridge σ is the ends' σ carried by h00, h01 alone, while the
+    """A gap inside an arc of radius 150 m: the ends' turn is the arc's own (:func:`bridge_bend`
+    F = 0), so hermite's bridge σ is the ends' σ carried by h00, h01 and its k₀·d, while the
     paper's keeps sqrt(k₀² + (k₁·F)²)·d with F = |Δψ| = 30 m / 150 m, the arc's turn between
     the ends."""
     sigma = 0.03
@@ -237,6 +237,45 @@ def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
         per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation], BRIDGE_SIGMA_PER_M[interpolation] * bend)
         expected = np.sqrt((per_m * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
         np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-2)
+
+
+def test_bridge_bend_is_the_bend_no_line_and_arc_of_the_ends_curvatures_follows() -> None:
+    """F = dist(Δψ, L·[min κ, max κ]) + L·min(|κ_E|, |κ_C|, |κ_C − κ_E|) in closed form: zero on
+    a straight, an arc and a straight meeting an arc inside the gap; the whole turn of a corner
+    between straights; the turn beyond what the ends' curvatures make; L·k across an S-bend
+    of curvatures ±k; the smaller curvature of a compound curve."""
+    length = 30.0
+    assert bridge_bend(0.0, 0.0, 0.0, length) == 0.0
+    assert bridge_bend(length / 150.0, 1.0 / 150.0, 1.0 / 150.0, length) == pytest.approx(0.0, abs=1e-15)
+    assert bridge_bend(-0.1, 0.0, -1.0 / 100.0, length) == 0.0  # straight into a right arc turning 0.1 of 0.3 rad
+    assert bridge_bend(0.25, 1.0 / 50.0, 0.0, length) == 0.0  # arc into a straight
+    assert bridge_bend(math.pi / 2.0, 0.0, 0.0, length) == math.pi / 2.0
+    assert bridge_bend(0.5, 0.0, 1.0 / 100.0, length) == pytest.approx(0.5 - 0.3)
+    assert bridge_bend(-0.5, 0.0, 1.0 / 100.0, length) == pytest.approx(0.5)
+    assert bridge_bend(0.0, 1.0 / 60.0, -1.0 / 60.0, length) == pytest.approx(length / 60.0)
+    assert bridge_bend(0.45, 1.0 / 100.0, 1.0 / 50.0, length) == pytest.approx(length / 100.0)  # turn inside [0.3, 0.6]
+    assert bridge_bend(0.35, 1.0 / 100.0, 1.0 / 80.0, length) == pytest.approx(length * (1.0 / 80.0 - 1.0 / 100.0))
+
+
+def test_hermite_bridge_from_a_straight_into_an_arc_has_only_its_floor_term() -> None:
+    """A straight meeting an arc of radius 100 m inside a 30 m gap: hermite (a straight, then the
+    largest arc tangent to both ends' tangents) follows the road, and the bridge's bend is zero
+    (the turn is one an arc of the coop's curvature makes after the ego's straight), so its σ
+    is the ends' σ carried by h00, h01 and k₀·d."""
+    sigma = 0.03
+    road = AnalyticRoad([Segment(60.0), Segment(300.0, 1.0 / 100.0)], yaw0=0.7)
+    ego, coop = sensed(road, 20.0, sigma), sensed(road, 80.0, sigma)  # the arc starts 10 m into the gap
+    result = fusion.fuse(ego, coop, interpolation="hermite")
+    assert result.kind == "spline"
+    inside = np.flatnonzero(result.left_source == Source.INTERPOLATED)
+    assert distance_to_polyline(result.left[inside], road.border(0.5 * WIDTH_M)).max() < 0.01
+    chain = result.left[inside[0] - 1: inside[-1] + 2]
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+    tau = s[1:-1] / s[-1]
+    h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+    d = s[-1] * np.minimum(tau, 1.0 - tau)
+    expected = np.sqrt((BRIDGE_SIGMA_FLOOR_PER_M["hermite"] * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
+    np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-2)
 
 
 def test_defaults_keep_todays_geometry_and_state_no_sigma() -> None:

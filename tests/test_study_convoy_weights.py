@@ -3,6 +3,9 @@ convoy fusions, both borders; calibration pooled over the borders' points)."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
 from conftest import load_tool
@@ -42,3 +45,20 @@ def test_a_run_without_correct_convoy_fusions_has_no_errors() -> None:
     row = study.convoy_row(metrics)
     assert row == {"fused": 0, "max_error_m": None, "p95_error_m": None, "mean_error_m": None}
     assert study.calibration_rows(metrics) == []
+
+
+def test_parts_hold_the_convoy_maximum_and_name_where_it_lies(tmp_path: Path) -> None:
+    """``--parts`` on a short camera run with 0.1 m / 5 mrad of coop pose error: the largest
+    part is the maximum the study's table reads from metrics.json, and it lies in the coop's
+    part past the overlap, beyond its 5 m seam blend (the coop's far range)."""
+    rural = Path(__file__).resolve().parents[1] / "maps" / "rural.xodr"
+    with study.convoy_parts() as parts:
+        status, err, _ = study.run_eval(["--map", str(rural), "--sensor", "camera", "--pose-xy", "0.1", "--pose-yaw",
+                                         "0.005", "--routes", "1", "--frames", "10", "--gaps", "20",
+                                         "--interpolation", "paper", "--workers", "1", "--no-mcap", "--no-plots",
+                                         "-q", "--out", str(tmp_path)])
+    assert status == 0, err
+    row = study.convoy_row(json.loads((tmp_path / "metrics.json").read_text()))
+    assert parts["max"] == pytest.approx(row["max_error_m"], abs=1e-12)
+    assert parts["max"] == max(parts[name] for name in study.PARTS)
+    assert parts["max_part"] == "coop" and parts["max_past_overlap_m"] > 5.0

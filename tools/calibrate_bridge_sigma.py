@@ -2,24 +2,25 @@
 k₁ and ``BRIDGE_SIGMA_FLOOR_PER_M`` k₀; the term is sqrt(k₀² + (k₁·F)²)·d at distance d from
 the bridge's nearer end, F = ``fusion.uncertainty.interpolation_bend``).
 
-Without ``--drives`` (``hermite``, k₀ = 0): on noise-free pairs of the analytic road families
-(``fusion.analytic.FAMILIES``) every interpolated point gives its true error e (distance from
-the true border), d and the bridge's bend F (of ``gap_bend`` of the pair's end fits, as the
-fusion computes it); k₁ = sqrt(Σe² / Σ(F·d)²) on the tune seed, printed with the coverage of
-e ≤ k₁·F·d and e ≤ 2k₁·F·d (68 % / 95 % for Gaussian errors) on the tune and on the report
-seed, overall and per family. No sensor noise and exact poses: the interpolation's own error.
-
-With ``--drives MAP ...`` (``paper``, whose error comes from the detections' noise as well as
-from the road's turn): ``cold-eval --sensor camera --pose-xy 0.05 --pose-yaw 0.002
---interpolation paper --seed DRIVE_SEED`` on each map, every interpolated point of a correct
-fusion (truly fusible) with its error, d, F and the variance its ends carry in (the bridge's σ²
-without the interpolation term); (k₀, k₁) on a grid (steps 0.0025 m/m, 0.005 m/(m·rad)) with
+With ``--drives MAP ...`` (the constants' source, for ``--interpolation paper`` or
+``hermite``): ``cold-eval --sensor camera --pose-xy 0.05 --pose-yaw 0.002 --interpolation
+INTERPOLATION --seed DRIVE_SEED`` on each map, every interpolated point of a correct fusion
+(truly fusible) with its error, d, F and the variance its ends carry in (the bridge's σ²
+without the interpolation term); (k₀, k₁) on a grid (steps 0.0025 m/m, 0.0025 m/(m·rad)) with
 the least squared deviation of the share within 1σ and 2σ from 68.3 % and 95.4 % over six
-equally filled bins of F.
+equally filled bins of F (fewer where many points share one F, e.g. hermite's F = 0).
 
-    .venv/bin/python tools/calibrate_bridge_sigma.py [--pairs 40] [--seed 123] [--report-seed 7]
+Without ``--drives`` (a cross-check of ``hermite`` on the analytic road families,
+``fusion.analytic.FAMILIES``, noise-free pairs, exact poses: the interpolation's own error):
+every interpolated point gives its true error e (distance from the true border), d and the
+bridge's bend F (of ``gap_bend`` of the pair's end fits, as the fusion computes it); prints
+the second-moment k₁ = sqrt(Σe² / Σ(F·d)²) on the tune seed and the share of points within
+1σ and 2σ of the module's interpolation term on the tune and on the report seed, overall and
+per family.
+
     .venv/bin/python tools/calibrate_bridge_sigma.py --drives ../shared/maps/carla/Town01.xodr \\
-        ../shared/maps/carla/Town04.xodr maps/rural.xodr [--drive-seed 0]
+        ../shared/maps/carla/Town04.xodr maps/rural.xodr [--interpolation hermite] [--drive-seed 0]
+    .venv/bin/python tools/calibrate_bridge_sigma.py [--pairs 40] [--seed 123] [--report-seed 7]
 """
 
 from __future__ import annotations
@@ -40,15 +41,16 @@ from fusion.analytic import FAMILIES, detect, family_case  # noqa: E402
 from fusion.api import DEFAULT_PARAMS, ego_frame_borders, end_fits, fuse  # noqa: E402
 from fusion.geometry import cumulative_length, distance_to_polyline  # noqa: E402
 from fusion.types import Source  # noqa: E402
-from fusion.uncertainty import gap_bend, interpolation_bend  # noqa: E402
+from fusion.uncertainty import (BRIDGE_SIGMA_FLOOR_PER_M, BRIDGE_SIGMA_PER_M, bridge_ends_variance,  # noqa: E402
+                                bridge_fraction, gap_bend, interpolation_bend)
 
 OFFSETS_M = (0.0, -4.0)
 COVERAGE = (0.683, 0.954)
-Sample = tuple[str, np.ndarray, np.ndarray]  # family, F·d [rad·m], e [m] of one bridge border's points
+Sample = tuple[str, np.ndarray, np.ndarray, np.ndarray]  # family, d [m], F [rad], e [m] of a bridge border's points
 
 
 def samples(pairs: int, seed: int) -> list[Sample]:
-    """(family, F·d, e) of every ``hermite`` bridge border of ``pairs`` pairs per family."""
+    """(family, d, F, e) of every ``hermite`` bridge border of ``pairs`` pairs per family."""
     out: list[Sample] = []
     for family in FAMILIES:
         rng = np.random.default_rng(seed)
@@ -69,21 +71,22 @@ def samples(pairs: int, seed: int) -> list[Sample]:
                 s = cumulative_length(points[inside[0] - 1: inside[-1] + 2])
                 d = np.minimum(s, s[-1] - s)[1:-1]
                 bend = interpolation_bend("hermite", ends, float(s[-1]))
-                out.append((family, bend * d, distance_to_polyline(points[inside], road.border(offset))))
+                out.append((family, d, np.full(d.size, bend), distance_to_polyline(points[inside], road.border(offset))))
     return out
 
 
-def coverage(rows: list[Sample], k: float) -> str:
-    """Shares of points within k·F·d and 2k·F·d, overall and per family."""
+def coverage(rows: list[Sample], k0: float, k1: float) -> str:
+    """Shares of points within sqrt(k₀² + (k₁·F)²)·d and twice that, overall and per family."""
     def shares(part: list[Sample]) -> str:
-        z = np.concatenate([r[2] for r in part]) / np.maximum(k * np.concatenate([r[1] for r in part]), 1e-12)
+        d, bend, e = (np.concatenate([r[i] for r in part]) for i in (1, 2, 3))
+        z = e / np.maximum(np.hypot(k0, k1 * bend) * d, 1e-12)
         return f"{np.mean(z <= 1):.3f} / {np.mean(z <= 2):.3f}"
     return f"{shares(rows)} (" + ", ".join(f"{f} {shares([r for r in rows if r[0] == f])}" for f in FAMILIES) + ")"
 
 
 @contextlib.contextmanager
-def recorded_bridges() -> Iterator[list[tuple[np.ndarray, ...]]]:
-    """While open, every ``paper`` bridge border the evaluator records as a correct fusion:
+def recorded_bridges(interpolation: str) -> Iterator[list[tuple[np.ndarray, ...]]]:
+    """While open, every ``interpolation`` bridge border the evaluator records as a correct fusion:
     (e, d, F, variance of the ends) per interpolated point."""
     import fusion
     import fusion.api as api
@@ -94,14 +97,12 @@ def recorded_bridges() -> Iterator[list[tuple[np.ndarray, ...]]]:
     fused: dict[int, tuple[Any, np.ndarray, tuple[np.ndarray, ...] | None]] = {}
     bridge, fuse_pair, record = api.bridge_variance, fusion.fuse, evaluator.MapEvaluator._record
 
-    def bridge_parts(gap, start, stop, ego_end, coop_start, interpolation, bend):  # type: ignore[no-untyped-def]
-        chain = np.concatenate((start[None, :], gap, stop[None, :]))
-        s = cumulative_length(chain)
-        d = np.minimum(s, s[-1] - s)[1:-1]
-        straight = (0.0, 0.0, 0.0)
-        ends = bridge(gap, start, stop, ego_end, coop_start, "hermite", straight)  # hermite: k₀ = 0, F(0) = 0
-        pending.append((d, np.full(d.size, interpolation_bend(interpolation, bend, float(s[-1]) or 1.0)), ends))
-        return bridge(gap, start, stop, ego_end, coop_start, interpolation, bend)
+    def bridge_parts(gap, start, stop, ego_end, coop_start, kind, bend):  # type: ignore[no-untyped-def]
+        tau, length = bridge_fraction(gap, start, stop)
+        d = length * np.minimum(tau, 1.0 - tau)
+        ends = bridge_ends_variance(tau, length, ego_end, coop_start)
+        pending.append((d, np.full(d.size, interpolation_bend(kind, bend, length)), ends))
+        return bridge(gap, start, stop, ego_end, coop_start, kind, bend)
 
     def fuse_and_keep(*args, **kwargs):  # type: ignore[no-untyped-def]
         pending.clear()
@@ -110,7 +111,7 @@ def recorded_bridges() -> Iterator[list[tuple[np.ndarray, ...]]]:
         for index, side in enumerate(("left", "right")):
             sigma = getattr(result, f"{side}_sigma")
             inside = getattr(result, f"{side}_source") == Source.INTERPOLATED
-            if sigma is not None and kwargs.get("interpolation") == "paper" and len(calls) == 2:
+            if sigma is not None and kwargs.get("interpolation") == interpolation and len(calls) == 2:
                 fused[id(sigma)] = (sigma, inside, calls[index] if calls[index][0].size == inside.sum() else None)
         return result
 
@@ -129,15 +130,15 @@ def recorded_bridges() -> Iterator[list[tuple[np.ndarray, ...]]]:
         api.bridge_variance, fusion.fuse, evaluator.MapEvaluator._record = bridge, fuse_pair, record
 
 
-def drive_samples(maps: list[Path], seed: int) -> tuple[np.ndarray, ...]:
-    """(e, d, F, ends' variance) of every interpolated point of the correct ``paper`` fusions
-    of ``cold-eval`` camera drives on ``maps``."""
+def drive_samples(maps: list[Path], seed: int, interpolation: str) -> tuple[np.ndarray, ...]:
+    """(e, d, F, ends' variance) of every interpolated point of the correct ``interpolation``
+    fusions of ``cold-eval`` camera drives on ``maps``."""
     from cold_maps.cli import evaluate
 
-    with recorded_bridges() as rows, tempfile.TemporaryDirectory() as folder:
+    with recorded_bridges(interpolation) as rows, tempfile.TemporaryDirectory() as folder:
         for index, path in enumerate(maps):
             status = evaluate.main(["--map", str(path), "--sensor", "camera", "--pose-xy", "0.05", "--pose-yaw",
-                                    "0.002", "--interpolation", "paper", "--seed", str(seed), "--workers", "1",
+                                    "0.002", "--interpolation", interpolation, "--seed", str(seed), "--workers", "1",
                                     "--no-mcap", "--no-plots", "-q", "--out", str(Path(folder) / str(index))])
             if status != 0:
                 raise SystemExit(f"cold-eval failed on {path}")
@@ -145,48 +146,52 @@ def drive_samples(maps: list[Path], seed: int) -> tuple[np.ndarray, ...]:
 
 
 def fit_drives(e: np.ndarray, d: np.ndarray, bend: np.ndarray, ends: np.ndarray) -> tuple[float, float, str]:
-    """(k₀, k₁) of the grid with the least squared deviation from :data:`COVERAGE` over six
-    equally filled bins of F, and the shares per bin."""
-    edges = np.quantile(bend, np.linspace(0.0, 1.0, 7))
-    index = np.clip(np.searchsorted(edges, bend, side="right") - 1, 0, 5)
-    counts = np.bincount(index, minlength=6)
+    """(k₀, k₁) of the grid with the least squared deviation from :data:`COVERAGE` over up to
+    six equally filled bins of F (tied quantiles merged), and the shares per bin."""
+    edges = np.unique(np.quantile(bend, np.linspace(0.0, 1.0, 7)))
+    bins = max(1, edges.size - 1)
+    index = np.clip(np.searchsorted(edges, bend, side="right") - 1, 0, bins - 1)
+    counts = np.bincount(index, minlength=bins)
     best: tuple[float, float, float, np.ndarray, np.ndarray] | None = None
     for k0 in np.arange(0.0, 0.08, 0.0025):
-        for k1 in np.arange(0.0, 0.25, 0.005):
+        for k1 in np.arange(0.0, 0.25, 0.0025):
             z = e / np.sqrt(ends + (k0 * d) ** 2 + (k1 * bend * d) ** 2)
-            within = [np.bincount(index, z <= k, 6) / counts for k in (1.0, 2.0)]
+            within = [np.bincount(index, z <= k, bins) / counts for k in (1.0, 2.0)]
             cost = float(sum(np.sum((w - c) ** 2) for w, c in zip(within, COVERAGE)))
             if best is None or cost < best[0]:
                 best = (cost, float(k0), float(k1), *within)
     assert best is not None
     _, k0, k1, one, two = best
-    bins = ", ".join(f"F {lo:.3f}–{hi:.3f}: {a:.3f} / {b:.3f}" for lo, hi, a, b in zip(edges[:-1], edges[1:], one, two))
-    return k0, k1, bins
+    shares = ", ".join(f"F {lo:.3f}–{hi:.3f}: {a:.3f} / {b:.3f}" for lo, hi, a, b in zip(edges[:-1], edges[1:], one, two))
+    return k0, k1, shares
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pairs", type=int, default=40, help="pairs per family (default 40)")
-    parser.add_argument("--seed", type=int, default=123, help="seed of the road draws k is fitted on (default 123)")
+    parser.add_argument("--seed", type=int, default=123, help="seed of the road draws of the tune set (default 123)")
     parser.add_argument("--report-seed", type=int, default=7, help="seed of the road draws reported (default 7)")
-    parser.add_argument("--drives", type=Path, nargs="+", metavar="MAP", help="fit paper's k₀, k₁ on these maps' drives")
+    parser.add_argument("--drives", type=Path, nargs="+", metavar="MAP", help="fit k₀, k₁ on these maps' drives")
+    parser.add_argument("--interpolation", choices=("paper", "hermite"), default="paper",
+                        help="--drives: the interpolation fitted (default paper)")
     parser.add_argument("--drive-seed", type=int, default=0, help="cold-eval --seed of the drives (default 0)")
     args = parser.parse_args()
     if args.drives:
-        e, d, bend, ends = drive_samples(args.drives, args.drive_seed)
+        e, d, bend, ends = drive_samples(args.drives, args.drive_seed, args.interpolation)
         k0, k1, bins = fit_drives(e, d, bend, ends)
         z = e / np.sqrt(ends + (k0 * d) ** 2 + (k1 * bend * d) ** 2)
-        print(f"paper: k0 = {k0:.4f} m/m, k1 = {k1:.4f} m/(m·rad) over {e.size} points; "
+        print(f"{args.interpolation}: k0 = {k0:.4f} m/m, k1 = {k1:.4f} m/(m·rad) over {e.size} points; "
               f"within 1σ / 2σ {np.mean(z <= 1):.3f} / {np.mean(z <= 2):.3f}")
         print(f"  per bin: {bins}")
         return 0
     tune, report = samples(args.pairs, args.seed), samples(args.pairs, args.report_seed)
-    fd = np.concatenate([row[1] for row in tune])
-    e = np.concatenate([row[2] for row in tune])
+    fd = np.concatenate([row[1] * row[2] for row in tune])
+    e = np.concatenate([row[3] for row in tune])
     k = math.sqrt(float((e * e).sum() / (fd * fd).sum()))
-    print(f"hermite: k1 = {k:.4f} m/(m·rad) over {e.size} points")
-    print(f"  within 1σ / 2σ, tune seed {args.seed}: {coverage(tune, k)}")
-    print(f"  within 1σ / 2σ, report seed {args.report_seed}: {coverage(report, k)}")
+    k0, k1 = BRIDGE_SIGMA_FLOOR_PER_M["hermite"], BRIDGE_SIGMA_PER_M["hermite"]
+    print(f"hermite: second-moment k1 = {k:.4f} m/(m·rad) over {e.size} points of seed {args.seed}")
+    print(f"  within 1σ / 2σ of k0 = {k0} m/m, k1 = {k1} m/(m·rad), tune seed {args.seed}: {coverage(tune, k0, k1)}")
+    print(f"  within 1σ / 2σ, report seed {args.report_seed}: {coverage(report, k0, k1)}")
     return 0
 
 

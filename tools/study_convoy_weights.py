@@ -21,22 +21,28 @@ same routes, frames, gaps and seed for every run) on each map × sensor (``ideal
 convoy scenario's errors of correct fusions (``tools/study_sensor.py``'s ``correct_errors``:
 the larger of the two borders' max and p95; the mean of both borders' means) and the
 calibration of the stated σ of every fused scenario (both borders' points pooled). Writes
-``study.json`` (every figure and how it was made) and ``study.md`` to ``--out``:
+``study.json`` (every figure and how it was made) and ``study.md`` to ``--out``. With
+``--parts`` (cold-eval then runs with one worker, in this process) it also gives where the
+largest error of the correct convoy fusions lies: the max per part of the fused lane (the
+ego's points before the overlap, the overlap's fused points, the coop's points past it; the
+parts beside the overlap include its 5 m seam blends) and how far past the overlap's end
+the largest error's point lies:
 
     .venv/bin/python tools/study_convoy_weights.py --maps rural,Town01,Town04 --out out/study-weights \
-        [--routes 3] [--frames 100] [--eval-seed 0] [--gaps 20,30,50] [--workers 2] [--sensors camera]
+        [--routes 3] [--frames 100] [--eval-seed 0] [--gaps 20,30,50] [--workers 2] [--sensors camera] [--parts]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import shlex
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -49,6 +55,8 @@ from cold_maps.simulation.lane_model_error import LaneModelErrorParams  # noqa: 
 from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
 from fusion.geometry import distance_to_polyline  # noqa: E402
 from study_sensor import MAPS, correct_errors, run_eval, sha256, shown  # noqa: E402
+
+PARTS = ("ego", "overlap", "coop")
 
 CAMERA = LaneModelErrorParams(sigma_c0_m=0.05, sigma_c1_rad=0.002, sigma_c2_per_m=4e-5, sigma_c3_per_m2=0.0,
                               white_m=0.01)
@@ -107,6 +115,60 @@ def convoy_row(metrics: dict[str, Any]) -> dict[str, Any]:
             "mean_error_m": sum(means) / len(means) if means else None}
 
 
+@contextlib.contextmanager
+def convoy_parts() -> Iterator[dict[str, Any]]:
+    """While open, the largest error [m] of every part (:data:`PARTS`: the points labelled
+    ego, fused, coop) of the correct convoy fusions cold-eval measures in this process, the
+    part of the point with the largest error of all (``max_part``) and, in the coop's part,
+    its distance [m] along the border from the overlap's last point (``max_past_overlap_m``)."""
+    from cold_maps.evaluation import evaluator
+
+    found: dict[str, Any] = {name: 0.0 for name in PARTS} | {"max": 0.0, "max_part": None,
+                                                             "max_past_overlap_m": None}
+    sources: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    truths: dict[int, bool] = {}
+    fuse, record, keep = fusion.fuse, evaluator.MapEvaluator._record, evaluator.MapEvaluator._keep_overlay
+
+    def fuse_and_keep(*args, **kwargs):  # type: ignore[no-untyped-def]
+        result = fuse(*args, **kwargs)
+        if kwargs.get("mode") == "convoy" and result.kind == "convoy":
+            for side in ("left", "right"):
+                sources[id(getattr(result, side))] = (getattr(result, side), getattr(result, f"{side}_source"))
+        return result
+
+    def record_truth(self, collector, scenario, keys, measured, *args, **kwargs):  # type: ignore[no-untyped-def]
+        truths[id(measured)] = bool(args[6])
+        return record(self, collector, scenario, keys, measured, *args, **kwargs)
+
+    def measure_parts(self, collector, scenario, index, measured, detections, lanes):  # type: ignore[no-untyped-def]
+        truth = truths.pop(id(measured), False)
+        for side, errors in (("left", measured.left_errors_m), ("right", measured.right_errors_m)):
+            kept = sources.pop(id(lanes.get(side)), None)
+            if kept is None or kept[0] is not lanes[side] or not truth or errors.size != kept[1].size:
+                continue
+            source = kept[1]
+            masks = {"ego": source == fusion.Source.EGO, "overlap": source == fusion.Source.FUSED,
+                     "coop": source == fusion.Source.COOP}
+            for name, mask in masks.items():
+                if mask.any():
+                    found[name] = max(found[name], float(errors[mask].max()))
+            worst = int(np.argmax(errors))
+            if errors[worst] > found["max"]:
+                part = next(name for name, mask in masks.items() if mask[worst])
+                end = int(np.flatnonzero(masks["overlap"])[-1]) if masks["overlap"].any() else worst
+                found["max"], found["max_part"] = float(errors[worst]), part
+                found["max_past_overlap_m"] = float(np.hypot(*np.diff(lanes[side][end: worst + 1], axis=0).T).sum()) \
+                    if part == "coop" else None
+        return keep(self, collector, scenario, index, measured, detections, lanes)
+
+    fusion.fuse, evaluator.MapEvaluator._record = fuse_and_keep, record_truth
+    evaluator.MapEvaluator._keep_overlay = measure_parts
+    try:
+        yield found
+    finally:
+        fusion.fuse, evaluator.MapEvaluator._record, evaluator.MapEvaluator._keep_overlay = fuse, record, keep
+
+
 def calibration_rows(metrics: dict[str, Any]) -> list[dict[str, Any]]:
     """Calibration of every fused scenario of one run, both borders' points pooled."""
     pooled: dict[str, list[dict[str, Any]]] = {}
@@ -141,6 +203,19 @@ def maps_markdown(study: dict[str, Any]) -> str:
                  for w in WEIGHTS]
         lines.append(f"| {row['map']} | {row['sensor']} | {row['pose'][0]:g} / {1e3 * row['pose'][1]:g} | "
                      + " | ".join(cells) + f" | {row['paper']['fused']} |")
+    with_parts = [row for row in study["rows"] if "parts" in row["paper"]]
+    if with_parts:
+        lines += ["", "Where the largest error of the correct convoy fusions lies (max per part [m]: the ego's "
+                  "points, the overlap's fused points, the coop's points; the part of the largest error and, in "
+                  "the coop's part, its distance along the border from the overlap's last point [m]):", "",
+                  "| map | sensor | pose σ_xy [m] / σ_yaw [mrad] | weights | ego max | overlap max | coop max "
+                  "| largest in | past the overlap [m] |", "|---|---|---|---|---|---|---|---|---|"]
+        for row in with_parts:
+            for w in WEIGHTS:
+                part = row[w]["parts"]
+                lines.append(f"| {row['map']} | {row['sensor']} | {row['pose'][0]:g} / {1e3 * row['pose'][1]:g} | "
+                             f"{w} | " + " | ".join(_num(part[name]) for name in PARTS)
+                             + f" | {part['max_part'] or '–'} | {_num(part['max_past_overlap_m'], 1)} |")
     lines += ["", "Calibration of the stated σ (share of fused points within 1σ / 2σ, %; the convoy "
               "row per weighting, spline rows from the inverse-variance run; 68.3 / 95.4 when calibrated):", "",
               "| map | pose σ_xy [m] / σ_yaw [mrad] | scenario | within 1σ | within 2σ | mean σ [m] "
@@ -168,7 +243,8 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
               file=sys.stderr)
         return 2
     options = ["--routes", args.routes, "--frames", args.frames, "--seed", args.eval_seed, "--gaps", args.gaps,
-               "--interpolation", "both", "--workers", args.workers, "--no-mcap", "--no-plots", "-q"]
+               "--interpolation", "both", "--workers", "1" if args.parts else args.workers, "--no-mcap", "--no-plots",
+               "-q"]
     study: dict[str, Any] = {"command": shlex.join(["python", "tools/study_convoy_weights.py", *argv]),
                              "version": cold_maps.__version__, "eval_options": shlex.join(options), "maps": [],
                              "rows": []}
@@ -186,7 +262,8 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
                     out = args.out / name / sensor / f"pose{sigma_xy:g}_{sigma_yaw:g}" / weights
                     run = ["--map", str(spec.path), "--sensor", sensor, "--pose-xy", f"{sigma_xy:g}", "--pose-yaw",
                            f"{sigma_yaw:g}", "--convoy-weights", weights, *options, "--out", str(out)]
-                    status, err, seconds = run_eval(run)
+                    with convoy_parts() if args.parts else contextlib.nullcontext({}) as parts:
+                        status, err, seconds = run_eval(run)
                     print(f"{name} {sensor} {sigma_xy:g}/{sigma_yaw:g} {weights}: exit {status} in {seconds:.0f} s",
                           file=sys.stderr)
                     if status != 0:
@@ -195,6 +272,8 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
                     metrics = json.loads((out / "metrics.json").read_text())
                     row[weights] = convoy_row(metrics) | {"calibration": calibration_rows(metrics),
                                                           "cold_eval": shlex.join(["cold-eval", *run])}
+                    if parts:
+                        row[weights]["parts"] = parts
                 study["rows"].append(row)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "study.json").write_text(json.dumps(study, indent=1) + "\n")
@@ -221,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--eval-seed", default="0", help="--maps: cold-eval --seed (default 0)")
     parser.add_argument("--gaps", default="20,30,50", help="--maps: cold-eval --gaps (default 20,30,50)")
     parser.add_argument("--workers", default="2", help="--maps: cold-eval --workers (default 2)")
+    parser.add_argument("--parts", action="store_true",
+                        help="--maps: also where the largest convoy error lies (cold-eval with one worker)")
     parser.add_argument("--sensors", default=",".join(SENSORS), choices=(*SENSORS, ",".join(SENSORS)),
                         help="--maps: the sensors, ideal, camera or both (default ideal,camera)")
     args = parser.parse_args(argv)
