@@ -36,7 +36,10 @@ more of the lateral limits than the own lane (the geometry does not separate the
 ``"fork"`` as ``"separation"``, and a branch the ego's detection ends at (runs less than
 :data:`FORK_SEEN_M` along) is not a lane the detection lies on: a camera's detection ends where
 the markings stop at a junction, so which way the ego's lane goes is not seen, and a coop that
-continues such a branch as well as or better than the ego's lane is rejected.
+continues such a branch as well as or better than the ego's lane is rejected; where the ego's
+detection states why it ended (``LaneDetection.end_reason``), one that stopped short of its range
+(:data:`fusion.types.END_EARLY`) shows no branch as a lane it lies on, and a single-lane gap pair
+whose ego detection ended ``"unmarked"`` (where a junction begins) is ambiguous.
 Rejections for ambiguity start with "ambiguous".
 """
 
@@ -367,7 +370,7 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     if params.association == "legacy":
         return association
     if params.association in SEPARATION_RULES and single and not convoy:
-        reason = _separation_reason(ego, coop, own, params, fits, used) or _unmarked_end_reason(ego, params)
+        reason = _unmarked_end_reason(ego, params) or _separation_reason(ego, coop, own, params, fits, used)
         if reason:
             return Association(reason, 0.0)
     return _confident(ego, coop, own, convoy, association, params, fits, ends)

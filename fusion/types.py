@@ -458,7 +458,9 @@ class FusionParams:
             lane branching off where the ego's detection ends — the detection runs less than
             :data:`fusion.association.FORK_SEEN_M` along it — is a fork whose way the ego's
             lane takes is not seen: a coop that continues that branch as well as or better
-            than the ego's lane is rejected). Opt-in: measured on the map families in
+            than the ego's lane is rejected; so is, by the ego's ``end_reason``, one that
+            continues a branch the ego's detection lies on where it stopped short of its
+            range, and a single-lane gap pair whose ego detection ended ``"unmarked"``). Opt-in: measured on the map families in
             docs/fusion/association.md and docs/results/association.md.
         min_confidence: lowest association confidence fused with ``association="confidence"``,
             ``"strict"`` or ``"separation"``
