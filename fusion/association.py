@@ -240,9 +240,9 @@ def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool, for
     it, :func:`overlap_end_offset`) is a lane the detection lies on as well: the coop may
     continue it or the ego's own lane, whichever is better; with ``fork_at_end``
     (``association="fork"``) only when the detection also runs :data:`FORK_SEEN_M` past the
-    branch's start (:func:`branch_seen_m`) and did not stop short of its range
-    (``ego.end_reason`` in :data:`fusion.types.END_EARLY`): a fork at the detection's end is
-    not seen past, and where the detection stopped early the lanes part unseen."""
+    branch's start (:func:`branch_seen_m`) and did not stop short of its range (``ego.end_reason``
+    not in :data:`fusion.types.END_EARLY`): a fork at the detection's end is not seen past, and
+    beyond a detection that stopped early the lanes part unseen."""
     lanes = [(branch.left, branch.right) for branch in ego.branches]
     end_inside = [lane for lane in lanes if _end_inside(own[0], lane)]
     early = fork_at_end and ego.end_reason in END_EARLY
