@@ -36,7 +36,10 @@ more of the lateral limits than the own lane (the geometry does not separate the
 ``"fork"`` as ``"separation"``, and a branch the ego's detection ends at (runs less than
 :data:`FORK_SEEN_M` along) is not a lane the detection lies on: a camera's detection ends where
 the markings stop at a junction, so which way the ego's lane goes is not seen, and a coop that
-continues such a branch as well as or better than the ego's lane is rejected.
+continues such a branch as well as or better than the ego's lane is rejected; where the ego's
+detection states why it ended (``LaneDetection.end_reason``), one that stopped short of its range
+(:data:`fusion.types.END_EARLY`) shows no branch as a lane it lies on, and a single-lane gap pair
+whose ego detection ended ``"unmarked"`` (where a junction begins) is ambiguous.
 Rejections for ambiguity start with "ambiguous".
 """
 
@@ -65,7 +68,7 @@ from fusion.fusibility import (
 from fusion.gate import GateBorder, gate_reason
 from fusion.geometry import EndFit, end_direction, foot_point, transform
 from fusion.spline import EndFits
-from fusion.types import SEPARATION_RULES, FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
+from fusion.types import END_EARLY, SEPARATION_RULES, FusionParams, LaneDetection, NDArrayFloat, stacked_arclength
 from fusion.uncertainty import pair_uncertainty
 
 Lane = tuple[NDArrayFloat, NDArrayFloat]
@@ -237,10 +240,14 @@ def _branch_reason(ego: LaneDetection, own: tuple[Lane, Lane], convoy: bool, for
     it, :func:`overlap_end_offset`) is a lane the detection lies on as well: the coop may
     continue it or the ego's own lane, whichever is better; with ``fork_at_end``
     (``association="fork"``) only when the detection also runs :data:`FORK_SEEN_M` past the
-    branch's start (:func:`branch_seen_m`): a fork at the detection's end is not seen past."""
+    branch's start (:func:`branch_seen_m`) and did not stop short of its range (``ego.end_reason``
+    not in :data:`fusion.types.END_EARLY`): a fork at the detection's end is not seen past, and
+    beyond a detection that stopped early the lanes part unseen."""
     lanes = [(branch.left, branch.right) for branch in ego.branches]
     end_inside = [lane for lane in lanes if _end_inside(own[0], lane)]
-    inside = [lane for lane in end_inside if not (fork_at_end and branch_seen_m(own[0], lane) < FORK_SEEN_M)]
+    early = fork_at_end and ego.end_reason in END_EARLY
+    inside = [lane for lane in end_inside
+              if not (fork_at_end and (early or branch_seen_m(own[0], lane) < FORK_SEEN_M))]
     main = min(_fit_cost(lane, own[1], convoy) for lane in (own[0], *inside))
     for lane in lanes:
         if any(lane is other for other in inside):
@@ -363,7 +370,7 @@ def associate(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane, Lane], c
     if params.association == "legacy":
         return association
     if params.association in SEPARATION_RULES and single and not convoy:
-        reason = _separation_reason(ego, coop, own, params, fits, used)
+        reason = _unmarked_end_reason(ego, params) or _separation_reason(ego, coop, own, params, fits, used)
         if reason:
             return Association(reason, 0.0)
     return _confident(ego, coop, own, convoy, association, params, fits, ends)
@@ -437,6 +444,17 @@ def _separation_reason(ego: LaneDetection, coop: LaneDetection, own: tuple[Lane,
                     f"using {moved_used:.2f} of a lateral limit, the coop's lane {used:.2f} (separation below "
                     f"{SEPARATION_MARGIN:.2f})")
     return ""
+
+
+def _unmarked_end_reason(ego: LaneDetection, params: FusionParams) -> str:
+    """Why a single-lane gap pair is ambiguous under ``association="fork"`` ("" when it is
+    not): the ego's detection ended where its lane's markings stop (``end_reason``
+    ``"unmarked"``), where a junction begins; which of the lanes that may leave there the
+    ego's lane takes is not seen, and a single-lane sensor reports none of them."""
+    if params.association != "fork" or ego.end_reason != "unmarked":
+        return ""
+    return ("ambiguous: the ego detection ends where its lane markings stop (a junction may begin there) and "
+            "reports no lane beside it: which way the ego's lane goes beyond is not seen")
 
 
 def _multi_lane(ego: LaneDetection, coop: LaneDetection) -> bool:

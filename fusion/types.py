@@ -34,6 +34,15 @@ ConvoyStrategy = Literal["weighted", "mean", "nearest"]
 ConvoyWeights = Literal["paper", "mean", "inverse-variance"]
 CONVOY_WEIGHTS: Final[tuple[str, ...]] = ("paper", "mean", "inverse-variance")
 SplineParameter = Literal["chord", "uniform"]
+END_REACHED: Final[tuple[str, ...]] = ("range", "map_end")
+"""``LaneDetection.end_reason`` values of a detection that ran as far as the sensor looks:
+its range (``"range"``) or the end of the lane it follows (``"map_end"``)."""
+END_EARLY: Final[tuple[str, ...]] = ("field_of_view", "crest", "occlusion", "unmarked")
+"""``LaneDetection.end_reason`` values of a detection that stopped short of its range: the
+lane left the field of view, went behind a crest or another vehicle, or its markings stopped
+(``"unmarked"``: where a junction begins)."""
+END_REASONS: Final[tuple[str, ...]] = END_REACHED + END_EARLY
+"""Every ``LaneDetection.end_reason`` (None: not stated)."""
 
 MIN_BORDER_POINTS: Final[int] = 2
 MIN_POINT_STEP_M: Final[float] = 1e-9
@@ -302,6 +311,8 @@ class LaneDetection:
             the sender states no uncertainty (default).
         pose_cov: ``(3, 3)`` covariance of the sender's pose error in (x [m], y [m],
             yaw [rad]), world frame, or None when unknown (default).
+        end_reason: why the detection ended, one of :data:`END_REASONS`, or None when not
+            stated (default); ``association="fork"`` reads it (:mod:`fusion.association`).
     """
 
     pose: Pose2D
@@ -316,6 +327,7 @@ class LaneDetection:
     left_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     right_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     pose_cov: NDArrayFloat | None = field(default=None, repr=False, compare=False)
+    end_reason: str | None = field(default=None, compare=False)
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
@@ -356,23 +368,28 @@ class LaneDetection:
         if self.road_edges is not None and not isinstance(self.road_edges, RoadEdges):
             raise InvalidDetectionError(f"LaneDetection.road_edges must be RoadEdges or None, "
                                         f"got {type(self.road_edges).__name__}")
+        if self.end_reason is not None and self.end_reason not in END_REASONS:
+            raise InvalidDetectionError(f"LaneDetection.end_reason must be None or one of {', '.join(END_REASONS)}, "
+                                        f"got {self.end_reason!r}")
 
     @classmethod
     def trusted(cls, pose: Pose2D, points: NDArrayFloat, n_left: int, *, stamp: float = 0.0, sender: str = "",
                 neighbours: tuple[NeighbourLane, ...] = (), road_edges: RoadEdges | None = None,
                 branches: tuple[LaneBranch, ...] = (), left_sigma: NDArrayFloat | None = None,
                 right_sigma: NDArrayFloat | None = None, pose_cov: NDArrayFloat | None = None,
-                arclength: NDArrayFloat | None = None) -> LaneDetection:
+                arclength: NDArrayFloat | None = None, end_reason: str | None = None) -> LaneDetection:
         """The detection of borders already checked as a block (:func:`clean_borders` true for
         both, ``points`` the stacked left and right, float64, read-only), sigmas, covariance
-        and (if given) ``arclength`` (:func:`stacked_arclengths`) already valid and read-only:
+        and (if given) ``arclength`` (:func:`stacked_arclengths`) already valid and read-only,
+        ``end_reason`` one of :data:`END_REASONS` or None:
         equal to the constructor's, without its per-detection checks and copies."""
         detection = object.__new__(cls)
         put = object.__setattr__
         for name, value in (("pose", pose), ("stamp", stamp), ("sender", sender), ("history", None),
                             ("neighbours", neighbours), ("road_edges", road_edges), ("branches", branches),
                             ("left_sigma", left_sigma), ("right_sigma", right_sigma), ("pose_cov", pose_cov),
-                            ("points", points), ("left", points[:n_left]), ("right", points[n_left:]),
+                            ("end_reason", end_reason), ("points", points), ("left", points[:n_left]),
+                            ("right", points[n_left:]),
                             ("arclength", _frozen(stacked_arclength(points, n_left)) if arclength is None else arclength)):
             put(detection, name, value)
         return detection
@@ -441,7 +458,9 @@ class FusionParams:
             lane branching off where the ego's detection ends — the detection runs less than
             :data:`fusion.association.FORK_SEEN_M` along it — is a fork whose way the ego's
             lane takes is not seen: a coop that continues that branch as well as or better
-            than the ego's lane is rejected). Opt-in: measured on the map families in
+            than the ego's lane is rejected; so is, by the ego's ``end_reason``, one that
+            continues a branch the ego's detection lies on where it stopped short of its
+            range, and a single-lane gap pair whose ego detection ended ``"unmarked"``). Opt-in: measured on the map families in
             docs/fusion/association.md and docs/results/association.md.
         min_confidence: lowest association confidence fused with ``association="confidence"``,
             ``"strict"`` or ``"separation"``

@@ -13,6 +13,7 @@ import pytest
 from camera_maps import LANE_WIDTH_M, Lane, one_road, write
 from conftest import bundled_map
 
+import fusion
 from cold_maps.cli import evaluate
 from cold_maps.evaluation.report import FRAMES_CSV_COLUMNS
 from cold_maps.network.lane_graph import LaneKey, load_graph
@@ -22,7 +23,7 @@ from cold_maps.opendrive.road_marks import BoundaryType, classify_border
 from cold_maps.simulation.camera import END_REASONS, CameraSensor, detection_window, lane_sensor
 from cold_maps.simulation.detection import obstacles_of
 from cold_maps.simulation.drive import Track, VehicleState
-from cold_maps.simulation.sensor import LaneSensor
+from cold_maps.simulation.sensor import END_MAP, END_RANGE, LaneSensor
 from cold_maps.simulation.sensor_profile import (
     BUILTIN_PROFILES,
     CAMERA,
@@ -234,6 +235,13 @@ def test_cold_eval_with_a_camera_records_why_each_local_detection_ended(tmp_path
     assert evaluate.main([*args, "--frames", "2", "--out", str(tmp_path / "ideal")]) == 0
     header = (tmp_path / "ideal" / "frames.csv").read_text().splitlines()[0]
     assert header == ",".join(FRAMES_CSV_COLUMNS)
+
+
+def test_every_end_reason_of_the_sensors_is_one_a_detection_states() -> None:
+    """The camera's and the ideal sensor's end reasons are exactly ``fusion``'s, split into
+    those that reach the sensor's range (or the lane's end) and those that stop short of it."""
+    assert set(END_REASONS) == set(fusion.types.END_REASONS)
+    assert {END_RANGE, END_MAP} == set(fusion.types.END_REACHED)
 
 
 @pytest.mark.parametrize("value, named", [("lidar", "unknown sensor 'lidar'"), ("nope.toml", "nope.toml: cannot read")])

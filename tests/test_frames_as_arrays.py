@@ -71,7 +71,8 @@ def _same_array(a, b) -> bool:
 
 
 def _assert_same_detection(a: fusion.LaneDetection, b: fusion.LaneDetection) -> None:
-    assert (a.pose, a.stamp, a.sender, a.road_edges) == (b.pose, b.stamp, b.sender, b.road_edges)
+    assert (a.pose, a.stamp, a.sender, a.road_edges, a.end_reason) == (b.pose, b.stamp, b.sender, b.road_edges,
+                                                                       b.end_reason)
     for name in ("points", "left", "right", "arclength", "left_sigma", "right_sigma", "pose_cov"):
         assert _same_array(getattr(a, name), getattr(b, name)), name
     assert [n.index for n in a.neighbours] == [n.index for n in b.neighbours]
@@ -92,6 +93,7 @@ def _assert_same_frames(reference: list[dict[str, Sensed]], block: list[dict[str
             assert type(a.state.station) is type(b.state.station) is float
             assert (a.detection is None) == (b.detection is None), name
             if a.detection is not None and b.detection is not None:
+                assert a.detection.end_reason == a.end_reason in fusion.types.END_REASONS, name
                 _assert_same_detection(a.detection, b.detection)
                 compared += 1
     return compared

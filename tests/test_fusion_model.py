@@ -119,3 +119,19 @@ def test_detection_sigma_follows_the_points_it_keeps_and_is_validated() -> None:
                 {"pose_cov": -np.eye(3)}):
         with pytest.raises(InvalidDetectionError, match="LaneDetection"):
             LaneDetection(Pose2D(0.0, 0.0, 0.0), left, right, **bad)
+
+
+def test_detection_end_reason_is_one_of_the_known_reasons_or_none() -> None:
+    """``end_reason`` defaults to None; a known reason is kept (also by ``trusted``); anything
+    else is refused with an error naming the field."""
+    base = lane()
+    assert base.end_reason is None
+    for reason in fusion.types.END_REASONS:
+        assert LaneDetection(base.pose, base.left, base.right, end_reason=reason).end_reason == reason
+        trusted = LaneDetection.trusted(base.pose, base.points, base.left.shape[0], end_reason=reason)
+        assert trusted.end_reason == reason
+    assert set(fusion.types.END_REACHED) | set(fusion.types.END_EARLY) == set(fusion.types.END_REASONS)
+    assert not set(fusion.types.END_REACHED) & set(fusion.types.END_EARLY)
+    for bad in ("", "Range", "unmarked ", 3):
+        with pytest.raises(InvalidDetectionError, match="LaneDetection.end_reason"):
+            LaneDetection(base.pose, base.left, base.right, end_reason=bad)

@@ -183,7 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "pairs below the association confidence 0.4 as ambiguous (confidence), and also "
                              "single-lane gap pairs whose lane a width aside passes the geometry too (strict) or "
                              "passes it about as well (separation, which also reads d_s <= d_i to 1 mm), and also "
-                             "coops that continue a lane branching off where the ego's detection ends (fork); see "
+                             "coops that continue a lane branching off where the ego's detection ends or stops "
+                             "short, and single-lane gap pairs whose ego detection ends where the markings stop "
+                             "(fork); see "
                              "docs/fusion/association.md (default legacy)")
     parser.add_argument("--lanes", type=int_in(0, MAX_LANES), default=0,
                         help="neighbour lanes the sensor detects on each side, with the road edges and lanes leaving "

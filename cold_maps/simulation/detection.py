@@ -66,7 +66,8 @@ def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: Sensor
 
     The detection states its uncertainty when an error model has one: per-point lateral
     1σ of both borders (:func:`lateral_sigmas`) and the pose covariance (:func:`pose_covariance`);
-    None when the model is off (the ideal sensor)."""
+    None when the model is off (the ideal sensor). It states why the sensor's lane ended
+    (``fusion.LaneDetection.end_reason``, the sensor's reason)."""
     raw, end_reason = sensor.read(state.track, state.station, obstacles)
     if raw is None:
         return Sensed(state, None, end_reason, seen=False)
@@ -82,7 +83,8 @@ def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: Sensor
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
                                               neighbours=lanes, road_edges=edges, branches=branches,
                                               left_sigma=sigmas[0], right_sigma=sigmas[1],
-                                              pose_cov=pose_covariance(errors, state.role)),
+                                              pose_cov=pose_covariance(errors, state.role),
+                                              end_reason=end_reason or None),
                   end_reason)
 
 
@@ -249,12 +251,13 @@ def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_erro
             out.append(fusion.LaneDetection.trusted(
                 item.pose, points[start:stop], int(middle - start), stamp=stamps_s[item.frame], sender=item.state.name,
                 neighbours=lanes, road_edges=edges, branches=branches, left_sigma=sigmas[0], right_sigma=sigmas[1],
-                pose_cov=pose_cov, arclength=arclength[start:stop]))
+                pose_cov=pose_cov, arclength=arclength[start:stop], end_reason=item.end_reason or None))
         else:
             out.append(fusion.LaneDetection(item.pose, points[start:middle], points[middle:stop],
                                             stamp=stamps_s[item.frame], sender=item.state.name, neighbours=lanes,
                                             road_edges=edges, branches=branches, left_sigma=sigmas[0],
-                                            right_sigma=sigmas[1], pose_cov=pose_cov))
+                                            right_sigma=sigmas[1], pose_cov=pose_cov,
+                                            end_reason=item.end_reason or None))
     return out
 
 
