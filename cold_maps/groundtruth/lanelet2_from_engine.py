@@ -52,7 +52,8 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
-from cold_maps.opendrive.sampling import LaneBorderSamples, record_joints, sample_s, section_points
+from cold_maps.opendrive.sampling import (
+    LaneBorderSamples, batchable, record_joints, sample_s, section_points, sections_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -133,6 +134,32 @@ def _check_stations(
     return open_, low, high, np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
 
 
+def _initial_stations(road: Road, section_index: int) -> NDArrayFloat:
+    """Where ``adaptive_section_samples`` starts (m): the section's ends, the record
+    starts inside it, a station ``END_VERTEX_M`` inside each end, at most
+    ``INITIAL_STEP_M`` apart."""
+    section = road.lane_sections[section_index]
+    length = section.s_end - section.s
+    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
+    return np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M),
+                                     _breakpoints(road, section_index), np.asarray(ends, dtype=np.float64))))
+
+
+def _refined(
+    s: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat, errors: NDArrayFloat, tolerance_m: float
+) -> NDArrayFloat | None:
+    """``s`` (m) with the intervals [low, high] whose chord error exceeds ``tolerance_m``
+    split, or None when none does (or they are shorter than ``MIN_STEP_M``)."""
+    refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+    if not refine.any():
+        return None
+    # the chord error grows with the square of the interval: split into that many pieces at once
+    pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+    starts, widths = low[refine], (high - low)[refine]
+    offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
+    return np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+
+
 def adaptive_section_samples(
     road: Road, section_index: int, lane_ids: Sequence[int], tolerance_m: float = CHORD_TOLERANCE_M
 ) -> list[LaneBorderSamples]:
@@ -142,11 +169,7 @@ def adaptive_section_samples(
     shorter than ``MIN_STEP_M``). Refinement starts from the section's ends, the record
     starts (``_breakpoints``) and a station ``END_VERTEX_M`` inside each end, with no
     interval longer than ``INITIAL_STEP_M``."""
-    section = road.lane_sections[section_index]
-    length = section.s_end - section.s
-    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
-    s = np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M), _breakpoints(road, section_index),
-                                  np.asarray(ends, dtype=np.float64))))
+    s = _initial_stations(road, section_index)
     joints = record_joints(road, section_index)
     for _ in range(MAX_ROUNDS):
         if len(joints.boundaries):  # record ends add stations: evaluate them before the checks
@@ -160,16 +183,60 @@ def adaptive_section_samples(
             points, checked = np.ascontiguousarray(both[:, :, :len(stations)]), both[:, :, len(stations):]
         borders = points.reshape(-1, len(stations), 3)
         errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3), open_)
-        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
-        if not refine.any():
+        refined = _refined(s, low, high, errors, tolerance_m)
+        if refined is None:
             break
-        # the chord error grows with the square of the interval: split into that many pieces at once
-        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
-        starts, widths = low[refine], (high - low)[refine]
-        offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
-        s = np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+        s = refined
+    return _samples(road, section_index, lane_ids, stations, points)
+
+
+def _samples(road: Road, section_index: int, lane_ids: Sequence[int], stations: NDArrayFloat,
+             points: NDArrayFloat) -> list[LaneBorderSamples]:
     return [LaneBorderSamples(road.id, section_index, lane_id, stations, points[index, 0], points[index, 1])
             for index, lane_id in enumerate(lane_ids)]
+
+
+BATCH_SECTIONS: Final[int] = 32
+"""Sections ``adaptive_samples`` refines together (bounds the arrays of one round)."""
+
+
+def adaptive_samples(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], tolerance_m: float = CHORD_TOLERANCE_M
+) -> list[list[LaneBorderSamples]]:
+    """``adaptive_section_samples`` of each (road, section index, lanes), bit for bit; the
+    sections ``sampling.batchable`` evaluates are refined ``BATCH_SECTIONS`` at a time,
+    one evaluation of all their stations and checks per round."""
+    result: list[list[LaneBorderSamples] | None] = [None] * len(sections)
+    together = []
+    for number, (road, index, lane_ids) in enumerate(sections):
+        if batchable(road, index, lane_ids):
+            together.append(number)
+        else:
+            result[number] = adaptive_section_samples(road, index, lane_ids, tolerance_m)
+    for first in range(0, len(together), BATCH_SECTIONS):
+        active = together[first:first + BATCH_SECTIONS]
+        s = {number: _initial_stations(*sections[number][:2]) for number in active}
+        for _ in range(MAX_ROUNDS):
+            checks = [_check_stations(s[number]) for number in active]
+            both = sections_points([sections[number] for number in active],
+                                   [np.concatenate((s[number], check[3])) for number, check in zip(active, checks)])
+            still = []
+            for number, (open_, low, high, _), values in zip(active, checks, both):
+                stations = s[number]
+                points, checked = np.ascontiguousarray(values[:, :, :len(stations)]), values[:, :, len(stations):]
+                borders = points.reshape(-1, len(stations), 3)
+                errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3),
+                                       open_)
+                road, index, lane_ids = sections[number]
+                result[number] = _samples(road, index, lane_ids, stations, points)
+                refined = _refined(stations, low, high, errors, tolerance_m)
+                if refined is not None:
+                    s[number] = refined
+                    still.append(number)
+            active = still
+            if not active:
+                break
+    return result  # type: ignore[return-value]
 
 
 def _is_zero_width(samples: LaneBorderSamples) -> bool:
@@ -277,15 +344,17 @@ def engine_lanelets(
     road_types = road_types or {}
     regulations = regulations or {}
     priority = priority or {}
-    sampled: list[tuple[Road, LaneBorderSamples, str]] = []
+    sections = []
+    kinds: dict[LaneKey, str] = {}
     for road in odr_map.roads.values():
         for index, section in enumerate(road.lane_sections):
-            kinds = {lane.id: lane.type for lane in section.lanes if LaneKey(road.id, index, lane.id) in graph.lengths}
-            if not kinds or section.s_end <= section.s:
-                continue
-            for samples in adaptive_section_samples(road, index, list(kinds)):
-                if not _is_zero_width(samples):
-                    sampled.append((road, samples, kinds[samples.lane_id]))
+            lanes = {lane.id: lane.type for lane in section.lanes if LaneKey(road.id, index, lane.id) in graph.lengths}
+            if lanes and section.s_end > section.s:
+                sections.append((road, index, list(lanes)))
+                kinds.update((LaneKey(road.id, index, lane_id), kind) for lane_id, kind in lanes.items())
+    sampled = [(road, samples, kinds[LaneKey(road.id, samples.section, samples.lane_id)])
+               for (road, _, _), section_samples in zip(sections, adaptive_samples(sections))
+               for samples in section_samples if not _is_zero_width(samples)]
     ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
     lanelets = []
     section_key: tuple[str, int] | None = None
