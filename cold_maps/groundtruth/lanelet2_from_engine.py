@@ -53,7 +53,7 @@ from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
 from cold_maps.opendrive.sampling import (
-    LaneBorderSamples, batchable, record_joints, sample_s, section_points, sections_points)
+    LaneBorderSamples, batchable, record_joints, sample_s, section_points, stacked_section_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -205,38 +205,97 @@ def adaptive_samples(
 ) -> list[list[LaneBorderSamples]]:
     """``adaptive_section_samples`` of each (road, section index, lanes), bit for bit; the
     sections ``sampling.batchable`` evaluates are refined ``BATCH_SECTIONS`` at a time,
-    one evaluation of all their stations and checks per round."""
-    result: list[list[LaneBorderSamples] | None] = [None] * len(sections)
-    together = []
-    for number, (road, index, lane_ids) in enumerate(sections):
-        if batchable(road, index, lane_ids):
-            together.append(number)
-        else:
-            result[number] = adaptive_section_samples(road, index, lane_ids, tolerance_m)
-    for first in range(0, len(together), BATCH_SECTIONS):
-        active = together[first:first + BATCH_SECTIONS]
-        s = {number: _initial_stations(*sections[number][:2]) for number in active}
-        for _ in range(MAX_ROUNDS):
-            checks = [_check_stations(s[number]) for number in active]
-            both = sections_points([sections[number] for number in active],
-                                   [np.concatenate((s[number], check[3])) for number, check in zip(active, checks)])
-            still = []
-            for number, (open_, low, high, _), values in zip(active, checks, both):
-                stations = s[number]
-                points, checked = np.ascontiguousarray(values[:, :, :len(stations)]), values[:, :, len(stations):]
-                borders = points.reshape(-1, len(stations), 3)
-                errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3),
-                                       open_)
+    their stations and checks evaluated, compared with the chords and split together
+    round by round. A ValueError is the one of the first section that fails."""
+    try:
+        result: dict[int, list[LaneBorderSamples]] = {}
+        together = []
+        for number, (road, index, lane_ids) in enumerate(sections):
+            if batchable(road, index, lane_ids):
+                together.append(number)
+            else:
+                result[number] = adaptive_section_samples(road, index, lane_ids, tolerance_m)
+        for first in range(0, len(together), BATCH_SECTIONS):
+            numbers = together[first:first + BATCH_SECTIONS]
+            for number, (stations, points) in zip(numbers, _refine_together([sections[n] for n in numbers],
+                                                                              tolerance_m)):
                 road, index, lane_ids = sections[number]
-                result[number] = _samples(road, index, lane_ids, stations, points)
-                refined = _refined(stations, low, high, errors, tolerance_m)
-                if refined is not None:
-                    s[number] = refined
-                    still.append(number)
-            active = still
-            if not active:
-                break
-    return result  # type: ignore[return-value]
+                result[number] = [LaneBorderSamples(road.id, index, lane_id, stations, points[row, 0], points[row, 1])
+                                  for row, lane_id in enumerate(lane_ids)]
+        return [result[number] for number in range(len(sections))]
+    except ValueError:
+        for road, index, lane_ids in sections:  # the error of the first section that fails, as one by one
+            adaptive_section_samples(road, index, lane_ids, tolerance_m)
+        raise
+
+
+def _refine_together(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], tolerance_m: float
+) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+    """Stations (m) and borders (lanes, 2, stations, 3) of ``adaptive_section_samples`` of
+    each ``batchable`` section: its rounds on the sections' concatenated stations."""
+    done: list[tuple[NDArrayFloat, NDArrayFloat] | None] = [None] * len(sections)
+    initial = [_initial_stations(road, index) for road, index, _ in sections]
+    s = np.concatenate(initial)
+    owner = np.repeat(np.arange(len(sections)), [len(block) for block in initial])  # index into `active`
+    active = np.arange(len(sections))
+    lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
+    fractions = np.asarray(CHECK_FRACTIONS)
+    for round_ in range(MAX_ROUNDS):
+        count = np.bincount(owner, minlength=len(active))
+        begin = np.cumsum(count) - count
+        intervals = np.flatnonzero((s[1:] > s[:-1]) & (owner[1:] == owner[:-1]))  # the open ones, low ends
+        low, high, of = s[intervals], s[intervals + 1], owner[intervals]
+        opened = np.bincount(of, minlength=len(active))
+        place = np.arange(len(intervals)) - (np.cumsum(opened) - opened)[of]  # interval's rank in its section
+        size = count + len(CHECK_FRACTIONS) * opened  # stations, then the checks fraction by fraction
+        request_begin = np.cumsum(size) - size
+        request = np.empty(int(size.sum()))
+        request[request_begin[owner] + np.arange(len(s)) - begin[owner]] = s
+        for rank, fraction in enumerate(CHECK_FRACTIONS):
+            request[request_begin[of] + count[of] + rank * opened[of] + place] = low + fraction * (high - low)
+        values, starts = stacked_section_points([sections[i] for i in active.tolist()], request, size)
+        # every (border, fraction, interval) of every section: checked point and chord
+        borders = 2 * lanes[active]
+        border_of = np.repeat(np.arange(len(active)), borders)
+        border_row = np.repeat(np.asarray(starts[:-1]), borders) + (
+            np.arange(int(borders.sum())) - np.repeat(np.cumsum(borders) - borders, borders)) * size[border_of]
+        per_border = len(CHECK_FRACTIONS) * opened[border_of]
+        triple_border = np.repeat(np.arange(len(border_of)), per_border)
+        rank_in_border = np.arange(int(per_border.sum())) - np.repeat(np.cumsum(per_border) - per_border, per_border)
+        section_of_triple = border_of[triple_border]
+        width = np.maximum(opened[section_of_triple], 1)
+        rank, interval = rank_in_border // width, rank_in_border % width
+        global_interval = (np.cumsum(opened) - opened)[section_of_triple] + interval
+        station = intervals[global_interval] - begin[section_of_triple]
+        row = border_row[triple_border]
+        fraction = fractions[rank][:, None]
+        chord = (1.0 - fraction) * values[row + station] + fraction * values[row + station + 1]
+        checked = values[row + count[section_of_triple] + rank * opened[section_of_triple] + interval]
+        errors = np.zeros(len(intervals))
+        np.maximum.at(errors, global_interval, np.sqrt(np.square(checked - chord).sum(axis=1)))
+        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+        finished = (np.bincount(of[refine], minlength=len(active)) == 0) | (round_ == MAX_ROUNDS - 1)
+        for i in np.flatnonzero(finished).tolist():
+            block = values[starts[i]:starts[i + 1]].reshape(lanes[active[i]], 2, size[i], 3)
+            done[active[i]] = s[begin[i]:begin[i] + count[i]], np.ascontiguousarray(block[:, :, :count[i]])
+        if finished.all():
+            break
+        # the chord error grows with the square of the interval: split into that many pieces at once
+        extra = pieces - 1
+        offsets = (np.arange(int(extra.sum())) - np.repeat(np.cumsum(extra) - extra, extra) + 1) / np.repeat(pieces, extra)
+        added = np.repeat(low[refine], extra) + offsets * np.repeat((high - low)[refine], extra)
+        renumber = np.cumsum(~finished) - 1
+        keep = ~finished[owner]
+        merged_owner = np.concatenate((renumber[owner[keep]], renumber[np.repeat(of[refine], extra)]))
+        merged = np.concatenate((s[keep], added))
+        order = np.lexsort((merged, merged_owner))
+        merged, merged_owner = merged[order], merged_owner[order]
+        new = np.ones(len(merged), dtype=bool)
+        new[1:] = (merged[1:] != merged[:-1]) | (merged_owner[1:] != merged_owner[:-1])
+        s, owner, active = merged[new], merged_owner[new], active[~finished]
+    return done  # type: ignore[return-value]
 
 
 def _is_zero_width(samples: LaneBorderSamples) -> bool:

@@ -304,22 +304,36 @@ def sections_points(
     sections: Sequence[tuple[Road, int, Sequence[int]]], s: Sequence[NDArrayFloat]
 ) -> list[NDArrayFloat]:
     """``section_points(road, section, s[i], lanes)[1]`` of each (road, section index,
-    lanes), all ``batchable``, bit for bit: the same elementwise arithmetic on the
-    stations of all sections at once (ValueError as ``section_points``)."""
+    lanes), all ``batchable``, bit for bit (``stacked_section_points``)."""
     counts = np.array([len(block) for block in s], dtype=np.int64)
-    bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
     flat = np.concatenate([np.asarray(block, dtype=np.float64) for block in s] or [np.zeros(0)])
+    values, starts = stacked_section_points(sections, flat, counts)
+    return [values[a:b].reshape(len(ids), 2, count, 3)
+            for (_, _, ids), count, a, b in zip(sections, counts.tolist(), starts[:-1], starts[1:])]
+
+
+def stacked_section_points(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], s: NDArrayFloat, counts: NDArrayInt
+) -> tuple[NDArrayFloat, list[int]]:
+    """x, y, z (m, inertial frame) of the borders of the listed lanes of each (road,
+    section index, lanes), all ``batchable``, at its block of ``counts`` stations in ``s``
+    (m): (rows, 3), section by section, lane by lane, inner then outer, station by
+    station (``section_points``' borders, bit for bit: the same elementwise arithmetic on
+    all stations at once), and the row where each section starts (and the end).
+    ValueError as ``section_points`` where a point is not finite."""
+    bounds = np.concatenate(([0], np.cumsum(counts)))
     parts = [section_of(road, index) for road, index, _ in sections]
-    x, y, hdg = _records_poses([_record_of(road, part) for (road, _, _), part in zip(sections, parts)], flat, counts)
+    x, y, hdg = _records_poses([_record_of(road, part) for (road, _, _), part in zip(sections, parts)], s, counts)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
-    z, offset = np.zeros(len(flat)), np.zeros(len(flat))
-    for (road, _, _), part, a, b in zip(sections, parts, bounds[:-1], bounds[1:]):
+    z, offset = np.zeros(len(s)), np.zeros(len(s))
+    for (road, _, _), part, a, b in zip(sections, parts, bounds[:-1].tolist(), bounds[1:].tolist()):
         if road.elevation:
-            z[a:b] = cubic_poly.evaluate(road.elevation, flat[a:b], before=part.s_end)
+            z[a:b] = cubic_poly.evaluate(road.elevation, s[a:b], before=part.s_end)
         if road.lane_offsets:
-            offset[a:b] = cubic_poly.evaluate(road.lane_offsets, flat[a:b], before=part.s_end)
+            offset[a:b] = cubic_poly.evaluate(road.lane_offsets, s[a:b], before=part.s_end)
     depth = max((abs(i) for _, _, ids in sections for i in ids), default=0)
-    xy: dict[tuple[int, int], tuple[NDArrayFloat, ...]] = {}  # (side, place) → inner x, y, outer x, y
+    planes = {}  # (side, place) → the plane index of its inner x, y (outer: + 2)
+    xy = []
     for sign in (1, -1):
         inner = offset
         for place in range(depth):
@@ -327,22 +341,32 @@ def sections_points(
                      else None for part, (_, _, ids) in zip(parts, sections)]
             if not any(lanes):
                 break
-            outer = inner + float(sign) * _single_width(lanes, parts, flat, counts)
-            xy[sign, place] = (x + inner * normal_x, y + inner * normal_y, x + outer * normal_x, y + outer * normal_y)
+            outer = inner + float(sign) * _single_width(lanes, parts, s, counts)
+            planes[sign, place] = len(xy)
+            xy += [x + inner * normal_x, y + inner * normal_y, x + outer * normal_x, y + outer * normal_y]
             inner = outer
-    result = []
-    for (road, index, ids), part, a, b in zip(sections, parts, bounds[:-1], bounds[1:]):
+    # each border row: its plane (x; y is the next) and its section's block of stations
+    plane, first, size = [], [], []
+    for (_, _, ids), part, a, count in zip(sections, parts, bounds[:-1].tolist(), counts.tolist()):
         places = {lane.id: (sign, place) for sign in (1, -1) for place, lane in enumerate(_side(part, sign))}
-        points = np.empty((len(ids), 2, b - a, 3))
-        for row, lane_id in enumerate(ids):
-            inner_x, inner_y, outer_x, outer_y = xy[places[lane_id]]
-            points[row, 0, :, 0], points[row, 0, :, 1] = inner_x[a:b], inner_y[a:b]
-            points[row, 1, :, 0], points[row, 1, :, 1] = outer_x[a:b], outer_y[a:b]
-            points[row, :, :, 2] = z[a:b]
-        if not np.isfinite(points).all():  # section_points names the road, section, lane and s
-            points = section_points(road, index, flat[a:b], ids)[1]
-        result.append(points)
-    return result
+        for lane_id in ids:
+            plane += [planes[places[lane_id]], planes[places[lane_id]] + 2]
+            first += [a, a]
+            size += [count, count]
+    sizes = np.asarray(size, dtype=np.int64)
+    ends = np.cumsum(sizes)
+    at = np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(np.asarray(first, dtype=np.int64) - (ends - sizes), sizes)
+    stacked = np.stack(xy) if xy else np.zeros((0, len(s)))
+    rows = np.repeat(np.asarray(plane, dtype=np.int64), sizes) * len(s) + at
+    values = np.column_stack((stacked.ravel()[rows], stacked.ravel()[rows + len(s)], z[at]))
+    starts = np.concatenate(([0], np.cumsum([2 * len(ids) * count for (_, _, ids), count
+                                              in zip(sections, counts.tolist())]))).tolist()
+    if not np.isfinite(values).all():  # section_points names the road, section, lane and s
+        for (road, index, ids), a, b, low, high in zip(sections, bounds[:-1], bounds[1:], starts[:-1], starts[1:]):
+            if not np.isfinite(values[low:high]).all():
+                section_points(road, index, s[a:b], ids)
+        raise ValueError("a lane border is not finite")  # not reached: section_points raised
+    return values, starts
 
 
 def _side(section: LaneSection, sign: int) -> tuple[Lane, ...]:
