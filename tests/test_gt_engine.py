@@ -293,12 +293,13 @@ def test_sections_refined_together_equal_the_section_by_section_sampling_bit_for
 
 
 def test_crossing_connections_evaluated_together_equal_one_by_one_bit_for_bit() -> None:
-    from cold_maps.opendrive.sampling import batchable, section_points, sections_points
+    from cold_maps.opendrive.sampling import batchable, section_points, stacked_section_points
 
     sections = _sections(parse_opendrive("".join(load_tool("big_maps").junction(4, 3)).encode()))
     assert all(batchable(*section) for section in sections)
     rng = np.random.default_rng(0)
     stations = [rng.uniform(road.lane_sections[index].s, road.lane_sections[index].s_end, size=int(rng.integers(0, 40)))
                 for road, index, _ in sections]  # unordered, some sections without a station
-    for (road, index, lane_ids), s, points in zip(sections, stations, sections_points(sections, stations)):
-        assert points.tobytes() == section_points(road, index, s, lane_ids)[1].tobytes()
+    values, starts = stacked_section_points(sections, np.concatenate(stations), np.array([len(s) for s in stations]))
+    for (road, index, lane_ids), s, first, end in zip(sections, stations, starts[:-1], starts[1:]):
+        assert values[first:end].tobytes() == section_points(road, index, s, lane_ids)[1].tobytes()

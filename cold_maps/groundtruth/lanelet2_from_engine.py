@@ -15,7 +15,9 @@ Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
   ``CHORD_TOLERANCE_M`` of the chord (checked at a quarter, half and three quarters of
   each interval; a failing one is split into as many pieces as the chord error's square
   root says, the error growing with the interval squared). All lanes of a section share the stations, so neighbours share their
-  border exactly and the writer makes it one way (Lanelet2 adjacency).
+  border exactly and the writer makes it one way (Lanelet2 adjacency). Sections on one
+  line or paramPoly3 record whose lanes have one ``<width>`` each are refined together
+  (``adaptive_samples``), with the same stations and points, bit for bit.
 - Successors are the lane graph's edges (``network.lane_graph``); linked ends at one
   point are one node, others are snapped to their centroid whatever
   the gap (``converters.joins``, join tolerance infinite), so every lane-graph edge is a
@@ -192,6 +194,7 @@ def adaptive_section_samples(
 
 def _samples(road: Road, section_index: int, lane_ids: Sequence[int], stations: NDArrayFloat,
              points: NDArrayFloat) -> list[LaneBorderSamples]:
+    """The samples of each listed lane from a section's stations and borders (lanes, 2, N, 3)."""
     return [LaneBorderSamples(road.id, section_index, lane_id, stations, points[index, 0], points[index, 1])
             for index, lane_id in enumerate(lane_ids)]
 
@@ -219,9 +222,7 @@ def adaptive_samples(
             numbers = together[first:first + BATCH_SECTIONS]
             for number, (stations, points) in zip(numbers, _refine_together([sections[n] for n in numbers],
                                                                               tolerance_m)):
-                road, index, lane_ids = sections[number]
-                result[number] = [LaneBorderSamples(road.id, index, lane_id, stations, points[row, 0], points[row, 1])
-                                  for row, lane_id in enumerate(lane_ids)]
+                result[number] = _samples(*sections[number], stations, points)
         return [result[number] for number in range(len(sections))]
     except ValueError:
         for road, index, lane_ids in sections:  # the error of the first section that fails, as one by one

@@ -221,7 +221,7 @@ def section_points(
 
 
 def batchable(road: Road, section_index: int, lane_ids: Sequence[int]) -> bool:
-    """Whether ``sections_points`` evaluates the listed lanes of a section: no record
+    """Whether ``stacked_section_points`` evaluates the listed lanes of a section: no record
     starts inside it, no superelevation, and every lane out to the outermost listed one
     has at most one ``<width>`` record (and no ``<border>`` in its stead)."""
     section = section_of(road, section_index)
@@ -298,18 +298,6 @@ def _single_width(
     applies = np.repeat([r is not None for r in records], counts) & (s0 <= local)
     ds = np.where(applies, local - s0, 0.0)
     return np.where(applies, c0 + ds * (c1 + ds * (c2 + ds * c3)), 0.0)
-
-
-def sections_points(
-    sections: Sequence[tuple[Road, int, Sequence[int]]], s: Sequence[NDArrayFloat]
-) -> list[NDArrayFloat]:
-    """``section_points(road, section, s[i], lanes)[1]`` of each (road, section index,
-    lanes), all ``batchable``, bit for bit (``stacked_section_points``)."""
-    counts = np.array([len(block) for block in s], dtype=np.int64)
-    flat = np.concatenate([np.asarray(block, dtype=np.float64) for block in s] or [np.zeros(0)])
-    values, starts = stacked_section_points(sections, flat, counts)
-    return [values[a:b].reshape(len(ids), 2, count, 3)
-            for (_, _, ids), count, a, b in zip(sections, counts.tolist(), starts[:-1], starts[1:])]
 
 
 def stacked_section_points(
