@@ -143,9 +143,14 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     """Index of each point's representative: the first earlier-or-same point within
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
     its representative; with ``tolerance`` 0 only equal points share one."""
-    if tolerance == 0.0:
-        _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
-        return first[inverse.ravel()].astype(np.int64)
+    if tolerance == 0.0:  # equal rows are neighbours in lexicographic order (stable: the first comes first)
+        order = np.lexsort(points.T[::-1])
+        ordered = points[order]
+        starts = np.ones(len(points), dtype=bool)
+        starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+        representative = np.empty(len(points), dtype=np.int64)
+        representative[order] = order[np.flatnonzero(starts)[np.cumsum(starts) - 1]]
+        return representative
     from scipy.spatial import cKDTree
 
     neighbours = cKDTree(points).query_ball_point(points, r=tolerance)
@@ -189,7 +194,15 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
 def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
     keep = np.ones(len(ids), dtype=bool)
     keep[1:] = ids[1:] != ids[:-1]
-    return tuple(int(i) for i in ids[keep])
+    return tuple(ids[keep].tolist())
+
+
+def _dense(values: NDArrayInt) -> tuple[NDArrayInt, NDArrayInt]:
+    """``np.unique(values, return_inverse=True)`` of non-negative integers below ``len``-ish
+    bounds, by counting (no sort)."""
+    present = np.zeros(int(values.max(initial=-1)) + 1, dtype=bool)
+    present[values] = True
+    return np.flatnonzero(present), (np.cumsum(present) - 1)[values]
 
 
 def _joined_ends(
@@ -247,7 +260,7 @@ def build_osm(
     representative, positions = join_ends(stacked, merge_points(stacked, merge_tolerance_m),
                                           _joined_ends(lanelets, starts, merge_tolerance_m, join_tolerance_m))
     representative = _keep_short_borders(representative, starts)
-    unique, point_index = np.unique(representative, return_inverse=True)
+    unique, point_index = _dense(representative)
     coordinates = np.column_stack((positions[unique], heights[unique]))
     ways: dict[tuple[int, ...], int] = {}
     way_points: list[NDArrayInt] = []
@@ -277,7 +290,7 @@ def build_osm(
             pair.append(way)
         members.append((pair[0], pair[1]))
         exit_points.append((ends[0], ends[1]))
-    used = np.unique(np.concatenate(way_points))
+    used = _dense(np.concatenate(way_points))[0]
     first_id = max(lanelet.id for lanelet in lanelets) + 1
     node_id = np.full(len(coordinates), -1, dtype=np.int64)
     node_id[used] = first_id + np.arange(len(used))
@@ -286,7 +299,8 @@ def build_osm(
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
     bulk = _nodes_text(node_id[used], coordinates[used]) + "".join(
-        f'  <way id="{way_id_base + way}">\n' + "".join(f'    <nd ref="{ref}"/>\n' for ref in node_id[chain].tolist())
+        f'  <way id="{way_id_base + way}">\n    <nd ref="' + '"/>\n    <nd ref="'.join(map(str, node_id[chain].tolist()))
+        + '"/>\n'
         + "".join(f'    <tag k="{_escape(key)}" v="{_escape(value)}"/>\n' for key, value in way_tags[way].items())
         + "  </way>\n"
         for way, chain in enumerate(way_points)
@@ -327,13 +341,26 @@ def _escape(value: str) -> str:
 def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
     """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1."""
     lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
-    known = np.isfinite(xyz[:, 2]).tolist()
-    return "".join(
-        f'  <node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}">\n    <tag k="ele" v="{height:.4f}"/>\n  </node>\n'
-        if has_height else f'  <node id="{identifier}" lat="{lat_deg!r}" lon="{lon_deg!r}"/>\n'
-        for identifier, lat_deg, lon_deg, height, has_height in zip(identifiers.tolist(), lat.tolist(), lon.tolist(),
-                                                                    xyz[:, 2].tolist(), known)
-    )
+    known = np.isfinite(xyz[:, 2])
+    parts = []
+    for first in range(0, len(xyz), _NODES_AT_ONCE):
+        at = slice(first, first + _NODES_AT_ONCE)
+        values: list[object] = [None] * (4 * len(known[at]))  # id, lat, lon, height of each node
+        values[0::4], values[1::4], values[2::4], values[3::4] = (
+            identifiers[at].tolist(), lat[at].tolist(), lon[at].tolist(), xyz[at, 2].tolist())
+        parts.append("".join(map(_NODE_FORMATS.__getitem__, known[at].tolist())) % tuple(values))
+    return "".join(parts)
+
+
+_NODES_AT_ONCE: Final[int] = 65536
+"""Nodes ``_nodes_text`` formats in one ``%`` (bounds the argument tuple)."""
+
+
+_NODE_FORMATS: Final[tuple[str, str]] = (
+    '  <node id="%d" lat="%r" lon="%r"/>\n%.0s',  # no height: the height is formatted as nothing
+    '  <node id="%d" lat="%r" lon="%r">\n    <tag k="ele" v="%.4f"/>\n  </node>\n',
+)
+"""An OSM node without and with its ``ele`` tag, pretty-printed at depth 1 (``%`` fields)."""
 
 
 def _kept_vertices(points: NDArrayFloat, tolerance_m: float) -> npt.NDArray[np.bool_]:

@@ -21,7 +21,7 @@ from cold_maps.network.lane_graph import build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive, parse_opendrive
 from converters import load_lanelet2
 from converters.osm import SIMPLIFY_TOLERANCE_M
-from tests.conftest import bundled_map
+from tests.conftest import bundled_map, load_tool
 from tests.gap_maps import branch_gap_map
 
 AGREEMENT_M = 1e-3
@@ -272,3 +272,34 @@ def test_evaluations_over_a_broken_link_are_unscored_and_the_rest_exact(tmp_path
         assert scenario["max_error_m"] <= 0.02  # everywhere else the GT is the engine's border
     # many of the 60 frames see the joint: more than 1 % unscored flags the run
     assert "GROUND TRUTH NOT TRUSTWORTHY" in line and "map is broken" in line
+
+
+def _sections(odr_map):
+    return [(road, index, [lane.id for lane in section.lanes])
+            for road in odr_map.roads.values() for index, section in enumerate(road.lane_sections)
+            if section.lanes and section.s_end > section.s]
+
+
+@pytest.mark.parametrize("name", ["junction", "highway", "rural"])
+def test_sections_refined_together_equal_the_section_by_section_sampling_bit_for_bit(name) -> None:
+    from cold_maps.groundtruth.lanelet2_from_engine import adaptive_samples
+
+    sections = _sections(load_opendrive(bundled_map(name)))
+    together = adaptive_samples(sections)
+    for (road, index, lane_ids), samples in zip(sections, together):
+        alone = adaptive_section_samples(road, index, lane_ids)
+        assert [(s.lane_id, s.s.tobytes(), s.inner.tobytes(), s.outer.tobytes()) for s in samples] == [
+            (s.lane_id, s.s.tobytes(), s.inner.tobytes(), s.outer.tobytes()) for s in alone]
+
+
+def test_crossing_connections_evaluated_together_equal_one_by_one_bit_for_bit() -> None:
+    from cold_maps.opendrive.sampling import batchable, section_points, stacked_section_points
+
+    sections = _sections(parse_opendrive("".join(load_tool("big_maps").junction(4, 3)).encode()))
+    assert all(batchable(*section) for section in sections)
+    rng = np.random.default_rng(0)
+    stations = [rng.uniform(road.lane_sections[index].s, road.lane_sections[index].s_end, size=int(rng.integers(0, 40)))
+                for road, index, _ in sections]  # unordered, some sections without a station
+    values, starts = stacked_section_points(sections, np.concatenate(stations), np.array([len(s) for s in stations]))
+    for (road, index, lane_ids), s, first, end in zip(sections, stations, starts[:-1], starts[1:]):
+        assert values[first:end].tobytes() == section_points(road, index, s, lane_ids)[1].tobytes()

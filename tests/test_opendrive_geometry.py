@@ -322,3 +322,17 @@ def test_reference_pose_picks_the_record_by_s():
     np.testing.assert_allclose(x, [4.0, 10.0, 20.0], atol=1e-12)
     np.testing.assert_allclose(y, [0.0, 0.0, 10.0], atol=1e-12)
     np.testing.assert_allclose(h, [0.0, 0.0, math.pi / 2], atol=1e-12)
+
+
+def test_parameters_of_many_curves_at_once_equal_one_curve_at_a_time_bit_for_bit():
+    from cold_maps.opendrive.geometry.cubic_curve import CubicCurve, arc_length_table, parameters
+
+    rng = np.random.default_rng(3)
+    tables, blocks = [], []
+    for index in range(60):
+        curve = CubicCurve(tuple(rng.normal(size=4) * [0, 10, 1, 0.1]), tuple(rng.normal(size=4) * [0, 1, 1, 0.1]),
+                           float(rng.uniform(0.5, 3.0)) if index % 2 else 1.0)
+        tables.append(arc_length_table(curve))
+        blocks.append(rng.uniform(-0.1, 1.05, size=int(rng.integers(0, 40))) * tables[-1].total)
+    together = parameters(tables, np.concatenate(blocks), [len(block) for block in blocks])
+    assert together.tobytes() == np.concatenate([t.parameter(b) for t, b in zip(tables, blocks)]).tobytes()

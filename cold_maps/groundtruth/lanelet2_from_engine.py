@@ -15,7 +15,9 @@ Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
   ``CHORD_TOLERANCE_M`` of the chord (checked at a quarter, half and three quarters of
   each interval; a failing one is split into as many pieces as the chord error's square
   root says, the error growing with the interval squared). All lanes of a section share the stations, so neighbours share their
-  border exactly and the writer makes it one way (Lanelet2 adjacency).
+  border exactly and the writer makes it one way (Lanelet2 adjacency). Sections on one
+  line or paramPoly3 record whose lanes have one ``<width>`` each are refined together
+  (``adaptive_samples``), with the same stations and points, bit for bit.
 - Successors are the lane graph's edges (``network.lane_graph``); linked ends at one
   point are one node, others are snapped to their centroid whatever
   the gap (``converters.joins``, join tolerance infinite), so every lane-graph edge is a
@@ -52,7 +54,8 @@ from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
-from cold_maps.opendrive.sampling import LaneBorderSamples, record_joints, sample_s, section_points
+from cold_maps.opendrive.sampling import (
+    LaneBorderSamples, batchable, record_joints, sample_s, section_points, stacked_section_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -133,6 +136,32 @@ def _check_stations(
     return open_, low, high, np.concatenate([low + f * (high - low) for f in CHECK_FRACTIONS])
 
 
+def _initial_stations(road: Road, section_index: int) -> NDArrayFloat:
+    """Where ``adaptive_section_samples`` starts (m): the section's ends, the record
+    starts inside it, a station ``END_VERTEX_M`` inside each end, at most
+    ``INITIAL_STEP_M`` apart."""
+    section = road.lane_sections[section_index]
+    length = section.s_end - section.s
+    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
+    return np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M),
+                                     _breakpoints(road, section_index), np.asarray(ends, dtype=np.float64))))
+
+
+def _refined(
+    s: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat, errors: NDArrayFloat, tolerance_m: float
+) -> NDArrayFloat | None:
+    """``s`` (m) with the intervals [low, high] whose chord error exceeds ``tolerance_m``
+    split, or None when none does (or they are shorter than ``MIN_STEP_M``)."""
+    refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+    if not refine.any():
+        return None
+    # the chord error grows with the square of the interval: split into that many pieces at once
+    pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+    starts, widths = low[refine], (high - low)[refine]
+    offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
+    return np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+
+
 def adaptive_section_samples(
     road: Road, section_index: int, lane_ids: Sequence[int], tolerance_m: float = CHORD_TOLERANCE_M
 ) -> list[LaneBorderSamples]:
@@ -142,11 +171,7 @@ def adaptive_section_samples(
     shorter than ``MIN_STEP_M``). Refinement starts from the section's ends, the record
     starts (``_breakpoints``) and a station ``END_VERTEX_M`` inside each end, with no
     interval longer than ``INITIAL_STEP_M``."""
-    section = road.lane_sections[section_index]
-    length = section.s_end - section.s
-    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
-    s = np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M), _breakpoints(road, section_index),
-                                  np.asarray(ends, dtype=np.float64))))
+    s = _initial_stations(road, section_index)
     joints = record_joints(road, section_index)
     for _ in range(MAX_ROUNDS):
         if len(joints.boundaries):  # record ends add stations: evaluate them before the checks
@@ -160,16 +185,118 @@ def adaptive_section_samples(
             points, checked = np.ascontiguousarray(both[:, :, :len(stations)]), both[:, :, len(stations):]
         borders = points.reshape(-1, len(stations), 3)
         errors = _chord_errors(borders, checked.reshape(len(borders), len(CHECK_FRACTIONS), len(low), 3), open_)
-        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
-        if not refine.any():
+        refined = _refined(s, low, high, errors, tolerance_m)
+        if refined is None:
             break
-        # the chord error grows with the square of the interval: split into that many pieces at once
-        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
-        starts, widths = low[refine], (high - low)[refine]
-        offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
-        s = np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+        s = refined
+    return _samples(road, section_index, lane_ids, stations, points)
+
+
+def _samples(road: Road, section_index: int, lane_ids: Sequence[int], stations: NDArrayFloat,
+             points: NDArrayFloat) -> list[LaneBorderSamples]:
+    """The samples of each listed lane from a section's stations and borders (lanes, 2, N, 3)."""
     return [LaneBorderSamples(road.id, section_index, lane_id, stations, points[index, 0], points[index, 1])
             for index, lane_id in enumerate(lane_ids)]
+
+
+BATCH_SECTIONS: Final[int] = 32
+"""Sections ``adaptive_samples`` refines together (bounds the arrays of one round)."""
+
+
+def adaptive_samples(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], tolerance_m: float = CHORD_TOLERANCE_M
+) -> list[list[LaneBorderSamples]]:
+    """``adaptive_section_samples`` of each (road, section index, lanes), bit for bit; the
+    sections ``sampling.batchable`` evaluates are refined ``BATCH_SECTIONS`` at a time,
+    their stations and checks evaluated, compared with the chords and split together
+    round by round. A ValueError is the one of the first section that fails."""
+    try:
+        result: dict[int, list[LaneBorderSamples]] = {}
+        together = []
+        for number, (road, index, lane_ids) in enumerate(sections):
+            if batchable(road, index, lane_ids):
+                together.append(number)
+            else:
+                result[number] = adaptive_section_samples(road, index, lane_ids, tolerance_m)
+        for first in range(0, len(together), BATCH_SECTIONS):
+            numbers = together[first:first + BATCH_SECTIONS]
+            for number, (stations, points) in zip(numbers, _refine_together([sections[n] for n in numbers],
+                                                                              tolerance_m)):
+                result[number] = _samples(*sections[number], stations, points)
+        return [result[number] for number in range(len(sections))]
+    except ValueError:
+        for road, index, lane_ids in sections:  # the error of the first section that fails, as one by one
+            adaptive_section_samples(road, index, lane_ids, tolerance_m)
+        raise
+
+
+def _refine_together(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], tolerance_m: float
+) -> list[tuple[NDArrayFloat, NDArrayFloat]]:
+    """Stations (m) and borders (lanes, 2, stations, 3) of ``adaptive_section_samples`` of
+    each ``batchable`` section: its rounds on the sections' concatenated stations."""
+    done: list[tuple[NDArrayFloat, NDArrayFloat] | None] = [None] * len(sections)
+    initial = [_initial_stations(road, index) for road, index, _ in sections]
+    s = np.concatenate(initial)
+    owner = np.repeat(np.arange(len(sections)), [len(block) for block in initial])  # index into `active`
+    active = np.arange(len(sections))
+    lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
+    fractions = np.asarray(CHECK_FRACTIONS)
+    for round_ in range(MAX_ROUNDS):
+        count = np.bincount(owner, minlength=len(active))
+        begin = np.cumsum(count) - count
+        intervals = np.flatnonzero((s[1:] > s[:-1]) & (owner[1:] == owner[:-1]))  # the open ones, low ends
+        low, high, of = s[intervals], s[intervals + 1], owner[intervals]
+        opened = np.bincount(of, minlength=len(active))
+        place = np.arange(len(intervals)) - (np.cumsum(opened) - opened)[of]  # interval's rank in its section
+        size = count + len(CHECK_FRACTIONS) * opened  # stations, then the checks fraction by fraction
+        request_begin = np.cumsum(size) - size
+        request = np.empty(int(size.sum()))
+        request[request_begin[owner] + np.arange(len(s)) - begin[owner]] = s
+        for rank, fraction in enumerate(CHECK_FRACTIONS):
+            request[request_begin[of] + count[of] + rank * opened[of] + place] = low + fraction * (high - low)
+        values, starts = stacked_section_points([sections[i] for i in active.tolist()], request, size)
+        # every (border, fraction, interval) of every section: checked point and chord
+        borders = 2 * lanes[active]
+        border_of = np.repeat(np.arange(len(active)), borders)
+        border_row = np.repeat(np.asarray(starts[:-1]), borders) + (
+            np.arange(int(borders.sum())) - np.repeat(np.cumsum(borders) - borders, borders)) * size[border_of]
+        per_border = len(CHECK_FRACTIONS) * opened[border_of]
+        triple_border = np.repeat(np.arange(len(border_of)), per_border)
+        rank_in_border = np.arange(int(per_border.sum())) - np.repeat(np.cumsum(per_border) - per_border, per_border)
+        section_of_triple = border_of[triple_border]
+        width = np.maximum(opened[section_of_triple], 1)
+        rank, interval = rank_in_border // width, rank_in_border % width
+        global_interval = (np.cumsum(opened) - opened)[section_of_triple] + interval
+        station = intervals[global_interval] - begin[section_of_triple]
+        row = border_row[triple_border]
+        fraction = fractions[rank][:, None]
+        chord = (1.0 - fraction) * values[row + station] + fraction * values[row + station + 1]
+        checked = values[row + count[section_of_triple] + rank * opened[section_of_triple] + interval]
+        errors = np.zeros(len(intervals))
+        np.maximum.at(errors, global_interval, np.sqrt(np.square(checked - chord).sum(axis=1)))
+        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+        finished = (np.bincount(of[refine], minlength=len(active)) == 0) | (round_ == MAX_ROUNDS - 1)
+        for i in np.flatnonzero(finished).tolist():
+            block = values[starts[i]:starts[i + 1]].reshape(lanes[active[i]], 2, size[i], 3)
+            done[active[i]] = s[begin[i]:begin[i] + count[i]], np.ascontiguousarray(block[:, :, :count[i]])
+        if finished.all():
+            break
+        # the chord error grows with the square of the interval: split into that many pieces at once
+        extra = pieces - 1
+        offsets = (np.arange(int(extra.sum())) - np.repeat(np.cumsum(extra) - extra, extra) + 1) / np.repeat(pieces, extra)
+        added = np.repeat(low[refine], extra) + offsets * np.repeat((high - low)[refine], extra)
+        renumber = np.cumsum(~finished) - 1
+        keep = ~finished[owner]
+        merged_owner = np.concatenate((renumber[owner[keep]], renumber[np.repeat(of[refine], extra)]))
+        merged = np.concatenate((s[keep], added))
+        order = np.lexsort((merged, merged_owner))
+        merged, merged_owner = merged[order], merged_owner[order]
+        new = np.ones(len(merged), dtype=bool)
+        new[1:] = (merged[1:] != merged[:-1]) | (merged_owner[1:] != merged_owner[:-1])
+        s, owner, active = merged[new], merged_owner[new], active[~finished]
+    return done  # type: ignore[return-value]
 
 
 def _is_zero_width(samples: LaneBorderSamples) -> bool:
@@ -277,15 +404,17 @@ def engine_lanelets(
     road_types = road_types or {}
     regulations = regulations or {}
     priority = priority or {}
-    sampled: list[tuple[Road, LaneBorderSamples, str]] = []
+    sections = []
+    kinds: dict[LaneKey, str] = {}
     for road in odr_map.roads.values():
         for index, section in enumerate(road.lane_sections):
-            kinds = {lane.id: lane.type for lane in section.lanes if LaneKey(road.id, index, lane.id) in graph.lengths}
-            if not kinds or section.s_end <= section.s:
-                continue
-            for samples in adaptive_section_samples(road, index, list(kinds)):
-                if not _is_zero_width(samples):
-                    sampled.append((road, samples, kinds[samples.lane_id]))
+            lanes = {lane.id: lane.type for lane in section.lanes if LaneKey(road.id, index, lane.id) in graph.lengths}
+            if lanes and section.s_end > section.s:
+                sections.append((road, index, list(lanes)))
+                kinds.update((LaneKey(road.id, index, lane_id), kind) for lane_id, kind in lanes.items())
+    sampled = [(road, samples, kinds[LaneKey(road.id, samples.section, samples.lane_id)])
+               for (road, _, _), section_samples in zip(sections, adaptive_samples(sections))
+               for samples in section_samples if not _is_zero_width(samples)]
     ids = {LaneKey(s.road_id, s.section, s.lane_id): number for number, (_, s, _) in enumerate(sampled, start=1)}
     lanelets = []
     section_key: tuple[str, int] | None = None

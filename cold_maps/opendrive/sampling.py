@@ -13,6 +13,7 @@ and lateral ``shape`` are not applied.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 from typing import Final, Sequence
 
@@ -22,8 +23,10 @@ import numpy.typing as npt
 from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
-from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, LaneSection, Road
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, Geometry, Lane, LaneSection, Road
 from cold_maps.opendrive.reference_line import check_s, record_joint, reference_pose
+
+NDArrayInt = npt.NDArray[np.int64]
 
 JOINED_M: Final[float] = 1e-6
 """Geometry records whose end and next start are closer than this (m) join: one sample."""
@@ -215,6 +218,148 @@ def section_points(
         raise ValueError(f"road {road.id}: lane section {section_index}, lane {lane_ids[lane]}: the "
                          f"{('inner', 'outer')[which]} border is not finite at s={float(s[at]):.6g} m")
     return s, points
+
+
+def batchable(road: Road, section_index: int, lane_ids: Sequence[int]) -> bool:
+    """Whether ``stacked_section_points`` evaluates the listed lanes of a section: no record
+    starts inside it, no superelevation, and every lane out to the outermost listed one
+    has at most one ``<width>`` record (and no ``<border>`` in its stead)."""
+    section = section_of(road, section_index)
+    if road.superelevation or not road.plan_view or record_indices(road, section.s, section.s_end):
+        return False
+    outermost = max((abs(i) for i in lane_ids), default=0)
+    lanes = [(sign, lane) for sign in (1, -1) for lane in _side(section, sign)[:outermost]]
+    return ({lane.id for _, lane in lanes} >= set(lane_ids)
+            and all(sign * lane.id > 0 and (len(lane.widths) == 1 or not (lane.widths or lane.borders))
+                    for sign, lane in lanes))
+
+
+def _record_of(road: Road, section: LaneSection) -> Geometry:
+    """The ``<geometry>`` record ``reference_pose(..., before=section.s_end)`` takes
+    everywhere on a section no record starts inside."""
+    starts = [record.s for record in road.plan_view]
+    last = max(bisect.bisect_left(starts, section.s_end), 1)
+    return road.plan_view[min(max(bisect.bisect_right(starts, section.s, 0, last) - 1, 0), last - 1)]
+
+
+def _records_poses(
+    records: Sequence[Geometry], s: NDArrayFloat, counts: NDArrayInt
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """``geometry.evaluate(records[i], max(s - records[i].s, 0))`` of each consecutive
+    block of ``counts[i]`` road s (m), bit for bit: lines and paramPoly3 records together,
+    the others one by one; NaN where a record cannot be evaluated (the caller names it)."""
+    from cold_maps.opendrive.geometry import evaluate
+    from cold_maps.opendrive.geometry.cubic_curve import arc_length_table, parameters, poses_at_parameters
+    from cold_maps.opendrive.geometry.param_poly3 import curve_of
+
+    bounds = np.concatenate(([0], np.cumsum(counts)))
+    ds = np.maximum(s - np.repeat([record.s for record in records], counts), 0.0)
+    x, y, hdg = np.full(len(s), np.nan), np.full(len(s), np.nan), np.full(len(s), np.nan)
+    done = np.zeros(len(records), dtype=bool)
+    lines = np.array([record.kind == "line" and record.length > 0.0 for record in records], dtype=bool)
+    if lines.any():
+        at = np.repeat(lines, counts)
+        angle = np.repeat([record.hdg for record in records], counts)[at]
+        x[at] = np.repeat([record.x for record in records], counts)[at] + ds[at] * np.cos(angle)
+        y[at] = np.repeat([record.y for record in records], counts)[at] + ds[at] * np.sin(angle)
+        hdg[at] = angle
+        done |= lines
+    curved = [(i, arc_length_table(curve_of(record))) for i, record in enumerate(records)
+              if record.kind == "paramPoly3" and record.length > 0.0]
+    curved = [(i, table) for i, table in curved if table.total > 0.0]
+    if curved:
+        chosen = [records[i] for i, _ in curved]
+        tables = [table for _, table in curved]
+        sizes = counts[[i for i, _ in curved]]
+        at = np.repeat(np.isin(np.arange(len(records)), [i for i, _ in curved]), counts)
+        scale = np.repeat([table.total / record.length for table, record in zip(tables, chosen)], sizes)
+        with np.errstate(over="ignore", invalid="ignore"):
+            p = parameters(tables, ds[at] * scale, sizes)
+            x[at], y[at], hdg[at] = poses_at_parameters(chosen, [table.curve for table in tables], p, sizes)
+        done[[i for i, _ in curved]] = True
+    for i in np.flatnonzero(~done).tolist():
+        a, b = int(bounds[i]), int(bounds[i + 1])
+        try:
+            x[a:b], y[a:b], hdg[a:b] = evaluate(records[i], ds[a:b])
+        except ValueError:
+            continue
+    return x, y, hdg
+
+
+def _single_width(
+    lanes: Sequence[Lane | None], sections: Sequence[LaneSection], s: NDArrayFloat, counts: NDArrayInt
+) -> NDArrayFloat:
+    """``cubic_poly.evaluate(lane.widths, s, s_offset=section.s)`` of each lane (at most one
+    record; None: no lane, 0) over its block of ``counts`` stations (m), bit for bit."""
+    records = [lane.widths[0] if lane is not None and lane.widths else None for lane in lanes]
+    table = np.array([(r.s0, r.a, r.b, r.c, r.d) if r is not None else (0.0,) * 5 for r in records]).reshape(-1, 5)
+    s0, c0, c1, c2, c3 = np.repeat(table, counts, axis=0).T
+    local = s - np.repeat([section.s for section in sections], counts)
+    applies = np.repeat([r is not None for r in records], counts) & (s0 <= local)
+    ds = np.where(applies, local - s0, 0.0)
+    return np.where(applies, c0 + ds * (c1 + ds * (c2 + ds * c3)), 0.0)
+
+
+def stacked_section_points(
+    sections: Sequence[tuple[Road, int, Sequence[int]]], s: NDArrayFloat, counts: NDArrayInt
+) -> tuple[NDArrayFloat, list[int]]:
+    """x, y, z (m, inertial frame) of the borders of the listed lanes of each (road,
+    section index, lanes), all ``batchable``, at its block of ``counts`` stations in ``s``
+    (m): (rows, 3), section by section, lane by lane, inner then outer, station by
+    station (``section_points``' borders, bit for bit: the same elementwise arithmetic on
+    all stations at once), and the row where each section starts (and the end).
+    ValueError as ``section_points`` where a point is not finite."""
+    bounds = np.concatenate(([0], np.cumsum(counts)))
+    parts = [section_of(road, index) for road, index, _ in sections]
+    x, y, hdg = _records_poses([_record_of(road, part) for (road, _, _), part in zip(sections, parts)], s, counts)
+    normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
+    z, offset = np.zeros(len(s)), np.zeros(len(s))
+    for (road, _, _), part, a, b in zip(sections, parts, bounds[:-1].tolist(), bounds[1:].tolist()):
+        if road.elevation:
+            z[a:b] = cubic_poly.evaluate(road.elevation, s[a:b], before=part.s_end)
+        if road.lane_offsets:
+            offset[a:b] = cubic_poly.evaluate(road.lane_offsets, s[a:b], before=part.s_end)
+    depth = max((abs(i) for _, _, ids in sections for i in ids), default=0)
+    planes = {}  # (side, place) → the plane index of its inner x, y (outer: + 2)
+    xy = []
+    for sign in (1, -1):
+        inner = offset
+        for place in range(depth):
+            lanes = [_side(part, sign)[place] if place < min(len(_side(part, sign)), max(map(abs, ids), default=0))
+                     else None for part, (_, _, ids) in zip(parts, sections)]
+            if not any(lanes):
+                break
+            outer = inner + float(sign) * _single_width(lanes, parts, s, counts)
+            planes[sign, place] = len(xy)
+            xy += [x + inner * normal_x, y + inner * normal_y, x + outer * normal_x, y + outer * normal_y]
+            inner = outer
+    # each border row: its plane (x; y is the next) and its section's block of stations
+    plane, first, size = [], [], []
+    for (_, _, ids), part, a, count in zip(sections, parts, bounds[:-1].tolist(), counts.tolist()):
+        places = {lane.id: (sign, place) for sign in (1, -1) for place, lane in enumerate(_side(part, sign))}
+        for lane_id in ids:
+            plane += [planes[places[lane_id]], planes[places[lane_id]] + 2]
+            first += [a, a]
+            size += [count, count]
+    sizes = np.asarray(size, dtype=np.int64)
+    ends = np.cumsum(sizes)
+    at = np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(np.asarray(first, dtype=np.int64) - (ends - sizes), sizes)
+    stacked = np.stack(xy) if xy else np.zeros((0, len(s)))
+    rows = np.repeat(np.asarray(plane, dtype=np.int64), sizes) * len(s) + at
+    values = np.column_stack((stacked.ravel()[rows], stacked.ravel()[rows + len(s)], z[at]))
+    starts = np.concatenate(([0], np.cumsum([2 * len(ids) * count for (_, _, ids), count
+                                              in zip(sections, counts.tolist())]))).tolist()
+    if not np.isfinite(values).all():  # section_points names the road, section, lane and s
+        for (road, index, ids), a, b, low, high in zip(sections, bounds[:-1], bounds[1:], starts[:-1], starts[1:]):
+            if not np.isfinite(values[low:high]).all():
+                section_points(road, index, s[a:b], ids)
+        raise ValueError("a lane border is not finite")  # not reached: section_points raised
+    return values, starts
+
+
+def _side(section: LaneSection, sign: int) -> tuple[Lane, ...]:
+    """The section's left (sign 1) or right (-1) lanes, from the reference line outwards."""
+    return section.left if sign > 0 else section.right
 
 
 def sample_section_at(

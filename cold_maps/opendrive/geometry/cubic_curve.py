@@ -9,6 +9,7 @@ the float64 round-off of S, far below 0.1 mm.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Final
@@ -91,6 +92,56 @@ class ArcLengthTable:
         return p
 
 
+def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequence[int]) -> NDArrayFloat:
+    """``tables[i].parameter`` of each consecutive block of ``counts[i]`` arc lengths (m) in
+    ``s``, bit for bit, evaluated together: the Newton steps of a block stop together, as
+    in one call, and each block's quadrature sums are its own matrix product (OpenBLAS
+    rounds a row by its place in the product)."""
+    s = np.asarray(s, dtype=np.float64)
+    bounds = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    k = np.concatenate([np.clip(np.searchsorted(table.lengths, s[a:b], side="right") - 1, 0, table.params.size - 2)
+                        for table, a, b in zip(tables, bounds[:-1], bounds[1:])] or [np.zeros(0, dtype=np.int64)])
+    first = np.concatenate(([0], np.cumsum([table.params.size for table in tables])))[:-1].astype(np.int64)
+    at = np.repeat(first, counts) + k
+    params = np.concatenate([table.params for table in tables] or [np.zeros(0)])
+    lengths = np.concatenate([table.lengths for table in tables] or [np.zeros(0)])
+    p_lo, p_hi, s_lo, s_hi = params[at], params[at + 1], lengths[at], lengths[at + 1]
+    last = np.repeat([table.params.size - 2 for table in tables], counts)
+    span = np.where(s_hi > s_lo, s_hi - s_lo, 1.0)
+    p = p_lo + (s - s_lo) / span * (p_hi - p_lo)
+    upper = np.where(k == last, np.inf, p_hi)
+    _, u1, u2, u3, _, v1, v2, v3 = _coefficients([table.curve for table in tables], counts)
+    active = np.flatnonzero(np.diff(bounds) > 0)  # blocks still iterating
+    for _ in range(NEWTON_ITERATIONS):
+        if not len(active):
+            break
+        blocks = np.diff(bounds)[active]
+        ends = np.cumsum(blocks)
+        rows = np.arange(ends[-1]) + np.repeat(bounds[active] - (ends - blocks), blocks)
+        lo, now, c1, c2, c3, d1, d2, d3 = (a[rows] for a in (p_lo, p, u1, u2, u3, v1, v2, v3))
+        half = 0.5 * (now - lo)
+        nodes = np.multiply(half, _NODES[:, None])  # (nodes, rows): long inner loops
+        nodes += 0.5 * (now + lo)
+        speeds = np.hypot(_tangent_at(nodes, c1, c2, c3), _tangent_at(nodes, d1, d2, d3)).T.copy()
+        sums = np.concatenate([speeds[b - n:b] @ _WEIGHTS for b, n in zip(ends.tolist(), blocks.tolist())])
+        residual = s_lo[rows] + half * sums - s[rows]
+        speed = np.hypot(c1 + now * (2.0 * c2 + now * 3.0 * c3), d1 + now * (2.0 * d2 + now * 3.0 * d3))
+        p[rows] = np.clip(now - residual / np.maximum(speed, 1e-12), lo, upper[rows])
+        active = active[~(np.maximum.reduceat(np.abs(residual), ends - blocks) < NEWTON_TOLERANCE_M)]
+    return p
+
+
+def _tangent_at(nodes: NDArrayFloat, c1: NDArrayFloat, c2: NDArrayFloat, c3: NDArrayFloat) -> NDArrayFloat:
+    """c1 + p·(2·c2 + p·3·c3) at the (K, N) parameters ``nodes``, one coefficient per
+    column, in ``CubicCurve.tangent``'s order of operations (in place: the arrays are large)."""
+    value = np.multiply(nodes, 3.0)
+    value *= c3
+    value += 2.0 * c2
+    value *= nodes
+    value += c1
+    return value
+
+
 @lru_cache(maxsize=8192)
 def arc_length_table(curve: CubicCurve) -> ArcLengthTable:
     """Arc-length table of a curve over [0, p_end] (cached: curves are immutable).
@@ -104,6 +155,25 @@ def arc_length_table(curve: CubicCurve) -> ArcLengthTable:
     params = np.linspace(0.0, curve.p_end, intervals + 1)
     pieces = curve.integral(params[:-1], params[1:])
     return ArcLengthTable(curve, params, np.concatenate(([0.0], np.cumsum(pieces))))
+
+
+def poses_at_parameters(
+    records: Sequence[Geometry], curves: Sequence[CubicCurve], p: NDArrayFloat, counts: Sequence[int]
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """``pose_at_parameter(records[i], curves[i], ...)`` of each consecutive block of
+    ``counts[i]`` parameters in ``p``, bit for bit."""
+    u0, u1, u2, u3, v0, v1, v2, v3 = _coefficients(curves, counts)
+    cos_h, sin_h = (np.repeat(f(np.array([record.hdg for record in records])), counts) for f in (np.cos, np.sin))
+    u, v = u0 + p * (u1 + p * (u2 + p * u3)), v0 + p * (v1 + p * (v2 + p * v3))
+    du, dv = u1 + p * (2.0 * u2 + p * 3.0 * u3), v1 + p * (2.0 * v2 + p * 3.0 * v3)
+    x0, y0, hdg0 = (np.repeat([getattr(record, name) for record in records], counts) for name in ("x", "y", "hdg"))
+    return x0 + u * cos_h - v * sin_h, y0 + u * sin_h + v * cos_h, hdg0 + np.arctan2(dv, du)
+
+
+def _coefficients(curves: Sequence[CubicCurve], counts: Sequence[int]) -> list[NDArrayFloat]:
+    """u[0..3], v[0..3] of each curve, repeated ``counts`` times (arrays)."""
+    table = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8)
+    return list(np.repeat(table, counts, axis=0).T)
 
 
 def pose_at_parameter(
