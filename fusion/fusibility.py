@@ -60,22 +60,31 @@ def _mean_direction(a: tuple[float, float], b: tuple[float, float]) -> tuple[flo
     return x / n, y / n
 
 
+def lane_end(left: NDArrayFloat, right: NDArrayFloat, at_end: bool) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``(point, tangent)`` of a lane's centre line at its last (``at_end``) or first cross-section,
+    in the borders' frame: the middle of the two border points [m] and the mean of the two
+    borders' chord tangents (:func:`fusion.geometry.end_direction`, driving direction)."""
+    (lx, ly), (rx, ry) = (left[-1] if at_end else left[0]).tolist(), (right[-1] if at_end else right[0]).tolist()
+    return ((0.5 * (lx + rx), 0.5 * (ly + ry)),
+            _mean_direction(end_direction(left, at_end, CHORD_WINDOW_M), end_direction(right, at_end, CHORD_WINDOW_M)))
+
+
+def signed_gap_m(p_end: tuple[float, float], t_end: tuple[float, float], p_start: tuple[float, float]) -> float:
+    """The centre-line gap from an end ``p_end`` (unit tangent ``t_end``) to a start ``p_start``
+    [m]: their distance, negative when the start is not more than 1 µm ahead along ``t_end``."""
+    dx, dy = p_start[0] - p_end[0], p_start[1] - p_end[1]
+    length = math.hypot(dx, dy)
+    return length if dx * t_end[0] + dy * t_end[1] > _MIN_GAP_M else -length
+
+
 def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArrayFloat,
               coop_right: NDArrayFloat) -> LaneEnds:
     """Centre-line end of the ego lane and start of the coop lane, in the borders' frame."""
+    p_end, t_end = lane_end(ego_left, ego_right, True)
+    p_start, t_start = lane_end(coop_left, coop_right, False)
     (lx, ly), (rx, ry) = ego_left[-1].tolist(), ego_right[-1].tolist()
-    (clx, cly), (crx, cry) = coop_left[0].tolist(), coop_right[0].tolist()
-    p_end = (0.5 * (lx + rx), 0.5 * (ly + ry))
-    p_start = (0.5 * (clx + crx), 0.5 * (cly + cry))
-    t_end = _mean_direction(end_direction(ego_left, True, CHORD_WINDOW_M),
-                            end_direction(ego_right, True, CHORD_WINDOW_M))
-    t_start = _mean_direction(end_direction(coop_left, False, CHORD_WINDOW_M),
-                              end_direction(coop_right, False, CHORD_WINDOW_M))
-    dx, dy = p_start[0] - p_end[0], p_start[1] - p_end[1]
-    length = math.hypot(dx, dy)
-    along = dx * t_end[0] + dy * t_end[1]
     width = math.hypot(lx - rx, ly - ry)
-    return LaneEnds(p_end, p_start, t_end, t_start, width, length if along > _MIN_GAP_M else -length)
+    return LaneEnds(p_end, p_start, t_end, t_start, width, signed_gap_m(p_end, t_end, p_start))
 
 
 def relative_pose(ego: Pose2D, coop: Pose2D) -> tuple[float, float, float]:
@@ -85,10 +94,16 @@ def relative_pose(ego: Pose2D, coop: Pose2D) -> tuple[float, float, float]:
     return c * dx + s * dy, -s * dx + c * dy, wrap_angle(coop.yaw - ego.yaw)
 
 
+def max_gap_m(params: FusionParams) -> float:
+    """The longest gap d_s [m] the rule bridges: d_i, plus :data:`GAP_TOLERANCE_M` under the
+    separation rules."""
+    return params.d_i_m + (GAP_TOLERANCE_M if params.association in SEPARATION_RULES else 0.0)
+
+
 def _gap_reason(ends: LaneEnds, params: FusionParams) -> str:
     if ends.gap_m <= 0.0:
         return f"no gap: the coop detection starts {-ends.gap_m:.2f} m before the ego detection ends (d_s must be > 0)"
-    if ends.gap_m > params.d_i_m + (GAP_TOLERANCE_M if params.association in SEPARATION_RULES else 0.0):
+    if ends.gap_m > max_gap_m(params):
         return f"gap d_s = {ends.gap_m:.2f} m exceeds d_i = {params.d_i_m:.2f} m"
     return ""
 

@@ -231,9 +231,11 @@ def test_new_keys_round_trip_and_old_files_still_read(tmp_path):
     assert old.stopping is None and old.near.points == 0 and math.isnan(old.range_percentiles_m[0])
     assert old.mean_error_m == results[0].mean_error_m
     rows = (tmp_path / "frames.csv").read_text().splitlines()
-    assert rows[0].endswith(",end_reason,near_points,near_max_error_m,far_max_error_m,known_to_m,stopping_distance_m")
-    assert rows[1].split(",")[-6:-1] == ["range", "2", "0.2", "0.9", "29.0"]
-    assert float(rows[1].split(",")[-1]) == pytest.approx(43.676470588)
+    assert rows[0].endswith(",end_reason,near_points,near_max_error_m,far_max_error_m,known_to_m,stopping_distance_m,"
+                            "detected_fusible")
+    assert rows[1].split(",")[-7:-2] == ["range", "2", "0.2", "0.9", "29.0"]
+    assert float(rows[1].split(",")[-2]) == pytest.approx(43.676470588)
+    assert rows[1].split(",")[-1] == ""  # a local evaluation has no pair
 
 
 @pytest.mark.parametrize(("make", "message"), [

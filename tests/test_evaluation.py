@@ -128,6 +128,7 @@ def test_straight_run_ranges_errors_and_fusibility(straight_results):
         for result in (convoy, spline):
             assert (result.frames, result.fused_frames) == (4 * 5, 5)
             assert result.fusibility_precision == 1.0 and result.fusibility_recall == 1.0
+            assert result.fusibility_recall_detected == 1.0  # the ideal sensor's detections reach its range
             assert sum(count for _, count in result.rejected) == 15
     assert set(collector.check_ms) == {("straight", "convoy"), ("straight", "spline-paper-d30")}
     assert all(len(v) == 5 for v in collector.check_ms.values())
@@ -175,3 +176,54 @@ def test_turning_coop_is_scored_against_its_own_lane():
 def test_build_drive_reuses_graph(straight_evaluator):
     drive = build_drive(straight_evaluator.graph, [LANE], 3, coop_leads_m=[25.0], rng=np.random.default_rng(0))
     assert [v.name for v in drive.vehicles] == ["coop25"]
+
+
+def test_recall_given_detections_leaves_out_pairs_the_short_detection_cannot_fuse(straight_evaluator):
+    """A camera seeing 20 m on the straight: its detection ends 20 m ahead, a coop's starts 3 m
+    (the camera's near limit) ahead of the coop. The convoy coop at 25 m does not overlap it
+    (28 > 20 m), the spline coop at 60 m leaves 43 m <= d_i = 50 m, the one at 80 m 63 m: the
+    recall counts all three valid pairs, the recall given detections only the 60 m one."""
+    from cold_maps.simulation.sensor_profile import CAMERA
+
+    plan = MapPlan(bundled_map("straight"), scenarios_for([30.0, 50.0], ["paper"]), frames=5, routes=1,
+                   start_lane=LANE, sensor=replace(CAMERA, max_range_m=20.0))
+    evaluator = MapEvaluator(plan, graph=straight_evaluator.graph, ground_truth=straight_evaluator.meter.ground_truth)
+    collector = Collector()
+    evaluator.run(collector)
+    convoy, near, far = sorted((a.result() for k, a in collector.accumulators.items()
+                                if k.boundary == "left" and k.fusion != "local"), key=lambda r: r.key.d_s)
+    assert (convoy.key.fusion, near.key.d_s, far.key.d_s) == ("convoy", 30.0, 50.0)
+    assert convoy.fusibility_recall == 0.0 and dict(convoy.rejected)["no_overlap"] == 15
+    assert np.isnan(convoy.fusibility_recall_detected)
+    assert near.fusibility_recall == 1.0 and near.fusibility_recall_detected == 1.0
+    assert far.fusibility_recall == 0.0 and dict(far.rejected)["gap_too_long"] == 15
+    assert np.isnan(far.fusibility_recall_detected)
+
+
+def test_read_ends_give_the_rules_gap_on_the_lanes_the_sensors_read(straight_evaluator):
+    """The ideal sensor reads 30 m: on the straight the coop 60 m ahead starts 30 m after the
+    ego's lane ends, the one 25 m ahead 5 m before it (negative: overlap). On curve90 (a
+    90° right turn of radius 18 m on the lane centre from station 150) the ego at 110 ends at
+    (140, -2) heading east, a coop 10 m past the turn starts at (168, -30) heading south: the
+    gap is the chord, as the rule measures d_s, not the 48.3 m of lane."""
+    from cold_maps.network.lane_graph import build_lane_graph
+    from cold_maps.opendrive.parser import load_opendrive
+    from cold_maps.simulation.drive import Track, VehicleState
+    from fusion.fusibility import signed_gap_m
+
+    sensor, rng, errors = LaneSensor(), np.random.default_rng(0), SensorErrorModel()
+    states = straight_evaluator.drives[0].states(0)
+    ego, coop, near = (sense(states[name], sensor, errors, rng).read_ends for name in ("ego", "coop60", "coop25"))
+    (p_end, t_end) = ego[1]
+    assert signed_gap_m(p_end, t_end, coop[0][0]) == pytest.approx(30.0, abs=1e-9)
+    assert signed_gap_m(p_end, t_end, near[0][0]) == pytest.approx(-5.0, abs=1e-9)
+    assert t_end == pytest.approx((1.0, 0.0), abs=1e-12)
+    track = Track.build(build_lane_graph(load_opendrive(bundled_map("curve90"))), [LANE])
+    station = 150.0 + 18.0 * np.pi / 2.0 + 10.0
+    (_, _), (p_end, t_end) = sense(VehicleState("ego", "ego", track, 110.0, LANE, 110.0), sensor, errors,
+                                   rng).read_ends
+    (p_start, t_start), _ = sense(VehicleState("c", "coop", track, station, LANE, station, 70.0), sensor, errors,
+                                  rng).read_ends
+    assert p_end == pytest.approx((140.0, -2.0), abs=1e-4) and p_start == pytest.approx((168.0, -30.0), abs=1e-4)
+    assert t_end == pytest.approx((1.0, 0.0), abs=1e-6) and t_start == pytest.approx((0.0, -1.0), abs=1e-6)
+    assert signed_gap_m(p_end, t_end, p_start) == pytest.approx(np.hypot(28.0, 28.0), abs=1e-4)

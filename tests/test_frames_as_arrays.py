@@ -89,7 +89,7 @@ def _assert_same_frames(reference: list[dict[str, Sensed]], block: list[dict[str
         assert list(one) == list(other)
         for name in one:
             a, b = one[name], other[name]
-            assert (a.state, a.end_reason, a.seen) == (b.state, b.end_reason, b.seen), name
+            assert (a.state, a.end_reason, a.seen, a.read_ends) == (b.state, b.end_reason, b.seen, b.read_ends), name
             assert type(a.state.station) is type(b.state.station) is float
             assert (a.detection is None) == (b.detection is None), name
             if a.detection is not None and b.detection is not None:

@@ -321,41 +321,50 @@ def test_sensor_reports_the_fork_branches(junction) -> None:
 # --- the association metrics in the report ----------------------------------------------------
 
 def test_report_counts_kinds_and_confidence_curve() -> None:
-    """Six decisions: own (0.9) and branch (0.5) true fusions, an adjacent false fusion (0.4),
-    a rejected valid pair and two rejected invalid ones: precision 2/3, recall 2/3; at
-    threshold 0.5 precision 1 and recall 2/3; at 0.6 precision 1, recall 1/3; the metrics.json
-    record round-trips."""
+    """Seven decisions: own (0.9) and branch (0.5) true fusions, an adjacent false fusion (0.4),
+    two rejected valid pairs (one whose detections leave too long a gap) and two rejected
+    invalid ones: precision 2/3, recall 2/4, recall given detections 2/3; at threshold 0.5
+    precision 1 and recall 2/4; at 0.6 precision 1, recall 1/4; the metrics.json record
+    round-trips."""
     from cold_maps.evaluation.report import CONFIDENCE_THRESHOLDS, FrameRecord, ScenarioAccumulator, ScenarioKey
     from cold_maps.evaluation.report import ScenarioResult, association_markdown
 
     acc = ScenarioAccumulator(ScenarioKey("m", "spline", "hermite", 20.0, "left"))
     fused = np.array([0.1])
     acc.add(FrameRecord(0, 0.0, "ego", "coop", fused, predicted_fusible=True, truly_fusible=True, relation="own",
-                        confidence=0.9))
+                        confidence=0.9, detected_fusible=True))
     acc.add(FrameRecord(1, 0.1, "ego", "turn", fused, predicted_fusible=True, truly_fusible=True, relation="branch",
-                        confidence=0.5))
+                        confidence=0.5, detected_fusible=True))
     acc.add(FrameRecord(2, 0.2, "ego", "adj", fused, predicted_fusible=True, truly_fusible=False,
                         relation="adjacent", confidence=0.4))
     acc.add(FrameRecord(3, 0.3, "ego", "coop", np.empty(0), rejected="other_lane", predicted_fusible=False,
-                        truly_fusible=True, relation="own", confidence=0.0))
+                        truly_fusible=True, relation="own", confidence=0.0, detected_fusible=True))
+    # a valid pair whose detections leave a gap beyond d_i: counted in the recall, not in the
+    # recall given detections
+    acc.add(FrameRecord(3, 0.3, "ego", "coop2", np.empty(0), rejected="gap_too_long", predicted_fusible=False,
+                        truly_fusible=True, relation="own", confidence=0.0, detected_fusible=False))
     for frame, kind in ((4, "opposite"), (5, "behind")):
         acc.add(FrameRecord(frame, 0.4, "ego", kind, np.empty(0), rejected="other_lane", predicted_fusible=False,
                             truly_fusible=False, relation=kind, confidence=0.0))
     result = acc.result()
-    assert result.fusibility_precision == pytest.approx(2 / 3) and result.fusibility_recall == pytest.approx(2 / 3)
+    assert result.fusibility_precision == pytest.approx(2 / 3) and result.fusibility_recall == pytest.approx(2 / 4)
+    assert result.fusibility_recall_detected == pytest.approx(2 / 3)
     assert result.fused_by_relation == (("branch", 1), ("own", 1))
     assert result.false_by_relation == (("adjacent", 1),)
     curve = {t: (p, r) for t, p, r in result.by_confidence}
     assert set(curve) == set(CONFIDENCE_THRESHOLDS)
-    assert curve[0.0] == pytest.approx((2 / 3, 2 / 3))
-    assert curve[0.5] == pytest.approx((1.0, 2 / 3))
-    assert curve[0.6] == pytest.approx((1.0, 1 / 3))
+    assert curve[0.0] == pytest.approx((2 / 3, 2 / 4))
+    assert curve[0.5] == pytest.approx((1.0, 2 / 4))
+    assert curve[0.6] == pytest.approx((1.0, 1 / 4))
     assert math.isnan(curve[1.0][0]) and curve[1.0][1] == 0.0
     again = ScenarioResult.from_dict(result.to_dict())
     assert again.fused_by_relation == result.fused_by_relation and again.false_by_relation == result.false_by_relation
+    assert again.fusibility_recall_detected == pytest.approx(2 / 3)
+    assert math.isnan(ScenarioResult.from_dict({**result.to_dict(), "fusibility": {
+        k: v for k, v in result.to_dict()["fusibility"].items() if k != "recall_detected"}}).fusibility_recall_detected)
     assert [t for t, _, _ in again.by_confidence] == list(CONFIDENCE_THRESHOLDS)
     text = association_markdown([result])
-    assert "adjacent: 1" in text and "| 0.667 | 0.667 | 1 | 1 |" in text and "1.000 / 0.667" in text
+    assert "adjacent: 1" in text and "| 0.667 | 0.500 | 0.667 | 1 | 1 |" in text and "1.000 / 0.500" in text
 
 
 def test_recording_round_trip_of_multi_lane_detections(tmp_path) -> None:

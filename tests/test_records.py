@@ -82,6 +82,8 @@ def reference_result(key: ScenarioKey, records: list[FrameRecord]) -> ScenarioRe
     decided = [(r.predicted_fusible, r.truly_fusible) for r in records
                if r.predicted_fusible is not None and r.truly_fusible is not None]
     true_positive = sum(p and t for p, t in decided)
+    detected = [bool(r.predicted_fusible) for r in records
+                if r.predicted_fusible is not None and r.truly_fusible is not None and r.detected_fusible]
     correct = [r.errors_m for r in fused if r.truly_fusible] if key.vehicles > 0 else []
     right = np.concatenate(correct) if correct else np.empty(0)
     fused_pairs = [r for r in records if r.predicted_fusible and r.truly_fusible is not None and r.relation]
@@ -118,6 +120,7 @@ def reference_result(key: ScenarioKey, records: list[FrameRecord]) -> ScenarioRe
                                 max=float(runtimes.max()) if runtimes.size else nan),
         fusibility_precision=_ratio(true_positive, sum(p for p, _ in decided)),
         fusibility_recall=_ratio(true_positive, sum(t for _, t in decided)),
+        fusibility_recall_detected=_ratio(sum(detected), len(detected)),
         correct_mean_error_m=float(right.mean()) if right.size else nan,
         correct_max_error_m=float(right.max()) if right.size else nan,
         correct_p95_error_m=float(np.percentile(right, P95_PERCENT)) if right.size else nan,
@@ -153,6 +156,7 @@ def reference_csv_rows(key: ScenarioKey, records: list[FrameRecord]) -> list[dic
         "far_max_error_m": number(float(np.max(far))) if far.size else "",
         "known_to_m": number(r.known_to_m),
         "stopping_distance_m": "" if r.stopping is None else number(r.stopping.distance_m),
+        "detected_fusible": flag(r.detected_fusible),
     } for r, (near, far) in ((r, r.split_errors()) for r in records)]
 
 
@@ -185,7 +189,8 @@ def make_records(seed: int, count: int, sigma: bool) -> list[FrameRecord]:
             end_reason=["", "range", "map_end"][i % 3], near_points=int(rng.integers(0, n + 1)) if rng.random() < 0.8
             else None, known_to_m=float(rng.uniform(0, 80)) if fused else math.nan,
             stopping=RULE.at(12.0) if rng.random() < 0.6 else None,
-            sigma_m=rng.uniform(0.01, 0.1, n) if sigma and rng.random() < 0.7 else None))
+            sigma_m=rng.uniform(0.01, 0.1, n) if sigma and rng.random() < 0.7 else None,
+            detected_fusible=None if not truly else [None, True, False][int(rng.integers(3))]))
     return out
 
 

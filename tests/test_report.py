@@ -89,7 +89,7 @@ def test_empty_scenario_has_nulls_not_zeros(tmp_path):
     record = json.loads((tmp_path / "metrics.json").read_text())["scenarios"][0]
     assert record["mean_error_m"] is None and record["p95_error_m"] is None
     assert record["runtime_ms"] == {"mean": None, "std": None, "max": None}
-    assert record["fusibility"] == {"precision": None, "recall": None, "fused": {}, "false": {}, "by_confidence": []}
+    assert record["fusibility"] == {"precision": None, "recall": None, "recall_detected": None, "fused": {}, "false": {}, "by_confidence": []}
     assert (record["frames"], record["fused_frames"], record["rejected"]) == (1, 0, {"no_coop": 1})
 
 

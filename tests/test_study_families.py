@@ -16,21 +16,27 @@ from tests.conftest import load_tool
 study_families = load_tool("study_families")
 
 
-def _record(predicted: bool | None, truth: bool | None, relation: str = "", confidence: float = math.nan) -> FrameRecord:
+def _record(predicted: bool | None, truth: bool | None, relation: str = "", confidence: float = math.nan,
+            detected: bool | None = None) -> FrameRecord:
     return FrameRecord(0, 0.0, "ego", "coop", np.empty(0), rejected="" if predicted else "other_lane",
-                       predicted_fusible=predicted, truly_fusible=truth, relation=relation, confidence=confidence)
+                       predicted_fusible=predicted, truly_fusible=truth, relation=relation, confidence=confidence,
+                       detected_fusible=detected)
 
 
 def test_counts_of_records() -> None:
-    records = [_record(True, True, "own"), _record(True, True, "branch"), _record(True, False, "adjacent"),
-               _record(True, False, "adjacent"), _record(True, False, "opposite"), _record(False, True),
-               _record(False, False), _record(None, True), _record(True, None)]
+    records = [_record(True, True, "own", detected=True), _record(True, True, "branch", detected=False),
+               _record(True, False, "adjacent"), _record(True, False, "adjacent"), _record(True, False, "opposite"),
+               _record(False, True, detected=True), _record(False, True, detected=False), _record(False, False),
+               _record(None, True, detected=True), _record(True, None)]
     counts = study_families.counts_of(records)
-    assert (counts.true_positive, counts.false_positive, counts.false_negative, counts.true_negative) == (2, 3, 1, 1)
-    assert counts.precision == pytest.approx(2 / 5) and counts.recall == pytest.approx(2 / 3)
+    assert (counts.true_positive, counts.false_positive, counts.false_negative, counts.true_negative) == (2, 3, 2, 1)
+    assert counts.precision == pytest.approx(2 / 5) and counts.recall == pytest.approx(2 / 4)
+    # given the detections: the own-lane fusion and one rejected pair (the undecided one left out)
+    assert (counts.detected, counts.detected_fused, counts.recall_detected) == (2, 1, pytest.approx(1 / 2))
     assert counts.false_by_kind == (("adjacent", 2), ("opposite", 1))
     both = counts + counts
-    assert (both.decisions, both.fusions, both.false_by_kind) == (14, 10, (("adjacent", 4), ("opposite", 2)))
+    assert (both.decisions, both.fusions, both.false_by_kind) == (16, 10, (("adjacent", 4), ("opposite", 2)))
+    assert (both.detected, both.detected_fused) == (4, 2)
     assert math.isnan(study_families.Counts().precision)
 
 
@@ -54,6 +60,7 @@ def test_study_agrees_with_the_runs_metrics(tmp_path: Path) -> None:
         cell = fusions[study_families.fusion_label(scenario["fusion"], scenario["d_s"])]["lanes0"]
         assert cell["precision"] == pytest.approx(scenario["fusibility"]["precision"])
         assert cell["recall"] == pytest.approx(scenario["fusibility"]["recall"])
+        assert cell["recall_detected"] == pytest.approx(scenario["fusibility"]["recall_detected"])
         assert cell["false_by_kind"] == scenario["fusibility"]["false"]
         compared += 1
     assert compared == 4  # convoy and spline at d_s 20, 30, 50

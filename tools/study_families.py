@@ -67,6 +67,9 @@ class Counts:
         false_negative: pairs rejected that truly continue it.
         true_negative: pairs rejected that do not.
         false_by_kind: (kind of pair, count) of the false fusions, sorted by kind.
+        detected: truly fusible pairs whose detections as made admit the paper's rule
+            (``FrameRecord.detected_fusible``).
+        detected_fused: those of them fused.
     """
 
     true_positive: int = 0
@@ -74,12 +77,15 @@ class Counts:
     false_negative: int = 0
     true_negative: int = 0
     false_by_kind: tuple[tuple[str, int], ...] = ()
+    detected: int = 0
+    detected_fused: int = 0
 
     def __add__(self, other: Counts) -> Counts:
         kinds = Counter(dict(self.false_by_kind)) + Counter(dict(other.false_by_kind))
         return Counts(self.true_positive + other.true_positive, self.false_positive + other.false_positive,
                       self.false_negative + other.false_negative, self.true_negative + other.true_negative,
-                      tuple(sorted(kinds.items())))
+                      tuple(sorted(kinds.items())), self.detected + other.detected,
+                      self.detected_fused + other.detected_fused)
 
     @property
     def decisions(self) -> int:
@@ -101,12 +107,20 @@ class Counts:
         """True fusions over truly fusible pairs; NaN without any."""
         return _ratio(self.true_positive, self.true_positive + self.false_negative)
 
+    @property
+    def recall_detected(self) -> float:
+        """Fusions over the truly fusible pairs whose detections admit the paper's rule; NaN
+        without any."""
+        return _ratio(self.detected_fused, self.detected)
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON record (NaN as null)."""
         return {"decisions": self.decisions, "true_positive": self.true_positive,
                 "false_positive": self.false_positive, "false_negative": self.false_negative,
                 "true_negative": self.true_negative, "precision": _finite(self.precision),
-                "recall": _finite(self.recall), "false_by_kind": dict(self.false_by_kind)}
+                "recall": _finite(self.recall), "recall_detected": _finite(self.recall_detected),
+                "detected": self.detected, "detected_fused": self.detected_fused,
+                "false_by_kind": dict(self.false_by_kind)}
 
 
 def _ratio(numerator: int, denominator: int) -> float:
@@ -120,7 +134,7 @@ def _finite(value: float) -> float | None:
 def counts_of(records: Iterable[Any]) -> Counts:
     """The :class:`Counts` of ``evaluation.report.FrameRecord`` s (records without a
     decision or without ground truth are left out)."""
-    tp = fp = fn = tn = 0
+    tp = fp = fn = tn = detected = detected_fused = 0
     kinds: Counter[str] = Counter()
     for record in records:
         predicted, truth = record.predicted_fusible, record.truly_fusible
@@ -130,7 +144,9 @@ def counts_of(records: Iterable[Any]) -> Counts:
         fn, tn = fn + (not predicted and truth), tn + (not predicted and not truth)
         if predicted and not truth:
             kinds[record.relation or "unknown"] += 1
-    return Counts(tp, fp, fn, tn, tuple(sorted(kinds.items())))
+        if record.detected_fusible:
+            detected, detected_fused = detected + 1, detected_fused + predicted
+    return Counts(tp, fp, fn, tn, tuple(sorted(kinds.items())), detected, detected_fused)
 
 
 def confidence_curve(records: Sequence[Any]) -> list[dict[str, Any]]:
@@ -217,18 +233,21 @@ def markdown(study: Mapping[str, Any]) -> str:
         f"`cold-eval` per family with {' '.join(BASE_ARGS)} and: "
         + "; ".join(f"`{name}` = `{' '.join(args) or '(defaults)'}`" for name, args in made["configurations"].items())
         + f"; frames {made['frames'] or 'default (at most 100)'}, routes {made['routes'] or 'default (3)'}. "
-        "Precision = true fusions / fusions, recall = true fusions / truly fusible pairs, pooled over the "
-        "family's maps (one decision per frame and vehicle pair).",
+        "Precision = true fusions / fusions, recall = true fusions / truly fusible pairs, recall given "
+        "detections = fusions / truly fusible pairs whose detections as made overlap (convoy) or leave a gap "
+        "0 < d_s <= d_i (spline), pooled over the family's maps (one decision per frame and vehicle pair).",
         "",
-        "| family | fusion | " + " | ".join(f"{c} precision | {c} recall" for c in configs) + " |",
-        "| --- | --- | " + " | ".join("---: | ---:" for _ in configs) + " |",
+        "| family | fusion | " + " | ".join(f"{c} precision | {c} recall | {c} recall given detections"
+                                           for c in configs) + " |",
+        "| --- | --- | " + " | ".join("---: | ---: | ---:" for _ in configs) + " |",
     ]
     for family, cells in study["families"].items():
         for label in cells["fusions"]:
             row = [family, label]
             for config in configs:
                 counts = cells["fusions"][label].get(config, {})
-                row += [_fmt(counts.get("precision")), _fmt(counts.get("recall"))]
+                row += [_fmt(counts.get("precision")), _fmt(counts.get("recall")),
+                        _fmt(counts.get("recall_detected"))]
             lines.append("| " + " | ".join(row) + " |")
     lines += ["", "False fusion rate = false fusions / fusions (convoy and spline at every d_s pooled); "
               "the kinds of pair that were falsely fused.", "",

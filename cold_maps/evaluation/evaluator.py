@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Callable, Final
 import numpy as np
 
 import fusion
+from fusion.fusibility import max_gap_m, signed_gap_m
 from fusion.uncertainty import own_variances
 from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
@@ -384,6 +385,7 @@ class MapEvaluator:
         plan = self.plan
         keys = self._keys(scenario)
         truth, relation = self._relation(ego.state, other.state)
+        detected = self._detected(truth, ego, other, scenario.fusion)
         main = other.state.role == "coop"
         label = (plan.name, scenario.label)
 
@@ -393,7 +395,7 @@ class MapEvaluator:
                 collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
                                                gt_unmatched=why, relation=relation, confidence=confidence,
-                                               stopping=self.stopping))
+                                               stopping=self.stopping, detected_fusible=detected))
             return {}
 
         if ego.detection is None or other.detection is None:
@@ -425,7 +427,7 @@ class MapEvaluator:
                 return reject(rejected, True, runtime, result.confidence, why)
             self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
                          truth, metrics if main else None, relation=relation, confidence=result.confidence,
-                         sigmas=(result.left_sigma, result.right_sigma))
+                         sigmas=(result.left_sigma, result.right_sigma), detected=detected)
             self._keep_overlay(collector, scenario, index, measured,
                                {"ego": ego_detection, other.state.name: other_detection},
                                {"left": result.left, "right": result.right})
@@ -450,9 +452,12 @@ class MapEvaluator:
             if coop.state.name in sent:
                 for key in keys:
                     collector.add_traffic(key, sent[coop.state.name], 1.0 / FRAME_RATE_HZ)
-        states = [ego.state, *(c.state for c in coops)]
-        truth = all(lane_relation(self.graph, a, b, self.relation_max_m, self.sensor.range_m)
-                    for a, b in zip(states, states[1:]))
+        links = list(zip([ego, *coops], coops))
+        valid = [lane_relation(self.graph, a.state, b.state, self.relation_max_m, self.sensor.range_m)
+                 for a, b in links]
+        truth = all(valid)
+        found = [self._detected(link_truth, a, b, scenario.fusion) for link_truth, (a, b) in zip(valid, links)]
+        detected = None if None in found else all(found)
         last = coops[-1].state.name
 
         def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
@@ -460,7 +465,7 @@ class MapEvaluator:
             for key in keys:
                 collector.add(key, FrameRecord(index, stamp, "ego", last, np.empty(0), runtime_ms=runtime,
                                                rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               gt_unmatched=why, stopping=self.stopping))
+                                               gt_unmatched=why, stopping=self.stopping, detected_fusible=detected))
             return {}
 
         if ego.detection is None or any(c.detection is None for c in coops):
@@ -482,7 +487,7 @@ class MapEvaluator:
                 rejected, why = _rejection(measured)
                 return reject(rejected, True, runtime, why)
             self._record(collector, scenario, keys, measured, index, stamp, "ego", last, runtime, True, truth, None,
-                         sigmas=(chain.left_sigma, chain.right_sigma))
+                         sigmas=(chain.left_sigma, chain.right_sigma), detected=detected)
             detections = {c.state.name: c.detection for c in coops if c.detection is not None}
             self._keep_overlay(collector, scenario, index, measured, {"ego": ego_detection, **detections},
                                {"left": chain.left, "right": chain.right})
@@ -508,6 +513,22 @@ class MapEvaluator:
             found = self._relations[other.name] = (truth, relation_kind(ego, other, truth))
         return found
 
+    def _detected(self, truth: bool, ego: Sensed, other: Sensed, mode: str) -> bool | None:
+        """Whether ``other`` is truly on a trajectory of the ego (``truth``, :meth:`_relation`)
+        and the two detections as the sensors made them admit the paper's rule for ``mode``:
+        they overlap (convoy) or leave a gap 0 < d_s <= d_i (spline), the gap d_s measured as
+        the rule measures it between the lanes the sensors read before any error model
+        (:attr:`Sensed.read_ends`). None when either vehicle sent no detection or the
+        detections fused are not the sensors' (a lane history or message exchange)."""
+        if self.exchange is not None or ego.detection is None or other.detection is None:
+            return None
+        if not truth:
+            return False
+        assert ego.read_ends is not None and other.read_ends is not None
+        (p_end, t_end), (p_start, _) = ego.read_ends[1], other.read_ends[0]
+        gap = signed_gap_m(p_end, t_end, p_start)
+        return gap <= 0.0 if mode == "convoy" else 0.0 < gap <= max_gap_m(self.plan.params)
+
     def _frame_true_lane(self, ego: VehicleState, other: VehicleState) -> tuple[NDArrayFloat, NDArrayFloat]:
         """:meth:`true_lane`, once per frame and vehicle."""
         found = self._true_lanes.get(other.name)
@@ -528,7 +549,8 @@ class MapEvaluator:
                 index: int, stamp: float, ego: str, coop: str, runtime: float, predicted: bool | None,
                 truth: bool | None, metrics: dict[str, float | None] | None, *, relation: str = "",
                 confidence: float = math.nan, end_reason: str = "",
-                sigmas: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None)) -> None:
+                sigmas: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None),
+                detected: bool | None = None) -> None:
         sides = ((measured.left_errors_m, measured.left_range_m), (measured.right_errors_m, measured.right_range_m))
         known = measured.known_to_m(LANE_ACCURACY_M)
         for key, (errors, length), near, sigma in zip(keys, sides, measured.near_points(), sigmas):
@@ -536,7 +558,7 @@ class MapEvaluator:
                                            runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
                                            relation=relation, confidence=confidence, end_reason=end_reason,
                                            near_points=near, known_to_m=known, stopping=self.stopping,
-                                           sigma_m=sigma))
+                                           sigma_m=sigma, detected_fusible=detected))
             if metrics is not None:
                 prefix = f"{scenario.label}_{key.boundary}".replace("-", "_")
                 metrics[f"{prefix}_mean_error_m"] = float(np.mean(errors))

@@ -33,6 +33,8 @@
           "gt_unmatched": {"past_gt_end": 3},  # only when any: why the GT did not cover a lane, or "map_broken"
           "runtime_ms": {"mean": 3.6, "std": 0.7, "max": 6.6},  # fusion runtime per evaluation
           "fusibility": {"precision": 0.98, "recall": 1.0,     # fusibility check vs GT
+                         "recall_detected": 1.0,  # recall over the true pairs whose detections as made
+                                                  # admit the paper's rule (docs/metrics.md); null: unknown
                          "fused": {"own": 250, "branch": 12},   # true fusions: ego's route / a branch
                          "false": {"adjacent": 2},              # false fusions by kind of pair
                          "by_confidence": [{"threshold": 0.5, "precision": 0.99, "recall": 0.97}]},
@@ -163,7 +165,8 @@ FRAMES_CSV_COLUMNS: Final[tuple[str, ...]] = (
     "map", "fusion", "interpolation", "d_s", "boundary", "frame", "stamp_s", "ego", "coop", "fused",
     "rejected", "points", "mean_error_m", "max_error_m", "perception_range_m", "runtime_ms",
     "predicted_fusible", "truly_fusible", "relation", "confidence",
-    "end_reason", "near_points", "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_distance_m")
+    "end_reason", "near_points", "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_distance_m",
+    "detected_fusible")
 RANGE_PERCENTS: Final[tuple[float, ...]] = (5.0, 50.0, 95.0)
 """Percentiles (linear interpolation) of the perception range over fused evaluations and
 the frames without an ego lane (:data:`NO_EGO_LANE`)."""
@@ -270,6 +273,10 @@ class FrameRecord:
             when not measured.
         sigma_m: the stated lateral 1σ (m) of the point of each of ``errors_m``, same shape;
             None when the lane states no σ.
+        detected_fusible: whether the pair is truly fusible and the two detections as the
+            sensors made them admit the paper's rule (they overlap for convoy, leave a gap
+            0 < d_s <= d_i for the spline; ``evaluator.MapEvaluator._detected``), None when
+            unknown (a detection missing, a lane history or exchange).
     """
 
     frame: int
@@ -290,6 +297,7 @@ class FrameRecord:
     known_to_m: float = math.nan
     stopping: StoppingDistance | None = None
     sigma_m: NDArrayFloat | None = None
+    detected_fusible: bool | None = None
 
     def __post_init__(self) -> None:
         if self.sigma_m is not None:
@@ -373,6 +381,9 @@ class ScenarioResult:
         runtime_ms: fusion runtime statistics (ms).
         fusibility_precision, fusibility_recall: the fusibility check against the GT;
             NaN when undefined.
+        fusibility_recall_detected: the recall over the pairs truly fusible whose detections
+            as made admit the paper's rule (:attr:`FrameRecord.detected_fusible`); NaN when
+            undefined.
         correct_mean_error_m, correct_max_error_m, correct_p95_error_m: the same statistics
             over the fusions whose partner truly continues the ego's lane (m; NaN without, and
             when ``key.vehicles`` is 0: the record leaves them out).
@@ -435,6 +446,7 @@ class ScenarioResult:
     end_reasons: tuple[tuple[str, int], ...] = ()
     calibration: Calibration | None = None
     calibration_correct: Calibration | None = None
+    fusibility_recall_detected: float = math.nan
 
     @property
     def stopping_share(self) -> float:
@@ -461,6 +473,7 @@ class ScenarioResult:
             "runtime_ms": {"mean": f(self.runtime_ms.mean), "std": f(self.runtime_ms.std),
                            "max": f(self.runtime_ms.max)},
             "fusibility": {"precision": f(self.fusibility_precision), "recall": f(self.fusibility_recall),
+                           "recall_detected": f(self.fusibility_recall_detected),
                            "fused": dict(self.fused_by_relation), "false": dict(self.false_by_relation),
                            "by_confidence": [{"threshold": t, "precision": f(p), "recall": f(r)}
                                              for t, p, r in self.by_confidence]},
@@ -560,6 +573,8 @@ class ScenarioResult:
                        runtime_ms=runtime,
                        fusibility_precision=_none_to_nan(record["fusibility"]["precision"], f"{where}.fusibility"),
                        fusibility_recall=_none_to_nan(record["fusibility"]["recall"], f"{where}.fusibility"),
+                       fusibility_recall_detected=_none_to_nan(record["fusibility"].get("recall_detected"),
+                                                               f"{where}.fusibility"),
                        fused_by_relation=counts["fused"], false_by_relation=counts["false"], by_confidence=points,
                        by_route=by_route, **calibration, **num, **cls._added_fields(record, where))
         except ReportError:
@@ -584,7 +599,8 @@ def record_schema() -> pa.Schema:
         ("truly_fusible", flag), ("gt_unmatched", text), ("relation", text), ("confidence", f64),
         ("end_reason", text), ("near_points", pa.int64()), ("known_to_m", f64), ("stopping_speed_mps", f64),
         ("stopping_reaction_time_s", f64), ("stopping_deceleration_mps2", f64), ("sigma_m", pa.list_(f64)),
-        ("mean_error_m", f64), ("max_error_m", f64), ("near_max_error_m", f64), ("far_max_error_m", f64)])
+        ("mean_error_m", f64), ("max_error_m", f64), ("near_max_error_m", f64), ("far_max_error_m", f64),
+        ("detected_fusible", flag)])
 
 
 def _record_figures(record: FrameRecord) -> tuple[float, float, float, float]:
@@ -619,7 +635,7 @@ def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
         "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
         "sigma_m": from_lists([r.sigma_m for r in records]),
         "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
-        "far_max_error_m": figures[3],
+        "far_max_error_m": figures[3], "detected_fusible": [r.detected_fusible for r in records],
     }
     schema = record_schema()
     return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)
@@ -647,7 +663,8 @@ def batch_records(batch: pa.RecordBatch) -> Iterator[FrameRecord]:
             near_points=data["near_points"][i], known_to_m=data["known_to_m"][i],
             stopping=None if speed is None else StoppingRule(
                 data["stopping_reaction_time_s"][i], data["stopping_deceleration_mps2"][i]).at(speed),
-            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]].copy())
+            sigma_m=None if sigma_null[i] else sigmas[sigma_offsets[i]:sigma_offsets[i + 1]].copy(),
+            detected_fusible=data["detected_fusible"][i])
 
 
 
@@ -711,9 +728,12 @@ class ScenarioAccumulator:
 
     def _scalars(self) -> dict[str, Any]:
         """The :data:`SCALAR_COLUMNS` of every record (numpy arrays, text as lists), the
-        ``points`` per record, the (known, value) flags ``predicted`` and ``truly``."""
-        parts: dict[str, list[Any]] = {name: [] for name in (*SCALAR_COLUMNS, "points", "predicted", "truly")}
-        for batch in self.records.batches((*SCALAR_COLUMNS, "errors_m", "predicted_fusible", "truly_fusible")):
+        ``points`` per record, the (known, value) flags ``predicted``, ``truly`` and
+        ``detected``."""
+        parts: dict[str, list[Any]] = {name: [] for name in (*SCALAR_COLUMNS, "points", "predicted", "truly",
+                                                              "detected")}
+        for batch in self.records.batches((*SCALAR_COLUMNS, "errors_m", "predicted_fusible", "truly_fusible",
+                                           "detected_fusible")):
             for name in SCALAR_COLUMNS:  # copies: a view would keep the whole segment (its points) in memory
                 column = batch.column(name)
                 parts[name].append(column.to_pylist() if str(column.type) == "string" else
@@ -721,9 +741,10 @@ class ScenarioAccumulator:
             parts["points"].append(np.diff(list_values(batch.column("errors_m"))[1]))
             parts["predicted"].append(flags(batch.column("predicted_fusible")))
             parts["truly"].append(flags(batch.column("truly_fusible")))
+            parts["detected"].append(flags(batch.column("detected_fusible")))
         out: dict[str, Any] = {}
         for name, chunks in parts.items():
-            if name in ("predicted", "truly"):
+            if name in ("predicted", "truly", "detected"):
                 out[name] = tuple(np.concatenate([c[i] for c in chunks]) if chunks else np.empty(0, dtype=bool)
                                   for i in range(2))
             elif chunks and isinstance(chunks[0], list):
@@ -808,6 +829,8 @@ class ScenarioAccumulator:
         truly_known, truly = c["truly"]
         decided = predicted_known & truly_known
         true_positive = int(np.count_nonzero(decided & predicted & truly))
+        detected_known, detected = c["detected"]
+        detected = decided & detected_known & detected
         fused_pairs = predicted_known & predicted & truly_known & (relation != "")
         confidence = c["confidence"]
         scored = decided & (~predicted | np.isfinite(confidence))
@@ -838,6 +861,8 @@ class ScenarioAccumulator:
                 max=float(runtimes.max()) if runtimes.size else nan),
             fusibility_precision=_ratio(true_positive, int(np.count_nonzero(decided & predicted))),
             fusibility_recall=_ratio(true_positive, int(np.count_nonzero(decided & truly))),
+            fusibility_recall_detected=_ratio(int(np.count_nonzero(detected & predicted)),
+                                              int(np.count_nonzero(detected))),
             correct_mean_error_m=right.mean(),
             correct_max_error_m=right.max(),
             correct_p95_error_m=right.percentile(P95_PERCENT),
@@ -910,7 +935,7 @@ FRAMES_COLUMNS_STORED: Final[tuple[str, ...]] = (
     "frame", "stamp_s", "ego", "coop", "errors_m", "rejected", "mean_error_m", "max_error_m", "perception_range_m",
     "runtime_ms", "predicted_fusible", "truly_fusible", "relation", "confidence", "end_reason", "near_points",
     "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s",
-    "stopping_deceleration_mps2")
+    "stopping_deceleration_mps2", "detected_fusible")
 """The stored columns ``frames.csv`` and ``frames.parquet`` are made from."""
 ROW_GROUP_ROWS: Final[int] = 1 << 15
 """Rows ``frames.parquet`` gathers into one row group (a record segment holds far fewer: a
@@ -928,7 +953,7 @@ def frames_schema() -> Any:
              "mean_error_m": f64, "max_error_m": f64, "perception_range_m": f64, "runtime_ms": f64,
              "predicted_fusible": flag, "truly_fusible": flag, "relation": text, "confidence": f64,
              "end_reason": text, "near_points": i64, "near_max_error_m": f64, "far_max_error_m": f64,
-             "known_to_m": f64, "stopping_distance_m": f64}
+             "known_to_m": f64, "stopping_distance_m": f64, "detected_fusible": flag}
     return pa.schema([(name, types[name]) for name in FRAMES_CSV_COLUMNS])
 
 
@@ -962,7 +987,7 @@ def frames_batch(key: ScenarioKey, batch: Any) -> Any:
     for name in ("mean_error_m", "max_error_m", "perception_range_m", "runtime_ms", "confidence",
                  "near_max_error_m", "far_max_error_m", "known_to_m"):
         columns[name] = finite(batch.column(name))
-    for name in ("predicted_fusible", "truly_fusible", "relation", "end_reason", "near_points"):
+    for name in ("predicted_fusible", "truly_fusible", "relation", "end_reason", "near_points", "detected_fusible"):
         columns[name] = batch.column(name)
     schema = frames_schema()
     return pa.RecordBatch.from_arrays([columns[name] for name in schema.names], schema=schema)
@@ -1311,16 +1336,20 @@ def association_markdown(results: Sequence[ScenarioResult]) -> str:
             continue
         name = [k.map, k.fusion, k.interpolation or "–", _fmt(k.d_s, 1)]
         fused = dict(r.fused_by_relation)
-        rows.append([*name, _fmt(r.fusibility_precision), _fmt(r.fusibility_recall), str(fused.get("own", 0)),
+        rows.append([*name, _fmt(r.fusibility_precision), _fmt(r.fusibility_recall),
+                     _fmt(r.fusibility_recall_detected), str(fused.get("own", 0)),
                      str(fused.get("branch", 0)),
                      ", ".join(f"{kind}: {count}" for kind, count in r.false_by_relation) or "–"])
         if r.by_confidence:
             curve.append([*name, *(f"{_fmt(p)} / {_fmt(q)}" for _, p, q in r.by_confidence)])
     if not rows:
         return ""
-    text = ("Pairs valid by the paper's rule (`lane_relation`); false fusions by kind of pair.\n\n"
-            + _table(["map", "fusion", "interp.", "d_s [m]", "precision", "recall", "fused own route",
-                      "fused branch", "false fusions"], rows))
+    text = ("Pairs valid by the paper's rule (`lane_relation`, the ego's detection counted to the sensor's "
+            "nominal range); recall given detections: over those of them whose detections as made overlap "
+            "(convoy) or leave a gap 0 < d_s <= d_i (spline), \"–\" when unknown (docs/metrics.md); false "
+            "fusions by kind of pair.\n\n"
+            + _table(["map", "fusion", "interp.", "d_s [m]", "precision", "recall", "recall given detections",
+                      "fused own route", "fused branch", "false fusions"], rows))
     if curve:
         text += ("\nPrecision / recall when only decisions of at least this association confidence count "
                  "as fusible:\n\n" + _table(["map", "fusion", "interp.", "d_s [m]",

@@ -7,12 +7,14 @@ maps a detection back into the world frame.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Final, Mapping, Sequence
 
 import numpy as np
 
 import fusion
+from fusion.fusibility import lane_end
 from fusion.types import clean_borders, stacked_arclengths
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.simulation.camera import CameraSensor
@@ -29,6 +31,22 @@ NO_OBSTACLES: Final[NDArrayFloat] = np.empty((0, 3))
 """No other vehicle (x, y m, yaw rad rows)."""
 
 
+End = tuple[tuple[float, float], tuple[float, float]]
+"""A lane's centre-line end: ``(point, unit tangent)``, world frame (m), driving direction."""
+
+
+def read_ends(raw: Detection) -> tuple[End, End]:
+    """The start and the end of the centre line of a sensor's lane, world frame, as the fusion
+    reads them from detections (:func:`fusion.fusibility.lane_end` on the borders in the
+    vehicle frame, then into the world frame)."""
+    c, s = math.cos(raw.yaw), math.sin(raw.yaw)
+    found = []
+    for at_end in (False, True):
+        (px, py), (tx, ty) = lane_end(raw.left, raw.right, at_end)
+        found.append(((raw.x + c * px - s * py, raw.y + s * px + c * py), (c * tx - s * ty, s * tx + c * ty)))
+    return found[0], found[1]
+
+
 @dataclass(frozen=True)
 class Sensed:
     """One vehicle's detection in one frame.
@@ -41,12 +59,15 @@ class Sensed:
         end_reason: why the sensor's lane ended (``sensor.Detection.end_reason``); ""
             when unknown.
         seen: False when the sensor saw no lane (the detection is None), True otherwise.
+        read_ends: the start and the end of the centre line of the lane the sensor read,
+            before any error model (:func:`read_ends`); None when the sensor saw no lane.
     """
 
     state: VehicleState
     detection: fusion.LaneDetection | None
     end_reason: str = ""
     seen: bool = True
+    read_ends: tuple[End, End] | None = None
 
     def missing(self, who: str) -> str:
         """Why ``who`` (``ego``/``coop``) sent no detection: ``WHO_not_seen`` (the sensor
@@ -72,8 +93,9 @@ def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: Sensor
     if raw is None:
         return Sensed(state, None, end_reason, seen=False)
     borders = errors.apply(raw.left, raw.right, rng)
+    ends = read_ends(raw)
     if borders is None:
-        return Sensed(state, None, end_reason)
+        return Sensed(state, None, end_reason, read_ends=ends)
     if lane_error is not None:
         borders = lane_error.perturb(state.name, stamp_s, *borders)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
@@ -85,7 +107,7 @@ def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: Sensor
                                               left_sigma=sigmas[0], right_sigma=sigmas[1],
                                               pose_cov=pose_covariance(errors, state.role),
                                               end_reason=end_reason or None),
-                  end_reason)
+                  end_reason, read_ends=ends)
 
 
 def _beside(state: VehicleState, raw: Detection, sensor: LaneSensor | CameraSensor, errors: SensorErrorModel,
@@ -119,13 +141,14 @@ def _reported_pose(state: VehicleState, raw: Detection, errors: SensorErrorModel
 @dataclass
 class _Pending:
     """A detection of :func:`sense_block` between its draws and its checks: where it is in
-    the block, its state, why its lane ended, its borders (vehicle frame, m) and what comes
-    with it."""
+    the block, its state, why its lane ended, its borders (vehicle frame, m), the ends of the
+    lane it read (:func:`read_ends`) and what comes with it."""
 
     frame: int
     state: VehicleState
     end_reason: str
     borders: tuple[NDArrayFloat, NDArrayFloat]
+    ends: tuple[End, End]
     beside: tuple[tuple[fusion.NeighbourLane, ...], fusion.RoadEdges | None, tuple[fusion.LaneBranch, ...]]
     pose: fusion.Pose2D
 
@@ -155,15 +178,15 @@ def sense_block(frames: Sequence[Mapping[str, VehicleState]], sensor: LaneSensor
             if identity or at_once:
                 # Identity errors draw nothing; known draws come after the loop, all at once.
                 pending.append(_Pending(frame, state, end_reason, (raw.left, raw.right),
-                                        _beside(state, raw, sensor, errors, rng, neighbours),
+                                        read_ends(raw), _beside(state, raw, sensor, errors, rng, neighbours),
                                         fusion.Pose2D(raw.x, raw.y, raw.yaw)))
                 continue
             borders = errors.apply(raw.left, raw.right, rng)
             if borders is None:
-                out[frame][name] = Sensed(state, None, end_reason)
+                out[frame][name] = Sensed(state, None, end_reason, read_ends=read_ends(raw))
                 continue
             beside = _beside(state, raw, sensor, errors, rng, neighbours)
-            pending.append(_Pending(frame, state, end_reason, borders, beside,
+            pending.append(_Pending(frame, state, end_reason, borders, read_ends(raw), beside,
                                     _reported_pose(state, raw, errors, rng)))
     if at_once:
         borders, poses = errors.apply_block(
@@ -183,7 +206,7 @@ def sense_block(frames: Sequence[Mapping[str, VehicleState]], sensor: LaneSensor
             for item, borders in zip(items, moved):
                 item.borders = borders
     for item, detection in zip(pending, _detections(pending, errors, lane_error, stamps_s)):
-        out[item.frame][item.state.name] = Sensed(item.state, detection, item.end_reason)
+        out[item.frame][item.state.name] = Sensed(item.state, detection, item.end_reason, read_ends=item.ends)
     return [{name: frame[name] for name in states} for frame, states in zip(out, frames)]
 
 
