@@ -49,8 +49,12 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
 
 def arc_lengths(polyline: NDArrayFloat) -> NDArrayFloat:
     """Cumulative arc length at each vertex, m; starts at 0."""
-    seg = np.hypot(*np.diff(polyline, axis=0).T)
-    return np.concatenate(([0.0], np.cumsum(seg)))
+    polyline = np.asarray(polyline)
+    step = polyline[1:] - polyline[:-1]
+    cum = np.empty(max(len(polyline), 1))
+    cum[0] = 0.0
+    np.cumsum(np.hypot(step[:, 0], step[:, 1]), out=cum[1:])
+    return cum
 
 
 def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArrayInt]:
