@@ -180,58 +180,41 @@ def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
     if design is None:
         if len(_DESIGNS) >= _MAX_DESIGNS:
             _DESIGNS.clear()
-        design = _DESIGNS[counts, n_noise] = _design(counts, n_noise, _filters(counts, None), 0)
+        design = _DESIGNS[counts, n_noise] = _designs(counts, n_noise, None)[0]
     return design
 
 
-def _weighted_designs(counts: tuple[int, ...], n_noise: int, weights: Sequence[NDArrayFloat]) -> list[_EndDesign]:
-    """:func:`_end_design` as weighted least squares, one per border's ``weights`` (one per
-    point from the end inward, at least ``counts[-1]``): each window's filters of all the
-    borders from one stacked pseudo-inverse."""
-    filters = _filters(counts, np.array([w[: counts[-1]] for w in weights]))
-    return [_design(counts, n_noise, filters, b) for b in range(len(weights))]
-
-
-def _filters(counts: tuple[int, ...], weights: NDArrayFloat | None) -> list[NDArrayFloat]:
-    """Per window, the least-squares filters of a quadratic in the point index (``(3,
-    count)``), then those of a cubic over the longest window (``(4, count)``; none under four
-    points); with ``weights`` (``(B, counts[-1])``) stacked, ``(B, …)``: pinv(√W·V)·√W."""
+def _designs(counts: tuple[int, ...], n_noise: int, weights: NDArrayFloat | None) -> list[_EndDesign]:
+    """:func:`_end_design`, or with ``weights`` (``(B, ≥ counts[-1])``, per border one per
+    point from the end inward) one weighted least-squares design per border: pinv(√W·V)·√W,
+    each window's filters of all the borders from one stacked pseudo-inverse."""
     windows = [(count, 3) for count in counts] + ([(counts[-1], 4)] if counts[-1] >= 4 else [])
     filters = []
     for count, degree in windows:
         vander = np.vander(np.arange(count, dtype=np.float64), degree, increasing=True)
         if weights is None:
-            filters.append(np.linalg.pinv(vander))
+            filters.append(np.linalg.pinv(vander)[None])
             continue
         root = np.sqrt(weights[:, :count])
         filters.append(np.linalg.pinv(vander * root[:, :, None]) * root[:, None, :])
-    return filters
-
-
-def _design(counts: tuple[int, ...], n_noise: int, filters: list[NDArrayFloat], border: int) -> _EndDesign:
-    """The :class:`_EndDesign` of ``_filters`` (of border ``border`` of a stack)."""
     n_windows = len(counts)
-    rows = np.zeros((3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
+    rows = np.zeros((len(filters[0]), 3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
     gains, cubic_leaks, quartic_leaks = [], [], []
     for w, count in enumerate(counts):
         t = np.arange(count, dtype=np.float64)
-        pinv = filters[w] if filters[w].ndim == 2 else filters[w][border]
-        rows[3 * w: 3 * w + 3, :count] = pinv
-        gains.append(np.linalg.norm(pinv, axis=1))
-        cubic_leaks.append(tuple((pinv @ t ** 3).tolist()))
-        quartic_leaks.append(tuple((pinv @ t ** 4).tolist()))
+        rows[:, 3 * w: 3 * w + 3, :count] = filters[w]
+        gains.append(np.linalg.norm(filters[w], axis=-1).tolist())
+        cubic_leaks.append((filters[w] @ t ** 3).tolist())
+        quartic_leaks.append((filters[w] @ t ** 4).tolist())
     t = np.arange(counts[-1], dtype=np.float64)
-    if counts[-1] >= 4:
-        p3 = (filters[-1] if filters[-1].ndim == 2 else filters[-1][border])[3]
-    else:
-        p3 = np.zeros(counts[-1])
-    rows[3 * n_windows, : counts[-1]] = p3
+    p3s = filters[-1][:, 3] if counts[-1] >= 4 else np.zeros((len(rows), counts[-1]))
+    rows[:, 3 * n_windows, : counts[-1]] = p3s
     for i in range(n_noise - 2):
-        rows[3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
-    gain = np.array(gains)
-    return _EndDesign(
-        rows, counts[0] >= 4, tuple(gain[:, 1].tolist()), tuple(gain[:, 2].tolist()), float(np.linalg.norm(p3)),
-        tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
+        rows[:, 3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
+    return [_EndDesign(rows[b], counts[0] >= 4, tuple(g[b][1] for g in gains), tuple(g[b][2] for g in gains),
+                       float(np.linalg.norm(p3)), tuple(tuple(leak[b]) for leak in cubic_leaks),
+                       tuple(tuple(leak[b]) for leak in quartic_leaks), float(p3 @ t ** 4))
+            for b, p3 in enumerate(p3s)]
 
 
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
@@ -281,8 +264,8 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
         if weighted >= 0:
             weighted_by_counts.setdefault(counts, []).append(weighted)
     designs = {(counts, e): design for counts, borders_ in weighted_by_counts.items()
-               for e, design in zip(borders_, _weighted_designs(counts, min(n_noise, counts[-1]),
-                                                                [weights[e] for e in borders_]))}
+               for e, design in zip(borders_, _designs(counts, min(n_noise, counts[-1]),
+                                                       np.array([weights[e][: counts[-1]] for e in borders_])))}
     filtered, squares, n_squares = [], 0.0, 0
     for (counts, weighted), members in groups.items():
         design = designs[counts, weighted] if weighted >= 0 else _end_design(counts, min(n_noise, counts[-1]))
