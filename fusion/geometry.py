@@ -173,47 +173,48 @@ _DESIGNS: dict[tuple[tuple[int, ...], int], _EndDesign] = {}
 _MAX_DESIGNS: Final[int] = 256
 
 
-def _end_design(counts: tuple[int, ...], n_noise: int, weights: NDArrayFloat | None = None) -> _EndDesign:
-    """The filters of windows of ``counts`` points and of the noise over ``n_noise`` points
-    (memoised: they depend on the sizes only); with ``weights`` (one per point from the end
-    inward, at least ``counts[-1]``) the fits are weighted least squares (not memoised)."""
-    if weights is None:
-        design = _DESIGNS.get((counts, n_noise))
-        if design is not None:
-            return design
-    n_windows = len(counts)
-    rows = np.zeros((3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
-    gains, cubic_leaks, quartic_leaks = [], [], []
-    for w, count in enumerate(counts):
-        t = np.arange(count, dtype=np.float64)
-        pinv = _pinv(np.vander(t, 3, increasing=True), weights)
-        rows[3 * w: 3 * w + 3, :count] = pinv
-        gains.append(np.linalg.norm(pinv, axis=1))
-        cubic_leaks.append(tuple((pinv @ t ** 3).tolist()))
-        quartic_leaks.append(tuple((pinv @ t ** 4).tolist()))
-    t = np.arange(counts[-1], dtype=np.float64)
-    p3 = _pinv(np.vander(t, 4, increasing=True), weights)[3] if counts[-1] >= 4 else np.zeros(counts[-1])
-    rows[3 * n_windows, : counts[-1]] = p3
-    for i in range(n_noise - 2):
-        rows[3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
-    gain = np.array(gains)
-    if len(_DESIGNS) >= _MAX_DESIGNS:
-        _DESIGNS.clear()
-    design = _EndDesign(
-        rows, counts[0] >= 4, tuple(gain[:, 1].tolist()), tuple(gain[:, 2].tolist()), float(np.linalg.norm(p3)),
-        tuple(cubic_leaks), tuple(quartic_leaks), float(p3 @ t ** 4))
-    if weights is None:
-        _DESIGNS[counts, n_noise] = design
+def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
+    """The filters of windows of ``counts`` points and of the noise over ``n_noise`` points,
+    unweighted (memoised: they depend on the sizes only)."""
+    design = _DESIGNS.get((counts, n_noise))
+    if design is None:
+        if len(_DESIGNS) >= _MAX_DESIGNS:
+            _DESIGNS.clear()
+        design = _DESIGNS[counts, n_noise] = _designs(counts, n_noise, None)[0]
     return design
 
 
-def _pinv(vander: NDArrayFloat, weights: NDArrayFloat | None) -> NDArrayFloat:
-    """Least-squares filter of a Vandermonde design: pinv(V), or with ``weights`` (per row)
-    pinv(√W·V)·√W, the weighted least squares."""
-    if weights is None:
-        return np.linalg.pinv(vander)
-    root = np.sqrt(weights[: vander.shape[0]])
-    return np.linalg.pinv(vander * root[:, None]) * root
+def _designs(counts: tuple[int, ...], n_noise: int, weights: NDArrayFloat | None) -> list[_EndDesign]:
+    """:func:`_end_design`, or with ``weights`` (``(B, ≥ counts[-1])``, per border one per
+    point from the end inward) one weighted least-squares design per border: pinv(√W·V)·√W,
+    each window's filters of all the borders from one stacked pseudo-inverse."""
+    windows = [(count, 3) for count in counts] + ([(counts[-1], 4)] if counts[-1] >= 4 else [])
+    filters = []
+    for count, degree in windows:
+        vander = np.vander(np.arange(count, dtype=np.float64), degree, increasing=True)
+        if weights is None:
+            filters.append(np.linalg.pinv(vander)[None])
+            continue
+        root = np.sqrt(weights[:, :count])
+        filters.append(np.linalg.pinv(vander * root[:, :, None]) * root[:, None, :])
+    n_windows = len(counts)
+    rows = np.zeros((len(filters[0]), 3 * n_windows + 1 + max(0, n_noise - 2), max(counts[-1], n_noise)))
+    gains, cubic_leaks, quartic_leaks = [], [], []
+    for w, count in enumerate(counts):
+        t = np.arange(count, dtype=np.float64)
+        rows[:, 3 * w: 3 * w + 3, :count] = filters[w]
+        gains.append(np.linalg.norm(filters[w], axis=-1).tolist())
+        cubic_leaks.append((filters[w] @ t ** 3).tolist())
+        quartic_leaks.append((filters[w] @ t ** 4).tolist())
+    t = np.arange(counts[-1], dtype=np.float64)
+    p3s = filters[-1][:, 3] if counts[-1] >= 4 else np.zeros((len(rows), counts[-1]))
+    rows[:, 3 * n_windows, : counts[-1]] = p3s
+    for i in range(n_noise - 2):
+        rows[:, 3 * n_windows + 1 + i, i:i + 3] = (1.0, -2.0, 1.0)
+    return [_EndDesign(rows[b], counts[0] >= 4, tuple(g[b][1] for g in gains), tuple(g[b][2] for g in gains),
+                       float(np.linalg.norm(p3)), tuple(tuple(leak[b]) for leak in cubic_leaks),
+                       tuple(tuple(leak[b]) for leak in quartic_leaks), float(p3 @ t ** 4))
+            for b, p3 in enumerate(p3s)]
 
 
 def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m: tuple[float, ...],
@@ -258,9 +259,16 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             counts = [min(n, count) for count in counts]
         groups.setdefault((tuple(counts), -1 if weights[e] is None else e), []).append(e)
     n_noise = min(n_min, max(3, int(round(noise_window_m / 0.1))))
+    weighted_by_counts: dict[tuple[int, ...], list[int]] = {}
+    for counts, weighted in groups:
+        if weighted >= 0:
+            weighted_by_counts.setdefault(counts, []).append(weighted)
+    designs = {(counts, e): design for counts, borders_ in weighted_by_counts.items()
+               for e, design in zip(borders_, _designs(counts, min(n_noise, counts[-1]),
+                                                       np.array([weights[e][: counts[-1]] for e in borders_])))}
     filtered, squares, n_squares = [], 0.0, 0
     for (counts, weighted), members in groups.items():
-        design = _end_design(counts, min(n_noise, counts[-1]), None if weighted < 0 else weights[weighted])
+        design = designs[counts, weighted] if weighted >= 0 else _end_design(counts, min(n_noise, counts[-1]))
         k = design.rows.shape[1]
         window = np.concatenate([borders[e][:-k - 1:-1] if at_end[e] else borders[e][:k] for e in members])
         values = (design.rows @ window.reshape(len(members), k, 2)).view(np.complex128)[..., 0]

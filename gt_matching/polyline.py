@@ -39,18 +39,22 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
         raise MatchingError(f"{name}: expected an (N, 2) array, got shape {array.shape}")
     if array.shape[0] < 2:
         raise MatchingError(f"{name}: needs at least 2 points, got {array.shape[0]}")
-    if not np.all(np.isfinite(array)):
+    if not np.isfinite(array).all():
         bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
         raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
-    if float(np.max(np.abs(array - array[0]))) <= ZERO_LENGTH_M:
+    if float(np.abs(array - array[0]).max()) <= ZERO_LENGTH_M:
         raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
     return array
 
 
 def arc_lengths(polyline: NDArrayFloat) -> NDArrayFloat:
     """Cumulative arc length at each vertex, m; starts at 0."""
-    seg = np.hypot(*np.diff(polyline, axis=0).T)
-    return np.concatenate(([0.0], np.cumsum(seg)))
+    polyline = np.asarray(polyline)
+    step = polyline[1:] - polyline[:-1]
+    cum = np.empty(max(len(polyline), 1))
+    cum[0] = 0.0
+    np.cumsum(np.hypot(step[:, 0], step[:, 1]), out=cum[1:])
+    return cum
 
 
 def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArrayInt]:

@@ -9,7 +9,6 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from gt_matching.geometry import COARSE_STEP_M, MapLines
 from gt_matching.polyline import NDArrayBool, NDArrayFloat, NDArrayInt, arc_lengths, resample, windowed_distances
@@ -274,11 +273,11 @@ class RouteBorder:
         widths = [int(2.0 * reach / self.step_m) + 1 + min(len(parts), 2) for reach in (NARROW_REACH_M, ANCHOR_REACH_M)]
         beyond = np.full(widths[-1] - 1, np.inf)
         padded_x, padded_y = (np.concatenate((self.samples[:, axis], beyond)) for axis in (0, 1))
+        self._padded = padded_x, padded_y
+        """x and y of the samples, m, then infinite: a window may reach past the last."""
         self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
-        self._windows = tuple((sliding_window_view(padded_x, width), sliding_window_view(padded_y, width))
-                              for width in widths)
-        """Narrow and wide windows: row k of each view holds x (y) of the samples k to
-        k + width - 1, m (infinite past the last)."""
+        self._widths = tuple(widths)
+        """Samples in the narrow and in the wide window."""
         self._checkpoint_arc = np.concatenate(
             [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
         )
@@ -396,31 +395,36 @@ class RouteBorder:
         whether the window settles it: the minimum is not on the edge (it may continue
         outside), and no kink or lanelet joint near it may start another minimum
         (``_clear_of_breaks``)."""
-        narrow, wide = self._windows
+        narrow, wide = self._widths
         distance, sample, inside = self._window_minimum(points, np.rint(seed).astype(np.int64), narrow)
         edge = np.flatnonzero(~inside)
         if len(edge):
             distance[edge], sample[edge], inside[edge] = self._window_minimum(points[edge], sample[edge], wide)
         return distance, sample, inside & self._smooth(distance, sample)
 
-    def _window_minimum(
-        self, points: NDArrayFloat, centre: NDArrayInt, window: tuple[NDArrayFloat, NDArrayFloat]
-    ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
-        """Per point, the smallest distance (m) to the samples of ``window`` (x and y views)
-        centred on sample ``centre``, that sample's index, and whether it lies inside the
-        window (not on an edge that is not the border's end; a ring has no end)."""
+    def _window_minimum(self, points: NDArrayFloat, centre: NDArrayInt, width: int
+                        ) -> tuple[NDArrayFloat, NDArrayInt, NDArrayBool]:
+        """Per point, the smallest distance (m) to the ``width`` samples of the window
+        centred on sample ``centre``, that sample's index (ties: the first), and whether it
+        lies inside the window (not on an edge that is not the border's end; a ring has no end)."""
         last = len(self.samples) - 1
-        window_x, window_y = window
-        width = window_x.shape[1]
+        padded_x, padded_y = self._padded
         first = np.clip(centre - width // 2, 0, last)
-        squared = window_x[first] - points[:, :1]
-        squared *= squared
-        dy = window_y[first] - points[:, 1:]
-        squared += dy * dy
-        closest = np.argmin(squared, axis=1)
+        x, y = points[:, 0], points[:, 1]
+        squared = np.full(len(points), np.inf)
+        closest = np.zeros(len(points), dtype=np.int64)
+        for offset in range(width):
+            sample = first + offset
+            dx, dy = padded_x[sample] - x, padded_y[sample] - y
+            dx *= dx
+            dy *= dy
+            dx += dy
+            closer = dx < squared
+            np.copyto(squared, dx, where=closer)
+            closest[closer] = offset
         ends = self.loop_m is None  # a ring's first and last samples are no ends: it goes on
         inside = ((closest > 0) | ((first == 0) & ends)) & ((closest < width - 1) | ((first + width - 1 >= last) & ends))
-        return np.sqrt(squared[np.arange(len(points)), closest]), first + closest, inside
+        return np.sqrt(squared), first + closest, inside
 
     def _smooth(self, distance: NDArrayFloat, sample: NDArrayInt) -> NDArrayBool:
         """Whether no kink or lanelet joint near each point's nearest sample (index

@@ -139,7 +139,7 @@ def test_unwritable_output_folder(tmp_path, capsys):
 
 @pytest.mark.parametrize("exception, code", [(KeyboardInterrupt, 130), (RuntimeError, 1)])
 def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys, exception, code):
-    original = MapEvaluator._frame
+    original = MapEvaluator._finish_frame
     calls = []
 
     def failing(self, *args, **kwargs):
@@ -148,7 +148,7 @@ def test_interrupt_or_crash_leaves_partial_outputs(tmp_path, monkeypatch, capsys
             raise exception("stop")
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(MapEvaluator, "_frame", failing)
+    monkeypatch.setattr(MapEvaluator, "_finish_frame", failing)
     out = tmp_path / "out"
     status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "10", "--routes", "1", "--out", str(out)])
     assert status == code

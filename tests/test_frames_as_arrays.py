@@ -207,7 +207,9 @@ def test_the_evaluator_over_blocks_equals_its_frame_loop(options, monkeypatch) -
         lane_error = None if reference.lane_errors is None else reference.lane_errors[index]
         frames = _frame_loop(reference, index, range(drive.frames), lane_error, reference.drive_rngs[index], offset)
         for frame, sensed in enumerate(frames):
-            reference._frame(loop, index, offset + frame, None, sensed)
+            fused = reference._fuse_frame(loop, index, offset + frame, sensed)
+            lanes = [lane for _, lane, _ in fused.steps if lane is not None]
+            reference._finish_frame(fused, iter(reference._measure_many(lanes)), None)
         offset += drive.frames
     reference.note_unmatched(loop)
     assert _records(blocks) == _records(loop)

@@ -108,7 +108,7 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
     """The lanes a short ``cold-eval`` run (with coops and lanes on) measures
-    (``GroundTruthMeter.measure_many``, one call per frame), in order."""
+    (``GroundTruthMeter.measure_many``, one call per block of frames), in order."""
     from cold_maps.cli import evaluate
 
     calls = []

@@ -45,34 +45,33 @@ Call = tuple[int, Any, Any, tuple[float, float, float], Any]
 
 
 def capture(map_path: Path, extra: list[str]) -> list[Call]:
-    """The lanes one in-process ``cold-eval`` run of ``map_path`` measures (its
-    ``measure_many`` calls, one per frame), as ``measure`` calls."""
+    """The lanes one in-process ``cold-eval`` run of ``map_path`` measures (those of each
+    frame the evaluator fuses), as ``measure`` calls."""
     sys.path.insert(0, str(ROOT))
     from cold_maps.cli import evaluate
     from cold_maps.evaluation.evaluator import MapEvaluator
-    from cold_maps.groundtruth.meter import GroundTruthMeter
 
     calls: list[Call] = []
     frames = [0]
-    measure_many, frame = GroundTruthMeter.measure_many, MapEvaluator._frame
+    fuse_frame = MapEvaluator._fuse_frame
 
-    def recorded(self: Any, lanes: Any) -> Any:
-        for left, right, pose, reference in lanes:
-            copy = None if reference is None else tuple(np.array(side) for side in reference)
-            calls.append((frames[0], np.array(left), np.array(right), tuple(pose), copy))
-        return measure_many(self, lanes)
-
-    def counted(self: Any, *args: Any, **kwargs: Any) -> Any:
+    def recorded(self: Any, *args: Any, **kwargs: Any) -> Any:
         frames[0] += 1
-        return frame(self, *args, **kwargs)
+        fused = fuse_frame(self, *args, **kwargs)
+        for _, lane, _ in fused.steps:
+            if lane is not None:
+                left, right, pose, reference = lane
+                copy = None if reference is None else tuple(np.array(side) for side in reference)
+                calls.append((frames[0], np.array(left), np.array(right), tuple(pose), copy))
+        return fused
 
-    GroundTruthMeter.measure_many, MapEvaluator._frame = recorded, counted  # type: ignore[method-assign]
+    MapEvaluator._fuse_frame = recorded  # type: ignore[method-assign]
     try:
         with tempfile.TemporaryDirectory(prefix="bench-measure-") as out:
             status = evaluate.main(["--map", str(map_path), "--workers", "1", "--no-plots", "--no-mcap",
                                     "--no-progress", "--out", out, *extra])
     finally:
-        GroundTruthMeter.measure_many, MapEvaluator._frame = measure_many, frame  # type: ignore[method-assign]
+        MapEvaluator._fuse_frame = fuse_frame  # type: ignore[method-assign]
     if status:
         raise SystemExit(f"cold-eval failed with status {status}")
     return calls

@@ -20,9 +20,9 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING, Callable, Final
+from typing import TYPE_CHECKING, Callable, Final, Iterator
 
 import numpy as np
 
@@ -80,10 +80,32 @@ RELATION_MARGIN_M: Final[float] = 5.0
 """Slack (m) on the longest lane distance at which a coop counts as ahead of the ego."""
 BLOCK_FRAMES: Final[int] = 100
 """Frames of a drive whose vehicle states and detections are computed at once, as arrays
-(:meth:`Drive.states_block`, :func:`sense_block`); the fusion stays per frame."""
+(:meth:`Drive.states_block`, :func:`sense_block`), and whose lanes are measured in one
+:meth:`GroundTruthMeter.measure_many`; the fusion stays per frame."""
 Finish = Callable[[Measurement | str | None], dict[str, NDArrayFloat]]
 """Records a frame's scenario from its lane's measurement (None when it has no lane to
 measure) and gives the lines the MCAP shows for it (name → ``(N, 2)`` world frame)."""
+
+
+@dataclass
+class _FusedFrame:
+    """A frame fused but not yet recorded.
+
+    Fields:
+        index, stamp: global frame index and its time, s.
+        sensed: the vehicles' detections (after the exchange).
+        steps: per scenario (and coop), the lines dict its MCAP lines go to, the lane to
+            measure (None: none) and what records its measurement.
+        metrics, fused_lines, gt_lines: what the MCAP gets of the frame, filled as it is recorded.
+    """
+
+    index: int
+    stamp: float
+    sensed: dict[str, Sensed]
+    steps: list[tuple[dict[str, NDArrayFloat], Lane | None, Finish]] = field(default_factory=list)
+    metrics: dict[str, float | None] = field(default_factory=dict)
+    fused_lines: dict[str, NDArrayFloat] = field(default_factory=dict)
+    gt_lines: dict[str, NDArrayFloat] = field(default_factory=dict)
 
 
 class MapEvaluator:
@@ -257,8 +279,12 @@ class MapEvaluator:
             sensed = sense_block(drive.states_block(block), self.sensor, self.plan.errors, self.drive_rngs[drive_index],
                                  stamps_s=[(frame_offset + frame) / FRAME_RATE_HZ for frame in block],
                                  neighbours=self.neighbours, lane_error=lane_error)
-            for frame, frame_sensed in zip(block, sensed):
-                self._frame(collector, drive_index, frame_offset + frame, recorder, frame_sensed)
+            fused = [self._fuse_frame(collector, drive_index, frame_offset + frame, frame_sensed)
+                     for frame, frame_sensed in zip(block, sensed)]
+            measured = iter(self._measure_many([lane for frame in fused for _, lane, _ in frame.steps
+                                                if lane is not None]))
+            for frame in fused:
+                self._finish_frame(frame, measured, recorder)
                 collector.frames_done += 1
                 if on_frame is not None:
                     on_frame()
@@ -283,11 +309,12 @@ class MapEvaluator:
             LOG.warning(note)
             collector.notes.append(note)
 
-    def _frame(self, collector: Collector, drive_index: int, index: int, recorder: Recorder | None,
-               sensed: dict[str, Sensed]) -> None:
+    def _fuse_frame(self, collector: Collector, drive_index: int, index: int,
+                    sensed: dict[str, Sensed]) -> _FusedFrame:
         """One frame (global index ``index``) of drive ``drive_index`` from its vehicles'
-        detections ``sensed`` (:func:`sense_block`): all pairs fused, all their lanes measured
-        in one :meth:`GroundTruthMeter.measure_many`, then recorded in scenario order."""
+        detections ``sensed`` (:func:`sense_block`): all pairs fused, their lanes to measure
+        and what records them (:meth:`_finish_frame`, after the lanes of the whole block are
+        measured in one :meth:`GroundTruthMeter.measure_many`)."""
         plan = self.plan
         stamp = index / FRAME_RATE_HZ
         self._relations.clear()
@@ -296,16 +323,14 @@ class MapEvaluator:
         if self.exchange is not None:
             sensed, sent = self.exchange.apply(drive_index, sensed, stamp)
         ego = sensed["ego"]
-        metrics: dict[str, float | None] = {}
-        fused_lines: dict[str, NDArrayFloat] = {}
-        gt_lines: dict[str, NDArrayFloat] = {}
-        steps: list[tuple[dict[str, NDArrayFloat], Lane | None, Finish]] = []
+        frame = _FusedFrame(index, stamp, sensed)
         for scenario in plan.scenarios:
             if scenario.fusion == "local":
-                steps.append((gt_lines, *self._local(collector, scenario, ego, index, stamp, metrics)))
+                frame.steps.append((frame.gt_lines, *self._local(collector, scenario, ego, index, stamp,
+                                                                 frame.metrics)))
                 continue
             if scenario.vehicles > 2:
-                steps.append((fused_lines, *self._chain(collector, scenario, sensed, index, stamp, sent)))
+                frame.steps.append((frame.fused_lines, *self._chain(collector, scenario, sensed, index, stamp, sent)))
                 continue
             for name, other in sensed.items():
                 if name == "ego" or abs(abs(other.state.lead_m) - scenario.lead_m) > 1e-9:
@@ -313,19 +338,26 @@ class MapEvaluator:
                 if name in sent:
                     for key in self._keys(scenario):
                         collector.add_traffic(key, sent[name], 1.0 / FRAME_RATE_HZ)
-                steps.append((fused_lines, *self._pair(collector, scenario, ego, other, index, stamp, metrics)))
-        measured = iter(self._measure_many([lane for _, lane, _ in steps if lane is not None]))
-        for lines, lane, finish in steps:
+                frame.steps.append((frame.fused_lines, *self._pair(collector, scenario, ego, other, index, stamp,
+                                                                   frame.metrics)))
+        return frame
+
+    def _finish_frame(self, frame: _FusedFrame, measured: Iterator[Measurement | str],
+                      recorder: Recorder | None) -> None:
+        """Records a fused frame in scenario order, its lanes' measurements taken from
+        ``measured`` in turn, and writes it to the ``recorder``."""
+        for lines, lane, finish in frame.steps:
             lines.update(finish(None if lane is None else next(measured)))
         if recorder is not None:
-            for name, item in sensed.items():
+            stamp, index = frame.stamp, frame.index
+            for name, item in frame.sensed.items():
                 if item.detection is not None:
                     recorder.write_detection(stamp, index, name, detection_pose(item.detection), item.detection.left,
                                              item.detection.right, ego=name == "ego", lanes=item.detection)
-            if gt_lines:
-                recorder.write_gt(stamp, gt_lines)
-            recorder.write_fused(stamp, fused_lines)
-            recorder.write_metrics(stamp, index, metrics)
+            if frame.gt_lines:
+                recorder.write_gt(stamp, frame.gt_lines)
+            recorder.write_fused(stamp, frame.fused_lines)
+            recorder.write_metrics(stamp, index, frame.metrics)
 
     def _local(self, collector: Collector, scenario: Scenario, ego: Sensed, index: int, stamp: float,
                metrics: dict[str, float | None]) -> tuple[Lane | None, Finish]:

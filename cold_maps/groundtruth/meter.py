@@ -58,10 +58,14 @@ def _chords(border: NDArrayFloat, arc: NDArrayFloat, first: int, end: int) -> tu
     point that starts another ``RANGE_CHORD_M`` of arc length from the first, the last)
     and their lengths (m)."""
     stations = (arc[first:end] if first == 0 else arc[first:end] - arc[first]) // RANGE_CHORD_M
-    ends = np.concatenate(([first], first + 1 + np.flatnonzero(stations[1:] != stations[:-1]), [end - 1]))
+    change = np.flatnonzero(stations[1:] != stations[:-1])
+    ends = np.empty(len(change) + 2, dtype=np.int64)
+    ends[0], ends[-1] = first, end - 1
+    np.add(change, first + 1, out=ends[1:-1])
     if ends[-1] == ends[-2]:
         ends = ends[:-1]
-    lengths: NDArrayFloat = np.hypot(*np.diff(border[ends], axis=0).T)
+    step = border[ends[1:]] - border[ends[:-1]]
+    lengths: NDArrayFloat = np.hypot(step[:, 0], step[:, 1])
     return ends, lengths
 
 
@@ -82,7 +86,7 @@ def _covered(border: NDArrayFloat, arc: NDArrayFloat, errors_m: NDArrayFloat,
     within = errors_m <= threshold_m
     if within.all():
         whole = _chords(border, arc, 0, len(arc))
-        return float(np.sum(whole[1])), whole
+        return float(whole[1].sum()), whole
     total = 0.0
     edges = np.flatnonzero(np.diff(np.concatenate(([False], within, [False])).astype(np.int8)))
     for first, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
@@ -94,7 +98,10 @@ def _ahead(border: NDArrayFloat, arc: NDArrayFloat, chords: tuple[NDArrayInt, ND
            pose: tuple[float, float, float] | None) -> NDArrayFloat:
     """:func:`ahead_of_m` of a border from its arc lengths and the ``_chords`` of all its points."""
     ends, lengths = chords
-    stations: NDArrayFloat = np.interp(arc, arc[ends], np.concatenate(([0.0], np.cumsum(lengths))))
+    along = np.empty(len(lengths) + 1)
+    along[0] = 0.0
+    np.cumsum(lengths, out=along[1:])
+    stations: NDArrayFloat = np.interp(arc, arc[ends], along)
     if pose is None:
         return stations
     x, y, yaw = pose
