@@ -912,7 +912,7 @@ FRAMES_COLUMNS_STORED: Final[tuple[str, ...]] = (
     "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s",
     "stopping_deceleration_mps2")
 """The stored columns ``frames.csv`` and ``frames.parquet`` are made from."""
-ROW_GROUP_ROWS: Final[int] = 1 << 15
+ROW_GROUP_ROWS: Final[int] = 1 << 13
 """Rows ``frames.parquet`` gathers into one row group (a record segment holds far fewer: a
 row group per segment would make the writer's footer grow with the run, ~20 kB each)."""
 
