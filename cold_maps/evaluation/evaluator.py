@@ -28,6 +28,7 @@ import numpy as np
 
 import fusion
 from fusion.uncertainty import own_variances
+from cold_maps.common.memory import release_free_heap
 from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
@@ -262,6 +263,8 @@ class MapEvaluator:
                 collector.frames_done += 1
                 if on_frame is not None:
                     on_frame()
+            del sensed
+            release_free_heap()
         return frame_offset + frames.stop
 
     @property
