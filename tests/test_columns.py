@@ -15,7 +15,7 @@ from conftest import bundled_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.evaluation.columns import from_lists, from_numpy, from_values, nulls, to_numpy
+from cold_maps.evaluation.columns import from_lists, from_numpy, from_values, nulls, to_numpy, to_strings
 
 FLOATS = st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True, width=64))
 INTS = st.one_of(st.none(), st.integers(-(2 ** 63), 2 ** 63 - 1))
@@ -72,6 +72,17 @@ def _same(a: list, b: list) -> bool:
     """Equal values, NaN equal to NaN."""
     return len(a) == len(b) and all(x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x)
                                                and math.isnan(y)) for x, y in zip(a, b))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.one_of(st.none(), st.sampled_from(["", "other_lane", "no_gap", "ü"])), max_size=60), st.data())
+def test_to_strings_equals_to_pylist_on_slices_with_one_object_per_value(values, data):
+    array = pa.array(values, type=pa.string())
+    start = data.draw(st.integers(0, len(values)))
+    stop = data.draw(st.integers(start, len(values)))
+    strings = to_strings(array.slice(start, stop - start))
+    assert strings == values[start:stop]
+    assert len({id(v) for v in strings if v is not None}) == len({v for v in strings if v is not None})
 
 
 def test_a_bool_column_with_nulls_has_no_numpy_form():

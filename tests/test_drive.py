@@ -125,6 +125,49 @@ def test_turning_coops_on_junction_branches(junction):
     assert seen > related > 0
 
 
+def test_branch_strips_end_past_where_their_turning_vehicles_read(junction):
+    """A turning vehicle is present only while the ego has not reached the branch, so its
+    track is read at most its lead plus the sensor's reach past the branch: the strip ends
+    there (cut), and every state and detection is the one on the whole track."""
+    from cold_maps.simulation.sensor import LaneSensor
+
+    lanes = [LaneKey("3", 0, -1)]
+    straight_on = next(k for k in junction.successors[lanes[0]]
+                       if junction.successors[k] and junction.successors[k][0].road_id == "1")
+    lanes += [straight_on, junction.successors[straight_on][0]]
+    kwargs = dict(coop_leads_m=[50.0], distractor_leads_m=[20.0, 50.0])
+    cut = build_drive(junction, lanes, 100, rng=np.random.default_rng(1), reach_m=40.0, **kwargs)
+    whole = build_drive(junction, lanes, 100, rng=np.random.default_rng(1), reach_m=1e9, **kwargs)
+    turns = [(a, b) for a, b in zip(cut.vehicles, whole.vehicles, strict=True) if a.role == "turn"]
+    assert turns
+    for a, b in turns:
+        assert a.name == b.name and a.branch_station_m == b.branch_station_m
+        assert a.track.lanes == b.track.lanes and np.array_equal(a.track.lane_starts, b.track.lane_starts)
+        station = a.track.strip.station
+        assert a.branch_station_m + 50.0 + 40.0 + ROUTE_MARGIN_M <= a.track.length < b.track.length
+        assert station[-2] < a.branch_station_m + 50.0 + 40.0 + ROUTE_MARGIN_M  # the first cross-section past it
+        for name in ("station", "centerline", "left", "right", "left_distance", "right_distance", "heading"):
+            assert np.array_equal(getattr(a.track.strip, name), getattr(b.track.strip, name)[:len(station)]), name
+    sensor = LaneSensor(range_m=40.0)
+    for frame, (mine, theirs) in enumerate(zip(cut.states_block(range(100)), whole.states_block(range(100)))):
+        assert list(mine) == list(theirs), frame
+        for name, state in mine.items():
+            other = theirs[name]
+            assert (state.station, state.lane, state.lane_offset_m) == (other.station, other.lane, other.lane_offset_m)
+            if state.role == "turn":
+                seen, expected = sensor.detect(state.track.strip, state.station), sensor.detect(
+                    other.track.strip, other.station)
+                assert seen is not None and expected is not None and seen.end_reason == expected.end_reason
+                assert np.array_equal(seen.left, expected.left) and np.array_equal(seen.right, expected.right)
+
+
+def test_track_cut_beyond_its_strip_is_the_track(straight):
+    track = Track.build(straight, [LANE])
+    assert track.cut(track.length) is track and track.cut(float(track.strip.station[-2]) + 1e-9) is track
+    shorter = track.cut(10.0)
+    assert 10.0 <= shorter.length < 10.0 + 0.11 and shorter.lanes == track.lanes
+
+
 def test_required_route_length_closed_form():
     assert required_route_length(11, [25.0, 80.0], behind_m=50.0) == pytest.approx(50 + 10 + 80 + 30 + ROUTE_MARGIN_M)
     with pytest.raises(ValueError, match="frames"):

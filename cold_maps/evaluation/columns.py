@@ -88,6 +88,14 @@ def from_values(values: Sequence[Any], arrow_type: pa.DataType) -> pa.Array:
     return from_numpy(filled, arrow_type, valid)
 
 
+def to_strings(column: pa.Array) -> list[str | None]:
+    """The values of a string column (``Array.to_pylist``), each distinct value one shared
+    ``str``: a long column of few values costs a pointer per row, not a string object."""
+    encoded = column.dictionary_encode()
+    values = [*encoded.dictionary.to_pylist(), None]
+    return [values[i] for i in to_numpy(encoded.indices, fill=len(values) - 1).tolist()]
+
+
 def nulls(column: pa.Array) -> np.ndarray:
     """Where ``column`` is null, as a bool array."""
     bitmap = column.buffers()[0]

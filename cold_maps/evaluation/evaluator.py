@@ -29,6 +29,7 @@ import numpy as np
 import fusion
 from fusion.fusibility import max_gap_m, signed_gap_m
 from fusion.uncertainty import own_variances
+from cold_maps.common.memory import release_free_heap
 from cold_maps.evaluation.collector import Collector, Overlay
 from cold_maps.evaluation.fit import fit_plan
 from cold_maps.evaluation.methods import resolve_method
@@ -125,6 +126,7 @@ class MapEvaluator:
         self.graph = graph or load_graph(plan.path)
         self.rng = np.random.default_rng(plan.seed)
         self.fit_notes: tuple[str, ...] = ()
+        self.sensor = lane_sensor(plan.sensor, self.graph)
         self.drives, self.coverage = self._drives()
         self.drive_rngs = self.rng.spawn(len(self.drives))
         self.lane_errors = (None if plan.sensor.lane_error.is_zero else
@@ -134,7 +136,6 @@ class MapEvaluator:
         self.stopping = self.plan.stopping.at(self.plan.speed_mps)
         self._ground_truth = ground_truth
         self.meter: GroundTruthMeter | None = None
-        self.sensor = lane_sensor(plan.sensor, self.graph)
         self.neighbours = NeighbourSensor(self.graph, plan.lanes) if plan.lanes > 0 else None
         self.relation_max_m = SENSOR_RANGE_M + plan.params.d_i_m + RELATION_MARGIN_M
         self.exchange = (LaneExchange(plan.history_m, plan.odometry, plan.messages, plan.errors, plan.seed)
@@ -173,7 +174,8 @@ class MapEvaluator:
         covered = {lane for route in routes for lane in route}
         leads = (*plan.coop_leads_m, *plan.chain_leads_m)
         drives = [build_drive(self.graph, lanes, plan.frames, coop_leads_m=leads,
-                              distractor_leads_m=fitted.distractor_leads_m, rng=self.rng, speed_mps=plan.speed_mps)
+                              distractor_leads_m=fitted.distractor_leads_m, rng=self.rng, speed_mps=plan.speed_mps,
+                              reach_m=self.sensor.reach_m)
                   for lanes in routes]
         return drives, (len(covered), len(self.graph.lanes))
 
@@ -288,6 +290,8 @@ class MapEvaluator:
                 collector.frames_done += 1
                 if on_frame is not None:
                     on_frame()
+            del sensed
+            release_free_heap()
         return frame_offset + frames.stop
 
     @property

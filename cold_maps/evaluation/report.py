@@ -113,7 +113,7 @@ from cold_maps.evaluation.safety import (
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
-from cold_maps.evaluation.columns import from_lists, from_numpy, from_strings, from_values, nulls, to_numpy
+from cold_maps.evaluation.columns import from_lists, from_numpy, from_strings, from_values, nulls, to_numpy, to_strings
 from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_values, pools
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, P95, Calibration, ErrorStats
 
@@ -736,8 +736,7 @@ class ScenarioAccumulator:
                                            "detected_fusible")):
             for name in SCALAR_COLUMNS:  # copies: a view would keep the whole segment (its points) in memory
                 column = batch.column(name)
-                parts[name].append(column.to_pylist() if str(column.type) == "string" else
-                                   to_numpy(column).copy())
+                parts[name].append(to_strings(column) if str(column.type) == "string" else to_numpy(column).copy())
             parts["points"].append(np.diff(list_values(batch.column("errors_m"))[1]))
             parts["predicted"].append(flags(batch.column("predicted_fusible")))
             parts["truly"].append(flags(batch.column("truly_fusible")))
@@ -937,7 +936,7 @@ FRAMES_COLUMNS_STORED: Final[tuple[str, ...]] = (
     "near_max_error_m", "far_max_error_m", "known_to_m", "stopping_speed_mps", "stopping_reaction_time_s",
     "stopping_deceleration_mps2", "detected_fusible")
 """The stored columns ``frames.csv`` and ``frames.parquet`` are made from."""
-ROW_GROUP_ROWS: Final[int] = 1 << 15
+ROW_GROUP_ROWS: Final[int] = 1 << 13
 """Rows ``frames.parquet`` gathers into one row group (a record segment holds far fewer: a
 row group per segment would make the writer's footer grow with the run, ~20 kB each)."""
 

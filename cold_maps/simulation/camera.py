@@ -261,6 +261,11 @@ class CameraSensor:
         self.search_m = profile.max_range_m * angle / math.sin(angle) + SEARCH_MARGIN_M
         self._surfaces: dict[tuple[LaneKey, ...], BorderSurface] = {}
 
+    @property
+    def reach_m(self) -> float:
+        """The farthest (m) a reading looks along a track past the vehicle's station."""
+        return self.search_m
+
     def surface(self, track: Track) -> BorderSurface:
         """The track's :class:`BorderSurface`, computed once per lane sequence."""
         found = self._surfaces.get(track.lanes)

@@ -20,7 +20,7 @@ Stations are centreline arc lengths (m) from the start of a track. The true lane
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any, Final, Literal, Mapping, Sequence
 
@@ -82,7 +82,8 @@ class Track:
         lanes: the lanes in driving order.
         strip: their centreline and borders by station (m).
         lane_starts: (L + 1,) station (m) where each lane begins; the last entry is the
-            track length. From the graph's lane lengths scaled to the strip length.
+            end of the last lane (the track length unless the strip is cut, :meth:`cut`).
+            From the graph's lane lengths scaled to the length of the whole strip.
 
     A track built from lanes (:meth:`build`) keeps only its strip: the route it came from
     (road s, heights, ``route_from_lanes(graph, lanes)``) is made again where needed (the
@@ -100,6 +101,18 @@ class Track:
         strip = LaneStrip.from_borders(route.left, route.right)
         cumulative = np.concatenate(([0.0], np.cumsum([graph.lengths[lane] for lane in lanes])))
         return cls(tuple(lanes), strip, cumulative * (strip.length / cumulative[-1]))
+
+    def cut(self, station: float) -> Track:
+        """This track with its strip ending at its first cross-section at or past ``station``
+        (m), lanes and lane starts unchanged: up to there every station, lane, offset, point
+        and heading is this track's (itself when ``station`` lies beyond its strip's second
+        to last cross-section)."""
+        strip = self.strip
+        end = int(np.searchsorted(strip.station, station, side="left")) + 1
+        if end >= len(strip.station):
+            return self
+        kept = LaneStrip(**{part.name: getattr(strip, part.name)[:end].copy() for part in fields(strip)})
+        return Track(self.lanes, kept, self.lane_starts)
 
     @property
     def length(self) -> float:
@@ -464,10 +477,12 @@ def _forward(graph: LaneGraph, lanes: list[LaneKey], length_m: float, rng: np.ra
 def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop_leads_m: Sequence[float],
                 distractor_leads_m: Sequence[float] = (), rng: np.random.Generator,
                 speed_mps: float = DEFAULT_SPEED_MPS, rate_hz: float = FRAME_RATE_HZ,
-                sensor_range_m: float = SENSOR_RANGE_M) -> Drive:
+                sensor_range_m: float = SENSOR_RANGE_M, reach_m: float | None = None) -> Drive:
     """A drive of ``frames`` frames on the route ``lanes``: a ``coop`` at each of
     ``coop_leads_m`` and, for each of ``distractor_leads_m``, ``turn`` vehicles on branches
-    of the route, ``adjacent``/``opposite`` distractors and one ``behind``.
+    of the route, ``adjacent``/``opposite`` distractors and one ``behind``. A branch's strip
+    is cut (:meth:`Track.cut`) past where its turning vehicles can be plus ``reach_m`` (m),
+    the farthest a sensor reads a track ahead of a vehicle, or ``sensor_range_m`` if farther.
 
     Raises DriveError when the route is shorter than the drive needs.
     """
@@ -481,7 +496,8 @@ def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop
     vehicles = [Vehicle(f"coop{lead:g}", "coop", lead, ego) for lead in coop_leads_m]
     beside: dict[LaneKey, tuple[tuple[str, Track], ...]] = {}
     if distractor_leads_m:
-        branches = _branches(graph, ego, needed, rng)
+        ahead_m = max(distractor_leads_m) + max(sensor_range_m, reach_m or 0.0) + ROUTE_MARGIN_M
+        branches = _branches(graph, ego, needed, ahead_m, rng)
         for lead in distractor_leads_m:
             vehicles += [Vehicle(f"turn{lead:g}-{i}", "turn", lead, track, station)
                          for i, (track, station) in enumerate(branches)]
@@ -499,16 +515,19 @@ def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop
     return Drive(graph, ego, tuple(vehicles), beside, frames, speed_mps, rate_hz, sensor_range_m, behind)
 
 
-def _branches(graph: LaneGraph, ego: Track, length_m: float, rng: np.random.Generator) -> list[tuple[Track, float]]:
+def _branches(graph: LaneGraph, ego: Track, length_m: float, ahead_m: float,
+              rng: np.random.Generator) -> list[tuple[Track, float]]:
     """Up to MAX_BRANCHES tracks that follow the ego's lanes to a lane with several
-    successors and turn into another one there; each with its branch station (m)."""
+    successors and turn into another one there, their lanes drawn to ``length_m`` (m) and
+    their strips cut ``ahead_m`` past the branch; each with its branch station (m)."""
     branches = []
     for index, (lane, following) in enumerate(zip(ego.lanes, ego.lanes[1:])):
         for other in graph.successors[lane]:
             if other == following or len(branches) >= MAX_BRANCHES:
                 continue
             lanes = _forward(graph, [*ego.lanes[: index + 1], other], length_m, rng)
-            branches.append((Track.build(graph, lanes), float(ego.lane_starts[index + 1])))
+            station = float(ego.lane_starts[index + 1])
+            branches.append((Track.build(graph, lanes).cut(station + ahead_m), station))
     return branches
 
 

@@ -90,6 +90,11 @@ class LaneSensor:
     range_m: float = SENSOR_RANGE_M
     step_m: float = SENSOR_STEP_M
 
+    @property
+    def reach_m(self) -> float:
+        """The farthest (m) a reading looks along a track past the vehicle's station."""
+        return self.range_m
+
     def detect(self, strip: LaneStrip, station: float) -> Detection | None:
         """The detection of a vehicle centred in the lane at ``station`` (m), or None
         when less than one step of lane is left ahead on the strip."""
