@@ -55,7 +55,7 @@ from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
 from cold_maps.opendrive.sampling import (
-    LaneBorderSamples, batchable, record_joints, sample_s, section_points, stacked_section_points)
+    LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, stacked_section_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -147,19 +147,27 @@ def _initial_stations(road: Road, section_index: int) -> NDArrayFloat:
                                      _breakpoints(road, section_index), np.asarray(ends, dtype=np.float64))))
 
 
+def _splits(
+    low: NDArrayFloat, high: NDArrayFloat, errors: NDArrayFloat, tolerance_m: float
+) -> tuple[npt.NDArray[np.bool_], NDArrayInt, NDArrayFloat]:
+    """Which intervals [low, high] (m) to split (chord error over ``tolerance_m``, not
+    shorter than ``MIN_STEP_M``), how many stations each of them gets, and those
+    stations (m), interval by interval."""
+    refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
+    # the chord error grows with the square of the interval: split into that many pieces at once
+    pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+    extra = pieces - 1
+    offsets = (np.arange(int(extra.sum())) - np.repeat(np.cumsum(extra) - extra, extra) + 1) / np.repeat(pieces, extra)
+    return refine, extra, np.repeat(low[refine], extra) + offsets * np.repeat((high - low)[refine], extra)
+
+
 def _refined(
     s: NDArrayFloat, low: NDArrayFloat, high: NDArrayFloat, errors: NDArrayFloat, tolerance_m: float
 ) -> NDArrayFloat | None:
     """``s`` (m) with the intervals [low, high] whose chord error exceeds ``tolerance_m``
-    split, or None when none does (or they are shorter than ``MIN_STEP_M``)."""
-    refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
-    if not refine.any():
-        return None
-    # the chord error grows with the square of the interval: split into that many pieces at once
-    pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
-    starts, widths = low[refine], (high - low)[refine]
-    offsets = np.concatenate([np.arange(1, k) / k for k in pieces.tolist()])
-    return np.union1d(s, np.repeat(starts, pieces - 1) + offsets * np.repeat(widths, pieces - 1))
+    split (:func:`_splits`), or None when none does (or they are shorter than ``MIN_STEP_M``)."""
+    refine, _, added = _splits(low, high, errors, tolerance_m)
+    return np.union1d(s, added) if refine.any() else None
 
 
 def adaptive_section_samples(
@@ -275,18 +283,13 @@ def _refine_together(
         checked = values[row + count[section_of_triple] + rank * opened[section_of_triple] + interval]
         errors = np.zeros(len(intervals))
         np.maximum.at(errors, global_interval, np.sqrt(np.square(checked - chord).sum(axis=1)))
-        refine = (errors > tolerance_m) & ((high - low) > MIN_STEP_M)
-        pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
+        refine, extra, added = _splits(low, high, errors, tolerance_m)
         finished = (np.bincount(of[refine], minlength=len(active)) == 0) | (round_ == MAX_ROUNDS - 1)
         for i in np.flatnonzero(finished).tolist():
             block = values[starts[i]:starts[i + 1]].reshape(lanes[active[i]], 2, size[i], 3)
             done[active[i]] = s[begin[i]:begin[i] + count[i]], np.ascontiguousarray(block[:, :, :count[i]])
         if finished.all():
             break
-        # the chord error grows with the square of the interval: split into that many pieces at once
-        extra = pieces - 1
-        offsets = (np.arange(int(extra.sum())) - np.repeat(np.cumsum(extra) - extra, extra) + 1) / np.repeat(pieces, extra)
-        added = np.repeat(low[refine], extra) + offsets * np.repeat((high - low)[refine], extra)
         renumber = np.cumsum(~finished) - 1
         keep = ~finished[owner]
         merged_owner = np.concatenate((renumber[owner[keep]], renumber[np.repeat(of[refine], extra)]))

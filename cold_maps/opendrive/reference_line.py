@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Final
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.opendrive import geometry
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
@@ -39,9 +40,7 @@ def reference_pose(
     s = check_s(road, s)
     if not road.plan_view:
         raise ValueError(f"road {road.id}: <planView> has no <geometry> record")
-    starts = np.array([g.s for g in road.plan_view])
-    last = len(starts) if before is None else max(int(np.searchsorted(starts, before, side="left")), 1)
-    index = np.clip(np.searchsorted(starts[:last], s, side="right") - 1, 0, last - 1)
+    index = record_index(road, s, before=before)
     if s.ndim and s.size and index.min() == index.max():  # one record: no masks
         return _evaluate(road, int(index.flat[0]), s)
     x = np.empty_like(s)
@@ -51,6 +50,15 @@ def reference_pose(
         mask = index == i
         x[mask], y[mask], hdg[mask] = _evaluate(road, int(i), s[mask])
     return x, y, hdg
+
+
+def record_index(road: Road, s: NDArrayFloat, *, before: float | None = None) -> npt.NDArray[np.intp]:
+    """Index of the ``<geometry>`` record :func:`reference_pose` evaluates each s (m) on:
+    the last one starting at or before it, among those starting before ``before`` (m)
+    when given (the road has at least one record)."""
+    starts = np.array([g.s for g in road.plan_view])
+    last = len(starts) if before is None else max(int(np.searchsorted(starts, before, side="left")), 1)
+    return np.clip(np.searchsorted(starts[:last], s, side="right") - 1, 0, last - 1)
 
 
 def _evaluate(road: Road, index: int, s: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:

@@ -13,7 +13,6 @@ and lateral ``shape`` are not applied.
 
 from __future__ import annotations
 
-import bisect
 from dataclasses import dataclass
 from typing import Final, Sequence
 
@@ -24,7 +23,7 @@ from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, Geometry, Lane, LaneSection, Road
-from cold_maps.opendrive.reference_line import check_s, record_joint, reference_pose
+from cold_maps.opendrive.reference_line import check_s, record_index, record_joint, reference_pose
 
 NDArrayInt = npt.NDArray[np.int64]
 
@@ -237,9 +236,7 @@ def batchable(road: Road, section_index: int, lane_ids: Sequence[int]) -> bool:
 def _record_of(road: Road, section: LaneSection) -> Geometry:
     """The ``<geometry>`` record ``reference_pose(..., before=section.s_end)`` takes
     everywhere on a section no record starts inside."""
-    starts = [record.s for record in road.plan_view]
-    last = max(bisect.bisect_left(starts, section.s_end), 1)
-    return road.plan_view[min(max(bisect.bisect_right(starts, section.s, 0, last) - 1, 0), last - 1)]
+    return road.plan_view[int(record_index(road, np.float64(section.s), before=section.s_end))]
 
 
 def _records_poses(
