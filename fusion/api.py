@@ -16,7 +16,7 @@ from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_check, relative_pose
 from fusion.geometry import to_world, transform
-from fusion.spline import EndFits, hermite_lane, paper_pieces, sample_pieces
+from fusion.spline import EndFits, hermite_lane, hermite_turns, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 from fusion.uncertainty import (PairUncertainty, bridge_end, bridge_variance, gap_bend, has_sigma, own_variances,
                                 pair_uncertainty)
@@ -210,21 +210,24 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
     parts = (el, gap_left, cl, er, gap_right, cr)
     if uncertainty is None:
         return parts, _SPLINE_SOURCES, None
-    return parts, _SPLINE_SOURCES, _spline_variances(parts, uncertainty, interpolation, gap_bend(fits.arcs()))
+    turns = ((0.0, 1.0), (0.0, 1.0)) if interpolation == "paper" else hermite_turns(fits())
+    return parts, _SPLINE_SOURCES, _spline_variances(parts, uncertainty, interpolation, gap_bend(fits.arcs()), turns)
 
 
 def _spline_variances(parts: Sequence[NDArrayFloat], uncertainty: PairUncertainty, interpolation: str,
-                      bend: tuple[float, float, float]) -> list[NDArrayFloat]:
+                      bend: tuple[float, float, float],
+                      turns: Sequence[tuple[float, float]]) -> list[NDArrayFloat]:
     """World variances of the parts (ego, gap, coop per border) of a spline fusion: the
     detections' own, and :func:`fusion.uncertainty.bridge_variance` of ``interpolation``
-    across the gap (``bend`` from :func:`fusion.uncertainty.gap_bend`)."""
+    across the gap (``bend`` from :func:`fusion.uncertainty.gap_bend`, ``turns`` the (left,
+    right) gaps' turning parts, :func:`fusion.spline.hermite_turns`)."""
     out = []
     for side in (0, 1):
         ego, gap, coop = parts[3 * side: 3 * side + 3]
         ego_var, coop_var = uncertainty.borders[side], uncertainty.borders[2 + side]
         ends = (bridge_end(ego, ego_var, True, (0.0, 0.0), uncertainty.ego_cov),
                 bridge_end(coop, coop_var, False, uncertainty.coop_xy, uncertainty.coop_cov))
-        out += [ego_var.world, bridge_variance(gap, ego[-1], coop[0], *ends, interpolation, bend),
+        out += [ego_var.world, bridge_variance(gap, ego[-1], coop[0], *ends, interpolation, bend, turns[side]),
                 coop_var.world]
     return out
 

@@ -235,20 +235,51 @@ def hermite_lane(fits: Sequence[EndFit], spacing_m: float,
     curvature would jump at the ends, gets clothoids (``share`` of the turn, default
     TRANSITION_SHARE; ``share`` given: used for every turn, 0 = the arc).
     """
-    d0 = _mean_dir(fits[0].direction, fits[1].direction)
-    d1 = _mean_dir(fits[2].direction, fits[3].direction)
-    ends = [(complex(*fits[i].point), complex(*fits[i + 2].point)) for i in (0, 1)]
-    triangles = [_tangent_triangle(p0, d0, p3, d1) for p0, p3 in ends]
-    if triangles[0] is None and triangles[1] is None:
-        left, right = sample_pieces([[_bezier_piece(p0, d0, p3, d1)] for p0, p3 in ends], spacing_m)
+    lane = _HermiteLane(fits, share)
+    if lane.share is None:
+        left, right = sample_pieces([[_bezier_piece(p0, lane.d0, p3, lane.d1)] for p0, p3 in lane.ends], spacing_m)
         return left, right
-    if share is None:
-        share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
-    turn = (triangles[0] or triangles[1])[0]  # the same for both borders (same end directions)
-    unit_tangent = _unit_tangent(turn, share)
-    left, right = (_hermite_points(p0, d0, p3, d1, triangle, unit_tangent, spacing_m, share)
-                   for (p0, p3), triangle in zip(ends, triangles))
+    left, right = (_hermite_points(p0, lane.d0, p3, lane.d1, triangle, lane.unit_tangent, spacing_m, lane.share)
+                   for (p0, p3), triangle in zip(lane.ends, lane.triangles))
     return left, right
+
+
+def hermite_turns(fits: Sequence[EndFit]) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Where :func:`hermite_lane` of ``fits`` turns, per border (left, right): the fractions
+    (start, stop) of the border's gap curve, by arc length from the ego's end, between which
+    it turns (arc, or clothoids and arc); before and after it runs straight along the end
+    tangents. (0, 1) where the gap curve turns throughout (an arc, a cubic Bézier)."""
+    lane = _HermiteLane(fits, None)
+    spans = []
+    for triangle in lane.triangles:
+        if lane.share is None or triangle is None:
+            spans.append((0.0, 1.0))
+            continue
+        lead, turn, tail = _turn_lengths(triangle, lane.unit_tangent, lane.share)
+        total = lead + turn + tail
+        spans.append((lead / total, (lead + turn) / total) if total > 0.0 else (0.0, 1.0))
+    return spans[0], spans[1]
+
+
+class _HermiteLane:
+    """What :func:`hermite_lane` draws both borders' gaps from: the averaged end directions
+    ``d0`` (ego) and ``d1`` (coop), the (ego, coop) end points per border ``ends``, their
+    :func:`_tangent_triangle` ``triangles``, the clothoids' ``share`` (None when neither border
+    has a triangle: cubic Béziers) and the turn's :func:`_unit_tangent`."""
+
+    def __init__(self, fits: Sequence[EndFit], share: float | None):
+        self.d0 = _mean_dir(fits[0].direction, fits[1].direction)
+        self.d1 = _mean_dir(fits[2].direction, fits[3].direction)
+        self.ends = [(complex(*fits[i].point), complex(*fits[i + 2].point)) for i in (0, 1)]
+        self.triangles = [_tangent_triangle(p0, self.d0, p3, self.d1) for p0, p3 in self.ends]
+        self.share: float | None = None
+        self.unit_tangent = math.nan
+        if self.triangles[0] is None and self.triangles[1] is None:
+            return
+        if share is None:
+            share = TRANSITION_SHARE if all(_straight(fit) for fit in fits) else 0.0
+        turn = (self.triangles[0] or self.triangles[1])[0]  # the same for both borders (same end directions)
+        self.share, self.unit_tangent = share, _unit_tangent(turn, share)
 
 
 def lane_end_fits(ego: tuple[NDArrayFloat, NDArrayFloat], coop: tuple[NDArrayFloat, NDArrayFloat],
@@ -392,6 +423,21 @@ def _unit_tangent(turn: float, share: float) -> float:
     return transition_tangent(turn, share) if share > 0.0 else math.tan(abs(turn) / 2.0)
 
 
+def _turn_lengths(triangle: tuple[float, float, float], unit_tangent: float, share: float) -> tuple[float, float, float]:
+    """(lead, turn, tail) [m]: the lengths of :func:`_hermite_points`'s straight along the ego's
+    end tangent, its turn (arc, or clothoids and arc with ``share`` > 0) and its straight into
+    the coop's start, for the end points' :func:`_tangent_triangle` and the turn's
+    :func:`_unit_tangent`."""
+    turn, a, b = triangle
+    m = min(a, b)
+    radius = m / unit_tangent
+    if share > 0.0:
+        arc = 2.0 * (share * abs(turn) * radius) + (1.0 - share) * abs(turn) * radius
+    else:
+        arc = radius * abs(turn)
+    return a - m, arc, b - m
+
+
 def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle: tuple[float, float, float] | None,
                     unit_tangent: float, spacing_m: float, share: float) -> NDArrayFloat:
     """:func:`hermite_gap` on points and unit directions as x + iy, given their ``triangle`` and
@@ -403,15 +449,10 @@ def _hermite_points(p0: complex, d0: complex, p3: complex, d1: complex, triangle
     """
     if triangle is None:
         return sample_pieces([[_bezier_piece(p0, d0, p3, d1)]], spacing_m)[0]
-    turn, a, b = triangle
-    m = min(a, b)
-    radius = m / unit_tangent
-    if share > 0.0:
-        spiral, arc_turn = share * abs(turn) * radius, (1.0 - share) * abs(turn)
-        arc = 2.0 * spiral + arc_turn * radius
-    else:
-        arc = radius * abs(turn)
-    lead, tail = a - m, b - m
+    turn = triangle[0]
+    radius = min(triangle[1:]) / unit_tangent
+    spiral, arc_turn = share * abs(turn) * radius, (1.0 - share) * abs(turn)
+    lead, arc, tail = _turn_lengths(triangle, unit_tangent, share)
     total = lead + arc + tail
     n_steps = math.ceil(total / spacing_m * (1.0 + 1e-9))
     if n_steps < 2:

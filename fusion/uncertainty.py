@@ -25,12 +25,14 @@ frame (a scalar, the same in any frame). Sources and how they combine:
   end's (neighbouring points of one lane model).
 - **Gap bridge** (spline fusion): see :func:`bridge_variance`: the errors at the two ends
   propagated through the cubic Hermite basis (offsets by h00/h01, the senders' yaw errors
-  turning the end tangents by h10/h11 times the gap length) plus an interpolation term
-  sqrt(k₀² + (k₁·F)²)·d growing with the distance d from the nearer end and with the bend F
-  (:func:`interpolation_bend`: for ``hermite`` the road's bend across the gap that no line
-  and arc of the ends' curvatures follows, :func:`bridge_bend`; for ``paper`` the ends'
-  turn), k₀ and k₁ per interpolation from :data:`BRIDGE_SIGMA_FLOOR_PER_M` and
-  :data:`BRIDGE_SIGMA_PER_M`.
+  turning the end tangents by h10/h11 times the gap length) plus an interpolation term of
+  variance (k₀·d)² + (k₁·F·d_t)², growing with the distance d from the nearer end, and with
+  the bend F (:func:`interpolation_bend`: for ``hermite`` the road's bend across the gap
+  that no line and arc of the ends' curvatures follows, :func:`bridge_bend`; for ``paper``
+  the ends' turn) times the distance d_t from the nearer end of the part of the bridge that
+  turns (``hermite``'s straights along the end tangents excluded,
+  :func:`fusion.spline.hermite_turns`; the whole bridge for ``paper``), k₀ and k₁ per
+  interpolation from :data:`BRIDGE_SIGMA_FLOOR_PER_M` and :data:`BRIDGE_SIGMA_PER_M`.
 - **History** (:func:`fusion.fuse_history`): a history point's σ fades linearly from the
   ego seam's σ to the coop seam's, like the seam offsets (:func:`seam_sigma`).
 """
@@ -46,14 +48,16 @@ import numpy as np
 from fusion.geometry import EndFit
 from fusion.types import LaneDetection, NDArrayFloat
 
-BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.075, "hermite": 0.0425}
+BRIDGE_SIGMA_PER_M: Final[dict[str, float]] = {"paper": 0.075, "hermite": 0.075}
 """Interpolation error k₁ of a gap bridge per interpolation (1σ, m/(m·rad)): the bridge's
-interpolation term is sqrt(k₀² + (k₁·F)²)·d at distance d [m] from its nearer end
-(:data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀), F [rad] the bend :func:`interpolation_bend`. ``hermite``
+interpolation term has the variance (k₀·d)² + (k₁·F·d_t)² at distance d [m] from its nearer
+end and d_t [m] from the nearer end of the part that turns (:func:`bridge_distances`;
+:data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀), F [rad] the bend :func:`interpolation_bend`. ``hermite``
 (line and arc): F the road's bend across the gap that no line-and-arc curve of the ends'
-curvatures follows (:func:`bridge_bend`); ``paper``: F the turn between the two ends' fitted
-tangents |Δψ| (its natural spline through an estimated apex errs on any turn, arcs
-included). k₀ and k₁ of each chosen together on camera drives with pose errors
+curvatures follows (:func:`bridge_bend`), d_t inside its turn (its straights along the end
+tangents follow the road's); ``paper``: F the turn between the two ends' fitted tangents
+|Δψ| (its natural spline through an estimated apex errs on any turn, arcs included), d_t = d.
+k₀ and k₁ of each chosen together on camera drives with pose errors
 (``tools/calibrate_bridge_sigma.py --drives``)."""
 
 BRIDGE_SIGMA_FLOOR_PER_M: Final[dict[str, float]] = {"paper": 0.0475, "hermite": 0.0025}
@@ -239,7 +243,8 @@ def gap_bend(arcs: Sequence[EndFit]) -> tuple[float, float, float]:
 
 
 def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, ego_end: BridgeEnd,
-                    coop_start: BridgeEnd, interpolation: str, bend: tuple[float, float, float]) -> NDArrayFloat:
+                    coop_start: BridgeEnd, interpolation: str, bend: tuple[float, float, float],
+                    turn: tuple[float, float] = (0.0, 1.0)) -> NDArrayFloat:
     """Lateral world variance [m²] of the gap points ``gap`` (``(K, 2)``) of a bridge from
     ``start`` to ``stop`` (the ego border's last and the coop border's first point).
 
@@ -248,16 +253,29 @@ def bridge_variance(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat, 
     the sensor parts of the ends' variances as (h00·σ_E)² + (h01·σ_C)², each sender's pose
     error δ as ((h00·J_E + h10·L·e_ψ)·δ)² for the ego end and ((h01·J_C + h11·L·e_ψ)·δ)² for
     the coop end (a yaw error turns that end's tangent, e_ψ = (0, 0, 1)); the interpolation
-    error adds (k₀² + (k₁·F)²)·d² (``interpolation``'s :data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀ and
-    :data:`BRIDGE_SIGMA_PER_M` k₁), F = :func:`interpolation_bend` of ``bend`` (the ends'
-    heading change [rad] and curvatures [1/m], :func:`gap_bend`).
+    error adds (k₀·d)² + (k₁·F·d_t)² (``interpolation``'s :data:`BRIDGE_SIGMA_FLOOR_PER_M` k₀
+    and :data:`BRIDGE_SIGMA_PER_M` k₁), F = :func:`interpolation_bend` of ``bend`` (the ends'
+    heading change [rad] and curvatures [1/m], :func:`gap_bend`) and d_t the distance from
+    the nearer end of the part of the bridge that turns, ``turn`` = its (start, stop)
+    fractions (:func:`fusion.spline.hermite_turns`; zero outside it; the whole bridge by
+    default, d_t = d).
     """
     if gap.shape[0] == 0:
         return np.empty(0)
     tau, length = bridge_fraction(gap, start, stop)
-    per_m = math.hypot(BRIDGE_SIGMA_FLOOR_PER_M[interpolation],
-                       BRIDGE_SIGMA_PER_M[interpolation] * interpolation_bend(interpolation, bend, length))
-    return (per_m * length * np.minimum(tau, 1.0 - tau)) ** 2 + bridge_ends_variance(tau, length, ego_end, coop_start)
+    d, d_turn = bridge_distances(tau, length, turn)
+    k0, k1 = BRIDGE_SIGMA_FLOOR_PER_M[interpolation], BRIDGE_SIGMA_PER_M[interpolation]
+    return ((k0 * d) ** 2 + (k1 * interpolation_bend(interpolation, bend, length) * d_turn) ** 2
+            + bridge_ends_variance(tau, length, ego_end, coop_start))
+
+
+def bridge_distances(tau: NDArrayFloat, length_m: float,
+                     turn: tuple[float, float] = (0.0, 1.0)) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """(d, d_t) [m] of the points at arc fractions ``tau`` of a bridge of length ``length_m``:
+    the distance from the bridge's nearer end, and from the nearer end of its part between
+    the fractions ``turn`` (zero outside it)."""
+    return (length_m * np.minimum(tau, 1.0 - tau),
+            length_m * np.maximum(np.minimum(tau - turn[0], turn[1] - tau), 0.0))
 
 
 def bridge_fraction(gap: NDArrayFloat, start: NDArrayFloat, stop: NDArrayFloat) -> tuple[NDArrayFloat, float]:

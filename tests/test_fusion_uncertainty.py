@@ -196,7 +196,8 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
     """A right-angle corner of radius 20 m inside the gap between two straights: the bend is
     F = π/2 for both (``hermite``: both ends straight, no arc follows the turn; ``paper``: the
     ends' turn); the interpolation term sqrt(k₀² + (k₁·F)²)·d at distance d from the nearer
-    end, on top of the ends' σ carried by h00, h01 (exact poses)."""
+    end (the ends equally far from the corner: hermite turns over the whole gap), on top of
+    the ends' σ carried by h00, h01 (exact poses)."""
     sigma = 0.02
     arc = Segment(20.0 * math.pi / 2.0, 1.0 / 20.0)
     road = AnalyticRoad([Segment(80.0), arc, Segment(80.0)], yaw0=0.3)
@@ -215,6 +216,35 @@ def test_bridge_interpolation_sigma_grows_with_the_turn_across_the_gap(interpola
     expected = np.sqrt((k0 * d) ** 2 + (k1 * math.pi / 2.0 * d) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
     np.testing.assert_allclose(result.left_sigma[gap], expected, rtol=1e-3)
     assert result.left_sigma[gap].max() > 0.5  # k·F·d at mid-bridge, d ≥ 15 m
+
+
+def test_hermite_bridge_sigma_bends_only_where_hermite_turns() -> None:
+    """The corner of radius 20 m with the ego's end 15 m before it and the coop's start 5 m
+    after it: the end tangents meet a = 35 m after the ego's end and b = 25 m before the coop's
+    start, so hermite runs straight along the ego's tangent for a − b = 10 m (the road does
+    too) and turns in the rest. The bend term grows with d_t, the distance from the nearer end
+    of that turn, zero on the straight: σ² = (k₀·d)² + (k₁·F·d_t)² + h00²σ² + h01²σ², F = π/2,
+    d_t = max(0, min(u − 10 m, L − u)) at arc length u."""
+    sigma = 0.02
+    arc = Segment(20.0 * math.pi / 2.0, 1.0 / 20.0)
+    road = AnalyticRoad([Segment(80.0), arc, Segment(80.0)], yaw0=0.3)
+    ego = sensed(road, 35.0, sigma)  # ends 15 m before the corner
+    coop = sensed(road, 80.0 + arc.length_m + 5.0, sigma)  # starts 5 m after it
+    result = fusion.fuse(ego, coop, interpolation="hermite")
+    assert result.kind == "spline"
+    inside = np.flatnonzero(result.left_source == Source.INTERPOLATED)
+    chain = result.left[inside[0] - 1: inside[-1] + 2]
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(chain, axis=0).T))))
+    u, length = s[1:-1], s[-1]
+    tau = u / length
+    h00, h01 = 2 * tau**3 - 3 * tau**2 + 1, 3 * tau**2 - 2 * tau**3
+    d, d_turn = np.minimum(u, length - u), np.maximum(np.minimum(u - 10.0, length - u), 0.0)
+    k0, k1 = BRIDGE_SIGMA_FLOOR_PER_M["hermite"], BRIDGE_SIGMA_PER_M["hermite"]
+    expected = np.sqrt((k0 * d) ** 2 + (k1 * math.pi / 2.0 * d_turn) ** 2 + (h00 * sigma) ** 2 + (h01 * sigma) ** 2)
+    np.testing.assert_allclose(result.left_sigma[inside], expected, rtol=1e-3)
+    straight_part = inside[u < 10.0]
+    assert straight_part.size > 50
+    assert distance_to_polyline(result.left[straight_part], road.border(0.5 * WIDTH_M)).max() < 1e-6
 
 
 def test_bridge_inside_an_arc_has_no_interpolation_term_for_hermite() -> None:
