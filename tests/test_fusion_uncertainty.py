@@ -172,7 +172,7 @@ def test_inverse_variance_weights_hold_to_the_overlap_ends_and_the_seams_fade_ou
 
 def test_bridge_sigma_on_a_straight_road_is_the_propagated_closed_form() -> None:
     """Hermite propagation of the end errors, with the coop's pose error: at arc fraction τ of
-    a bridge of length L (ego exact), σ² = (k₀² + (k₁·F)²)·d² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
+    a bridge of length L (ego exact), σ² = (k₀·d)² + (k₁·F·d_t)² + h00²σ_E² + h01²σ_C² + h01²σ_xy² +
     (h11·L)²σ_ψ², d = L·min(τ, 1 − τ); a straight gap does not bend or turn, F = 0: only
     k₀·d is left."""
     road = straight(-0.3)
