@@ -102,11 +102,12 @@ def corrected(points: NDArrayFloat, coop_xy: tuple[float, float], estimate: NDAr
 def corrected_variance(points: NDArrayFloat, sensor: NDArrayFloat, coop_xy: tuple[float, float],
                        update: PoseUpdate) -> BorderVariance:
     """:class:`BorderVariance` of a corrected coop border (``points`` ego frame): its sensor
-    variance, the world pose variance left after the update as ``pose`` and the rest of the
-    ego-frame variance (the ego's pose error the correction took on) as ``relative``."""
+    variance, the world pose variance left after the update (J·``world``·Jᵀ) as ``pose`` and
+    the ego-frame one less that (J·(``relative`` − ``world``)·Jᵀ, negative where the
+    correction took on more of the ego's pose error than it left of the coop's) as
+    ``relative``, so that sensor + pose + relative is the ego-frame variance."""
     world = pose_variance(points, coop_xy, update.world)
-    relative = pose_variance(points, coop_xy, update.relative)
-    return BorderVariance(sensor, world, np.maximum(relative - world, 0.0))
+    return BorderVariance(sensor, world, pose_variance(points, coop_xy, update.relative) - world)
 
 
 def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],

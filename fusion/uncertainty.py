@@ -77,7 +77,9 @@ class BorderVariance:
     Fields: ``sensor`` the detection's stated σ² per point; ``pose`` the variance its sender's
     pose error adds per point (J Σ Jᵀ, see the module docstring), zeros without
     ``pose_cov``; ``relative`` the variance the *other* sender's pose error adds to these
-    points in that sender's frame (zeros for the ego's own points). All ``(N,)``.
+    points in that sender's frame (zeros for the ego's own points; for a coop corrected by a
+    pose update the ego-frame variance less the world one,
+    :func:`fusion.registration.corrected_variance`). All ``(N,)``.
     """
 
     sensor: NDArrayFloat
