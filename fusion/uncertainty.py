@@ -15,7 +15,9 @@ frame (a scalar, the same in any frame). Sources and how they combine:
   only their sensor variance, while the coop's points carry the coop's pose variance *and*
   the ego's (the relative pose ego⁻¹·coop holds both errors; to first order their
   covariances add, each with its own lever arm). Inverse-variance convoy weights are
-  computed in the ego frame: w_coop = σ_e² / (σ_e² + σ_c² + J_cΣ_cJ_cᵀ + J_eΣ_eJ_eᵀ).
+  computed in the ego frame: w_coop = σ_e² / (σ_e² + σ_c² + J_cΣ_cJ_cᵀ + J_eΣ_eJ_eᵀ), or with
+  the pose variance left after the coop's pose error is estimated from the overlap
+  (:mod:`fusion.registration`) in place of the two pose terms.
 - **Fused point** (world frame, the result's frame): with weight w of the coop point,
   σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
   are independent. For inverse-variance weights and an exact ego pose this is
