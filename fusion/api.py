@@ -195,12 +195,14 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
         n_left = cl.shape[0]
         arclengths = (coop.arclength[:n_left], coop.arclength[n_left:])
         known = None if uncertainty is None else uncertainty.borders
+        shared: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None)
         if inverse and uncertainty is not None and (uncertainty.coop_cov.any() or uncertainty.ego_cov.any()):
-            cl, cr, starts, known = registered(borders, arclengths, starts, uncertainty)
+            cl, cr, starts, known, shared = registered(borders, arclengths, starts, uncertainty)
         pairs = (None, None) if known is None else ((known[0], known[2]), (known[1], known[3]))
+        end = params.convoy_end_blend_m
         parts, sources, variances = zip(
-            *convoy_border(el, cl, arclengths[0], starts[0], w, blend, pairs[0], inverse, params.convoy_end_blend_m),
-            *convoy_border(er, cr, arclengths[1], starts[1], w, blend, pairs[1], inverse, params.convoy_end_blend_m))
+            *convoy_border(el, cl, arclengths[0], starts[0], w, blend, pairs[0], inverse, end, shared[0]),
+            *convoy_border(er, cr, arclengths[1], starts[1], w, blend, pairs[1], inverse, end, shared[1]))
         return parts, np.array(sources, dtype=np.int8), None if uncertainty is None else variances
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"

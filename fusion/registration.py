@@ -28,7 +28,7 @@ import numpy as np
 
 from fusion.convoy import OverlapStart, overlap_start
 from fusion.types import NDArrayFloat
-from fusion.uncertainty import BorderVariance, PairUncertainty, pose_variance
+from fusion.uncertainty import BorderVariance, PairUncertainty, lateral_jacobian, pose_variance
 
 
 @dataclass(frozen=True)
@@ -38,24 +38,27 @@ class PoseUpdate:
     Fields: ``estimate`` δ̂ (x [m], y [m], yaw [rad]; yaw about the coop); ``relative`` its
     error's covariance P⁺ (what is left of the coop's pose error relative to the ego, (3, 3));
     ``world`` the covariance of the corrected coop's pose error in the world frame (its own
-    pose error less the estimate; equal to ``relative`` when the ego's pose is exact).
+    pose error less the estimate; equal to ``relative`` when the ego's pose is exact);
+    ``gain`` K (3, M), how the estimate follows each measurement.
     """
 
     estimate: NDArrayFloat
     relative: NDArrayFloat
     world: NDArrayFloat
+    gain: NDArrayFloat
 
 
 def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
                  ego_sensor: NDArrayFloat, coop_sensor: NDArrayFloat, coop_xy: tuple[float, float]
-                 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """(H (2, 3), d (2,), R (2,)) of one border pair at the overlap's start and end (the coop
-    start's foot on the ego border and the arc length ``convoy_border`` pairs last), ego frame:
-    the lateral difference coop minus ego along the ego border's left normal, how the coop's
-    pose error moves it, and the sum of the two sensor variances there [m²]."""
+                 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """(H (2, 3), d (2,), R (2,), the ego's part of R (2,)) of one border pair at the overlap's
+    start and end (the coop start's foot on the ego border and the arc length
+    ``convoy_border`` pairs last), ego frame: the lateral difference coop minus ego along the
+    ego border's left normal, how the coop's pose error moves it, and the sum of the two
+    sensor variances there [m²]."""
     s_ego, s0 = start.s_ego, start.s0
     overlap_end = max(min(s_ego.item(-1) - s0, s_coop.item(-1)), 0.0)
-    rows, differences, noise = [], [], []
+    rows, differences, noise, ego_noise = [], [], [], []
     for u in (0.0, overlap_end):
         p_ego = np.array([np.interp(s0 + u, s_ego, ego[:, 0]), np.interp(s0 + u, s_ego, ego[:, 1])])
         p_coop = np.array([np.interp(u, s_coop, coop[:, 0]), np.interp(u, s_coop, coop[:, 1])])
@@ -66,8 +69,9 @@ def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, st
         lever = p_coop - np.asarray(coop_xy)
         rows.append([normal[0], normal[1], normal @ np.array([-lever[1], lever[0]])])
         differences.append(float(normal @ (p_coop - p_ego)))
-        noise.append(float(np.interp(s0 + u, s_ego, ego_sensor) + np.interp(u, s_coop, coop_sensor)))
-    return np.array(rows), np.array(differences), np.array(noise)
+        ego_noise.append(float(np.interp(s0 + u, s_ego, ego_sensor)))
+        noise.append(ego_noise[-1] + float(np.interp(u, s_coop, coop_sensor)))
+    return np.array(rows), np.array(differences), np.array(noise), np.array(ego_noise)
 
 
 def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFloat, coop_cov: NDArrayFloat,
@@ -87,7 +91,7 @@ def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFlo
     measured = gain @ noise_cov @ gain.T
     relative = keep @ prior @ keep.T + measured
     world = keep @ coop_cov @ keep.T + gain @ rows @ ego_part @ rows.T @ gain.T + measured
-    return PoseUpdate(gain @ differences, 0.5 * (relative + relative.T), 0.5 * (world + world.T))
+    return PoseUpdate(gain @ differences, 0.5 * (relative + relative.T), 0.5 * (world + world.T), gain)
 
 
 def corrected(points: NDArrayFloat, coop_xy: tuple[float, float], estimate: NDArrayFloat) -> NDArrayFloat:
@@ -114,21 +118,34 @@ def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayF
                arclengths: tuple[NDArrayFloat, NDArrayFloat], starts: tuple[OverlapStart, OverlapStart],
                uncertainty: PairUncertainty
                ) -> tuple[NDArrayFloat, NDArrayFloat, tuple[OverlapStart, OverlapStart],
-                          tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance]]:
+                          tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance],
+                          tuple[NDArrayFloat, NDArrayFloat]]:
     """The coop's (left, right) borders of a convoy pair (``borders`` ego left, ego right, coop
     left, coop right, ego frame; ``arclengths`` of the coop's) corrected by the
     :func:`pose_update` of both borders' overlap ends, their overlap starts on the ego borders
-    and the four borders' :class:`BorderVariance` (the coop's with the covariance left after
-    the update)."""
+    the four borders' :class:`BorderVariance` (the coop's with the covariance left after
+    the update) and the coop borders' :func:`ego_shared`."""
     xy = uncertainty.coop_xy
     measured = [overlap_rows(borders[side], borders[2 + side], arclengths[side], starts[side],
                              uncertainty.borders[side].sensor, uncertainty.borders[2 + side].sensor, xy)
                 for side in (0, 1)]
-    rows, differences, noise = (np.concatenate([m[i] for m in measured]) for i in range(3))
+    rows, differences, noise, ego_noise = (np.concatenate([m[i] for m in measured]) for i in range(4))
     update = pose_update(rows, differences, noise, uncertainty.coop_cov, uncertainty.ego_cov, xy)
     left, right = (corrected(borders[2 + side], xy, update.estimate) for side in (0, 1))
     moved_starts = (overlap_start(borders[0], left, starts[0].s_ego), overlap_start(borders[1], right, starts[1].s_ego))
     variances = (uncertainty.borders[0], uncertainty.borders[1],
                  corrected_variance(left, uncertainty.borders[2].sensor, xy, update),
                  corrected_variance(right, uncertainty.borders[3].sensor, xy, update))
-    return left, right, moved_starts, variances
+    shared = tuple(ego_shared(points, xy, update.gain[:, 2 * side: 2 * side + 2], ego_noise[2 * side: 2 * side + 2])
+                   for side, points in enumerate((left, right)))
+    return left, right, moved_starts, variances, shared
+
+
+def ego_shared(points: NDArrayFloat, coop_xy: tuple[float, float], gain: NDArrayFloat,
+               ego_variance: NDArrayFloat) -> NDArrayFloat:
+    """Per point of a corrected coop border, the covariance [m] of its error with an ego point
+    of unit σ on the same border: the correction carries the ego's errors at that border's
+    overlap ends (variances ``ego_variance`` [m²], their columns ``gain`` of K) in as
+    J·K·e_ends, and an ego point's error is taken as fully correlated with its border's ends
+    (one lane model), Σ_k (J·K)_k·σ_e,k."""
+    return lateral_jacobian(points, coop_xy) @ (gain @ np.sqrt(ego_variance))

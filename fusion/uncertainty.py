@@ -118,9 +118,15 @@ def pose_variance(points: NDArrayFloat, sender_xy: tuple[float, float], covarian
     J = (n_x, n_y, t·(p − s))."""
     if not covariance.any():
         return np.zeros(points.shape[0])
-    t = tangents(points)
-    jacobian = np.column_stack((-t[:, 1], t[:, 0], np.einsum("ij,ij->i", t, points - np.asarray(sender_xy))))
+    jacobian = lateral_jacobian(points, sender_xy)
     return np.maximum(np.einsum("ij,jk,ik->i", jacobian, covariance, jacobian), 0.0)
+
+
+def lateral_jacobian(points: NDArrayFloat, sender_xy: tuple[float, float]) -> NDArrayFloat:
+    """``(N, 3)`` J = (n_x, n_y, t·(p − s)) of a border's ``points``: how a pose error (x, y,
+    yaw) of their sender at ``sender_xy`` moves each laterally, one frame."""
+    t = tangents(points)
+    return np.column_stack((-t[:, 1], t[:, 0], np.einsum("ij,ij->i", t, points - np.asarray(sender_xy))))
 
 
 def has_sigma(detection: LaneDetection) -> bool:
@@ -175,9 +181,12 @@ def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDA
     return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy)
 
 
-def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat) -> NDArrayFloat:
-    """World variance [m²] of (1 − w)·P_ego + w·P_coop: w²·σ_c² + (1 − w)²·σ_e²."""
-    return w * w * coop_world + (1.0 - w) * (1.0 - w) * ego_world
+def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat,
+                   cross: NDArrayFloat | float | None = None) -> NDArrayFloat:
+    """World variance [m²] of (1 − w)·P_ego + w·P_coop: w²·σ_c² + (1 − w)²·σ_e², plus
+    2w(1 − w)·``cross`` when the two errors share a covariance [m²]."""
+    variance = w * w * coop_world + (1.0 - w) * (1.0 - w) * ego_world
+    return variance if cross is None else variance + 2.0 * w * (1.0 - w) * cross
 
 
 def inverse_variance_weight(ego_frame_ego: NDArrayFloat, ego_frame_coop: NDArrayFloat) -> NDArrayFloat:

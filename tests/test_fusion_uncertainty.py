@@ -100,7 +100,9 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
     (1, 0) and (1, 20) and the sensors' variances R. After the update (gain K) a coop point x
     ahead of the coop has ego-frame variance σ_c² + J·P⁺·Jᵀ and world variance σ_c² + J·M·Jᵀ,
     J = (1, x), P⁺ = (I − KH)(Σ_c + E)(I − KH)ᵀ + KRKᵀ, M = (I − KH)Σ_c(I − KH)ᵀ + KHEHᵀKᵀ +
-    KRKᵀ; the weights and the fused σ follow as without the update."""
+    KRKᵀ. The correction carries the ego's errors at the left border's overlap ends in, so a
+    fused point's variance adds 2w(1 − w)·σ_e·J·K·(σ_e,start, σ_e,end) (the ego's border errors
+    taken as fully correlated)."""
     yaw = 0.7
     road = straight(yaw)
     sigma_e = lambda x: np.hypot(0.03, 0.004 * x)  # noqa: E731 - a σ growing with distance
@@ -133,11 +135,15 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
     def left(cov: np.ndarray, x: np.ndarray) -> np.ndarray:
         return cov[0, 0] + 2.0 * cov[0, 1] * x + cov[1, 1] * x * x
 
+    def shared(x: np.ndarray) -> np.ndarray:  # the correction's covariance with a unit-σ ego point of the border
+        return np.column_stack((np.ones_like(x), x)) @ gain[:, :2] @ np.array([sigma_e(10.0), sigma_e(30.0)])
+
     ve, pe = sigma_e(x_ego) ** 2, pose_var(ego_cov, x_ego)
     vc = sigma_c**2
     w = ve / (ve + vc + left(relative, x_coop))  # ego frame: the coop carries what is left of both pose errors
     np.testing.assert_allclose(result.left_sigma[middle],
-                               np.sqrt(w * w * (vc + left(world, x_coop)) + (1 - w) ** 2 * (ve + pe)), rtol=1e-6)
+                               np.sqrt(w * w * (vc + left(world, x_coop)) + (1 - w) ** 2 * (ve + pe)
+                                       + 2 * w * (1 - w) * sigma_e(x_ego) * shared(x_coop)), rtol=1e-6)
     ego_only = result.left_source == Source.EGO
     x0 = along_m(result.left[ego_only], road) - 10.0
     before = x0 < 10.0 - IV.convoy_end_blend_m  # short of the seam blend the ego's own σ
@@ -156,7 +162,9 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
     w_seam = 1.0 - (1.0 - w_end) * t * t * (3.0 - 2.0 * t)
     np.testing.assert_allclose(result.left_sigma[coop_only][~beyond],
                                np.sqrt(w_seam**2 * (vc + left(world, x1[~beyond]))
-                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)), rtol=1e-6)
+                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)
+                                       + 2 * w_seam * (1 - w_seam) * math.sqrt(ve_end) * shared(x1[~beyond])),
+                               rtol=1e-6)
 
 
 def test_inverse_variance_blends_in_and_out_without_a_step() -> None:
