@@ -20,8 +20,9 @@ frame (a scalar, the same in any frame). Sources and how they combine:
   (:mod:`fusion.registration`) in place of the two pose terms.
 - **Fused point** (world frame, the result's frame): with weight w of the coop point,
   σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
-  are independent. For inverse-variance weights and an exact ego pose this is
-  1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
+  are independent (after a pose update, :mod:`fusion.registration`, the corrected coop's
+  error shares the ego's errors at the overlap's ends: + 2w(1 − w)·σ_e·shared). For
+  inverse-variance weights, an exact ego pose and no update this is 1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
   steps out (:func:`fusion.convoy.convoy_border`), a point takes the same formula with the
   faded weight of the other sender's end point, its error fully correlated with its own
   end's (neighbouring points of one lane model).
