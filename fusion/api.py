@@ -16,6 +16,7 @@ from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
 from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_check, relative_pose
 from fusion.geometry import to_world, transform
+from fusion.registration import registered
 from fusion.spline import EndFits, hermite_lane, hermite_turns, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
 from fusion.uncertainty import (PairUncertainty, bridge_end, bridge_variance, gap_bend, has_sigma, own_variances,
@@ -192,13 +193,16 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
         w, blend = params.coop_weight, params.convoy_blend_offset_m
         inverse = params.convoy_weights == "inverse-variance"
         n_left = cl.shape[0]
-        pairs = (None, None) if uncertainty is None else ((uncertainty.borders[0], uncertainty.borders[2]),
-                                                          (uncertainty.borders[1], uncertainty.borders[3]))
+        arclengths = (coop.arclength[:n_left], coop.arclength[n_left:])
+        known = None if uncertainty is None else uncertainty.borders
+        shared: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None)
+        if inverse and uncertainty is not None and (uncertainty.coop_cov.any() or uncertainty.ego_cov.any()):
+            cl, cr, starts, known, shared = registered(borders, arclengths, starts, uncertainty)
+        pairs = (None, None) if known is None else ((known[0], known[2]), (known[1], known[3]))
+        end = params.convoy_end_blend_m
         parts, sources, variances = zip(
-            *convoy_border(el, cl, coop.arclength[:n_left], starts[0], w, blend, pairs[0], inverse,
-                           params.convoy_end_blend_m),
-            *convoy_border(er, cr, coop.arclength[n_left:], starts[1], w, blend, pairs[1], inverse,
-                           params.convoy_end_blend_m))
+            *convoy_border(el, cl, arclengths[0], starts[0], w, blend, pairs[0], inverse, end, shared[0]),
+            *convoy_border(er, cr, arclengths[1], starts[1], w, blend, pairs[1], inverse, end, shared[1]))
         return parts, np.array(sources, dtype=np.int8), None if uncertainty is None else variances
     if interpolation == "paper":
         uniform = params.spline_parameter == "uniform"

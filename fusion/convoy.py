@@ -46,7 +46,8 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
                   coop_weight: float, blend_offset_m: float,
                   variances: tuple[BorderVariance, BorderVariance] | None = None,
                   inverse_variance: bool = False,
-                  end_blend_m: float = 0.0) -> list[tuple[NDArrayFloat, Source, NDArrayFloat | None]]:
+                  end_blend_m: float = 0.0,
+                  shared: NDArrayFloat | None = None) -> list[tuple[NDArrayFloat, Source, NDArrayFloat | None]]:
     """Fuse one ego border with the coop border that starts inside it.
 
     The coop start projects onto the ego border at arc length s0 (``start``); ``s_coop`` are
@@ -61,7 +62,10 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     variances [m²] (else None). ``inverse_variance`` (needs ``variances``) weights each pair
     by :func:`fusion.uncertainty.inverse_variance_weight` of their ego-frame variances over
     the whole overlap and closes the steps at its two ends outside it
-    (:func:`_seam_blend`, over ``end_blend_m``).
+    (:func:`_seam_blend`, over ``end_blend_m``). ``shared`` (per coop point, [m]) is the
+    covariance of a coop point's error with that of an ego point of unit σ (a coop corrected
+    from the overlap, :func:`fusion.registration.ego_shared`): a fused point's variance then
+    adds 2w(1 − w)·σ_e·``shared``.
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
     first = int(s_ego.searchsorted(s0))
@@ -83,24 +87,28 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     difference = paired - overlap  # coop minus ego at each overlap point
     paired = overlap + w * difference
     ego_var = coop_var = paired_var = None
+    cross = _cross(variances, shared, s_coop)
     if variances is not None:
         ego_var, coop_var = variances[0].world, variances[1].world
         paired_var = np.interp(u, s_coop, coop_var)
-        fused_var: NDArrayFloat | None = fused_variance(w, ego_var[first:stop], paired_var)
+        fused_var: NDArrayFloat | None = fused_variance(w, ego_var[first:stop], paired_var,
+                                                        cross(slice(first, stop), u))
     else:
         fused_var = None
     before, before_var = ego[:first], None if ego_var is None else ego_var[:first]
     if seams:
         assert isinstance(w, np.ndarray) and ego_var is not None and paired_var is not None
         before, before_var = _seam_blend(before, s0 - s_ego[:first], w[0] * difference[0], end_blend_m,
-                                         lambda lam: fused_variance(w[0] * lam, ego_var[:first], paired_var[0]))
+                                         lambda lam: fused_variance(w[0] * lam, ego_var[:first], paired_var[0],
+                                                                    cross(slice(0, first), 0.0)))
     parts = [(before, Source.EGO, before_var), (paired.view(np.float64).reshape(-1, 2), Source.FUSED, fused_var)]
     if not coop_continues:
         after, after_var = ego[stop:], None if ego_var is None else ego_var[stop:]
         if seams:
             assert isinstance(w, np.ndarray) and ego_var is not None and paired_var is not None
             after, after_var = _seam_blend(after, s_ego[stop:] - s0 - u[-1], w[-1] * difference[-1], end_blend_m,
-                                           lambda lam: fused_variance(w[-1] * lam, ego_var[stop:], paired_var[-1]))
+                                           lambda lam: fused_variance(w[-1] * lam, ego_var[stop:], paired_var[-1],
+                                                                      cross(slice(stop, None), u[-1])))
         parts.append((after, Source.EGO, after_var))
     else:
         tail = int(s_coop.searchsorted(overlap_end, side="right"))
@@ -109,7 +117,8 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
             assert isinstance(w, np.ndarray) and ego_var is not None and coop_var is not None
             after, after_var = _seam_blend(after, s_coop[tail:] - u[-1], (w[-1] - 1.0) * difference[-1],
                                            end_blend_m, lambda lam: fused_variance(1.0 - (1.0 - w[-1]) * lam,
-                                                                                   ego_var[stop - 1], coop_var[tail:]))
+                                                                                   ego_var[stop - 1], coop_var[tail:],
+                                                                                   cross(stop - 1, s_coop[tail:])))
         parts.append((after, Source.COOP, after_var))
     return parts
 
@@ -123,3 +132,14 @@ def _seam_blend(points: NDArrayFloat, distance: NDArrayFloat, step: complex, len
     lam = smoothstep(1.0 - distance / length_m)
     moved = points + lam[:, None] * np.array([step.real, step.imag])
     return moved, variance(lam)
+
+
+def _cross(variances: tuple[BorderVariance, BorderVariance] | None, shared: NDArrayFloat | None,
+           s_coop: NDArrayFloat) -> Callable[[slice | int, NDArrayFloat | float], NDArrayFloat | None]:
+    """cross(ego points, u): the covariance [m²] of those ego points' errors with the coop's
+    at arc lengths u, σ_e·``shared``(u) (None without ``shared``)."""
+    def cross(ego: slice | int, u: NDArrayFloat | float) -> NDArrayFloat | None:
+        if variances is None or shared is None:
+            return None
+        return np.sqrt(variances[0].sensor[ego]) * np.interp(u, s_coop, shared)
+    return cross

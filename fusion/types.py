@@ -426,8 +426,10 @@ class FusionParams:
         convoy_weights: the weights of the convoy overlap: ``"paper"`` (default: the fixed
             weights of ``convoy_strategy``, the paper's 0.75 coop / 0.25 ego), ``"mean"`` (0.5
             each) or ``"inverse-variance"`` (point by point from both detections' σ and pose
-            covariances, :mod:`fusion.uncertainty`, over the whole overlap; the steps at its
-            two ends fade out over ``convoy_end_blend_m`` outside it; the weights of
+            covariances, :mod:`fusion.uncertainty`, over the whole overlap; with a pose
+            covariance the coop's relative pose error is first estimated from the overlap's
+            ends and its whole detection corrected, :mod:`fusion.registration`; the steps at
+            its two ends fade out over ``convoy_end_blend_m`` outside it; the weights of
             ``"mean"`` when a detection states no σ).
             ``"mean"`` and ``"inverse-variance"`` need ``convoy_strategy="weighted"``.
         convoy_end_blend_m: length over which the steps of inverse-variance weights at the

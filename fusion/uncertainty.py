@@ -15,11 +15,14 @@ frame (a scalar, the same in any frame). Sources and how they combine:
   only their sensor variance, while the coop's points carry the coop's pose variance *and*
   the ego's (the relative pose ego⁻¹·coop holds both errors; to first order their
   covariances add, each with its own lever arm). Inverse-variance convoy weights are
-  computed in the ego frame: w_coop = σ_e² / (σ_e² + σ_c² + J_cΣ_cJ_cᵀ + J_eΣ_eJ_eᵀ).
+  computed in the ego frame: w_coop = σ_e² / (σ_e² + σ_c² + J_cΣ_cJ_cᵀ + J_eΣ_eJ_eᵀ), or with
+  the pose variance left after the coop's pose error is estimated from the overlap
+  (:mod:`fusion.registration`) in place of the two pose terms.
 - **Fused point** (world frame, the result's frame): with weight w of the coop point,
   σ² = w²·(σ_c² + J_cΣ_cJ_cᵀ) + (1 − w)²·(σ_e² + J_eΣ_eJ_eᵀ): the two senders' world errors
-  are independent. For inverse-variance weights and an exact ego pose this is
-  1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
+  are independent (after a pose update, :mod:`fusion.registration`, the corrected coop's
+  error shares the ego's errors at the overlap's ends: + 2w(1 − w)·σ_e·shared). For
+  inverse-variance weights, an exact ego pose and no update this is 1 / (1/σ_e² + 1/σ_c²). Beside the overlap, where inverse-variance weights fade their
   steps out (:func:`fusion.convoy.convoy_border`), a point takes the same formula with the
   faded weight of the other sender's end point, its error fully correlated with its own
   end's (neighbouring points of one lane model).
@@ -81,7 +84,9 @@ class BorderVariance:
     Fields: ``sensor`` the detection's stated σ² per point; ``pose`` the variance its sender's
     pose error adds per point (J Σ Jᵀ, see the module docstring), zeros without
     ``pose_cov``; ``relative`` the variance the *other* sender's pose error adds to these
-    points in that sender's frame (zeros for the ego's own points). All ``(N,)``.
+    points in that sender's frame (zeros for the ego's own points; for a coop corrected by a
+    pose update the ego-frame variance less the world one,
+    :func:`fusion.registration.corrected_variance`). All ``(N,)``.
     """
 
     sensor: NDArrayFloat
@@ -118,9 +123,15 @@ def pose_variance(points: NDArrayFloat, sender_xy: tuple[float, float], covarian
     J = (n_x, n_y, t·(p − s))."""
     if not covariance.any():
         return np.zeros(points.shape[0])
-    t = tangents(points)
-    jacobian = np.column_stack((-t[:, 1], t[:, 0], np.einsum("ij,ij->i", t, points - np.asarray(sender_xy))))
+    jacobian = lateral_jacobian(points, sender_xy)
     return np.maximum(np.einsum("ij,jk,ik->i", jacobian, covariance, jacobian), 0.0)
+
+
+def lateral_jacobian(points: NDArrayFloat, sender_xy: tuple[float, float]) -> NDArrayFloat:
+    """``(N, 3)`` J = (n_x, n_y, t·(p − s)) of a border's ``points``: how a pose error (x, y,
+    yaw) of their sender at ``sender_xy`` moves each laterally, one frame."""
+    t = tangents(points)
+    return np.column_stack((-t[:, 1], t[:, 0], np.einsum("ij,ij->i", t, points - np.asarray(sender_xy))))
 
 
 def has_sigma(detection: LaneDetection) -> bool:
@@ -175,9 +186,12 @@ def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDA
     return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy)
 
 
-def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat) -> NDArrayFloat:
-    """World variance [m²] of (1 − w)·P_ego + w·P_coop: w²·σ_c² + (1 − w)²·σ_e²."""
-    return w * w * coop_world + (1.0 - w) * (1.0 - w) * ego_world
+def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat,
+                   cross: NDArrayFloat | float | None = None) -> NDArrayFloat:
+    """World variance [m²] of (1 − w)·P_ego + w·P_coop: w²·σ_c² + (1 − w)²·σ_e², plus
+    2w(1 − w)·``cross`` when the two errors share a covariance [m²]."""
+    variance = w * w * coop_world + (1.0 - w) * (1.0 - w) * ego_world
+    return variance if cross is None else variance + 2.0 * w * (1.0 - w) * cross
 
 
 def inverse_variance_weight(ego_frame_ego: NDArrayFloat, ego_frame_coop: NDArrayFloat) -> NDArrayFloat:

@@ -93,8 +93,16 @@ def test_inverse_variance_sigma_is_the_spread_of_fused_gaussian_errors() -> None
 
 @pytest.mark.parametrize("ego_cov", [None, np.diag([0.02**2, 0.05**2, 0.003**2])])
 def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(ego_cov: np.ndarray | None) -> None:
-    """Straight road heading 0.7 rad, anisotropic world covariances: lateral variance of a
-    point x ahead of its sender = sin²ψ·σx² + cos²ψ·σy² + σψ²·x² (its normal is (−sin ψ, cos ψ))."""
+    """Straight road heading 0.7 rad, anisotropic world covariances, exact poses. Road frame,
+    state (lateral, yaw) of the coop's relative pose error: the coop's prior diag(a_c, b_c),
+    a = sin²ψ·σx² + cos²ψ·σy², b = σψ², and the ego's carried to the coop 10 m ahead,
+    E = [[a_e + 100·b_e, 10·b_e], [10·b_e, b_e]]; the overlap's ends measure it with rows
+    (1, 0) and (1, 20) and the sensors' variances R. After the update (gain K) a coop point x
+    ahead of the coop has ego-frame variance σ_c² + J·P⁺·Jᵀ and world variance σ_c² + J·M·Jᵀ,
+    J = (1, x), P⁺ = (I − KH)(Σ_c + E)(I − KH)ᵀ + KRKᵀ, M = (I − KH)Σ_c(I − KH)ᵀ + KHEHᵀKᵀ +
+    KRKᵀ. The correction carries the ego's errors at the left border's overlap ends in, so a
+    fused point's variance adds 2w(1 − w)·σ_e·J·K·(σ_e,start, σ_e,end) (the ego's border errors
+    taken as fully correlated)."""
     yaw = 0.7
     road = straight(yaw)
     sigma_e = lambda x: np.hypot(0.03, 0.004 * x)  # noqa: E731 - a σ growing with distance
@@ -107,16 +115,35 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
     x_ego = along_m(result.left[middle], road) - 10.0
     x_coop = x_ego - 10.0
 
+    def lateral_var(cov: np.ndarray | None) -> float:
+        return 0.0 if cov is None else math.sin(yaw) ** 2 * cov[0, 0] + math.cos(yaw) ** 2 * cov[1, 1]
+
     def pose_var(cov: np.ndarray | None, x: np.ndarray) -> np.ndarray:
-        if cov is None:
-            return np.zeros_like(x)
-        return math.sin(yaw) ** 2 * cov[0, 0] + math.cos(yaw) ** 2 * cov[1, 1] + cov[2, 2] * x * x
+        return lateral_var(cov) + (0.0 if cov is None else cov[2, 2]) * x * x
+
+    own = np.diag([lateral_var(coop_cov), coop_cov[2, 2]])
+    b_e = 0.0 if ego_cov is None else ego_cov[2, 2]
+    carried = np.array([[lateral_var(ego_cov) + 100.0 * b_e, 10.0 * b_e], [10.0 * b_e, b_e]])
+    rows = np.array([[1.0, 0.0], [1.0, 20.0]] * 2)
+    noise = np.diag(np.array([sigma_e(10.0), sigma_e(30.0)] * 2) ** 2 + sigma_c**2)
+    prior = own + carried
+    gain = prior @ rows.T @ np.linalg.inv(rows @ prior @ rows.T + noise)
+    keep = np.eye(2) - gain @ rows
+    relative = keep @ prior @ keep.T + gain @ noise @ gain.T
+    world = keep @ own @ keep.T + gain @ rows @ carried @ rows.T @ gain.T + gain @ noise @ gain.T
+
+    def left(cov: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return cov[0, 0] + 2.0 * cov[0, 1] * x + cov[1, 1] * x * x
+
+    def shared(x: np.ndarray) -> np.ndarray:  # the correction's covariance with a unit-σ ego point of the border
+        return np.column_stack((np.ones_like(x), x)) @ gain[:, :2] @ np.array([sigma_e(10.0), sigma_e(30.0)])
 
     ve, pe = sigma_e(x_ego) ** 2, pose_var(ego_cov, x_ego)
-    vc, pc = sigma_c**2, pose_var(coop_cov, x_coop)
-    w = ve / (ve + vc + pc + pe)  # ego frame: the coop carries both pose errors
-    np.testing.assert_allclose(result.left_sigma[middle], np.sqrt(w * w * (vc + pc) + (1 - w) ** 2 * (ve + pe)),
-                               rtol=1e-6)
+    vc = sigma_c**2
+    w = ve / (ve + vc + left(relative, x_coop))  # ego frame: the coop carries what is left of both pose errors
+    np.testing.assert_allclose(result.left_sigma[middle],
+                               np.sqrt(w * w * (vc + left(world, x_coop)) + (1 - w) ** 2 * (ve + pe)
+                                       + 2 * w * (1 - w) * sigma_e(x_ego) * shared(x_coop)), rtol=1e-6)
     ego_only = result.left_source == Source.EGO
     x0 = along_m(result.left[ego_only], road) - 10.0
     before = x0 < 10.0 - IV.convoy_end_blend_m  # short of the seam blend the ego's own σ
@@ -125,18 +152,19 @@ def test_pose_covariance_enters_weights_and_sigma_as_the_propagated_closed_form(
                                np.sqrt(sigma_e(x0[before]) ** 2 + pose_var(ego_cov, x0[before])), rtol=1e-6)
     coop_only = result.left_source == Source.COOP
     x1 = along_m(result.left[coop_only], road) - 20.0
-    beyond = x1 > 20.0 + IV.convoy_end_blend_m  # past the seam blend the coop's own σ
-    np.testing.assert_allclose(result.left_sigma[coop_only][beyond],
-                               np.sqrt(sigma_c**2 + pose_var(coop_cov, x1[beyond])), rtol=1e-6)
+    beyond = x1 > 20.0 + IV.convoy_end_blend_m  # past the seam blend the coop's own σ, after the update
+    np.testing.assert_allclose(result.left_sigma[coop_only][beyond], np.sqrt(vc + left(world, x1[beyond])), rtol=1e-6)
     # in the seam blend the coop point keeps 1 − λ·(1 − w_end) of its weight, the ego's last point the rest
     x_end = float(along_m(result.left[result.left_source == Source.FUSED], road)[-1]) - 10.0
     ve_end, pe_end = sigma_e(np.array(x_end)) ** 2, pose_var(ego_cov, np.array(x_end))
-    w_end = ve_end / (ve_end + vc + pose_var(coop_cov, np.array(x_end - 10.0)) + pe_end)
+    w_end = ve_end / (ve_end + vc + left(relative, np.array(x_end - 10.0)))
     t = np.clip(1.0 - (x1[~beyond] - (x_end - 10.0)) / IV.convoy_end_blend_m, 0.0, 1.0)
     w_seam = 1.0 - (1.0 - w_end) * t * t * (3.0 - 2.0 * t)
     np.testing.assert_allclose(result.left_sigma[coop_only][~beyond],
-                               np.sqrt(w_seam**2 * (vc + pose_var(coop_cov, x1[~beyond]))
-                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)), rtol=1e-6)
+                               np.sqrt(w_seam**2 * (vc + left(world, x1[~beyond]))
+                                       + (1 - w_seam) ** 2 * (ve_end + pe_end)
+                                       + 2 * w_seam * (1 - w_seam) * math.sqrt(ve_end) * shared(x1[~beyond])),
+                               rtol=1e-6)
 
 
 def test_inverse_variance_blends_in_and_out_without_a_step() -> None:

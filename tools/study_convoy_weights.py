@@ -8,7 +8,7 @@ stating its closed-form σ(x); the coop's reported pose carries a Gaussian error
 ``σ_xy``/``σ_yaw`` and states that covariance (the ego is the reference, exact). The same
 pairs are fused with each weighting; per pose-error level the table gives the max / p95 /
 mean error of all fused points against the true borders, the inverse-variance coop weight
-at the overlap's middle (closed form), and the calibration of the stated σ (share of points within
+at the overlap's middle (closed form on a straight road, after the pose update), and the calibration of the stated σ (share of points within
 1σ and 2σ); the same errors and calibration over the overlap's fused points alone. With ``--gap`` the coop drives that far past the ego's range instead (spline
 fusion, calibration of the bridge σ; weights do not apply).
 
@@ -54,6 +54,7 @@ import fusion  # noqa: E402
 from cold_maps.simulation.lane_model_error import LaneModelErrorParams  # noqa: E402
 from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
 from fusion.geometry import distance_to_polyline  # noqa: E402
+from fusion.registration import pose_update  # noqa: E402
 from study_sensor import MAPS, correct_errors, run_eval, sha256, shown  # noqa: E402
 
 PARTS = ("ego", "overlap", "coop")
@@ -64,6 +65,22 @@ POSE_LEVELS = ((0.0, 0.0), (0.05, 0.002), (0.1, 0.005))  # (σ_xy m, σ_yaw rad)
 WEIGHTS = ("paper", "mean", "inverse-variance")
 HALF_WIDTH_M = 1.75
 SENSORS = ("ideal", "camera")
+
+
+def middle_weight(lead_m: float, range_m: float, sigma_xy: float, sigma_yaw: float) -> float:
+    """The inverse-variance w_coop at the overlap's middle on a straight road (closed form):
+    the coop's pose error after the update from the overlap's ends (both borders, levers 0
+    and range − lead from the coop, the camera's σ there), then σ_e² / (σ_e² + σ_c² + J P⁺ Jᵀ)."""
+    overlap = range_m - lead_m
+    sigma = lambda x: float(CAMERA.sigma_m(np.array(x)))  # noqa: E731
+    rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, overlap]] * 2)
+    noise = np.array([sigma(lead_m) ** 2 + sigma(0.0) ** 2, sigma(range_m) ** 2 + sigma(overlap) ** 2] * 2)
+    cov = np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2])
+    left = pose_update(rows, np.zeros(4), noise, cov, np.zeros((3, 3)), (lead_m, 0.0)).relative
+    x = 0.5 * (lead_m + range_m)
+    jacobian = np.array([0.0, 1.0, x - lead_m])
+    ego_var, coop_var = sigma(x) ** 2, sigma(x - lead_m) ** 2 + float(jacobian @ left @ jacobian)
+    return ego_var / (ego_var + coop_var)
 
 
 def random_road(rng: np.random.Generator) -> AnalyticRoad:
@@ -343,11 +360,8 @@ def main(argv: list[str] | None = None) -> int:
             e, s, o = np.concatenate(errors[name]), np.concatenate(sigmas[name]), np.concatenate(overlap[name])
             o_sigma = np.concatenate(overlap_sigmas[name])
             w = "–"
-            if name == "inverse-variance" and args.gap is None:  # closed form at the overlap's middle
-                x = 0.5 * (lead + args.range)
-                ego_var = float(CAMERA.sigma_m(np.array(x))) ** 2
-                coop_var = float(CAMERA.sigma_m(np.array(x - lead))) ** 2 + sigma_xy**2 + (sigma_yaw * (x - lead)) ** 2
-                w = f"{ego_var / (ego_var + coop_var):.2f}"
+            if name == "inverse-variance" and args.gap is None:
+                w = f"{middle_weight(lead, args.range, sigma_xy, sigma_yaw):.2f}"
             print(f"| {sigma_xy:g} / {1e3 * sigma_yaw:g} | {name} | {e.max():.3f} | {np.percentile(e, 95):.3f} | "
                   f"{e.mean():.3f} | {o.max():.3f} | {np.percentile(o, 95):.3f} | {o.mean():.3f} | {w} | {100 * np.mean(e <= s):.1f} | {100 * np.mean(e <= 2 * s):.1f} | "
                   f"{100 * np.mean(o <= o_sigma):.1f} | {100 * np.mean(o <= 2 * o_sigma):.1f} |")

@@ -176,8 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "installed packages and the current folder (repeatable; default: none)")
     parser.add_argument("--convoy-weights", choices=CONVOY_WEIGHTS, default="paper",
                         help="weights of the convoy overlap: the paper's fixed 0.75 coop / 0.25 ego, 0.5 each, or "
-                             "inverse-variance point by point from the detections' σ and pose covariances (the "
-                             "weights of mean when the detections state no σ) (default paper)")
+                             "inverse-variance point by point from the detections' σ and pose covariances, the coop's "
+                             "pose first corrected from the overlap (the weights of mean when the detections state "
+                             "no σ) (default paper)")
     parser.add_argument("--association", choices=ASSOCIATION_RULES, default="legacy",
                         help="lane association decision: the geometric and lane rules alone (legacy), also reject "
                              "pairs below the association confidence 0.4 as ambiguous (confidence), and also "

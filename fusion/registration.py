@@ -1,0 +1,151 @@
+"""The coop's pose error estimated from a convoy overlap (``convoy_weights="inverse-variance"``).
+
+A sender's pose error moves its whole detection rigidly, so the coop's points are not
+independent of each other: where the two detections overlap, their lateral differences
+measure the relative pose error δ = (δx, δy, δψ) of the coop in the ego frame (yaw about
+the coop's position). The Gaussian MAP (Kalman) update with the pose covariances as the
+prior gives its estimate and the covariance left after it, in closed form:
+
+    P = Σ_c + T Σ_e Tᵀ,   K = P Hᵀ (H P Hᵀ + R)⁻¹,   δ̂ = K d,   P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ
+
+with d the measured lateral differences (coop minus ego, along the ego border's left normal
+n), H their rows (n_x, n_y, n·R₉₀(p − s_c)) (p the coop point, s_c the coop, R₉₀ the
+quarter turn), R the two detections' stated sensor variances there, and T = [[1, 0, −s_y],
+[0, 1, s_x], [0, 0, 1]] carrying the ego's pose error (about the ego) to the coop. The
+measurements are the overlap's two ends on each border: a lane detection's error is
+correlated along the border (a lane model's offset and heading), so its many points carry
+about as much information as a line through its ends, not one independent draw each; with
+a short overlap the two ends nearly coincide, the yaw is not observed and the prior keeps
+it. The coop's whole detection is moved by −δ̂ before the overlap is fused point by point.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion.convoy import OverlapStart, overlap_start
+from fusion.types import NDArrayFloat
+from fusion.uncertainty import BorderVariance, PairUncertainty, lateral_jacobian, pose_variance
+
+
+@dataclass(frozen=True)
+class PoseUpdate:
+    """The relative pose error of the coop estimated from a convoy overlap, ego frame.
+
+    Fields: ``estimate`` δ̂ (x [m], y [m], yaw [rad]; yaw about the coop); ``relative`` its
+    error's covariance P⁺ (what is left of the coop's pose error relative to the ego, (3, 3));
+    ``world`` the covariance of the corrected coop's pose error in the world frame (its own
+    pose error less the estimate; equal to ``relative`` when the ego's pose is exact);
+    ``gain`` K (3, M), how the estimate follows each measurement.
+    """
+
+    estimate: NDArrayFloat
+    relative: NDArrayFloat
+    world: NDArrayFloat
+    gain: NDArrayFloat
+
+
+def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
+                 ego_sensor: NDArrayFloat, coop_sensor: NDArrayFloat, coop_xy: tuple[float, float]
+                 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """(H (2, 3), d (2,), R (2,), the ego's part of R (2,)) of one border pair at the overlap's
+    start and end (the coop start's foot on the ego border and the arc length
+    ``convoy_border`` pairs last), ego frame: the lateral difference coop minus ego along the
+    ego border's left normal, how the coop's pose error moves it, and the sum of the two
+    sensor variances there [m²]."""
+    s_ego, s0 = start.s_ego, start.s0
+    overlap_end = max(min(s_ego.item(-1) - s0, s_coop.item(-1)), 0.0)
+    rows, differences, noise, ego_noise = [], [], [], []
+    for u in (0.0, overlap_end):
+        p_ego = np.array([np.interp(s0 + u, s_ego, ego[:, 0]), np.interp(s0 + u, s_ego, ego[:, 1])])
+        p_coop = np.array([np.interp(u, s_coop, coop[:, 0]), np.interp(u, s_coop, coop[:, 1])])
+        k = int(np.clip(s_ego.searchsorted(s0 + u, side="right") - 1, 0, ego.shape[0] - 2))
+        t = ego[k + 1] - ego[k]
+        t = t / (math.hypot(*t) or 1.0)
+        normal = np.array([-t[1], t[0]])
+        lever = p_coop - np.asarray(coop_xy)
+        rows.append([normal[0], normal[1], normal @ np.array([-lever[1], lever[0]])])
+        differences.append(float(normal @ (p_coop - p_ego)))
+        ego_noise.append(float(np.interp(s0 + u, s_ego, ego_sensor)))
+        noise.append(ego_noise[-1] + float(np.interp(u, s_coop, coop_sensor)))
+    return np.array(rows), np.array(differences), np.array(noise), np.array(ego_noise)
+
+
+def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFloat, coop_cov: NDArrayFloat,
+                ego_cov: NDArrayFloat, coop_xy: tuple[float, float]) -> PoseUpdate:
+    """:class:`PoseUpdate` from measurements H (``rows``, (M, 3)), d (``differences``) and their
+    variances R (``noise``, [m²]) with the senders' (x, y, yaw) covariances in the ego frame
+    (see the module docstring). Zero covariances give δ̂ = 0 (the identity); a singular
+    innovation covariance (no sensor noise and an unobserved direction) is pseudo-inverted."""
+    sx, sy = coop_xy
+    carry = np.array([[1.0, 0.0, -sy], [0.0, 1.0, sx], [0.0, 0.0, 1.0]])
+    ego_part = carry @ ego_cov @ carry.T
+    prior = coop_cov + ego_part
+    noise_cov = np.diag(noise)
+    innovation = rows @ prior @ rows.T + noise_cov
+    gain = prior @ rows.T @ np.linalg.pinv(innovation, hermitian=True)
+    keep = np.eye(3) - gain @ rows
+    measured = gain @ noise_cov @ gain.T
+    relative = keep @ prior @ keep.T + measured
+    world = keep @ coop_cov @ keep.T + gain @ rows @ ego_part @ rows.T @ gain.T + measured
+    return PoseUpdate(gain @ differences, 0.5 * (relative + relative.T), 0.5 * (world + world.T), gain)
+
+
+def corrected(points: NDArrayFloat, coop_xy: tuple[float, float], estimate: NDArrayFloat) -> NDArrayFloat:
+    """Coop ``points`` (ego frame) moved by the inverse of the pose error ``estimate``: shifted
+    by −(δx, δy) and turned by −δψ about the coop at ``coop_xy``."""
+    c, s = math.cos(estimate[2]), math.sin(estimate[2])
+    lever = points - np.asarray(coop_xy) - estimate[:2]
+    turned = np.column_stack((c * lever[:, 0] + s * lever[:, 1], -s * lever[:, 0] + c * lever[:, 1]))
+    return turned + np.asarray(coop_xy)
+
+
+def corrected_variance(points: NDArrayFloat, sensor: NDArrayFloat, coop_xy: tuple[float, float],
+                       update: PoseUpdate) -> BorderVariance:
+    """:class:`BorderVariance` of a corrected coop border (``points`` ego frame): its sensor
+    variance, the world pose variance left after the update (J·``world``·Jᵀ) as ``pose`` and
+    the ego-frame one less that (J·(``relative`` − ``world``)·Jᵀ, negative where the
+    correction took on more of the ego's pose error than it left of the coop's) as
+    ``relative``, so that sensor + pose + relative is the ego-frame variance."""
+    world = pose_variance(points, coop_xy, update.world)
+    return BorderVariance(sensor, world, pose_variance(points, coop_xy, update.relative) - world)
+
+
+def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
+               arclengths: tuple[NDArrayFloat, NDArrayFloat], starts: tuple[OverlapStart, OverlapStart],
+               uncertainty: PairUncertainty
+               ) -> tuple[NDArrayFloat, NDArrayFloat, tuple[OverlapStart, OverlapStart],
+                          tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance],
+                          tuple[NDArrayFloat, NDArrayFloat]]:
+    """The coop's (left, right) borders of a convoy pair (``borders`` ego left, ego right, coop
+    left, coop right, ego frame; ``arclengths`` of the coop's) corrected by the
+    :func:`pose_update` of both borders' overlap ends, their overlap starts on the ego borders
+    the four borders' :class:`BorderVariance` (the coop's with the covariance left after
+    the update) and the coop borders' :func:`ego_shared`."""
+    xy = uncertainty.coop_xy
+    measured = [overlap_rows(borders[side], borders[2 + side], arclengths[side], starts[side],
+                             uncertainty.borders[side].sensor, uncertainty.borders[2 + side].sensor, xy)
+                for side in (0, 1)]
+    rows, differences, noise, ego_noise = (np.concatenate([m[i] for m in measured]) for i in range(4))
+    update = pose_update(rows, differences, noise, uncertainty.coop_cov, uncertainty.ego_cov, xy)
+    left, right = (corrected(borders[2 + side], xy, update.estimate) for side in (0, 1))
+    moved_starts = (overlap_start(borders[0], left, starts[0].s_ego), overlap_start(borders[1], right, starts[1].s_ego))
+    variances = (uncertainty.borders[0], uncertainty.borders[1],
+                 corrected_variance(left, uncertainty.borders[2].sensor, xy, update),
+                 corrected_variance(right, uncertainty.borders[3].sensor, xy, update))
+    shared = tuple(ego_shared(points, xy, update.gain[:, 2 * side: 2 * side + 2], ego_noise[2 * side: 2 * side + 2])
+                   for side, points in enumerate((left, right)))
+    return left, right, moved_starts, variances, shared
+
+
+def ego_shared(points: NDArrayFloat, coop_xy: tuple[float, float], gain: NDArrayFloat,
+               ego_variance: NDArrayFloat) -> NDArrayFloat:
+    """Per point of a corrected coop border, the covariance [m] of its error with an ego point
+    of unit σ on the same border: the correction carries the ego's errors at that border's
+    overlap ends (variances ``ego_variance`` [m²], their columns ``gain`` of K) in as
+    J·K·e_ends, and an ego point's error is taken as fully correlated with its border's ends
+    (one lane model), Σ_k (J·K)_k·σ_e,k."""
+    return lateral_jacobian(points, coop_xy) @ (gain @ np.sqrt(ego_variance))

@@ -1,0 +1,163 @@
+"""The coop's pose error estimated from a convoy overlap (inverse-variance weights): the
+Gaussian MAP update against the information form of generalised least squares, the
+corrected lane and its σ against closed forms on a straight road, curved and short overlaps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import fusion
+from fusion import FusionParams, LaneDetection, Pose2D, Source
+from fusion.analytic import AnalyticRoad, Segment, detect
+from fusion.geometry import distance_to_polyline, transform
+from fusion.registration import pose_update
+
+WIDTH_M = 3.5
+IV = FusionParams(convoy_weights="inverse-variance")
+ROAD_YAW = 0.3
+
+
+def straight() -> AnalyticRoad:
+    return AnalyticRoad([Segment(300.0)], x0=5.0, y0=-3.0, yaw0=ROAD_YAW)
+
+
+def stated(det: LaneDetection, sigma: float, pose_cov: np.ndarray | None, pose: Pose2D | None = None) -> LaneDetection:
+    """``det`` stating a constant ``sigma`` per point and ``pose_cov``, reporting ``pose``."""
+    return LaneDetection(pose or det.pose, det.left, det.right, left_sigma=np.full(det.left.shape[0], sigma),
+                         right_sigma=np.full(det.right.shape[0], sigma), pose_cov=pose_cov)
+
+
+def road_frame(points: np.ndarray, road: AnalyticRoad) -> np.ndarray:
+    """World ``points`` in the straight road's frame (x along it from its start, y left)."""
+    return transform(points - road.xy[0], 0.0, 0.0, -ROAD_YAW)
+
+
+def test_the_update_is_the_generalised_least_squares_solution_and_zero_covariance_the_identity() -> None:
+    rng = np.random.default_rng(3)
+    rows = rng.normal(size=(4, 3))
+    differences = rng.normal(0.0, 0.1, 4)
+    noise = rng.uniform(0.001, 0.01, 4)
+    a = rng.normal(size=(3, 3))
+    coop_cov = a @ a.T * 1e-3 + np.diag([1e-3, 1e-3, 1e-5])
+    update = pose_update(rows, differences, noise, coop_cov, np.zeros((3, 3)), (10.0, 1.0))
+    information = np.linalg.inv(coop_cov) + rows.T @ np.diag(1.0 / noise) @ rows
+    posterior = np.linalg.inv(information)
+    np.testing.assert_allclose(update.estimate, posterior @ rows.T @ (differences / noise), rtol=1e-9)
+    np.testing.assert_allclose(update.relative, posterior, rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(update.relative, update.world)  # an exact ego: the world keeps what is left
+    none = pose_update(rows, differences, noise, np.zeros((3, 3)), np.zeros((3, 3)), (10.0, 1.0))
+    assert not none.estimate.any() and not none.relative.any()
+
+
+def test_the_egos_pose_error_enters_the_prior_carried_to_the_coop() -> None:
+    """An ego yaw error δψ turns the coop at (s_x, s_y) about the ego: the relative pose error
+    is (−s_y·δψ, s_x·δψ, δψ) about the coop; with only that prior the update is its GLS."""
+    rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 20.0], [1.0, 0.0, -1.5]])
+    noise = np.full(3, 1e-4)
+    ego_cov = np.diag([0.0, 0.0, 0.003**2])
+    carry = np.array([[1.0, 0.0, -2.0], [0.0, 1.0, 25.0], [0.0, 0.0, 1.0]])
+    update = pose_update(rows, np.array([0.05, 0.1, 0.0]), noise, np.zeros((3, 3)), ego_cov, (25.0, 2.0))
+    prior = carry @ ego_cov @ carry.T
+    gain = prior @ rows.T @ np.linalg.inv(rows @ prior @ rows.T + np.diag(noise))
+    np.testing.assert_allclose(update.estimate, gain @ np.array([0.05, 0.1, 0.0]), rtol=1e-9)
+    assert np.linalg.eigvalsh(update.world).min() >= -1e-15
+
+
+@pytest.mark.parametrize("offset_m, yaw_rad", [(0.08, 0.004), (-0.12, -0.006), (0.0, 0.003)])
+def test_a_known_offset_and_yaw_are_estimated_as_gls_and_the_whole_coop_lane_corrected(offset_m: float,
+                                                                                      yaw_rad: float) -> None:
+    """Straight road, exact borders stating σ: the coop (20 m on the road, 10 m ahead of the
+    ego) reports its pose ``offset_m`` to the left and turned by ``yaw_rad``. The overlap's ends
+    (levers 0 and L = 20 m from the coop, both borders) measure d = (ℓ, ℓ + L·sin δψ); in the
+    road frame H = (1, L·cos δψ) rows for (lateral, yaw), so the estimate is the GLS
+    (P⁻¹ + HᵀR⁻¹H)⁻¹HᵀR⁻¹d and every coop point past the overlap is the reported one turned
+    back by the estimated yaw and shifted back by the estimated offset."""
+    road = straight()
+    sigma_e, sigma_c, sxy, syaw = 0.05, 0.03, 0.1, 0.005
+    cov = np.diag([sxy**2, sxy**2, syaw**2])
+    ego = stated(detect(road, 10.0, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M), sigma_e, None)
+    true = detect(road, 20.0, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    normal = (-math.sin(ROAD_YAW), math.cos(ROAD_YAW))
+    reported = Pose2D(true.pose.x + offset_m * normal[0], true.pose.y + offset_m * normal[1], true.pose.yaw + yaw_rad)
+    coop = stated(true, sigma_c, cov, reported)
+    result = fusion.fuse(ego, coop, params=IV)
+    assert result.kind == "convoy"
+    lever = 20.0
+    rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, lever * math.cos(yaw_rad)]] * 2)
+    d = np.array([offset_m, offset_m + lever * math.sin(yaw_rad)] * 2)
+    noise = 1.0 / (sigma_e**2 + sigma_c**2)
+    posterior = np.linalg.inv(np.linalg.inv(cov) + noise * rows.T @ rows)  # cov is the same in the road frame
+    estimate = posterior @ rows.T @ (noise * d)
+    assert estimate[0] == pytest.approx(0.0, abs=1e-15)  # along the road: not observed
+    # the reported border (road frame) shifted back by the estimate and turned back about the reported coop
+    turn = lambda a: np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])  # noqa: E731
+    coop_xy = np.array([20.0, offset_m])
+    expected = coop_xy + (true.left @ turn(yaw_rad).T - estimate[:2]) @ turn(-estimate[2]).T
+    coop_part = result.left_source == Source.COOP
+    local = road_frame(result.left[coop_part], road)
+    beyond = local[:, 0] > 40.0 + IV.convoy_end_blend_m
+    assert beyond.sum() > 40
+    np.testing.assert_allclose(local[beyond], expected[-beyond.sum():], atol=1e-9)
+    uncorrected = (coop_xy + true.left @ turn(yaw_rad).T)[-beyond.sum():]
+    assert np.abs(local[beyond, 1] - 0.5 * WIDTH_M).max() < np.abs(uncorrected[:, 1] - 0.5 * WIDTH_M).max()
+    # its σ: the sensor's and what is left of the pose error, J·P⁺·Jᵀ with J = (n, t·(p − s_c))
+    angle = yaw_rad - estimate[2]
+    t, n = np.array([math.cos(angle), math.sin(angle)]), np.array([-math.sin(angle), math.cos(angle)])
+    jacobian = np.column_stack((np.tile(n, (beyond.sum(), 1)), (local[beyond] - coop_xy) @ t))
+    expected_var = sigma_c**2 + np.einsum("ij,jk,ik->i", jacobian, posterior, jacobian)
+    np.testing.assert_allclose(result.left_sigma[coop_part][beyond], np.sqrt(expected_var), rtol=1e-6)
+
+
+def test_zero_pose_covariance_leaves_inverse_variance_as_without_it() -> None:
+    road = straight()
+    ego = stated(detect(road, 10.0, 30.0, 1.75, -1.75), 0.05, None)
+    det = detect(road, 20.0, 30.0, 1.75, -1.75)
+    moved = Pose2D(det.pose.x, det.pose.y + 0.1, det.pose.yaw + 0.004)
+    exact, zero = (fusion.fuse(ego, stated(det, 0.03, cov, moved), params=IV) for cov in (None, np.zeros((3, 3))))
+    np.testing.assert_array_equal(exact.left, zero.left)
+    np.testing.assert_array_equal(exact.right_sigma, zero.right_sigma)
+    paper = [fusion.fuse(ego, stated(det, 0.03, cov, moved)) for cov in (None, np.diag([0.01, 0.01, 1e-5]))]
+    np.testing.assert_array_equal(paper[0].left, paper[1].left)  # the paper's weights never move the coop
+
+
+@pytest.mark.parametrize("curvature", [1 / 100.0, -1 / 80.0])
+def test_a_curved_overlap_corrects_the_coops_pose_error(curvature: float) -> None:
+    """On an arc the overlap's ends still measure the lateral offset and the yaw: with a small
+    sensor σ the coop's far points come back to the road (their error a fifth of the
+    uncorrected one or less)."""
+    road = AnalyticRoad([Segment(5.0), Segment(200.0, curvature)], yaw0=-1.1)
+    ego = stated(detect(road, 10.0, 30.0, 1.75, -1.75), 0.005, None)
+    det = detect(road, 22.0, 30.0, 1.75, -1.75)
+    moved = Pose2D(det.pose.x + 0.06, det.pose.y - 0.08, det.pose.yaw + 0.006)
+    truth = road.border(1.75, 0.0, 120.0)
+    errors = {}
+    for weights in ("paper", "inverse-variance"):
+        coop = stated(det, 0.005, np.diag([0.1**2, 0.1**2, 0.005**2]), moved)
+        result = fusion.fuse(ego, coop, params=FusionParams(convoy_weights=weights))
+        assert result.kind == "convoy" and np.isfinite(result.left_sigma).all()
+        errors[weights] = distance_to_polyline(result.left[result.left_source == Source.COOP], truth).max()
+    assert errors["paper"] > 0.1
+    assert errors["inverse-variance"] < 0.2 * errors["paper"]
+
+
+def test_a_short_overlap_leaves_the_yaw_to_the_prior_without_nan() -> None:
+    """0.3 m of overlap: both ends sit at one lever, the yaw is not observed (its posterior
+    variance stays the prior's) while the lateral offset is; nothing is NaN."""
+    road = straight()
+    ego = stated(detect(road, 10.0, 30.0, 1.75, -1.75), 0.05, None)
+    det = detect(road, 39.7, 30.0, 1.75, -1.75)
+    cov = np.diag([0.1**2, 0.1**2, 0.005**2])
+    coop = stated(det, 0.03, cov, Pose2D(det.pose.x, det.pose.y, det.pose.yaw + 0.004))
+    result = fusion.fuse(ego, coop, params=IV)
+    assert result.kind == "convoy"
+    for array in (result.left, result.right, result.left_sigma, result.right_sigma):
+        assert np.isfinite(array).all()
+    rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.3]] * 2)
+    rows[:, :2] = rows[:, :2] @ np.array([[math.cos(ROAD_YAW), math.sin(ROAD_YAW)],
+                                          [-math.sin(ROAD_YAW), math.cos(ROAD_YAW)]]) @ np.diag([1.0, 1.0])
+    update = pose_update(rows, np.zeros(4), np.full(4, 0.05**2 + 0.03**2), cov, np.zeros((3, 3)), (0.0, 0.0))
+    assert update.relative[2, 2] > 0.95 * cov[2, 2]
+    assert update.relative[1, 1] < 0.5 * cov[1, 1] or update.relative[0, 0] < 0.5 * cov[0, 0]
