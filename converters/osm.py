@@ -347,9 +347,54 @@ def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
         at = slice(first, first + _NODES_AT_ONCE)
         values: list[object] = [None] * (4 * len(known[at]))  # id, lat, lon, height of each node
         values[0::4], values[1::4], values[2::4], values[3::4] = (
-            identifiers[at].tolist(), lat[at].tolist(), lon[at].tolist(), xyz[at, 2].tolist())
+            identifiers[at].tolist(), float_reprs(lat[at]), float_reprs(lon[at]), _heights_text(xyz[at, 2]))
         parts.append("".join(map(_NODE_FORMATS.__getitem__, known[at].tolist())) % tuple(values))
     return "".join(parts)
+
+
+def _heights_text(z: NDArrayFloat) -> list[str]:
+    """``"%.4f" % h`` of each height (m), each distinct value (bit pattern) formatted once."""
+    distinct, inverse = np.unique(np.ascontiguousarray(z, dtype=np.float64).view(np.int64), return_inverse=True)
+    return np.array(["%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
+
+
+def float_reprs(values: NDArrayFloat) -> list[str]:
+    """``repr`` of each float of ``values``: orjson's shortest round-trip digits (the
+    digits of ``repr``, many times faster) in ``repr``'s notation (from 1e-4 to 1e15 the
+    two agree; below, ``_fifth_decade`` and ``_padded_exponents``), ``repr`` itself for
+    zero, |v| >= 1e15 and values not finite, or for all if orjson's notation is not the
+    one expected."""
+    import orjson
+
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    magnitude = np.abs(values)
+    bands = (  # (where, what orjson writes once in each text, how it becomes repr's)
+        ((magnitude >= 1e-4) & (magnitude < 1e15), b".", list),
+        ((magnitude >= 1e-5) & (magnitude < 1e-4), b"0.0000", _fifth_decade),
+        ((magnitude < 1e-5) & (magnitude > 0.0), b"e-", _padded_exponents),
+    )
+    texts = np.empty(len(values), dtype=object)
+    for where, marker, notation in bands:
+        count = int(where.sum())
+        if count:
+            data = orjson.dumps(values[where], option=orjson.OPT_SERIALIZE_NUMPY)
+            if data.count(marker) != count or data.count(b"e") != (marker == b"e-") * count:
+                return list(map(repr, values.tolist()))  # not the notation expected
+            texts[where] = notation(data[1:-1].decode("ascii").split(","))
+    others = ~(bands[0][0] | bands[1][0] | bands[2][0])
+    texts[others] = list(map(repr, values[others].tolist()))
+    return texts.tolist()
+
+
+def _fifth_decade(texts: list[str]) -> list[str]:
+    """orjson's "0.0000dd…" (1e-5 <= |v| < 1e-4) as ``repr`` writes it: "d.d…e-05"."""
+    return [f"{sign}{digits[0]}.{digits[1:]}e-05" if len(digits) > 1 else f"{sign}{digits}e-05"
+            for sign, _, digits in (text.partition("0.0000") for text in texts)]
+
+
+def _padded_exponents(texts: list[str]) -> list[str]:
+    """orjson's "d.d…e-6" as ``repr`` writes it: an exponent of at least two digits, "d.d…e-06"."""
+    return [f"{mantissa}e-{power.zfill(2)}" for mantissa, _, power in (text.partition("e-") for text in texts)]
 
 
 _NODES_AT_ONCE: Final[int] = 65536
@@ -357,8 +402,8 @@ _NODES_AT_ONCE: Final[int] = 65536
 
 
 _NODE_FORMATS: Final[tuple[str, str]] = (
-    '  <node id="%d" lat="%r" lon="%r"/>\n%.0s',  # no height: the height is formatted as nothing
-    '  <node id="%d" lat="%r" lon="%r">\n    <tag k="ele" v="%.4f"/>\n  </node>\n',
+    '  <node id="%d" lat="%s" lon="%s"/>\n%.0s',  # no height: the height is formatted as nothing
+    '  <node id="%d" lat="%s" lon="%s">\n    <tag k="ele" v="%s"/>\n  </node>\n',
 )
 """An OSM node without and with its ``ele`` tag, pretty-printed at depth 1 (``%`` fields)."""
 

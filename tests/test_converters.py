@@ -29,6 +29,7 @@ from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
 from converters.osm import (
     MERGE_TOLERANCE_M,
     OPENDRIVE_TAG,
+    float_reprs,
     left_on_left,
     merge_points,
     opendrive_lanes_tag,
@@ -234,6 +235,30 @@ def test_simplify_drops_collinear_vertices_and_keeps_corners() -> None:
 
 
 @settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), max_size=50))
+def test_float_reprs_are_repr(values) -> None:
+    assert float_reprs(np.array(values, dtype=np.float64)) == [repr(v) for v in values]
+
+
+def test_node_heights_are_written_as_four_decimals_each_bit_pattern_its_own() -> None:
+    from converters.osm import _heights_text
+
+    heights = np.array([0.0, -0.0, 1.23455, 1.23465, -2.5, 0.0, np.nan])
+    assert _heights_text(heights) == ["%.4f" % h for h in heights.tolist()]
+    assert _heights_text(heights)[:2] == ["0.0000", "-0.0000"]
+
+
+def test_float_reprs_are_repr_in_every_decade_and_at_the_notation_changes() -> None:
+    rng = np.random.default_rng(0)
+    decades = rng.uniform(1.0, 10.0, 20_000) * 10.0 ** rng.integers(-40, 25, 20_000)
+    edges = np.array([1e-4, 1e-5, 1e15, 1e16, 5e-324, 1.7976931348623157e308, 0.0, -0.0, 1.0, 100.0])
+    with np.errstate(over="ignore"):  # the largest float's next is inf
+        edges = np.concatenate([edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+    bits = rng.integers(0, 2**63, 20_000, dtype=np.int64).view(np.float64)
+    for values in (decades, -decades, edges, bits, rng.uniform(-0.02, 0.02, 20_000)):
+        assert float_reprs(values) == [repr(v) for v in values.tolist()]
+
+
 @given(st.lists(st.tuples(st.text(min_size=1).filter(lambda t: ";" not in t), st.integers(0, 99), st.integers(-9, 9))))
 def test_opendrive_lanes_tag_round_trips(lanes) -> None:
     assert parse_opendrive_lanes_tag(opendrive_lanes_tag(lanes)) == tuple(lanes)

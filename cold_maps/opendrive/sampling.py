@@ -290,7 +290,7 @@ def _single_width(
     record; None: no lane, 0) over its block of ``counts`` stations (m), bit for bit."""
     records = [lane.widths[0] if lane is not None and lane.widths else None for lane in lanes]
     table = np.array([(r.s0, r.a, r.b, r.c, r.d) if r is not None else (0.0,) * 5 for r in records]).reshape(-1, 5)
-    s0, c0, c1, c2, c3 = np.repeat(table, counts, axis=0).T
+    s0, c0, c1, c2, c3 = np.repeat(table.T, counts, axis=1)  # contiguous rows
     local = s - np.repeat([section.s for section in sections], counts)
     applies = np.repeat([r is not None for r in records], counts) & (s0 <= local)
     ds = np.where(applies, local - s0, 0.0)

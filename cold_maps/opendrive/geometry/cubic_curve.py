@@ -117,7 +117,8 @@ def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequen
             break
         blocks = np.diff(bounds)[active]
         ends = np.cumsum(blocks)
-        rows = np.arange(ends[-1]) + np.repeat(bounds[active] - (ends - blocks), blocks)
+        rows: slice | np.ndarray = slice(None) if ends[-1] == len(s) else (  # all of them: views, no copies
+            np.arange(ends[-1]) + np.repeat(bounds[active] - (ends - blocks), blocks))
         lo, now, c1, c2, c3, d1, d2, d3 = (a[rows] for a in (p_lo, p, u1, u2, u3, v1, v2, v3))
         half = 0.5 * (now - lo)
         nodes = np.multiply(half, _NODES[:, None])  # (nodes, rows): long inner loops
@@ -171,9 +172,9 @@ def poses_at_parameters(
 
 
 def _coefficients(curves: Sequence[CubicCurve], counts: Sequence[int]) -> list[NDArrayFloat]:
-    """u[0..3], v[0..3] of each curve, repeated ``counts`` times (arrays)."""
+    """u[0..3], v[0..3] of each curve, repeated ``counts`` times (contiguous arrays)."""
     table = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8)
-    return list(np.repeat(table, counts, axis=0).T)
+    return list(np.repeat(table.T, counts, axis=1))
 
 
 def pose_at_parameter(
