@@ -69,9 +69,10 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
     first = int(s_ego.searchsorted(s0))
-    overlap_end = min(s_ego.item(-1) - s0, s_coop.item(-1))
-    stop = int(s_ego.searchsorted(s0 + overlap_end, side="right"))
-    coop_continues = stop >= ego.shape[0]
+    ego_left = s_ego.item(-1) - s0
+    coop_continues = ego_left <= s_coop.item(-1)
+    overlap_end = ego_left if coop_continues else s_coop.item(-1)
+    stop = ego.shape[0] if coop_continues else int(s_ego.searchsorted(s0 + overlap_end, side="right"))
     u = s_ego[first:stop] - s0
     paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])
     overlap = np.ascontiguousarray(ego[first:stop]).view(np.complex128)[:, 0]

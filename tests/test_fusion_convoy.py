@@ -110,3 +110,18 @@ def test_convoy_mode_with_a_gap_is_rejected_and_zero_gap_concatenates() -> None:
     assert np.isfinite(joined.left).all()
     assert np.diff(joined.left[:, 0]).min() > 0.0
     assert joined.left[-1, 0] == pytest.approx(60.0)
+
+
+def test_coop_tail_kept_where_the_overlap_end_rounds_below_the_ego_end() -> None:
+    """The coop continues past the ego's end even when s0 + (s_end − s0) rounds one ulp below s_end."""
+    from fusion.convoy import OverlapStart, convoy_border
+    x = np.linspace(0.0, 31.3, 314)
+    ego = np.column_stack((x, np.full_like(x, 2.0)))
+    s0 = 14.409121793547266
+    assert s0 + (x[-1] - s0) < x[-1]
+    coop = np.column_stack((s0 + x, np.full_like(x, 2.0)))
+    parts = convoy_border(ego, coop, x, OverlapStart(x, s0, 0.0, 0.0), 0.75, 0.5)
+    assert [source for _, source, _ in parts] == [Source.EGO, Source.FUSED, Source.COOP]
+    border = np.concatenate([points for points, _, _ in parts])
+    assert border[-1, 0] == pytest.approx(s0 + 31.3)
+    assert np.all(np.diff(border[:, 0]) > 0.0)
