@@ -16,8 +16,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, GroundTruthMeter,
-                                         Measurement, _end_direction, _near_ends, ahead_of_m, border_figures,
-                                         covered_length_m, gt_ends, points_past_ends)
+                                         Measurement, _end_direction, ahead_of_m, covered_length_m, gt_ends,
+                                         points_past_ends)
 from gt_matching.polyline import SegmentIndex, arc_lengths, closest_distances
 from conftest import bundled_map
 
@@ -104,28 +104,6 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
         distances = rng.uniform(0.0, 3.0, count)
         assert points_past_ends(border, gt, distances, 0.02) == _past_reference(border, gt, distances, 0.02)
         assert points_past_ends(border, gt_ends(gt), distances, 0.02) == _past_reference(border, gt, distances, 0.02)
-
-
-@given(st.integers(0, 2**32 - 1), st.lists(st.integers(2, 120), min_size=1, max_size=6), st.floats(0.0, 1.0))
-def test_border_figures_of_many_borders_equal_one_by_one_bit_for_bit(seed: int, counts: list[int],
-                                                                     far_share: float) -> None:
-    """Range and distances ahead of several borders at once (with and without poses, runs
-    of points near and far), and which of them may reach past a GT end."""
-    rng = np.random.default_rng(seed)
-    borders = [_polyline(seed + index, count, float(rng.uniform(0.001, 1.0))) for index, count in enumerate(counts)]
-    errors = []
-    for count in counts:
-        found = rng.uniform(0.0, 0.9, count)
-        found[rng.random(count) < far_share] = 1.5
-        errors.append(found)
-    poses = [None if rng.random() < 0.3 else (float(b[0, 0]) - 1.0, float(b[0, 1]), float(rng.uniform(-np.pi, np.pi)))
-             for b in borders]
-    for (covered, ahead), border, found, pose in zip(border_figures(borders, errors, poses), borders, errors, poses):
-        assert covered == covered_length_m(border, found)
-        assert ahead.tobytes() == ahead_of_m(border, pose).tobytes()
-    ends = gt_ends(_polyline(seed + 99, 40, 0.3))
-    for near, border, found in zip(_near_ends(borders, ends), borders, errors):
-        assert near or points_past_ends(border, ends, found + 3.0, 0.02) == 0
 
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:

@@ -25,7 +25,7 @@ import numpy as np
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.lru import lru_get
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import NDArrayBool, NDArrayInt, arc_lengths, arc_lengths_many, as_polyline, restarting_cumsum
+from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch, MatchingError
@@ -128,47 +128,6 @@ def ahead_of_m(border: NDArrayFloat, pose: tuple[float, float, float] | None) ->
     return _ahead(border, arc, _chords(border, arc, 0, len(arc)), pose)
 
 
-def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFloat],
-                   poses: Sequence[tuple[float, float, float] | None]) -> list[tuple[float, NDArrayFloat]]:
-    """Per border (``(N >= 2, 2)``, world frame, driving order; its points' GT errors
-    ``errors_m``; its sender's pose or None), :func:`covered_length_m` and
-    :func:`ahead_of_m`, bit for bit as one by one: the arc lengths and chords of all
-    borders in one pass."""
-    counts = np.array([len(border) for border in borders])
-    starts = np.cumsum(counts) - counts
-    points = np.concatenate(borders)
-    arc = arc_lengths_many(list(borders))
-    stations = arc // RANGE_CHORD_M
-    is_end = np.zeros(len(points), dtype=bool)
-    is_end[starts] = is_end[starts + counts - 1] = True
-    is_end[1:] |= stations[1:] != stations[:-1]
-    ends = np.flatnonzero(is_end)
-    chord_counts = np.add.reduceat(is_end, starts) - 1
-    owner = np.repeat(np.arange(len(counts)), chord_counts + 1)
-    step = points[ends[1:]] - points[ends[:-1]]
-    chords = np.hypot(step[:, 0], step[:, 1])[owner[1:] == owner[:-1]]
-    along = restarting_cumsum(chords, chord_counts)
-    knot_x = arc[ends]
-    knots = np.cumsum(chord_counts + 1) - (chord_counts + 1)
-    figures = []
-    for index, (border, pose) in enumerate(zip(borders, poses)):
-        first, end = int(starts[index]), int(starts[index] + counts[index])
-        knot, chord_count = int(knots[index]), int(chord_counts[index])
-        chord = knot - index
-        errors = errors_m[index]
-        if (errors <= RANGE_ERROR_THRESHOLD_M).all():
-            covered = float(chords[chord:chord + chord_count].sum())
-        else:
-            covered = _covered(border, arc[first:end], errors)[0]
-        ahead_m = np.interp(arc[first:end], knot_x[knot:knot + chord_count + 1], along[knot:knot + chord_count + 1])
-        if pose is not None:
-            x, y, yaw = pose
-            start = math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y)
-            ahead_m = ahead_m + max(start, 0.0)
-        figures.append((covered, ahead_m))
-    return figures
-
-
 GT_END_TOLERANCE_M: Final[float] = 0.1
 """A detected point more than this (m) past an end of its GT border, along the border's
 end direction, lies beyond the GT (one detection sample spacing)."""
@@ -264,28 +223,6 @@ def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat | GtEnds, distances_
     return count
 
 
-#: Margin (m) by which ``_near_ends`` widens ``GT_END_TOLERANCE_M``: more than the rounding of
-#: a projection computed another way.
-NEAR_END_MARGIN_M: Final[float] = 1e-6
-
-
-def _near_ends(borders: Sequence[NDArrayFloat], ends: GtEnds) -> NDArrayBool:
-    """Per border (``(N, 2)``, m), whether a point may lie more than ``GT_END_TOLERANCE_M``
-    past one of ``ends`` (all borders' points projected at once, with a margin of
-    ``NEAR_END_MARGIN_M``): only those need :func:`points_past_ends`."""
-    counts = np.array([len(border) for border in borders])
-    near = np.zeros(len(borders), dtype=bool)
-    if not ends:
-        return near
-    points = np.concatenate(borders)
-    past = np.zeros(len(points), dtype=bool)
-    for end, direction in ends:
-        past |= ((points[:, 0] - end[0]) * direction[0] + (points[:, 1] - end[1]) * direction[1]
-                 > GT_END_TOLERANCE_M - NEAR_END_MARGIN_M)
-    near[np.repeat(np.arange(len(borders)), counts)[past]] = True
-    return near
-
-
 class GroundTruthMeter:
     """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
     (``GroundTruth.errors``: per-point distances to the GT borders resampled every
@@ -343,9 +280,10 @@ class GroundTruthMeter:
         routes: dict[tuple[tuple[int, bool], ...], list[tuple[int, LaneMatch, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
         matches = self.match_many([(*(reference or (left, right)), pose) for left, right, pose, reference in lanes])
         for index, ((left, right, _, _), match) in enumerate(zip(lanes, matches)):
+            if isinstance(match, MatchingError):
+                found[index] = match
+                continue
             try:
-                if isinstance(match, MatchingError):
-                    raise match
                 lane = (as_polyline("left border", left), as_polyline("right border", right))
             except MatchingError as exc:
                 found[index] = exc
@@ -361,22 +299,21 @@ class GroundTruthMeter:
     def _measured(self, matches: list[LaneMatch], lanes: list[tuple[NDArrayFloat, NDArrayFloat]],
                   poses: Sequence[tuple[float, float, float] | None]) -> list[Measurement]:
         """:meth:`errors` of validated lanes against matches of one GT lanelet sequence."""
-        distances = self.ground_truth.resampled(matches[0], lanes)
-        sides = []
-        for side in (0, 1):
-            borders, errors = [lane[side] for lane in lanes], [found[side] for found in distances]
-            ends = self._ends(matches[0], ("left", "right")[side])
-            near = _near_ends(borders, ends)
-            past = [points_past_ends(points, ends, found, self.step_m) if close else 0
-                    for points, found, close in zip(borders, errors, near.tolist())]
-            sides.append((border_figures(borders, errors, poses), past))
         measured = []
-        for index, match in enumerate(matches):
-            (left_range, left_ahead), (right_range, right_ahead) = sides[0][0][index], sides[1][0][index]
-            past = sides[0][1][index] + sides[1][1][index]
+        distances = self.ground_truth.resampled(matches[0], lanes)
+        for match, (left, right), (left_errors, right_errors), pose in zip(matches, lanes, distances, poses):
+            past = 0
+            figures = []
+            for points, side, errors in ((left, "left", left_errors), (right, "right", right_errors)):
+                past += points_past_ends(points, self._ends(match, side), errors, self.step_m)
+                arc = arc_lengths(points)
+                covered, chords = _covered(points, arc, errors)
+                figures.append((covered, _ahead(points, arc, _chords(points, arc, 0, len(arc))
+                                                if chords is None else chords, pose)))
             reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
-            measured.append(Measurement(distances[index][0], distances[index][1], left_range, right_range,
-                                        match.left_gt, match.right_gt, match.matched, reason, left_ahead, right_ahead))
+            (left_range, left_ahead), (right_range, right_ahead) = figures
+            measured.append(Measurement(left_errors, right_errors, left_range, right_range, match.left_gt,
+                                        match.right_gt, match.matched, reason, left_ahead, right_ahead))
         return measured
 
     def _ends(self, match: LaneMatch, side: str) -> GtEnds:
