@@ -230,8 +230,9 @@ class _SharedNearest:
             found = self._found.get(geometry.key)
             if found is None:
                 distances, index = geometry.centre_nearest(self._points)
-                found = self._found[geometry.key] = list(zip(np.split(distances, self._splits),
-                                                             np.split(index, self._splits)))
+                found = self._found[geometry.key] = (list(zip(np.split(distances, self._splits),
+                                                              np.split(index, self._splits)))
+                                                     if len(self._splits) else [(distances, index)])
             return found[lane]
 
         return centre_nearest

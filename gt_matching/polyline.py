@@ -124,6 +124,8 @@ def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
 
 def arc_lengths_many(polylines: list[NDArrayFloat]) -> NDArrayFloat:
     """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated."""
+    if len(polylines) == 1:
+        return arc_lengths(polylines[0])
     counts = np.array([len(polyline) for polyline in polylines])
     vertices = np.concatenate(polylines)
     step = vertices[1:] - vertices[:-1]
