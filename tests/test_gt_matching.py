@@ -331,7 +331,8 @@ def test_match_many_equals_match_one_by_one(junction: JunctionMap) -> None:
         np.testing.assert_array_equal(item.left_gt, expected.left_gt)
         np.testing.assert_array_equal(item.right_gt, expected.right_gt)
     assert [isinstance(item, MatchingError) for item in found] == [False] * 5 + [True] * 2
-    assert found[1].lanelet_ids[-1] == junction.ids["right_exit"] and found[2].lanelet_ids[-1] == junction.ids["left_exit"]
+    assert found[1].lanelet_ids[-1] == junction.ids["right_exit"]
+    assert found[2].lanelet_ids[-1] == junction.ids["left_exit"]
     assert not found[4].matched
 
 
