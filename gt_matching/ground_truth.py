@@ -27,7 +27,7 @@ from gt_matching.polyline import (
     angle_difference,
     arc_lengths,
     as_polyline,
-    closest_distances,
+    closest_many,
     mid_line,
     SegmentIndex,
 )
@@ -97,6 +97,18 @@ class _Route:
     keys: tuple[LaneletKey, ...]
     left: RouteBorder
     right: RouteBorder
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """What lanelet sequences are scored on, for one detected lane: its mid-line samples
+    every ``score_step_m`` (``(K, 2)``, m), the sender's distance to them (m) and arc length
+    along them (m), and each lanelet's ``centre_nearest`` of the samples."""
+
+    centre: NDArrayFloat
+    pose_gap_m: float
+    pose_arc_m: float
+    centre_nearest: CentreNearest
 
 
 def _pose(pose: Sequence[float]) -> Pose:
@@ -202,6 +214,30 @@ def _border_fit_m(lanelets: Sequence[LaneletGeometry], left: NDArrayFloat, right
     return float(np.mean(fits))
 
 
+class _SharedNearest:
+    """Lanelets' ``centre_nearest`` of several lanes' mid-line samples, each lanelet's
+    KD-tree asked once for all of them on first use (a point's answer does not depend on the
+    others asked with it)."""
+
+    def __init__(self, centres: list[NDArrayFloat]) -> None:
+        self._points = np.concatenate(centres)
+        self._splits = np.cumsum([len(centre) for centre in centres])[:-1]
+        self._found: dict[LaneletKey, list[tuple[NDArrayFloat, NDArrayInt]]] = {}
+
+    def of(self, lane: int) -> CentreNearest:
+        """``centre_nearest`` of the ``lane``-th lane's samples."""
+        def centre_nearest(geometry: LaneletGeometry) -> tuple[NDArrayFloat, NDArrayInt]:
+            found = self._found.get(geometry.key)
+            if found is None:
+                distances, index = geometry.centre_nearest(self._points)
+                found = self._found[geometry.key] = (list(zip(np.split(distances, self._splits),
+                                                              np.split(index, self._splits)))
+                                                     if len(self._splits) else [(distances, index)])
+            return found[lane]
+
+        return centre_nearest
+
+
 class GroundTruth:
     """A Lanelet2 map prepared for matching detections: built once, reused per frame.
 
@@ -261,9 +297,47 @@ class GroundTruth:
         driving order) and the sender's pose (x, y, yaw)."""
         return self._match(*self._inputs(left, right, pose))[0]
 
-    def _match(self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose) -> tuple[LaneMatch, _Route]:
-        """``match`` of validated inputs, and the assembled route."""
-        sequence, pose_ids, mismatch = self._select(left, right, pose)
+    def match_many(self, lanes: Sequence[tuple[npt.ArrayLike, npt.ArrayLike, Sequence[float]]]
+                   ) -> list[LaneMatch | MatchingError]:
+        """``match`` of each lane (left, right, pose), or its ``MatchingError``, bit for bit as
+        one by one: the lanes' mid-line samples measured from their poses in one pass, and the
+        lanes at one pose (a frame's) measured to each lanelet in one KD-tree query."""
+        found: list[LaneMatch | MatchingError | None] = [None] * len(lanes)
+        valid = []
+        for index, (left, right, pose) in enumerate(lanes):
+            try:
+                valid.append((index, *self._inputs(left, right, pose)))
+            except MatchingError as exc:
+                found[index] = exc
+        prepared = self._prepare([(left, right, pose) for _, left, right, pose in valid]) if valid else []
+        for (index, left, right, pose), lane in zip(valid, prepared):
+            try:
+                found[index] = self._match(left, right, pose, lane)[0]
+            except MatchingError as exc:
+                found[index] = exc
+        return [item for item in found if item is not None]
+
+    def _prepare(self, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat, Pose]]) -> list[_Prepared]:
+        """``_Prepared`` of validated lanes: the poses' closest points on the mid-lines in one
+        pass (``closest_many``); the lanes at one pose share one query per lanelet."""
+        centres = [mid_line(left, right, self.config.score_step_m) for left, right, _ in lanes]
+        gaps, arcs = closest_many(np.array([pose[:2] for _, _, pose in lanes]), centres)
+        at_pose: dict[Pose, list[int]] = {}
+        for index, (_, _, pose) in enumerate(lanes):
+            at_pose.setdefault(pose, []).append(index)
+        nearest: dict[int, CentreNearest] = {}
+        for members in at_pose.values():
+            shared = _SharedNearest([centres[index] for index in members])
+            nearest.update((index, shared.of(rank)) for rank, index in enumerate(members))
+        return [_Prepared(centre, gap, arc, nearest[index])
+                for index, (centre, gap, arc) in enumerate(zip(centres, gaps.tolist(), arcs.tolist()))]
+
+    def _match(self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose,
+               prepared: _Prepared | None = None) -> tuple[LaneMatch, _Route]:
+        """``match`` of validated inputs (``prepared``: by ``_prepare``, else prepared
+        alone), and the assembled route."""
+        sequence, pose_ids, mismatch = self._select(left, right, pose,
+                                                    prepared or self._prepare([(left, right, pose)])[0])
         route = self._route(sequence.lanelets)
         match = LaneMatch(
             lanelet_ids=_ids(sequence.lanelets),
@@ -413,22 +487,15 @@ class GroundTruth:
         ]
 
     def _select(
-        self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose
+        self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose, prepared: _Prepared
     ) -> tuple[_Sequence, tuple[int, ...], str | None]:
-        """The lanelet sequence to score against, the sender's lanelets, and a mismatch reason."""
+        """The lanelet sequence to score against, the sender's lanelets, and a mismatch reason
+        (``prepared``: the lane's ``_Prepared``)."""
         config = self.config
         candidates = self._candidates(pose)
-        centre = mid_line(left, right, config.score_step_m)
-        pose_gap, pose_arc = closest_distances(np.array([pose[:2]]), centre)
-        ahead_m = arc_lengths(centre)[-1] - pose_arc[0] + pose_gap[0] + config.margin_m
-        behind_m = pose_arc[0] + config.margin_m
-        memo: dict[LaneletKey, tuple[NDArrayFloat, NDArrayInt]] = {}
-
-        def centre_nearest(geometry: LaneletGeometry) -> tuple[NDArrayFloat, NDArrayInt]:
-            found = memo.get(geometry.key)
-            if found is None:
-                found = memo[geometry.key] = geometry.centre_nearest(centre)
-            return found
+        centre, centre_nearest = prepared.centre, prepared.centre_nearest
+        ahead_m = arc_lengths(centre)[-1] - prepared.pose_arc_m + prepared.pose_gap_m + config.margin_m
+        behind_m = prepared.pose_arc_m + config.margin_m
 
         def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:
             return centre_nearest(geometry)[0]

@@ -75,15 +75,16 @@ def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArr
 
 
 def segment_distances(
-    points: NDArrayFloat, vertices: NDArrayFloat, segments: NDArrayInt
+    points: NDArrayFloat, vertices: NDArrayFloat, segments: NDArrayInt, cum: NDArrayFloat | None = None
 ) -> tuple[NDArrayFloat, NDArrayFloat]:
     """Closest-point distance of each point to a set of candidate segments of ``vertices``.
 
     ``segments`` is ``(N, K)``: for point i the indices of K candidate segments
     (segment j joins vertex j and j + 1). Returns the smallest distance per point, m,
-    and the arc length along ``vertices`` of the closest point, m.
+    and the arc length along ``vertices`` of the closest point, m (``cum``: the arc length
+    of each vertex, default ``arc_lengths(vertices)``).
     """
-    cum = arc_lengths(vertices)
+    cum = arc_lengths(vertices) if cum is None else cum
     start = vertices[segments]
     delta = vertices[segments + 1] - start
     length_sq = np.einsum("nkd,nkd->nk", delta, delta)
@@ -104,6 +105,42 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     brute force over all segments: O(N * M), for short inputs."""
     all_segments = np.broadcast_to(np.arange(len(vertices) - 1), (len(points), len(vertices) - 1))
     return segment_distances(points, vertices, all_segments)
+
+
+def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
+    """Per group of ``counts`` consecutive ``values``, 0 and then their running sums: each
+    group's ``[0, *np.cumsum(group)]`` bit for bit (rows of a zero-padded array summed in
+    order), the groups concatenated."""
+    width = int(counts.max()) + 1
+    padded = np.zeros(len(counts) * width)
+    at = np.arange(1, len(values) + 1) + np.repeat(np.arange(len(counts)) * width - (np.cumsum(counts) - counts),
+                                                   counts)
+    padded[at] = values
+    rows = padded.reshape(len(counts), width)
+    np.cumsum(rows, axis=1, out=rows)
+    summed: NDArrayFloat = rows[np.arange(width) <= counts[:, None]]
+    return summed
+
+
+def arc_lengths_many(polylines: list[NDArrayFloat]) -> NDArrayFloat:
+    """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated."""
+    if len(polylines) == 1:
+        return arc_lengths(polylines[0])
+    counts = np.array([len(polyline) for polyline in polylines])
+    vertices = np.concatenate(polylines)
+    step = vertices[1:] - vertices[:-1]
+    inner = np.ones(len(step), dtype=bool)
+    inner[np.cumsum(counts)[:-1] - 1] = False
+    return restarting_cumsum(np.hypot(step[:, 0], step[:, 1])[inner], counts - 1)
+
+
+def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:
+    """``closest_distances`` of each point (``(L, 2)``) on its polyline (``L`` of them, at
+    least 2 vertices each), bit for bit, all in one pass: distance (m) and arc length (m)."""
+    counts = np.array([len(polyline) for polyline in polylines])
+    starts = np.cumsum(counts) - counts
+    segments = np.minimum(starts[:, None] + np.arange(int(counts.max()) - 1), (starts + counts - 2)[:, None])
+    return segment_distances(points, np.concatenate(polylines), segments, arc_lengths_many(polylines))
 
 
 class SegmentIndex:

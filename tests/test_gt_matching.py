@@ -304,6 +304,38 @@ def test_bad_input_raises_matching_error(
     assert message in str(error.value)
 
 
+def test_match_many_equals_match_one_by_one(junction: JunctionMap) -> None:
+    """Lanes at two poses (sharing lanelets), a reversed lane, one with bad input and one
+    off every lanelet: each slot holds ``match``'s result bit for bit, or its error."""
+    gt = junction.gt
+    lanes = [
+        (*route(junction, "approach").borders(5.0, 35.0), (5.0, 0.0, 0.0)),
+        (*route(junction, "approach", "right", "right_exit").borders(15.0, 75.0), (15.0, 0.0, 0.0)),
+        (*route(junction, "approach", "left", "left_exit").borders(15.0, 75.0), (15.0, 0.0, 0.0)),
+        (*route(junction, "approach", "straight").borders(15.0, 55.0, shift_m=0.4), (15.0, 0.0, 0.0)),
+        (*(border[::-1] for border in route(junction, "approach").borders(5.0, 35.0)[::-1]), (5.0, 0.0, 0.0)),
+        (np.zeros((4, 2)), route(junction, "approach").borders(5.0, 35.0)[1], (5.0, 0.0, 0.0)),
+        (*route(junction, "approach").borders(5.0, 35.0), (500.0, -20.0, 0.0)),
+    ]
+    found = gt.match_many(lanes)
+    assert len(found) == len(lanes)
+    for item, (left, right, pose) in zip(found, lanes):
+        try:
+            expected = gt.match(left, right, pose)
+        except MatchingError as exc:
+            assert isinstance(item, MatchingError) and str(item) == str(exc)
+            continue
+        assert not isinstance(item, MatchingError)
+        assert (item.lanelet_ids, item.route_key, item.pose_lanelet_ids, item.matched, item.mismatch) == (
+            expected.lanelet_ids, expected.route_key, expected.pose_lanelet_ids, expected.matched, expected.mismatch)
+        np.testing.assert_array_equal(item.left_gt, expected.left_gt)
+        np.testing.assert_array_equal(item.right_gt, expected.right_gt)
+    assert [isinstance(item, MatchingError) for item in found] == [False] * 5 + [True] * 2
+    assert found[1].lanelet_ids[-1] == junction.ids["right_exit"]
+    assert found[2].lanelet_ids[-1] == junction.ids["left_exit"]
+    assert not found[4].matched
+
+
 def test_config_rejects_bad_thresholds() -> None:
     with pytest.raises(ValueError, match="step_m must be > 0"):
         MatchingConfig(step_m=0.0)

@@ -7,12 +7,19 @@ import math
 import numpy as np
 import pytest
 
+from hypothesis import given
+from hypothesis import strategies as st
+
 from gt_matching.polyline import (
     angle_difference,
+    arc_lengths,
+    arc_lengths_many,
     at_fractions,
     closest_distances,
+    closest_many,
     mid_line,
     resample,
+    restarting_cumsum,
     windowed_distances,
 )
 
@@ -75,3 +82,25 @@ def test_nearest_distances_are_exact_on_rings_and_short_borders() -> None:
         exact, _ = nearest_distances(points, vertices)
         brute, _ = closest_distances(points, vertices)
         np.testing.assert_allclose(exact, brute, atol=1e-12)
+
+
+@given(st.integers(0, 2**32 - 1), st.lists(st.integers(2, 80), min_size=1, max_size=8))
+def test_many_polylines_at_once_equal_one_by_one_bit_for_bit(seed: int, counts: list[int]) -> None:
+    """Random walks (some steps repeated, some tiny, far from the origin) and a point near
+    each: arc lengths, closest points and running sums as for each polyline alone."""
+    rng = np.random.default_rng(seed)
+    polylines = []
+    for count in counts:
+        steps = rng.normal(0.0, float(rng.choice([1e-3, 0.1, 2.0])), (count - 1, 2))
+        steps[rng.random(count - 1) < 0.2] = 0.0
+        polylines.append(np.vstack(([0.0, 0.0], np.cumsum(steps, axis=0))) + rng.normal(0.0, 1e4, 2))
+    points = np.array([polyline[rng.integers(len(polyline))] + rng.normal(0.0, 1.0, 2) for polyline in polylines])
+    assert np.concatenate([arc_lengths(p) for p in polylines]).tobytes() == arc_lengths_many(polylines).tobytes()
+    distance, along = closest_many(points, polylines)
+    for index, polyline in enumerate(polylines):
+        alone = closest_distances(points[index:index + 1], polyline)
+        assert (alone[0][0], alone[1][0]) == (distance[index], along[index])
+    values = rng.normal(0.0, 1.0, sum(counts))
+    groups = np.split(values, np.cumsum(counts)[:-1])
+    expected = np.concatenate([np.concatenate(([0.0], np.cumsum(group))) for group in groups])
+    assert restarting_cumsum(values, np.array(counts)).tobytes() == expected.tobytes()

@@ -11,7 +11,8 @@ preparation within the frame loop counts as it does in a run. Printed: CPU ms pe
 
 Each pass runs in a fresh interpreter; the sides (this checkout one by one, in
 ``GroundTruthMeter.measure_many`` blocks of N frames for each ``--block N``, and the
-``--baseline-ref`` commit) alternate, so all see the same load. Usage: ``python
+``--baseline-ref`` commit the same ways: it needs ``measure_many`` for ``--block``) alternate,
+so all see the same load. Usage: ``python
 tools/bench_measure.py [--map MAP.xodr] [--args "--frames 100"] [--repeat 3]
 [--baseline-ref 0abd8c1] [--block 1 --block 20] [--save calls.pkl | --calls calls.pkl]``.
 """
@@ -147,7 +148,7 @@ def side_pass(code: Path, map_path: Path, calls_file: Path, block: int) -> tuple
 
 def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None, blocks: list[int]) -> list[str]:
     """Report lines: the calls replayed ``repeat`` times on this checkout (one by one, and in
-    ``measure_many`` blocks of each of ``blocks`` frames) and, with ``ref``, one by one on
+    ``measure_many`` blocks of each of ``blocks`` frames) and, with ``ref``, the same ways on
     that commit's code (``git archive`` extracted to a temporary folder), the sides
     alternating so that all see the same load."""
     with tempfile.TemporaryDirectory(prefix="bench-measure-") as folder:
@@ -161,6 +162,7 @@ def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None, blo
             with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
                 tar.extractall(Path(folder) / "baseline", filter="tar")
             sides[ref] = (Path(folder) / "baseline", 0)
+            sides.update({f"{ref} block {block}": (Path(folder) / "baseline", block) for block in blocks})
         found: dict[str, tuple[list[float], set[str]]] = {name: ([], set()) for name in sides}
         for _ in range(repeat):
             for name, (code, block) in sides.items():
@@ -169,12 +171,12 @@ def compare(map_path: Path, calls: list[Call], repeat: int, ref: str | None, blo
                 found[name][1].add(digest)
     lines = [summary(name, per_frame, "/".join(sorted(digests))) for name, (per_frame, digests) in found.items()]
     if ref:
-        baseline = statistics.fmean(found[ref][0])
-        for name in sides:
-            if name != ref:
+        for name, (_, block) in sides.items():
+            if not name.startswith(ref):
+                baseline = ref if not block else f"{ref} block {block}"
                 same = found[name][1] == found[ref][1]
-                lines.append(f"  ratio {ref} / {name}: {baseline / statistics.fmean(found[name][0]):.2f}x; results "
-                             f"{'identical' if same else 'DIFFER'}")
+                ratio = statistics.fmean(found[baseline][0]) / statistics.fmean(found[name][0])
+                lines.append(f"  ratio {baseline} / {name}: {ratio:.2f}x; results {'identical' if same else 'DIFFER'}")
     return lines
 
 

@@ -243,6 +243,24 @@ class GroundTruthMeter:
         key = (left.tobytes(), right.tobytes(), tuple(pose))
         return lru_get(self._matches, key, lambda: self.ground_truth.match(left, right, pose), MATCH_CACHE_SIZE)
 
+    def match_many(self, lanes: Sequence[tuple[NDArrayFloat, NDArrayFloat, tuple[float, float, float]]]
+                   ) -> list[LaneMatch | MatchingError]:
+        """:meth:`match` of each lane (left, right, pose), or its ``gt_matching.MatchingError``:
+        those not matched lately matched together (``GroundTruth.match_many``), each once."""
+        from gt_matching import MatchingError
+
+        keys = []
+        for left, right, pose in lanes:
+            left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
+            keys.append(((left.tobytes(), right.tobytes(), tuple(pose)), (left, right, pose)))
+        known = {key: self._matches[key] for key, _ in keys if key in self._matches}
+        missing = {key: lane for key, lane in keys if key not in known}
+        known.update(zip(missing, self.ground_truth.match_many(list(missing.values()))))
+        for key, _ in keys:
+            if not isinstance(known[key], MatchingError):
+                lru_get(self._matches, key, lambda: known[key], MATCH_CACHE_SIZE)
+        return [known[key] for key, _ in keys]
+
     def errors(self, match: LaneMatch, left: NDArrayFloat, right: NDArrayFloat,
                pose: tuple[float, float, float] | None = None) -> Measurement:
         """Closest-point errors and range of a lane against the GT borders of ``match``; the
@@ -260,9 +278,12 @@ class GroundTruthMeter:
 
         found: list[Measurement | MatchingError | None] = [None] * len(lanes)
         routes: dict[tuple[tuple[int, bool], ...], list[tuple[int, LaneMatch, tuple[NDArrayFloat, NDArrayFloat]]]] = {}
-        for index, (left, right, pose, reference) in enumerate(lanes):
+        matches = self.match_many([(*(reference or (left, right)), pose) for left, right, pose, reference in lanes])
+        for index, ((left, right, _, _), match) in enumerate(zip(lanes, matches)):
+            if isinstance(match, MatchingError):
+                found[index] = match
+                continue
             try:
-                match = self.match(*(reference or (left, right)), pose)
                 lane = (as_polyline("left border", left), as_polyline("right border", right))
             except MatchingError as exc:
                 found[index] = exc
