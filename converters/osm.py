@@ -347,7 +347,7 @@ def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
         at = slice(first, first + _NODES_AT_ONCE)
         values: list[object] = [None] * (4 * len(known[at]))  # id, lat, lon, height of each node
         values[0::4], values[1::4], values[2::4], values[3::4] = (
-            identifiers[at].tolist(), float_reprs(lat[at]), float_reprs(lon[at]), _heights_text(xyz[at, 2]))
+            identifiers[at].tolist(), float_texts(lat[at]), float_texts(lon[at]), _heights_text(xyz[at, 2]))
         parts.append("".join(map(_NODE_FORMATS.__getitem__, known[at].tolist())) % tuple(values))
     return "".join(parts)
 
@@ -358,43 +358,21 @@ def _heights_text(z: NDArrayFloat) -> list[str]:
     return np.array(["%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
 
 
-def float_reprs(values: NDArrayFloat) -> list[str]:
-    """``repr`` of each float of ``values``: orjson's shortest round-trip digits (the
-    digits of ``repr``, many times faster) in ``repr``'s notation (from 1e-4 to 1e15 the
-    two agree; below, ``_fifth_decade`` and ``_padded_exponents``), ``repr`` itself for
-    zero, |v| >= 1e15 and values not finite, or for all if orjson's notation is not the
-    one expected."""
+def float_texts(values: NDArrayFloat) -> list[str]:
+    """The shortest decimal text of each float of ``values`` that reads back as the same
+    float (orjson's, the digits ``repr`` has; its notation: "0.0000123", "1.5e-6"),
+    ``repr`` for values not finite."""
     import orjson
 
     values = np.ascontiguousarray(values, dtype=np.float64)
-    magnitude = np.abs(values)
-    bands = (  # (where, what orjson writes once in each text, how it becomes repr's)
-        ((magnitude >= 1e-4) & (magnitude < 1e15), b".", list),
-        ((magnitude >= 1e-5) & (magnitude < 1e-4), b"0.0000", _fifth_decade),
-        ((magnitude < 1e-5) & (magnitude > 0.0), b"e-", _padded_exponents),
-    )
-    texts = np.empty(len(values), dtype=object)
-    for where, marker, notation in bands:
-        count = int(where.sum())
-        if count:
-            data = orjson.dumps(values[where], option=orjson.OPT_SERIALIZE_NUMPY)
-            if data.count(marker) != count or data.count(b"e") != (marker == b"e-") * count:
-                return list(map(repr, values.tolist()))  # not the notation expected
-            texts[where] = notation(data[1:-1].decode("ascii").split(","))
-    others = ~(bands[0][0] | bands[1][0] | bands[2][0])
-    texts[others] = list(map(repr, values[others].tolist()))
+    finite = np.isfinite(values)
+    if not values.size:
+        return []
+    if finite.all():
+        return orjson.dumps(values, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].decode("ascii").split(",")
+    texts = np.array(list(map(repr, values.tolist())), dtype=object)
+    texts[finite] = float_texts(values[finite])
     return texts.tolist()
-
-
-def _fifth_decade(texts: list[str]) -> list[str]:
-    """orjson's "0.0000dd…" (1e-5 <= |v| < 1e-4) as ``repr`` writes it: "d.d…e-05"."""
-    return [f"{sign}{digits[0]}.{digits[1:]}e-05" if len(digits) > 1 else f"{sign}{digits}e-05"
-            for sign, _, digits in (text.partition("0.0000") for text in texts)]
-
-
-def _padded_exponents(texts: list[str]) -> list[str]:
-    """orjson's "d.d…e-6" as ``repr`` writes it: an exponent of at least two digits, "d.d…e-06"."""
-    return [f"{mantissa}e-{power.zfill(2)}" for mantissa, _, power in (text.partition("e-") for text in texts)]
 
 
 _NODES_AT_ONCE: Final[int] = 65536
