@@ -83,7 +83,7 @@ BLOCK_FRAMES: Final[int] = 25
 """Frames of a drive whose vehicle states and detections are computed at once, as arrays
 (:meth:`Drive.states_block`, :func:`sense_block`), and whose lanes are measured in one
 :meth:`GroundTruthMeter.measure_many`; the fusion stays per frame. A block's detections,
-fused lanes and their temporary arrays are held together (on Town04 about 1.2 MB per
+fused lanes and their temporary arrays are held together (on Town04 1 to 2 MB per
 frame): the block size bounds that, not the results, which are the same for any size."""
 Finish = Callable[[Measurement | str | None], dict[str, NDArrayFloat]]
 """Records a frame's scenario from its lane's measurement (None when it has no lane to
