@@ -7,6 +7,7 @@ from x), which is the world frame of the detections.
 
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -45,6 +46,11 @@ ROUTE_CACHE_SIZE: Final = 32
 #: keeps (``MapLines``, about 80 kB each): a long drive touching much of a map stays bounded;
 #: one prepared whole keeps all.
 PART_CACHE_SIZE: Final = 64
+#: Lanelets whose geometry (``LaneletGeometry``: mid-line every 0.1 m and its KD-tree,
+#: about 35 kB on Town04, 30 MB for its 873 lanelets) a ``GroundTruth`` prepared on first
+#: use keeps (LRU; one still referenced, by a match in progress, is found again as the
+#: same object): a long drive touching much of a map stays bounded.
+GEOMETRY_CACHE_SIZE: Final = 128
 #: Poses whose candidate lanelets a ``GroundTruth`` keeps (every lane measured in a frame
 #: is matched at the same pose, the ego's).
 CANDIDATE_CACHE_SIZE: Final = 8
@@ -277,12 +283,15 @@ class GroundTruth:
         self.routing_graph = routing_graph if routing_graph is not None else LaneletRelations(
             lanelet_map, self.traffic_rules)
         self.lines = MapLines(lanelet_map, cache_size=None if prepare_all else PART_CACHE_SIZE)
-        self._geometry: dict[LaneletKey, LaneletGeometry] = {}
+        self._geometry: OrderedDict[LaneletKey, LaneletGeometry] = OrderedDict()
+        self._geometry_kept = None if prepare_all else GEOMETRY_CACHE_SIZE
+        self._geometry_alive: weakref.WeakValueDictionary[LaneletKey, LaneletGeometry] = (
+            weakref.WeakValueDictionary())
         self._parts: OrderedDict[tuple[LaneletKey, str], BorderPart] = OrderedDict()
         self._parts_kept = None if prepare_all else PART_CACHE_SIZE
         self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
-        self._graph_neighbours: dict[tuple[LaneletKey, str], list[LaneletGeometry]] = {}
+        self._graph_neighbours: dict[tuple[LaneletKey, str], list[tuple[LaneletKey, Any]]] = {}
         self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
         if prepare_all:
             for lanelet in lanelet_map.laneletLayer:
@@ -411,15 +420,21 @@ class GroundTruth:
         unknown = [key for key in match.route_key if key not in self._geometry and not layer.exists(key[0])]
         if unknown:
             raise MatchingError(f"lanelets {unknown} of the match are not in this GroundTruth's map")
-        return [self._geometry.get(key) or self._lanelet(layer[key[0]].invert() if key[1] else layer[key[0]])
-                for key in match.route_key]
+        return [self._lanelet(layer[key[0]].invert() if key[1] else layer[key[0]], key) for key in match.route_key]
 
-    def _lanelet(self, lanelet: Any) -> LaneletGeometry:
-        key = (int(lanelet.id), bool(lanelet.inverted()))
-        geometry = self._geometry.get(key)
-        if geometry is None:
-            geometry = self._geometry[key] = LaneletGeometry.of(lanelet)
-        return geometry
+    def _lanelet(self, lanelet: Any, key: LaneletKey | None = None) -> LaneletGeometry:
+        """The geometry of a Lanelet2 lanelet (its ``key``, if known), kept (LRU of
+        ``GEOMETRY_CACHE_SIZE`` when prepared on first use; while referenced elsewhere the
+        same object)."""
+        key = key or (int(lanelet.id), bool(lanelet.inverted()))
+
+        def make() -> LaneletGeometry:
+            geometry = self._geometry_alive.get(key)
+            if geometry is None:
+                geometry = self._geometry_alive[key] = LaneletGeometry.of(lanelet)
+            return geometry
+
+        return lru_get(self._geometry, key, make, self._geometry_kept)
 
     def _part(self, geometry: LaneletGeometry, side: str) -> BorderPart:
         """A lanelet border ("left" or "right") prepared for routes (cached; LRU of
@@ -436,13 +451,13 @@ class GroundTruth:
 
     def _neighbours(self, geometry: LaneletGeometry, way: str) -> list[LaneletGeometry]:
         """The routing graph's ``previous`` or ``following`` lanelets (``way``) of a lanelet,
-        in the graph's order (kept: the graph does not change)."""
+        in the graph's order (the lanelets kept: the graph does not change)."""
         key = (geometry.key, way)
         found = self._graph_neighbours.get(key)
         if found is None:
-            found = self._graph_neighbours[key] = [self._lanelet(g) for g in getattr(self.routing_graph, way)(
-                geometry.lanelet)]
-        return found
+            found = self._graph_neighbours[key] = [((int(g.id), bool(g.inverted())), g)
+                                                   for g in getattr(self.routing_graph, way)(geometry.lanelet)]
+        return [self._lanelet(lanelet, lanelet_key) for lanelet_key, lanelet in found]
 
     def _joined_border(self, lanelets: Sequence[LaneletGeometry], side: str) -> SegmentIndex:
         """``_joined_border`` of a lanelet sequence, kept (LRU, ``ROUTE_CACHE_SIZE``): the

@@ -229,3 +229,32 @@ def test_covering_routes_until_every_startable_lane_is_covered(junction):
     startable = {lane for lane in junction.lanes if longest[lane] >= 120.0}
     assert startable <= {lane for route in routes for lane in route}
     assert len(routes) <= len(startable)
+
+
+def test_tracks_beside_the_lanes_built_again_are_the_same(monkeypatch):
+    """A drive keeps only the latest ``BESIDE_TRACKS_KEPT`` tracks beside its lanes built:
+    with one kept (each built again when asked for after another), every frame's vehicles
+    stand on the same lanes at the same stations and points as with all of them kept."""
+    from cold_maps.cli.evaluate import _plans, build_parser
+    from cold_maps.evaluation.evaluator import MapEvaluator
+    from cold_maps.simulation import drive as drive_module
+
+    def drives():
+        args = build_parser().parse_args(["--map", str(bundled_map("highway")), "--frames", "300", "--routes", "1"])
+        return MapEvaluator(_plans(args)[0]).drives
+
+    (everything,) = drives()
+    monkeypatch.setattr(drive_module, "BESIDE_TRACKS_KEPT", 1)
+    (one,) = drives()
+    beside = 0
+    for frame in range(0, one.frames, 7):
+        kept, rebuilt = everything.states(frame), one.states(frame)
+        assert list(kept) == list(rebuilt)
+        for name, state in kept.items():
+            other = rebuilt[name]
+            assert (state.role, state.station, state.lane, state.lane_offset_m, state.lead_m, state.track.lanes) == (
+                other.role, other.station, other.lane, other.lane_offset_m, other.lead_m, other.track.lanes)
+            assert np.array_equal(state.track.strip.centerline, other.track.strip.centerline)
+            beside += state.role in ("adjacent", "opposite")
+    assert beside > 0
+    assert len(one.beside._built) == 1 and len({track.lanes for lanes in one.beside.values() for _, track in lanes}) > 1

@@ -144,7 +144,8 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """prepare_all=False builds lanelet geometry, border samples, clearances and KD-trees
     only for the lanelets and lines a frame needs, keeping the latest ``PART_CACHE_SIZE``
-    (``kept``: so few that they are dropped and built again), and without a routing graph
+    border parts and ``GEOMETRY_CACHE_SIZE`` lanelets (``kept``: so few that they are
+    dropped and built again, also within one match), and without a routing graph
     the relations only for the lanelets a frame reaches; matches and errors (other-lane
     check included) are bit-identical, also for a match made by another GroundTruth of the map."""
     from dataclasses import replace
@@ -153,6 +154,7 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
 
     if kept is not None:
         monkeypatch.setattr(ground_truth, "PART_CACHE_SIZE", kept)
+        monkeypatch.setattr(ground_truth, "GEOMETRY_CACHE_SIZE", kept)
     lanelet_map, graph, prepared = grid
     lazy = GroundTruth(lanelet_map, graph, prepare_all=False)
     no_graph = GroundTruth(lanelet_map, prepare_all=False)
@@ -162,7 +164,8 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
         match = prepared.match(left, right, pose)
         for first_use in (lazy, no_graph):
             lazy_match = first_use.match(left, right, pose)
-            assert lazy_match.route_key == match.route_key
+            assert (lazy_match.route_key, lazy_match.matched, lazy_match.mismatch) == (
+                match.route_key, match.matched, match.mismatch)
             np.testing.assert_array_equal(lazy_match.left_gt, match.left_gt)
             for exact in (True, False):
                 expected = prepared.errors(left, right, match, exact=exact)
@@ -179,7 +182,7 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
     with pytest.raises(MatchingError, match=f"lanelets \\[\\({missing}, False\\)\\] of the match are not"):
         lazy.errors(left, right, replace(match, route_key=(*match.route_key, (missing, False))))
     if kept is not None:
-        assert len(lazy._parts) == len(lazy.lines._trees) == len(lazy.lines._samples) == kept
+        assert len(lazy._parts) == len(lazy.lines._trees) == len(lazy.lines._samples) == len(lazy._geometry) == kept
 
 
 def test_lanes_matched_at_one_pose_share_its_candidates(grid: tuple[Any, Any, GroundTruth]) -> None:

@@ -20,6 +20,8 @@ Stations are centreline arc lengths (m) from the start of a track. The true lane
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any, Final, Literal, Mapping, Sequence
@@ -37,6 +39,7 @@ from cold_maps.network.routing import (
     random_route,
 )
 from cold_maps.simulation.sensor import SENSOR_RANGE_M
+from gt_matching.lru import lru_get
 
 FRAME_RATE_HZ: Final[float] = 10.0
 DEFAULT_SPEED_MPS: Final[float] = 10.0
@@ -53,6 +56,9 @@ BESIDE_MAX_DISTANCE_M: Final[float] = 8.0
 ROUTE_MARGIN_M: Final[float] = 5.0
 """Extra route length (m) beyond what the vehicles and their sensors need."""
 MAX_BRANCHES: Final[int] = 2
+BESIDE_TRACKS_KEPT: Final[int] = 16
+"""Tracks of the lanes beside the ego's that a drive keeps built (:class:`BesideTracks`,
+latest used; a block of frames asks for those of a few lanes)."""
 """Branch (turning) tracks built per drive at most."""
 MAX_COVER_ROUTES: Final[int] = 1000
 """Most routes drawn to cover a map's lanes."""
@@ -494,7 +500,7 @@ def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop
         raise DriveError(f"{_map_name(graph)}: route of {ego.length:.0f} m is shorter than the {needed:.0f} m "
                          f"{frames} frames need; use fewer --frames")
     vehicles = [Vehicle(f"coop{lead:g}", "coop", lead, ego) for lead in coop_leads_m]
-    beside: dict[LaneKey, tuple[tuple[str, Track], ...]] = {}
+    beside: Mapping[LaneKey, tuple[tuple[str, Track], ...]] = {}
     if distractor_leads_m:
         ahead_m = max(distractor_leads_m) + max(sensor_range_m, reach_m or 0.0) + ROUTE_MARGIN_M
         branches = _branches(graph, ego, needed, ahead_m, rng)
@@ -504,15 +510,41 @@ def build_drive(graph: LaneGraph, lanes: Sequence[LaneKey], frames: int, *, coop
             vehicles += [Vehicle(f"{role}{lead:g}", role, lead) for role in ("adjacent", "opposite")]
             vehicles.append(Vehicle(f"behind{lead:g}", "behind", -lead, ego))
         reach = 2.0 * sensor_range_m + max(distractor_leads_m) + ROUTE_MARGIN_M
-        tracks: dict[LaneKey, Track] = {}
+        routes: dict[LaneKey, tuple[LaneKey, ...]] = {}
+        roles: dict[LaneKey, tuple[tuple[str, LaneKey], ...]] = {}
         for lane in dict.fromkeys(ego.lanes):
-            entries = []
-            for role, other in lanes_beside(graph, lane):
-                if other not in tracks:
-                    tracks[other] = Track.build(graph, _forward(graph, [other], reach, rng))
-                entries.append((role, tracks[other]))
-            beside[lane] = tuple(entries)
+            roles[lane] = tuple(lanes_beside(graph, lane))
+            for _, other in roles[lane]:
+                if other not in routes:
+                    routes[other] = tuple(_forward(graph, [other], reach, rng))
+        beside = BesideTracks(graph, roles, routes)
     return Drive(graph, ego, tuple(vehicles), beside, frames, speed_mps, rate_hz, sensor_range_m, behind)
+
+
+class BesideTracks(Mapping[LaneKey, tuple[tuple[str, Track], ...]]):
+    """A drive's ``beside``: lane → (role, track) of each lane beside it, the tracks built
+    from their lanes when asked for and the latest ``BESIDE_TRACKS_KEPT`` kept (a long
+    drive passes many lanes; a track built again is the same, :meth:`Track.build`)."""
+
+    def __init__(self, graph: LaneGraph, roles: Mapping[LaneKey, tuple[tuple[str, LaneKey], ...]],
+                 routes: Mapping[LaneKey, tuple[LaneKey, ...]]) -> None:
+        """``roles``: per lane of the ego, the role and first lane of each lane beside it;
+        ``routes``: per such first lane, the lanes of its track."""
+        self._graph = graph
+        self._roles = roles
+        self._routes = routes
+        self._built: OrderedDict[LaneKey, Track] = OrderedDict()
+
+    def __getitem__(self, lane: LaneKey) -> tuple[tuple[str, Track], ...]:
+        return tuple((role, lru_get(self._built, other, lambda: Track.build(self._graph, self._routes[other]),
+                                    BESIDE_TRACKS_KEPT))
+                     for role, other in self._roles[lane])
+
+    def __iter__(self) -> Iterator[LaneKey]:
+        return iter(self._roles)
+
+    def __len__(self) -> int:
+        return len(self._roles)
 
 
 def _branches(graph: LaneGraph, ego: Track, length_m: float, ahead_m: float,
