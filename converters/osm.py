@@ -144,7 +144,7 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
     its representative; with ``tolerance`` 0 only equal points share one."""
     if tolerance == 0.0:  # equal rows are neighbours in lexicographic order (stable: the first comes first)
-        order = np.lexsort(points.T[::-1])
+        order = np.argsort(np.ascontiguousarray(points, dtype=np.float64).view(np.complex128)[:, 0], kind="stable")
         ordered = points[order]
         starts = np.ones(len(points), dtype=bool)
         starts[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)

@@ -11,7 +11,7 @@ import numpy as np
 
 from gt_matching.errors import MatchingError
 from gt_matching.lru import lru_get
-from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, mid_line, resample
+from gt_matching.polyline import NDArrayFloat, NDArrayInt, arc_lengths, mid_line, resample, resample_many
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
@@ -119,7 +119,7 @@ class MapLines:
                     self.vertices.append(line_xy(line, f"lanelet {lanelet.id}"))
         if not self.vertices:
             raise MatchingError("lanelet map has no lanelets")
-        coarse = [resample(vertices, COARSE_STEP_M)[0] for vertices in self.vertices]
+        coarse = resample_many(self.vertices, COARSE_STEP_M)
         #: Samples every COARSE_STEP_M of all lines, and the slot of each.
         self.coarse: NDArrayFloat = np.concatenate(coarse)
         self.coarse_owner: NDArrayInt = np.repeat(np.arange(len(coarse)), [len(c) for c in coarse])

@@ -74,6 +74,41 @@ def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArr
     return points, seg.astype(np.int64)
 
 
+def resample_many(polylines: list[NDArrayFloat], step_m: float) -> list[NDArrayFloat]:
+    """``resample(polyline, step_m)[0]`` of each polyline (at least 2 vertices), bit for bit:
+    the arc lengths and segment searches line by line, the interpolation of all in one pass."""
+    counts = np.array([len(polyline) for polyline in polylines], dtype=np.int64)
+    vertices = np.concatenate(polylines) if polylines else np.empty((0, 2))
+    step = vertices[1:] - vertices[:-1]
+    lengths = np.hypot(step[:, 0], step[:, 1])
+    first = np.cumsum(counts) - counts
+    cum = np.empty(len(vertices))
+    stations, segments = [], []
+    for start, count in zip(first.tolist(), counts.tolist()):
+        line_cum = cum[start:start + count]
+        line_cum[0] = 0.0
+        np.cumsum(lengths[start:start + count - 1], out=line_cum[1:])
+        total = line_cum[-1]
+        if total <= ZERO_LENGTH_M:
+            s = np.zeros(1)
+            segments.append(np.full(1, -1, dtype=np.int64))
+        else:
+            s = np.arange(0.0, total, step_m)
+            if total - s[-1] > ZERO_LENGTH_M:
+                s = np.append(s, total)
+            segments.append(start + np.minimum(np.maximum(line_cum.searchsorted(s, side="right") - 1, 0), count - 2))
+        stations.append(s)
+    s, seg = np.concatenate(stations), np.concatenate(segments)
+    flat = seg < 0
+    seg[flat] = np.repeat(first, [len(x) for x in stations])[flat]
+    seg_len = np.where(flat, 0.0, cum[np.minimum(seg + 1, len(cum) - 1)] - cum[seg])
+    t = np.divide(s - cum[seg], seg_len, out=np.zeros_like(s), where=seg_len > ZERO_LENGTH_M)
+    ahead = np.where(flat, seg, seg + 1)
+    points = vertices[seg] + np.clip(t, 0.0, 1.0)[:, None] * (vertices[ahead] - vertices[seg])
+    points[flat] = vertices[seg[flat]]
+    return np.split(points, np.cumsum([len(x) for x in stations])[:-1])
+
+
 def segment_distances(
     points: NDArrayFloat, vertices: NDArrayFloat, segments: NDArrayInt, cum: NDArrayFloat | None = None
 ) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -214,6 +214,14 @@ def test_merge_points_moves_no_point_farther_than_the_tolerance(points, toleranc
     assert np.all(representative[alone] == np.flatnonzero(alone))
 
 
+@given(st.lists(st.tuples(st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-300]), st.sampled_from([0.0, -0.0, 3.0, 7.5])),
+                min_size=1, max_size=60))
+def test_merge_points_without_tolerance_gives_each_point_the_first_equal_one(points) -> None:
+    array = np.array(points, dtype=np.float64)
+    first_equal = [next(j for j, q in enumerate(points) if q[0] == p[0] and q[1] == p[1]) for p in points]
+    assert merge_points(array, 0.0).tolist() == first_equal
+
+
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)), min_size=2, max_size=40), st.floats(1e-4, 1.0))
 def test_simplify_keeps_the_ends_and_every_dropped_vertex_within_tolerance(points, tolerance) -> None:

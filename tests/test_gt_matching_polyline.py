@@ -19,6 +19,7 @@ from gt_matching.polyline import (
     closest_many,
     mid_line,
     resample,
+    resample_many,
     restarting_cumsum,
     windowed_distances,
 )
@@ -104,3 +105,19 @@ def test_many_polylines_at_once_equal_one_by_one_bit_for_bit(seed: int, counts: 
     groups = np.split(values, np.cumsum(counts)[:-1])
     expected = np.concatenate([np.concatenate(([0.0], np.cumsum(group))) for group in groups])
     assert restarting_cumsum(values, np.array(counts)).tobytes() == expected.tobytes()
+
+
+@given(st.integers(0, 2**32 - 1), st.sampled_from([0.02, 0.5, 2.0, 7.3]))
+def test_resample_many_is_resample_of_each_line_bit_for_bit(seed: int, step_m: float) -> None:
+    """Lines of 2 to 40 vertices, steps from 1 mm to 2 m with repeated vertices (zero-length
+    segments and whole zero-length lines), far from the origin."""
+    rng = np.random.default_rng(seed)
+    polylines = []
+    for count in rng.integers(2, 40, int(rng.integers(1, 12))).tolist():
+        steps = rng.normal(0.0, float(rng.choice([1e-3, 0.1, 2.0])), (count - 1, 2))
+        steps[rng.random(count - 1) < float(rng.choice([0.2, 1.0]))] = 0.0
+        polylines.append(np.vstack(([0.0, 0.0], np.cumsum(steps, axis=0))) + rng.normal(0.0, 1e4, 2))
+    batched = resample_many(polylines, step_m)
+    assert len(batched) == len(polylines)
+    for polyline, points in zip(polylines, batched):
+        assert points.tobytes() == resample(polyline, step_m)[0].tobytes()
