@@ -61,52 +61,51 @@ def resample(polyline: NDArrayFloat, step_m: float) -> tuple[NDArrayFloat, NDArr
     """Points every ``step_m`` along ``polyline`` (both ends included; the last gap may be
     shorter) and, for each, the index of the segment it lies on. A zero-length polyline
     gives its first point. ``polyline`` needs at least 2 vertices."""
-    cum = arc_lengths(polyline)
-    if cum[-1] <= ZERO_LENGTH_M:
-        return polyline[:1].copy(), np.zeros(1, dtype=np.int64)
-    s = np.arange(0.0, cum[-1], step_m)
-    if cum[-1] - s[-1] > ZERO_LENGTH_M:
-        s = np.append(s, cum[-1])
-    seg = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(polyline) - 2)
-    seg_len = cum[seg + 1] - cum[seg]
-    t = np.divide(s - cum[seg], seg_len, out=np.zeros_like(s), where=seg_len > ZERO_LENGTH_M)
-    points = polyline[seg] + np.clip(t, 0.0, 1.0)[:, None] * (polyline[seg + 1] - polyline[seg])
-    return points, seg.astype(np.int64)
+    points, segments, _ = _resampled([np.asarray(polyline)], step_m)
+    return points, segments
 
 
 def resample_many(polylines: list[NDArrayFloat], step_m: float) -> list[NDArrayFloat]:
-    """``resample(polyline, step_m)[0]`` of each polyline (at least 2 vertices), bit for bit:
-    the arc lengths and segment searches line by line, the interpolation of all in one pass."""
-    counts = np.array([len(polyline) for polyline in polylines], dtype=np.int64)
-    vertices = np.concatenate(polylines) if polylines else np.empty((0, 2))
+    """``resample(polyline, step_m)[0]`` of each polyline (at least 2 vertices), bit for bit."""
+    points, _, sizes = _resampled(polylines, step_m)
+    return np.split(points, np.cumsum(sizes)[:-1])
+
+
+def _resampled(polylines: list[NDArrayFloat], step_m: float) -> tuple[NDArrayFloat, NDArrayInt, list[int]]:
+    """``resample`` of each polyline, concatenated: the points, the index of each one's
+    segment among all the polylines' vertices, and how many points each polyline has. The
+    arc lengths and segment searches go line by line, the interpolation of all in one pass."""
+    counts = [len(polyline) for polyline in polylines]
+    vertices = np.concatenate(polylines)
     step = vertices[1:] - vertices[:-1]
     lengths = np.hypot(step[:, 0], step[:, 1])
-    first = np.cumsum(counts) - counts
     cum = np.empty(len(vertices))
-    stations, segments = [], []
-    for start, count in zip(first.tolist(), counts.tolist()):
+    stations, segments, flat = [], [], []
+    start = 0
+    for count in counts:
         line_cum = cum[start:start + count]
         line_cum[0] = 0.0
         np.cumsum(lengths[start:start + count - 1], out=line_cum[1:])
         total = line_cum[-1]
-        if total <= ZERO_LENGTH_M:
+        flat.append(total <= ZERO_LENGTH_M)
+        if flat[-1]:
             s = np.zeros(1)
-            segments.append(np.full(1, -1, dtype=np.int64))
+            segments.append(np.full(1, start, dtype=np.int64))
         else:
             s = np.arange(0.0, total, step_m)
             if total - s[-1] > ZERO_LENGTH_M:
                 s = np.append(s, total)
-            segments.append(start + np.minimum(np.maximum(line_cum.searchsorted(s, side="right") - 1, 0), count - 2))
+            segments.append(start + np.clip(line_cum.searchsorted(s, side="right") - 1, 0, count - 2))
         stations.append(s)
-    s, seg = np.concatenate(stations), np.concatenate(segments)
-    flat = seg < 0
-    seg[flat] = np.repeat(first, [len(x) for x in stations])[flat]
-    seg_len = np.where(flat, 0.0, cum[np.minimum(seg + 1, len(cum) - 1)] - cum[seg])
+        start += count
+    sizes = [len(s) for s in stations]
+    s, seg = np.concatenate(stations), np.concatenate(segments).astype(np.int64)
+    seg_len = cum[seg + 1] - cum[seg]
     t = np.divide(s - cum[seg], seg_len, out=np.zeros_like(s), where=seg_len > ZERO_LENGTH_M)
-    ahead = np.where(flat, seg, seg + 1)
-    points = vertices[seg] + np.clip(t, 0.0, 1.0)[:, None] * (vertices[ahead] - vertices[seg])
-    points[flat] = vertices[seg[flat]]
-    return np.split(points, np.cumsum([len(x) for x in stations])[:-1])
+    points = vertices[seg] + np.clip(t, 0.0, 1.0)[:, None] * (vertices[seg + 1] - vertices[seg])
+    at_first = np.repeat(flat, sizes)
+    points[at_first] = vertices[seg[at_first]]  # a zero-length polyline: its first point as it is
+    return points, seg, sizes
 
 
 def segment_distances(
