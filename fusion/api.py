@@ -175,13 +175,13 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_result(ego, (el, er), ends.gap_m, association.reason)
     uncertainty = pair_uncertainty(ego, coop, borders, (x_rel, y_rel))
+    posed = uncertainty  # for the convoy's pose update and weights; without σ under a pose covariance: exact points
     if uncertainty is None and kind == "convoy" and params.convoy_weights == "inverse-variance" and (
             ego.pose_cov is not None or coop.pose_cov is not None):
         posed = pair_uncertainty(ego, coop, borders, (x_rel, y_rel), UNSTATED_SIGMA_M)
-        parts, sources, _ = _fused(coop, borders, fits, kind, starts, interpolation, params, posed)
-        variances = None
-    else:
-        parts, sources, variances = _fused(coop, borders, fits, kind, starts, interpolation, params, uncertainty)
+    parts, sources, variances = _fused(coop, borders, fits, kind, starts, interpolation, params, posed)
+    if uncertainty is None:
+        variances = None  # no detection stated σ: neither does the fused lane
     lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
     return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes, variances)
 
