@@ -19,8 +19,8 @@ from fusion.geometry import to_world, transform
 from fusion.registration import registered
 from fusion.spline import EndFits, hermite_lane, hermite_turns, paper_pieces, sample_pieces
 from fusion.types import FusionKind, FusionParams, FusionResult, LaneDetection, NDArrayFloat, NDArrayInt8, Source
-from fusion.uncertainty import (PairUncertainty, bridge_end, bridge_variance, gap_bend, has_sigma, own_variances,
-                                pair_uncertainty)
+from fusion.uncertainty import (UNSTATED_SIGMA_M, PairUncertainty, bridge_end, bridge_variance, gap_bend, has_sigma,
+                                own_variances, pair_uncertainty)
 
 DEFAULT_PARAMS = FusionParams()
 _MODES = ("auto", "convoy", "spline")
@@ -175,7 +175,13 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     if association.reason:
         return ego_result(ego, (el, er), ends.gap_m, association.reason)
     uncertainty = pair_uncertainty(ego, coop, borders, (x_rel, y_rel))
-    parts, sources, variances = _fused(coop, borders, fits, kind, starts, interpolation, params, uncertainty)
+    posed = uncertainty  # for the convoy's pose update and weights; without σ under a pose covariance: exact points
+    if uncertainty is None and kind == "convoy" and params.convoy_weights == "inverse-variance" and (
+            ego.pose_cov is not None or coop.pose_cov is not None):
+        posed = pair_uncertainty(ego, coop, borders, (x_rel, y_rel), UNSTATED_SIGMA_M)
+    parts, sources, variances = _fused(coop, borders, fits, kind, starts, interpolation, params, posed)
+    if uncertainty is None:
+        variances = None  # no detection stated σ: neither does the fused lane
     lanes = tuple(matched_lane(ego, coop, index, kind, interpolation, params) for index in association.matched)
     return ego_frame_result(ego, parts, sources, kind, ends.gap_m, "", association.confidence, lanes, variances)
 
@@ -197,7 +203,11 @@ def _fused(coop: LaneDetection, borders: Borders, fits: EndFits, kind: FusionKin
         known = None if uncertainty is None else uncertainty.borders
         shared: tuple[NDArrayFloat | None, NDArrayFloat | None] = (None, None)
         if inverse and uncertainty is not None and (uncertainty.coop_cov.any() or uncertainty.ego_cov.any()):
-            cl, cr, starts, known, shared = registered(borders, arclengths, starts, uncertainty)
+            update = registered(borders, arclengths, starts, uncertainty)
+            if update is None:
+                inverse = False
+            else:
+                cl, cr, starts, known, shared = update
         pairs = (None, None) if known is None else ((known[0], known[2]), (known[1], known[3]))
         end = params.convoy_end_blend_m
         parts, sources, variances = zip(

@@ -42,6 +42,15 @@ def overlap_start(ego: NDArrayFloat, coop: NDArrayFloat, s_ego: NDArrayFloat) ->
     return OverlapStart(s_ego, s0, offset, abs(diff))
 
 
+def overlap_length(start: OverlapStart, s_coop: NDArrayFloat) -> tuple[float, bool]:
+    """(length [m], whether the coop continues past the ego's end) of the overlap of a coop
+    border (vertex arc lengths ``s_coop``) that starts on an ego border at ``start``: what
+    is left of the ego border past s0, or the whole coop border when that ends first."""
+    ego_left = start.s_ego.item(-1) - start.s0
+    coop_continues = ego_left <= s_coop.item(-1)
+    return (ego_left if coop_continues else s_coop.item(-1)), coop_continues
+
+
 def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
                   coop_weight: float, blend_offset_m: float,
                   variances: tuple[BorderVariance, BorderVariance] | None = None,
@@ -69,9 +78,7 @@ def convoy_border(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, s
     """
     s_ego, s0, offset = start.s_ego, start.s0, start.offset_m
     first = int(s_ego.searchsorted(s0))
-    ego_left = s_ego.item(-1) - s0
-    coop_continues = ego_left <= s_coop.item(-1)
-    overlap_end = ego_left if coop_continues else s_coop.item(-1)
+    overlap_end, coop_continues = overlap_length(start, s_coop)
     stop = ego.shape[0] if coop_continues else int(s_ego.searchsorted(s0 + overlap_end, side="right"))
     u = s_ego[first:stop] - s0
     paired = np.interp(u, s_coop, np.ascontiguousarray(coop).view(np.complex128)[:, 0])

@@ -64,6 +64,19 @@ def cumulative_length(points: NDArrayFloat) -> NDArrayFloat:
     return out
 
 
+def segment_at(arclength: NDArrayFloat, s: NDArrayFloat) -> NDArrayFloat:
+    """Index of the segment of a polyline (vertex arc lengths ``arclength`` [m]) that holds
+    each arc length ``s`` [m]: the last vertex at or before it, the first or last segment
+    for ``s`` before or past the line."""
+    return np.clip(arclength.searchsorted(s, side="right") - 1, 0, arclength.shape[0] - 2)
+
+
+def points_at(polyline: NDArrayFloat, arclength: NDArrayFloat, s: NDArrayFloat) -> NDArrayFloat:
+    """``(len(s), 2)`` points of ``polyline`` (vertex arc lengths ``arclength`` [m]) at arc
+    lengths ``s`` [m], linearly interpolated (its ends outside)."""
+    return np.column_stack((np.interp(s, arclength, polyline[:, 0]), np.interp(s, arclength, polyline[:, 1])))
+
+
 def _nearest_segment(point: NDArrayFloat, polyline: NDArrayFloat) -> tuple[float, int, float, float, float]:
     """``(distance, segment, t, x, y)`` of the closest point of ``polyline`` to ``point``: its
     distance [m], the index of the segment holding it, its fraction along that segment and

@@ -17,18 +17,31 @@ correlated along the border (a lane model's offset and heading), so its many poi
 about as much information as a line through its ends, not one independent draw each; with
 a short overlap the two ends nearly coincide, the yaw is not observed and the prior keeps
 it. The coop's whole detection is moved by −δ̂ before the overlap is fused point by point.
+
+The update holds only while the overlap agrees with the model: when the normalised innovation
+squared dᵀ(H P Hᵀ + R)⁻¹d exceeds the χ² quantile of its M dof at the false rejection rate
+:data:`INCONSISTENT_RATE`, the two detections differ by far more than their stated σ and pose
+covariances allow (a border that turns into a junction lane, a lane model gone wrong), the
+difference is not the coop's pose error, and :func:`registered` makes no update.
 """
 
 from __future__ import annotations
 
-import math
+import functools
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
-from fusion.convoy import OverlapStart, overlap_start
+from fusion.convoy import OverlapStart, overlap_length, overlap_start
+from fusion.geometry import norms, points_at, segment_at, transform
 from fusion.types import NDArrayFloat
 from fusion.uncertainty import BorderVariance, PairUncertainty, lateral_jacobian, pose_variance
+
+INCONSISTENT_RATE: Final[float] = 1e-9
+"""False rejection rate of the update's consistency test (module docstring): the overlap's
+differences are taken as no measurement of the coop's pose when their normalised innovation
+squared exceeds the χ² quantile at 1 − this rate."""
 
 
 @dataclass(frozen=True)
@@ -39,13 +52,15 @@ class PoseUpdate:
     error's covariance P⁺ (what is left of the coop's pose error relative to the ego, (3, 3));
     ``world`` the covariance of the corrected coop's pose error in the world frame (its own
     pose error less the estimate; equal to ``relative`` when the ego's pose is exact);
-    ``gain`` K (3, M), how the estimate follows each measurement.
+    ``gain`` K (3, M), how the estimate follows each measurement; ``innovation`` the
+    normalised innovation squared dᵀ(H P Hᵀ + R)⁻¹d (χ² of M dof when the model holds).
     """
 
     estimate: NDArrayFloat
     relative: NDArrayFloat
     world: NDArrayFloat
     gain: NDArrayFloat
+    innovation: float
 
 
 def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
@@ -53,25 +68,22 @@ def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, st
                  ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """(H (2, 3), d (2,), R (2,), the ego's part of R (2,)) of one border pair at the overlap's
     start and end (the coop start's foot on the ego border and the arc length
-    ``convoy_border`` pairs last), ego frame: the lateral difference coop minus ego along the
-    ego border's left normal, how the coop's pose error moves it, and the sum of the two
-    sensor variances there [m²]."""
-    s_ego, s0 = start.s_ego, start.s0
-    overlap_end = max(min(s_ego.item(-1) - s0, s_coop.item(-1)), 0.0)
-    rows, differences, noise, ego_noise = [], [], [], []
-    for u in (0.0, overlap_end):
-        p_ego = np.array([np.interp(s0 + u, s_ego, ego[:, 0]), np.interp(s0 + u, s_ego, ego[:, 1])])
-        p_coop = np.array([np.interp(u, s_coop, coop[:, 0]), np.interp(u, s_coop, coop[:, 1])])
-        k = int(np.clip(s_ego.searchsorted(s0 + u, side="right") - 1, 0, ego.shape[0] - 2))
-        t = ego[k + 1] - ego[k]
-        t = t / (math.hypot(*t) or 1.0)
-        normal = np.array([-t[1], t[0]])
-        lever = p_coop - np.asarray(coop_xy)
-        rows.append([normal[0], normal[1], normal @ np.array([-lever[1], lever[0]])])
-        differences.append(float(normal @ (p_coop - p_ego)))
-        ego_noise.append(float(np.interp(s0 + u, s_ego, ego_sensor)))
-        noise.append(ego_noise[-1] + float(np.interp(u, s_coop, coop_sensor)))
-    return np.array(rows), np.array(differences), np.array(noise), np.array(ego_noise)
+    ``convoy_border`` pairs last, :func:`fusion.convoy.overlap_length`), ego frame: the
+    lateral difference coop minus ego along the ego border's left normal, how the coop's
+    pose error moves it, and the sum of the two sensor variances there [m²]."""
+    u = np.array([0.0, overlap_length(start, s_coop)[0]])
+    s = start.s0 + u
+    p_ego, p_coop = points_at(ego, start.s_ego, s), points_at(coop, s_coop, u)
+    k = segment_at(start.s_ego, s)
+    t = ego[k + 1] - ego[k]
+    length = norms(t)
+    t = t / np.where(length > 0.0, length, 1.0)[:, None]
+    normal = np.column_stack((-t[:, 1], t[:, 0]))
+    lever = p_coop - np.asarray(coop_xy)
+    rows = np.column_stack((normal, normal[:, 1] * lever[:, 0] - normal[:, 0] * lever[:, 1]))
+    differences = np.einsum("ij,ij->i", normal, p_coop - p_ego)
+    ego_noise = np.interp(s, start.s_ego, ego_sensor)
+    return rows, differences, ego_noise + np.interp(u, s_coop, coop_sensor), ego_noise
 
 
 def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFloat, coop_cov: NDArrayFloat,
@@ -86,21 +98,31 @@ def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFlo
     prior = coop_cov + ego_part
     noise_cov = np.diag(noise)
     innovation = rows @ prior @ rows.T + noise_cov
-    gain = prior @ rows.T @ np.linalg.pinv(innovation, hermitian=True)
+    inverse = np.linalg.pinv(innovation, hermitian=True)
+    gain = prior @ rows.T @ inverse
     keep = np.eye(3) - gain @ rows
     measured = gain @ noise_cov @ gain.T
     relative = keep @ prior @ keep.T + measured
     world = keep @ coop_cov @ keep.T + gain @ rows @ ego_part @ rows.T @ gain.T + measured
-    return PoseUpdate(gain @ differences, 0.5 * (relative + relative.T), 0.5 * (world + world.T), gain)
+    return PoseUpdate(gain @ differences, 0.5 * (relative + relative.T), 0.5 * (world + world.T), gain,
+                      float(differences @ inverse @ differences))
+
+
+@functools.cache
+def consistency_limit(measurements: int) -> float:
+    """The largest normalised innovation squared of ``measurements`` differences that
+    :func:`registered` takes as a measurement of the pose: the χ² quantile at 1 −
+    :data:`INCONSISTENT_RATE`."""
+    from scipy.stats import chi2
+
+    return float(chi2.isf(INCONSISTENT_RATE, measurements))
 
 
 def corrected(points: NDArrayFloat, coop_xy: tuple[float, float], estimate: NDArrayFloat) -> NDArrayFloat:
     """Coop ``points`` (ego frame) moved by the inverse of the pose error ``estimate``: shifted
     by −(δx, δy) and turned by −δψ about the coop at ``coop_xy``."""
-    c, s = math.cos(estimate[2]), math.sin(estimate[2])
-    lever = points - np.asarray(coop_xy) - estimate[:2]
-    turned = np.column_stack((c * lever[:, 0] + s * lever[:, 1], -s * lever[:, 0] + c * lever[:, 1]))
-    return turned + np.asarray(coop_xy)
+    x, y = coop_xy
+    return transform(points - (np.array([x, y]) + estimate[:2]), x, y, -float(estimate[2]))
 
 
 def corrected_variance(points: NDArrayFloat, sensor: NDArrayFloat, coop_xy: tuple[float, float],
@@ -119,18 +141,21 @@ def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayF
                uncertainty: PairUncertainty
                ) -> tuple[NDArrayFloat, NDArrayFloat, tuple[OverlapStart, OverlapStart],
                           tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance],
-                          tuple[NDArrayFloat, NDArrayFloat]]:
+                          tuple[NDArrayFloat, NDArrayFloat]] | None:
     """The coop's (left, right) borders of a convoy pair (``borders`` ego left, ego right, coop
     left, coop right, ego frame; ``arclengths`` of the coop's) corrected by the
     :func:`pose_update` of both borders' overlap ends, their overlap starts on the ego borders
     the four borders' :class:`BorderVariance` (the coop's with the covariance left after
-    the update) and the coop borders' :func:`ego_shared`."""
+    the update) and the coop borders' :func:`ego_shared`; None when the overlap contradicts
+    the model (its innovation above :func:`consistency_limit`: no update)."""
     xy = uncertainty.coop_xy
     measured = [overlap_rows(borders[side], borders[2 + side], arclengths[side], starts[side],
                              uncertainty.borders[side].sensor, uncertainty.borders[2 + side].sensor, xy)
                 for side in (0, 1)]
     rows, differences, noise, ego_noise = (np.concatenate([m[i] for m in measured]) for i in range(4))
     update = pose_update(rows, differences, noise, uncertainty.coop_cov, uncertainty.ego_cov, xy)
+    if update.innovation > consistency_limit(differences.shape[0]):
+        return None
     left, right = (corrected(borders[2 + side], xy, update.estimate) for side in (0, 1))
     moved_starts = (overlap_start(borders[0], left, starts[0].s_ego), overlap_start(borders[1], right, starts[1].s_ego))
     variances = (uncertainty.borders[0], uncertainty.borders[1],

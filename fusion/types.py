@@ -428,9 +428,13 @@ class FusionParams:
             each) or ``"inverse-variance"`` (point by point from both detections' σ and pose
             covariances, :mod:`fusion.uncertainty`, over the whole overlap; with a pose
             covariance the coop's relative pose error is first estimated from the overlap's
-            ends and its whole detection corrected, :mod:`fusion.registration`; the steps at
-            its two ends fade out over ``convoy_end_blend_m`` outside it; the weights of
-            ``"mean"`` when a detection states no σ).
+            ends and its whole detection corrected, :mod:`fusion.registration`, unless the
+            overlap contradicts the stated σ; the steps at its two ends fade out over
+            ``convoy_end_blend_m`` outside it; a detection that states no σ under a pose
+            covariance takes :data:`fusion.uncertainty.UNSTATED_SIGMA_M` per point for the
+            update and the weights, its fused lane stating none; the weights of ``"mean"``
+            when a detection states no σ and no sender a pose covariance, or the overlap
+            contradicts the stated σ).
             ``"mean"`` and ``"inverse-variance"`` need ``convoy_strategy="weighted"``.
         convoy_end_blend_m: length over which the steps of inverse-variance weights at the
             overlap's ends fade out (smoothstep) into the ego lane before it and into the
@@ -538,7 +542,8 @@ class FusionParams:
     @property
     def coop_weight(self) -> float:
         """Fixed weight of the coop point in the convoy overlap: ``convoy_strategy``'s with
-        ``convoy_weights="paper"``, else 0.5 (``"mean"``, and ``"inverse-variance"`` without σ)."""
+        ``convoy_weights="paper"``, else 0.5 (``"mean"``, and ``"inverse-variance"`` without σ
+        or where the overlap contradicts it)."""
         if self.convoy_weights != "paper":
             return 0.5
         return {"weighted": self.w_coop, "mean": 0.5, "nearest": 1.0}[self.convoy_strategy]

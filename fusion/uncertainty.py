@@ -69,6 +69,13 @@ BRIDGE_SIGMA_FLOOR_PER_M: Final[dict[str, float]] = {"paper": 0.0475, "hermite":
 the detection's point noise on any road; ``hermite``'s fitted ends miss what changes inside
 the gap without bending it (lane width, gentle curvature)."""
 
+UNSTATED_SIGMA_M: Final[float] = 0.005
+"""Lateral 1σ [m] that the coop's pose update (:mod:`fusion.registration`) takes for every
+point of a detection that states no σ while a sender states a pose covariance (the ideal
+sensor under pose errors): its points are exact in its own frame up to how its borders are
+sampled; the update then has the overlap's geometry as nearly exact evidence of the pose
+error. The fused lane still states no σ."""
+
 
 def interpolation_bend(interpolation: str, bend: tuple[float, float, float], length_m: float) -> float:
     """The bend F [rad] that scales the interpolation term of a gap bridge of length L [m]
@@ -139,15 +146,27 @@ def has_sigma(detection: LaneDetection) -> bool:
     return detection.left_sigma is not None and detection.right_sigma is not None
 
 
-def own_variances(detection: LaneDetection) -> tuple[BorderVariance, BorderVariance] | None:
+def _sigmas(detection: LaneDetection, unstated_m: float | None) -> tuple[NDArrayFloat, NDArrayFloat] | None:
+    """The stated σ [m] of a detection's (left, right) border points; ``unstated_m`` for every
+    point of a detection that states none (None then: no σ)."""
+    if has_sigma(detection):
+        assert detection.left_sigma is not None and detection.right_sigma is not None
+        return detection.left_sigma, detection.right_sigma
+    if unstated_m is None:
+        return None
+    return np.full(detection.left.shape[0], unstated_m), np.full(detection.right.shape[0], unstated_m)
+
+
+def own_variances(detection: LaneDetection,
+                  unstated_m: float | None = None) -> tuple[BorderVariance, BorderVariance] | None:
     """:class:`BorderVariance` of a detection's (left, right) borders with no other sender;
-    None when it states no σ."""
-    if not has_sigma(detection):
+    None when it states no σ (and no ``unstated_m``, see :func:`_sigmas`)."""
+    sigmas = _sigmas(detection, unstated_m)
+    if sigmas is None:
         return None
     covariance = frame_covariance(detection.pose_cov, detection.pose.yaw)
     out = []
-    for points, sigma in ((detection.left, detection.left_sigma), (detection.right, detection.right_sigma)):
-        assert sigma is not None
+    for points, sigma in zip((detection.left, detection.right), sigmas):
         zeros = np.zeros(points.shape[0])
         out.append(BorderVariance(sigma * sigma, pose_variance(points, (0.0, 0.0), covariance), zeros))
     return out[0], out[1]
@@ -169,18 +188,19 @@ class PairUncertainty:
 
 
 def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDArrayFloat, ...],
-                     coop_xy: tuple[float, float]) -> PairUncertainty | None:
+                     coop_xy: tuple[float, float], unstated_m: float | None = None) -> PairUncertainty | None:
     """:class:`PairUncertainty` of a pair whose ``borders`` (ego left, ego right, coop left,
     coop right) are in the ego frame with the coop at ``coop_xy``; None unless both
-    detections state σ."""
-    own = own_variances(ego)
-    if own is None or not has_sigma(coop):
+    detections state σ (a detection that states none takes ``unstated_m`` [m] for every
+    point when given)."""
+    own = own_variances(ego, unstated_m)
+    coop_sigmas = _sigmas(coop, unstated_m)
+    if own is None or coop_sigmas is None:
         return None
     yaw = ego.pose.yaw
     ego_cov, coop_cov = frame_covariance(ego.pose_cov, yaw), frame_covariance(coop.pose_cov, yaw)
     coop_parts = []
-    for points, sigma in ((borders[2], coop.left_sigma), (borders[3], coop.right_sigma)):
-        assert sigma is not None
+    for points, sigma in zip(borders[2:], coop_sigmas):
         coop_parts.append(BorderVariance(sigma * sigma, pose_variance(points, coop_xy, coop_cov),
                                          pose_variance(points, (0.0, 0.0), ego_cov)))
     return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy)

@@ -12,8 +12,10 @@ import pytest
 import fusion
 from fusion import FusionParams, LaneDetection, Pose2D, Source
 from fusion.analytic import AnalyticRoad, Segment, detect
-from fusion.geometry import distance_to_polyline, transform
-from fusion.registration import pose_update
+from fusion.convoy import OverlapStart, overlap_length
+from fusion.geometry import distance_to_polyline, points_at, segment_at, transform
+from fusion.registration import INCONSISTENT_RATE, consistency_limit, corrected, pose_update
+from fusion.uncertainty import UNSTATED_SIGMA_M
 
 WIDTH_M = 3.5
 IV = FusionParams(convoy_weights="inverse-variance")
@@ -161,3 +163,87 @@ def test_a_short_overlap_leaves_the_yaw_to_the_prior_without_nan() -> None:
     update = pose_update(rows, np.zeros(4), np.full(4, 0.05**2 + 0.03**2), cov, np.zeros((3, 3)), (0.0, 0.0))
     assert update.relative[2, 2] > 0.95 * cov[2, 2]
     assert update.relative[1, 1] < 0.5 * cov[1, 1] or update.relative[0, 0] < 0.5 * cov[0, 0]
+
+
+@pytest.mark.parametrize("offset_m, yaw_rad", [(0.08, 0.004), (-0.12, -0.006)])
+def test_without_stated_sigma_a_known_pose_error_is_estimated_with_the_unstated_sigma(offset_m: float,
+                                                                                     yaw_rad: float) -> None:
+    """The ideal sensor: exact borders stating no σ, the coop's pose covariance stated. The
+    update takes σ_u = UNSTATED_SIGMA_M for every point (R = 2σ_u² per end), so the estimate is
+    the GLS of the known-offset test with that R, the coop's far points come back to the road
+    within 3σ of what the update leaves (J P⁺ Jᵀ), and the fused lane states no σ; the
+    paper's weights keep the reported pose's error."""
+    road = straight()
+    sxy, syaw = 0.1, 0.005
+    cov = np.diag([sxy**2, sxy**2, syaw**2])
+    ego = detect(road, 10.0, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    true = detect(road, 20.0, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    normal = (-math.sin(ROAD_YAW), math.cos(ROAD_YAW))
+    reported = Pose2D(true.pose.x + offset_m * normal[0], true.pose.y + offset_m * normal[1], true.pose.yaw + yaw_rad)
+    coop = LaneDetection(reported, true.left, true.right, pose_cov=cov)
+    result = fusion.fuse(ego, coop, params=IV)
+    assert result.kind == "convoy" and result.left_sigma is None and result.right_sigma is None
+    lever = 20.0
+    rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, lever * math.cos(yaw_rad)]] * 2)
+    d = np.array([offset_m, offset_m + lever * math.sin(yaw_rad)] * 2)
+    noise = 1.0 / (2.0 * UNSTATED_SIGMA_M**2)
+    posterior = np.linalg.inv(np.linalg.inv(cov) + noise * rows.T @ rows)
+    estimate = posterior @ rows.T @ (noise * d)
+    turn = lambda a: np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])  # noqa: E731
+    coop_xy = np.array([20.0, offset_m])
+    expected = coop_xy + (true.left @ turn(yaw_rad).T - estimate[:2]) @ turn(-estimate[2]).T
+    local = road_frame(result.left[result.left_source == Source.COOP], road)
+    beyond = local[:, 0] > 40.0 + IV.convoy_end_blend_m
+    assert beyond.sum() > 40
+    np.testing.assert_allclose(local[beyond], expected[-beyond.sum():], atol=1e-9)
+    jacobian = np.column_stack((np.zeros(beyond.sum()), np.ones(beyond.sum()), local[beyond, 0] - coop_xy[0]))
+    left_sigma = np.sqrt(np.einsum("ij,jk,ik->i", jacobian, posterior, jacobian))
+    assert (np.abs(local[beyond, 1] - 0.5 * WIDTH_M) < 3.0 * left_sigma).all()
+    paper = road_frame(fusion.fuse(ego, coop).left, road)
+    assert np.abs(paper[:, 1] - 0.5 * WIDTH_M).max() > abs(offset_m) + 0.5 * lever * abs(yaw_rad)
+    assert np.abs(local[:, 1] - 0.5 * WIDTH_M).max() < 0.1 * (abs(offset_m) + lever * abs(yaw_rad))
+
+
+def test_an_overlap_that_contradicts_the_stated_sigma_makes_no_update() -> None:
+    """The ego's borders 1 m to the left of the coop's in the overlap (a border turned into
+    another lane): far beyond σ 0.05 m and a 0.1 m / 5 mrad pose covariance, so the
+    innovation exceeds the χ²₄ limit at the stated rate, the coop is not moved and the
+    overlap takes the fixed weights (0.5), as without σ."""
+    road = straight()
+    ego_det = detect(road, 10.0, 30.0, 0.5 * WIDTH_M + 1.0, -0.5 * WIDTH_M + 1.0)
+    det = detect(road, 20.0, 30.0, 0.5 * WIDTH_M, -0.5 * WIDTH_M)
+    moved = Pose2D(det.pose.x, det.pose.y, det.pose.yaw + 0.004)
+    cov = np.diag([0.1**2, 0.1**2, 0.005**2])
+    sigma = 0.05
+    result = fusion.fuse(stated(ego_det, sigma, None), stated(det, sigma, cov, moved), params=IV)
+    bare = fusion.fuse(LaneDetection(ego_det.pose, ego_det.left, ego_det.right),
+                       LaneDetection(moved, det.left, det.right), params=IV)
+    np.testing.assert_allclose(result.left, bare.left, atol=1e-12)
+    np.testing.assert_allclose(result.right, bare.right, atol=1e-12)
+    # χ²₄'s survival function is e^(−x/2)(1 + x/2): the limit is where it equals the rate (47.9)
+    assert math.exp(-consistency_limit(4) / 2) * (1 + consistency_limit(4) / 2) == pytest.approx(INCONSISTENT_RATE)
+
+
+def test_corrected_inverts_a_rigid_pose_error_about_the_coop() -> None:
+    """Points moved by a pose error δ (turned by δψ about the coop, then shifted by (δx, δy))
+    come back exactly when corrected by δ."""
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-30.0, 60.0, (50, 2))
+    coop_xy, estimate = (25.0, -1.5), np.array([0.07, -0.12, 0.006])
+    c, s = math.cos(estimate[2]), math.sin(estimate[2])
+    moved = (points - coop_xy) @ np.array([[c, -s], [s, c]]).T + coop_xy + estimate[:2]
+    np.testing.assert_allclose(corrected(moved, coop_xy, estimate), points, atol=1e-12)
+
+
+def test_segment_at_and_overlap_length() -> None:
+    """The segment of an arc length is that of the last vertex at or before it, the first or
+    last one outside the line; the overlap is what is left of the ego border past s0 unless
+    the coop border ends first."""
+    s = np.array([0.0, 1.0, 3.0, 6.0])
+    np.testing.assert_array_equal(segment_at(s, np.array([-1.0, 0.0, 0.5, 1.0, 2.9, 3.0, 6.0, 9.0])),
+                                  [0, 0, 0, 1, 1, 2, 2, 2])
+    line = np.column_stack((s, np.zeros(4)))
+    np.testing.assert_allclose(points_at(line, s, np.array([0.5, 4.5])), [[0.5, 0.0], [4.5, 0.0]])
+    start = OverlapStart(s, 2.0, 0.0, 0.0)
+    assert overlap_length(start, np.array([0.0, 10.0])) == (4.0, True)
+    assert overlap_length(start, np.array([0.0, 2.5])) == (2.5, False)

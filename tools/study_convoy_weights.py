@@ -15,7 +15,8 @@ fusion, calibration of the bridge σ; weights do not apply).
     .venv/bin/python tools/study_convoy_weights.py [--pairs 200] [--seed 1] [--lead 25] [--range 50]
 
 With ``--maps`` it runs ``cold-eval`` instead (in this process, ``--no-mcap --no-plots``, the
-same routes, frames, gaps and seed for every run) on each map × sensor (``ideal``,
+same routes, frames, gaps and seed for every run) on each map (a name of ``tools/study_sensor.py``
+or an ``.xodr`` file, named by its stem) × sensor (``ideal``,
 ``camera``, or one of them with ``--sensors``) × coop pose error (none, 0.05 m / 2 mrad, 0.1 m / 5 mrad: ``--pose-xy``,
 ``--pose-yaw``) × ``--convoy-weights`` (paper, mean, inverse-variance) and tabulates the
 convoy scenario's errors of correct fusions (``tools/study_sensor.py``'s ``correct_errors``:
@@ -55,7 +56,7 @@ from cold_maps.simulation.lane_model_error import LaneModelErrorParams  # noqa: 
 from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
 from fusion.geometry import distance_to_polyline  # noqa: E402
 from fusion.registration import pose_update  # noqa: E402
-from study_sensor import MAPS, correct_errors, run_eval, sha256, shown  # noqa: E402
+from study_sensor import MAPS, StudyMap, correct_errors, run_eval, sha256, shown  # noqa: E402
 
 PARTS = ("ego", "overlap", "coop")
 
@@ -254,6 +255,9 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
     """The ``--maps`` study (module docstring)."""
     specs = {m.name: m for m in MAPS}
     wanted = [name for name in args.maps.split(",") if name]
+    for name in wanted:
+        if name not in specs and name.endswith(".xodr"):
+            specs[name] = StudyMap(Path(name).stem, Path(name), True)
     unknown = sorted(set(wanted) - set(specs))
     if unknown:
         print(f"study_convoy_weights: --maps: unknown map(s) {', '.join(unknown)} (known: {', '.join(specs)})",
@@ -265,8 +269,9 @@ def maps_study(args: argparse.Namespace, argv: list[str]) -> int:
     study: dict[str, Any] = {"command": shlex.join(["python", "tools/study_convoy_weights.py", *argv]),
                              "version": cold_maps.__version__, "eval_options": shlex.join(options), "maps": [],
                              "rows": []}
-    for name in wanted:
-        spec = specs[name]
+    for key in wanted:
+        spec = specs[key]
+        name = spec.name
         if not spec.path.is_file():
             print(f"{name}: skipped, {spec.path} not found", file=sys.stderr)
             study["maps"].append({"name": name, "path": shown(spec.path), "sha256": None})
@@ -310,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--interpolation", choices=("paper", "hermite"), default="hermite",
                         help="interpolation of the spline study (default hermite)")
     parser.add_argument("--maps", default="", help="comma-separated maps of tools/study_sensor.py (e.g. "
-                        "rural,Town01,Town04): the cold-eval study instead of the analytic one")
+                        "rural,Town01,Town04) or .xodr files: the cold-eval study instead of the analytic one")
     parser.add_argument("--out", type=Path, default=Path("out/study-weights"), help="--maps: output folder")
     parser.add_argument("--routes", default="3", help="--maps: cold-eval --routes (default 3)")
     parser.add_argument("--frames", default="100", help="--maps: cold-eval --frames (default 100)")
