@@ -191,10 +191,14 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
     )
 
 
-def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
+def _without_repeats(ids: NDArrayInt, starts: NDArrayInt) -> tuple[NDArrayInt, list[int]]:
+    """``ids`` of the borders that begin at ``starts`` (the last: the end) without a
+    border's repeats of its previous id, and where each border begins in the result."""
     keep = np.ones(len(ids), dtype=bool)
     keep[1:] = ids[1:] != ids[:-1]
-    return tuple(ids[keep].tolist())
+    keep[starts[:-1][starts[:-1] < len(ids)]] = True
+    kept_before = np.concatenate(([0], np.cumsum(keep)))
+    return ids[keep], kept_before[starts].tolist()
 
 
 def _dense(values: NDArrayInt) -> tuple[NDArrayInt, NDArrayInt]:
@@ -262,6 +266,8 @@ def build_osm(
     representative = _keep_short_borders(representative, starts)
     unique, point_index = _dense(representative)
     coordinates = np.column_stack((positions[unique], heights[unique]))
+    kept_ids, kept_starts = _without_repeats(point_index, starts)
+    kept_list = kept_ids.tolist()
     ways: dict[tuple[int, ...], int] = {}
     way_points: list[NDArrayInt] = []
     way_tags: list[dict[str, str]] = []
@@ -274,14 +280,15 @@ def build_osm(
             ("left", 2 * index, dict(lanelet.left_tags) or _MARKINGS.get(lanelet.left_marking, {})),
             ("right", 2 * index + 1, dict(lanelet.right_tags) or _MARKINGS.get(lanelet.right_marking, {})),
         ):
-            points = _without_repeats(point_index[starts[position] : starts[position + 1]])
+            first, end = kept_starts[position], kept_starts[position + 1]
+            points = tuple(kept_list[first:end])
             if len(points) < 2:
                 raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {merge_tolerance_m} m")
             ends.append(points[-1])
             way = ways.get(points, ways.get(points[::-1]))
             if way is None:
                 way = ways[points] = len(way_points)
-                chain = np.asarray(points)
+                chain = kept_ids[first:end]
                 kept = chain if simplify_tolerance_m is None else chain[_kept_vertices(coordinates[chain], simplify_tolerance_m)]
                 way_points.append(kept)
                 way_tags.append({})
@@ -298,13 +305,7 @@ def build_osm(
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    bulk = _nodes_text(node_id[used], coordinates[used]) + "".join(
-        f'  <way id="{way_id_base + way}">\n    <nd ref="' + '"/>\n    <nd ref="'.join(map(str, node_id[chain].tolist()))
-        + '"/>\n'
-        + "".join(f'    <tag k="{_escape(key)}" v="{_escape(value)}"/>\n' for key, value in way_tags[way].items())
-        + "  </way>\n"
-        for way, chain in enumerate(way_points)
-    )
+    bulk = [_nodes_text(node_id[used], coordinates[used]), *_ways_text(way_id_base, node_id, way_points, way_tags)]
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -330,7 +331,7 @@ def build_osm(
     # The bulk of nodes and ways, written as text in lxml's pretty-printed form (an element
     # per node is slow), goes right after the recipe comment, where the tree would put it.
     after_comment = document.index(b"-->\n") + len(b"-->\n")
-    return document[:after_comment] + bulk.encode("utf-8") + document[after_comment:]
+    return b"".join([document[:after_comment], *bulk, document[after_comment:]])
 
 
 def _escape(value: str) -> str:
@@ -338,29 +339,56 @@ def _escape(value: str) -> str:
     return value.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 
-def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
-    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1."""
+def _ways_text(
+    first_id: int, node_id: NDArrayInt, way_points: Sequence[NDArrayInt], way_tags: Sequence[dict[str, str]]
+) -> list[bytes]:
+    """Ways ``first_id`` on of these points (indices into ``node_id``) and tags,
+    pretty-printed at depth 1 (UTF-8)."""
+    import orjson
+
+    tags_text: dict[tuple[tuple[str, str], ...], bytes] = {}
+    texts = []
+    for way, (chain, tags) in enumerate(zip(way_points, way_tags)):
+        key = tuple(tags.items())
+        if key not in tags_text:
+            tags_text[key] = "".join(f'    <tag k="{_escape(k)}" v="{_escape(v)}"/>\n' for k, v in key).encode("utf-8")
+        refs = orjson.dumps(node_id[chain], option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
+        texts.append(b'  <way id="%d">\n    <nd ref="%s"/>\n%s  </way>\n'
+                     % (first_id + way, refs.replace(b",", b'"/>\n    <nd ref="'), tags_text[key]))
+    return texts
+
+
+def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> bytes:
+    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1 (ASCII)."""
     lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
     known = np.isfinite(xyz[:, 2])
     parts = []
     for first in range(0, len(xyz), _NODES_AT_ONCE):
         at = slice(first, first + _NODES_AT_ONCE)
-        values: list[object] = [None] * (4 * len(known[at]))  # id, lat, lon, height of each node
+        nodes = len(known[at])
+        values: list[object] = [None] * (4 * nodes)  # id, lat, lon, height of each node
         values[0::4], values[1::4], values[2::4], values[3::4] = (
             identifiers[at].tolist(), float_texts(lat[at]), float_texts(lon[at]), _heights_text(xyz[at, 2]))
-        parts.append("".join(map(_NODE_FORMATS.__getitem__, known[at].tolist())) % tuple(values))
-    return "".join(parts)
+        if known[at].all():
+            formats = _NODE_FORMATS[1] * nodes
+        else:
+            formats = b"".join(map(_NODE_FORMATS.__getitem__, known[at].tolist()))
+        parts.append(formats % tuple(values))
+    return b"".join(parts)
 
 
-def _heights_text(z: NDArrayFloat) -> list[str]:
-    """``"%.4f" % h`` of each height (m), each distinct value (bit pattern) formatted once."""
-    distinct, inverse = np.unique(np.ascontiguousarray(z, dtype=np.float64).view(np.int64), return_inverse=True)
-    return np.array(["%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
+def _heights_text(z: NDArrayFloat) -> list[bytes]:
+    """``b"%.4f" % h`` of each height (m), each distinct value (bit pattern) formatted once."""
+    bits = np.ascontiguousarray(z, dtype=np.float64).view(np.int64)
+    if len(bits) and (bits == bits[0]).all():
+        return [b"%.4f" % z[0]] * len(bits)
+    distinct, inverse = np.unique(bits, return_inverse=True)
+    return np.array([b"%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
 
 
-def float_texts(values: NDArrayFloat) -> list[str]:
-    """The shortest decimal text of each float of ``values`` that reads back as the same
-    float (orjson's, the digits ``repr`` has; its notation: "0.0000123", "1.5e-6"),
+def float_texts(values: NDArrayFloat) -> list[bytes]:
+    """The shortest decimal text (ASCII) of each float of ``values`` that reads back as the
+    same float (orjson's, the digits ``repr`` has; its notation: "0.0000123", "1.5e-6"),
     ``repr`` for values not finite."""
     import orjson
 
@@ -369,8 +397,8 @@ def float_texts(values: NDArrayFloat) -> list[str]:
     if not values.size:
         return []
     if finite.all():
-        return orjson.dumps(values, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].decode("ascii").split(",")
-    texts = np.array(list(map(repr, values.tolist())), dtype=object)
+        return orjson.dumps(values, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",")
+    texts = np.array([repr(value).encode("ascii") for value in values.tolist()], dtype=object)
     texts[finite] = float_texts(values[finite])
     return texts.tolist()
 
@@ -379,9 +407,9 @@ _NODES_AT_ONCE: Final[int] = 65536
 """Nodes ``_nodes_text`` formats in one ``%`` (bounds the argument tuple)."""
 
 
-_NODE_FORMATS: Final[tuple[str, str]] = (
-    '  <node id="%d" lat="%s" lon="%s"/>\n%.0s',  # no height: the height is formatted as nothing
-    '  <node id="%d" lat="%s" lon="%s">\n    <tag k="ele" v="%s"/>\n  </node>\n',
+_NODE_FORMATS: Final[tuple[bytes, bytes]] = (
+    b'  <node id="%d" lat="%s" lon="%s"/>\n%.0s',  # no height: the height is formatted as nothing
+    b'  <node id="%d" lat="%s" lon="%s">\n    <tag k="ele" v="%s"/>\n  </node>\n',
 )
 """An OSM node without and with its ``ele`` tag, pretty-printed at depth 1 (``%`` fields)."""
 

@@ -253,7 +253,7 @@ def _assert_shortest_round_trip(values: np.ndarray) -> None:
     def digits(text: str) -> str:
         return text.lower().lstrip("-").partition("e")[0].replace(".", "").strip("0")
 
-    texts = float_texts(values)
+    texts = [text.decode("ascii") for text in float_texts(values)]
     assert len(texts) == len(values)
     for value, text in zip(values.tolist(), texts):
         assert np.float64(text).view(np.int64) == np.float64(value).view(np.int64) or (value != value and text == "nan")
@@ -264,8 +264,9 @@ def test_node_heights_are_written_as_four_decimals_each_bit_pattern_its_own() ->
     from converters.osm import _heights_text
 
     heights = np.array([0.0, -0.0, 1.23455, 1.23465, -2.5, 0.0, np.nan])
-    assert _heights_text(heights) == ["%.4f" % h for h in heights.tolist()]
-    assert _heights_text(heights)[:2] == ["0.0000", "-0.0000"]
+    assert _heights_text(heights) == [b"%.4f" % h for h in heights.tolist()]
+    assert _heights_text(heights)[:2] == [b"0.0000", b"-0.0000"]
+    assert _heights_text(np.full(3, -0.0)) == [b"-0.0000"] * 3
 
 
 def test_float_texts_in_every_decade_and_at_the_notation_changes() -> None:
