@@ -60,16 +60,22 @@ def successor_gaps(
     """Every converter successor relation whose ends are farther apart than
     ``merge_tolerance_m`` (m) on either border, in lanelet order; ``joined`` when both
     lie within ``join_tolerance_m`` (m)."""
-    by_id = {lanelet.id: lanelet for lanelet in lanelets}
-    gaps = []
-    for lanelet in lanelets:
-        for follower in (by_id[i] for i in lanelet.successors if i in by_id):
-            left = float(np.hypot(*(lanelet.left[-1] - follower.left[0])))
-            right = float(np.hypot(*(lanelet.right[-1] - follower.right[0])))
-            if max(left, right) > merge_tolerance_m:
-                joined = max(left, right) <= join_tolerance_m
-                gaps.append(EndGap(lanelet.id, follower.id, left, right, joined))
-    return tuple(gaps)
+    slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
+    pairs = [(index, slot[i]) for index, lanelet in enumerate(lanelets) for i in lanelet.successors if i in slot]
+    if not pairs:
+        return ()
+    before, after = np.array(pairs, dtype=np.int64).T
+    involved = np.unique(np.concatenate((before, after))).tolist()
+    ends = np.array([(lanelets[i].left[-1], lanelets[i].right[-1]) for i in involved], dtype=np.float64)
+    starts = np.array([(lanelets[i].left[0], lanelets[i].right[0]) for i in involved], dtype=np.float64)
+    gap = ends[np.searchsorted(involved, before)] - starts[np.searchsorted(involved, after)]  # (pair, left/right, x/y)
+    distance = np.hypot(gap[..., 0], gap[..., 1])
+    left, right = distance[:, 0], distance[:, 1]
+    largest = np.where(right > left, right, left)  # max(left, right) as Python's max
+    return tuple(
+        EndGap(lanelets[b].id, lanelets[a].id, l, r, m <= join_tolerance_m)
+        for b, a, l, r, m in zip(*(v[largest > merge_tolerance_m].tolist() for v in (before, after, left, right, largest)))
+    )
 
 
 def join_ends(

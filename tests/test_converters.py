@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 import converters
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
-from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
+from converters.crdesigner_bridge import SourceLanelet, crdesigner_version, read_geo_reference
 from converters.osm import (
     MERGE_TOLERANCE_M,
     OPENDRIVE_TAG,
@@ -375,6 +375,25 @@ def test_cache_folder_precedence(tmp_path, monkeypatch) -> None:
     name = cache_path(b"abc", "9.9", tmp_path).name
     assert name.startswith("ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad")
     assert "crdesigner9.9" in name and f"format{frame.FORMAT_VERSION}" in name
+
+
+def test_geo_reference_read_from_the_header_alone_is_the_whole_file_s(tmp_path) -> None:
+    header = "<header><geoReference><![CDATA[ +proj=utm  +zone=32 ]]></geoReference></header>"
+    whole = tmp_path / "whole.xodr"
+    whole.write_text(f"<OpenDRIVE>{header}<road/></OpenDRIVE>")
+    cut = tmp_path / "cut.xodr"
+    cut.write_text(f"<OpenDRIVE>{header}<road")
+    assert read_geo_reference(whole) == read_geo_reference(whole, header_only=True) == "+proj=utm +zone=32"
+    assert read_geo_reference(cut, header_only=True) == "+proj=utm +zone=32"  # what follows the header is not read
+    with pytest.raises(converters.ConversionError, match="not well-formed XML"):
+        read_geo_reference(cut)
+    for content, message in (("<OpenDRIVE><header", "not well-formed XML"), ("<osm/>", "root element is <osm>"),
+                             ('<!DOCTYPE x [<!ENTITY a "b">]><OpenDRIVE/>', "DOCTYPE is not allowed")):
+        whole.write_text(content)
+        with pytest.raises(converters.ConversionError, match=message):
+            read_geo_reference(whole, header_only=True)
+    whole.write_text("<OpenDRIVE><road/></OpenDRIVE>")
+    assert read_geo_reference(whole, header_only=True) == ""
 
 
 # --- errors and CLI --------------------------------------------------------------------
