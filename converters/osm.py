@@ -170,25 +170,44 @@ def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
     right. crdesigner 0.8.5 does that for every lane of an LHT road (it reverses the
     vertex order for the driving direction but keeps inner as left); Lanelet2's loader
     would then invert both borders and flip the driving direction."""
-    if len(lanelet.left) != len(lanelet.right) or len(lanelet.left) < 2:
-        return lanelet
-    centre = 0.5 * (lanelet.left + lanelet.right)
-    tangent = np.gradient(centre, axis=0)
-    across = lanelet.left - lanelet.right
-    leftness = np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
-    if leftness >= 0.0:
-        return lanelet
-    return replace(
-        lanelet,
-        left=lanelet.right,
-        right=lanelet.left,
-        left_marking=lanelet.right_marking,
-        right_marking=lanelet.left_marking,
-        left_tags=lanelet.right_tags,
-        right_tags=lanelet.left_tags,
-        left_z=lanelet.right_z,
-        right_z=lanelet.left_z,
-    )
+    return lefts_on_left([lanelet])[0]
+
+
+def lefts_on_left(lanelets: Sequence[SourceLanelet]) -> list[SourceLanelet]:
+    """``left_on_left`` of each lanelet: the sum over its vertices of the mid-line's
+    tangent (``np.gradient``) crossed with the left-minus-right offset, negative on the
+    right; the products of all lanelets in one pass, each lanelet's sum as ``np.sum`` of
+    its own (only lanelets whose borders have the same two or more vertices are judged)."""
+    judged = [index for index, lanelet in enumerate(lanelets) if len(lanelet.left) == len(lanelet.right) >= 2]
+    result = list(lanelets)
+    if not judged:
+        return result
+    left = np.concatenate([lanelets[index].left for index in judged])
+    right = np.concatenate([lanelets[index].right for index in judged])
+    ends = np.cumsum([len(lanelets[index].left) for index in judged])
+    begins = np.concatenate(([0], ends[:-1]))
+    centre = 0.5 * (left + right)
+    tangent = np.empty_like(centre)  # np.gradient along each lanelet (unit spacing, first-order ends)
+    tangent[1:-1] = (centre[2:] - centre[:-2]) / 2.0
+    tangent[begins] = centre[begins + 1] - centre[begins]
+    tangent[ends - 1] = centre[ends - 1] - centre[ends - 2]
+    across = left - right
+    products = tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0]
+    for index, first, end in zip(judged, begins.tolist(), ends.tolist()):
+        if not np.sum(products[first:end]) >= 0.0:  # a NaN sum swaps too
+            lanelet = lanelets[index]
+            result[index] = replace(
+                lanelet,
+                left=lanelet.right,
+                right=lanelet.left,
+                left_marking=lanelet.right_marking,
+                right_marking=lanelet.left_marking,
+                left_tags=lanelet.right_tags,
+                right_tags=lanelet.left_tags,
+                left_z=lanelet.right_z,
+                right_z=lanelet.left_z,
+            )
+    return result
 
 
 def _without_repeats(ids: NDArrayInt, starts: NDArrayInt) -> tuple[NDArrayInt, list[int]]:
@@ -229,9 +248,14 @@ def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArr
     """``representative`` with the last point of each border that the merge reduced to a
     single node made a node of its own, so every border keeps two nodes."""
     kept = representative.copy()
-    for first, end in zip(starts[:-1], starts[1:]):
-        if end - first >= 2 and np.all(representative[first:end] == representative[first]):
-            kept[end - 1] = end - 1
+    if not len(representative):
+        return kept
+    sizes = np.diff(starts)
+    filled = sizes > 0
+    firsts = starts[:-1][filled]  # a border's span in reduceat runs to the next non-empty border
+    single = np.minimum.reduceat(representative, firsts) == np.maximum.reduceat(representative, firsts)
+    ends = starts[1:][filled][single & (sizes[filled] >= 2)]
+    kept[ends - 1] = ends - 1
     return kept
 
 
@@ -254,7 +278,7 @@ def build_osm(
     when a lanelet has a border with fewer than two distinct points, or when nothing is
     left to write.
     """
-    lanelets = [left_on_left(lanelet) for lanelet in lanelets]
+    lanelets = lefts_on_left(lanelets)
     borders = [border for lanelet in lanelets for border in (lanelet.left, lanelet.right)]
     if not borders:
         raise ConversionError(source, "no lanelets to write")

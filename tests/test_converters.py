@@ -31,6 +31,7 @@ from converters.osm import (
     OPENDRIVE_TAG,
     float_texts,
     left_on_left,
+    lefts_on_left,
     merge_points,
     opendrive_lanes_tag,
     parse_opendrive_lanes_tag,
@@ -293,6 +294,39 @@ def test_left_on_left_swaps_only_lanelets_whose_left_border_is_on_the_right() ->
     assert left_on_left(good) is good
     swapped = left_on_left(SourceLanelet(7, good.right, good.left, good.types))
     assert np.array_equal(swapped.left, good.left) and np.array_equal(swapped.right, good.right)
+
+
+def test_lefts_on_left_judges_each_lanelet_by_its_own_gradient_sum() -> None:
+    rng = np.random.default_rng(5)
+    lanelets = [SourceLanelet(i, rng.normal(size=(n, 2)), rng.normal(size=(m, 2)), frozenset())
+                for i, (n, m) in enumerate([(2, 2), (3, 3), (7, 7), (130, 130), (5, 4), (1, 1)] * 20)]
+
+    def leftness(lanelet: SourceLanelet) -> float:
+        tangent = np.gradient(0.5 * (lanelet.left + lanelet.right), axis=0)
+        across = lanelet.left - lanelet.right
+        return np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
+
+    judged = [len(lanelet.left) == len(lanelet.right) >= 2 for lanelet in lanelets]
+    swapped = [judge and leftness(lanelet) < 0.0 for judge, lanelet in zip(judged, lanelets)]
+    assert 0 < sum(swapped) < sum(judged)
+    for lanelet, result, swap in zip(lanelets, lefts_on_left(lanelets), swapped):
+        assert (result is not lanelet) == swap
+        assert result.left is (lanelet.right if swap else lanelet.left)
+
+
+def test_a_border_merged_into_one_node_keeps_its_last_point_as_its_own() -> None:
+    from converters.osm import _keep_short_borders
+
+    rng = np.random.default_rng(6)
+    for _ in range(500):
+        starts = np.cumsum(np.concatenate(([0], rng.integers(0, 5, rng.integers(0, 8)))))
+        representative = rng.integers(0, 3, starts[-1])
+        kept = _keep_short_borders(representative, starts)
+        for first, end in zip(starts[:-1].tolist(), starts[1:].tolist()):
+            if end > first:
+                single = end - first >= 2 and len(set(representative[first:end].tolist())) == 1
+                assert kept[first:end - 1].tolist() == representative[first:end - 1].tolist()
+                assert kept[end - 1] == (end - 1 if single else representative[end - 1])
 
 
 # --- cache -----------------------------------------------------------------------------
