@@ -143,7 +143,11 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     """Index of each point's representative: the first earlier-or-same point within
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
     its representative; with ``tolerance`` 0 only equal points share one."""
-    if tolerance == 0.0:  # equal rows are neighbours in lexicographic order (stable: the first comes first)
+    if tolerance == 0.0:
+        hashed = _first_equal_by_hash(points)
+        if hashed is not None:
+            return hashed
+        # equal rows are neighbours in lexicographic order (stable: the first comes first)
         order = np.argsort(np.ascontiguousarray(points, dtype=np.float64).view(np.complex128)[:, 0], kind="stable")
         ordered = points[order]
         starts = np.ones(len(points), dtype=bool)
@@ -163,6 +167,39 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
             if representative[other] < 0:
                 representative[other] = index
     return representative
+
+
+def _first_equal_by_hash(points: NDArrayFloat) -> NDArrayInt | None:
+    """``merge_points(points, 0.0)`` from a 64-bit hash of each point (-0.0 as 0.0): only
+    the points whose hash another shares are compared (most points of a map are unique,
+    and sorting hashes is cheaper than sorting points); None when two different points
+    share a hash or a NaN point does."""
+    xy = np.ascontiguousarray(points, dtype=np.float64) + 0.0
+    bits = xy.view(np.uint64)
+    key = _mixed(_mixed(bits[:, 0]) ^ bits[:, 1])
+    ordered = np.sort(key)
+    shared = np.unique(ordered[1:][ordered[1:] == ordered[:-1]])
+    representative = np.arange(len(points), dtype=np.int64)
+    if not len(shared):
+        return representative
+    slot = np.minimum(np.searchsorted(shared, key), len(shared) - 1)
+    members = np.flatnonzero(shared[slot] == key)
+    members = members[np.argsort(slot[members], kind="stable")]  # by hash, each hash's points in index order
+    group = slot[members]
+    first = np.ones(len(members), dtype=bool)
+    first[1:] = group[1:] != group[:-1]
+    leader = members[first][np.cumsum(first) - 1]
+    if not (xy[members] == xy[leader]).all():
+        return None
+    representative[members] = leader
+    return representative
+
+
+def _mixed(values: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
+    """splitmix64's finaliser of each value (a bijection that spreads every input bit)."""
+    values = (values ^ (values >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    values = (values ^ (values >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return values ^ (values >> np.uint64(31))
 
 
 def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
