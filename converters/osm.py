@@ -37,7 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
-from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_gaps
+from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_distances
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import arc_lengths, simplify
 
@@ -270,15 +270,13 @@ def _joined_ends(
 ) -> list[tuple[int, int]]:
     """(border end, successor's border start) point pairs, as indices into the stacked
     borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
-    across a gap (``converters.joins.successor_gaps``)."""
-    slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
-    pairs = []
-    for gap in successor_gaps(lanelets, merge_tolerance_m, join_tolerance_m):
-        if gap.joined:
-            before, after = slot[gap.lanelet], slot[gap.successor]
-            for side in (0, 1):
-                pairs.append((int(starts[2 * before + side + 1]) - 1, int(starts[2 * after + side])))
-    return pairs
+    across a gap (``converters.joins.successor_gaps``' joined ones)."""
+    before, after, _, _, largest = successor_distances(lanelets)
+    joined = (largest > merge_tolerance_m) & (largest <= join_tolerance_m)
+    sides = np.arange(2)
+    ends = starts[2 * before[joined, None] + sides + 1] - 1  # (relation, left/right)
+    begins = starts[2 * after[joined, None] + sides]
+    return list(zip(ends.ravel().tolist(), begins.ravel().tolist()))
 
 
 def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArrayInt:
