@@ -364,7 +364,7 @@ def build_osm(
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    bulk = [_nodes_text(node_id[used], coordinates[used]), *_ways_text(way_id_base, node_id, way_points, way_tags)]
+    bulk = [*_nodes_text(node_id[used], coordinates[used]), *_ways_text(way_id_base, node_id, way_points, way_tags)]
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -380,7 +380,7 @@ def build_osm(
 
     def new_node(xyz: NDArrayFloat) -> int:
         identifier = next(fresh)
-        text = _nodes_text(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
+        (text,) = _nodes_text(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
         root.append(etree.fromstring(text, etree.XMLParser(remove_blank_text=True)))
         return identifier
 
@@ -417,8 +417,9 @@ def _ways_text(
     return texts
 
 
-def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> bytes:
-    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1 (ASCII)."""
+def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> list[bytes]:
+    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1
+    (ASCII), in pieces of up to ``_NODES_AT_ONCE`` nodes."""
     lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
     known = np.isfinite(xyz[:, 2])
     parts = []
@@ -433,7 +434,7 @@ def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> bytes:
         else:
             formats = b"".join(map(_NODE_FORMATS.__getitem__, known[at].tolist()))
         parts.append(formats % tuple(values))
-    return b"".join(parts)
+    return parts
 
 
 def _heights_text(z: NDArrayFloat) -> list[bytes]:
