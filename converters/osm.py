@@ -326,8 +326,8 @@ def build_osm(
     unique, point_index = _dense(representative)
     coordinates = np.column_stack((positions[unique], heights[unique]))
     kept_ids, kept_starts = _without_repeats(point_index, starts)
-    kept_list = kept_ids.tolist()
-    ways: dict[tuple[int, ...], int] = {}
+    last_ids = np.append(kept_ids, -1)[np.array(kept_starts[1:]) - 1].tolist()  # each border's last id
+    ways: dict[bytes, int] = {}  # a way's point ids (int64 bytes) in its stored order
     way_points: list[NDArrayInt] = []
     way_tags: list[dict[str, str]] = []
     members: list[tuple[int, int]] = []
@@ -340,14 +340,16 @@ def build_osm(
             ("right", 2 * index + 1, dict(lanelet.right_tags) or _MARKINGS.get(lanelet.right_marking, {})),
         ):
             first, end = kept_starts[position], kept_starts[position + 1]
-            points = tuple(kept_list[first:end])
-            if len(points) < 2:
+            if end - first < 2:
                 raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {merge_tolerance_m} m")
-            ends.append(points[-1])
-            way = ways.get(points, ways.get(points[::-1]))
+            ends.append(last_ids[position])
+            chain = kept_ids[first:end]
+            points = chain.tobytes()
+            way = ways.get(points)
+            if way is None:
+                way = ways.get(chain[::-1].tobytes())
             if way is None:
                 way = ways[points] = len(way_points)
-                chain = kept_ids[first:end]
                 kept = chain if simplify_tolerance_m is None else chain[_kept_vertices(coordinates[chain], simplify_tolerance_m)]
                 way_points.append(kept)
                 way_tags.append({})
