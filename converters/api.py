@@ -108,7 +108,7 @@ def convert(
         data = _convert_bytes(xodr, verbose, converter)
     atomic_write(out, data)
     return frame.LoadRecipe(
-        osm_path=str(out), geo_reference=read_geo_reference(xodr), lanelets=data.count(b'<tag k="type" v="lanelet"/>')
+        osm_path=str(out), geo_reference=read_geo_reference(xodr, header_only=True), lanelets=data.count(b'<tag k="type" v="lanelet"/>')
     )
 
 

@@ -113,9 +113,11 @@ def _hardened_parser() -> etree.XMLParser:
     )
 
 
-def read_geo_reference(path: Path) -> str:
+def read_geo_reference(path: Path, *, header_only: bool = False) -> str:
     """Check that ``path`` is a readable OpenDRIVE file; return its geoReference ("" if none).
 
+    With ``header_only`` the XML is parsed up to the end of the root's first ``<header>``
+    (OpenDRIVE has one), the rest neither parsed nor checked: for a map converted already.
     Raises ConversionError for a missing, oversized or malformed file, a DOCTYPE (never
     needed by OpenDRIVE, and the only way in for entity attacks) or a non-OpenDRIVE root.
     """
@@ -130,13 +132,36 @@ def read_geo_reference(path: Path) -> str:
     if b"<!DOCTYPE" in data[: root_start if root_start >= 0 else len(data)]:
         raise ConversionError(str(path), "a DOCTYPE is not allowed in an OpenDRIVE map")
     try:
-        root = etree.fromstring(data, _hardened_parser())
+        root, header = _read_to_header(data) if header_only else (etree.fromstring(data, _hardened_parser()), None)
     except etree.XMLSyntaxError as exc:
         raise ConversionError(str(path), f"not well-formed XML: {exc}") from exc
     if etree.QName(root).localname != "OpenDRIVE":
         raise ConversionError(str(path), f"root element is <{etree.QName(root).localname}>, not <OpenDRIVE>")
-    geo = root.find("{*}header/{*}geoReference")
+    geo = root.find("{*}header/{*}geoReference") if header is None else header.find("{*}geoReference")
     return "" if geo is None else " ".join((geo.text or "").split())
+
+
+_HEADER_CHUNK_BYTES: Final[int] = 1 << 16
+"""Bytes ``_read_to_header`` parses at a time."""
+
+
+def _read_to_header(data: bytes) -> tuple[etree._Element, etree._Element | None]:
+    """The root of the XML ``data`` and its first ``<header>`` child, parsed (hardened) up
+    to that header's end; without a header (or under another root than ``<OpenDRIVE>``,
+    given back at once), None for the header."""
+    parser = etree.XMLPullParser(events=("start", "end"), resolve_entities=False, no_network=True, load_dtd=False,
+                                 huge_tree=False, remove_pis=True)
+    root = None
+    for first in range(0, len(data), _HEADER_CHUNK_BYTES):
+        parser.feed(data[first : first + _HEADER_CHUNK_BYTES])
+        for event, element in parser.read_events():
+            if root is None:
+                root = element
+                if etree.QName(root).localname != "OpenDRIVE":
+                    return root, None
+            elif event == "end" and element.getparent() is root and etree.QName(element).localname == "header":
+                return root, element
+    return parser.close(), None
 
 
 @contextlib.contextmanager

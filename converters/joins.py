@@ -54,22 +54,35 @@ class EndGap:
     joined: bool
 
 
+def successor_distances(
+    lanelets: Sequence[SourceLanelet],
+) -> tuple[NDArrayInt, NDArrayInt, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Every converter successor relation, in lanelet order: the lanelet's and the
+    successor's index in ``lanelets``, the distances (m) from the lanelet's left and right
+    border ends to the successor's left and right starts, and the larger of the two."""
+    slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
+    pairs = [(index, slot[i]) for index, lanelet in enumerate(lanelets) for i in lanelet.successors if i in slot]
+    before, after = np.array(pairs, dtype=np.int64).reshape(-1, 2).T
+    involved = np.unique(np.concatenate((before, after))).tolist()
+    ends = np.array([(lanelets[i].left[-1], lanelets[i].right[-1]) for i in involved], dtype=np.float64)
+    starts = np.array([(lanelets[i].left[0], lanelets[i].right[0]) for i in involved], dtype=np.float64)
+    gap = (ends[np.searchsorted(involved, before)] - starts[np.searchsorted(involved, after)]).reshape(-1, 2, 2)
+    distance = np.hypot(gap[..., 0], gap[..., 1])  # (pair, left/right)
+    left, right = distance[:, 0], distance[:, 1]
+    return before, after, left, right, np.where(right > left, right, left)  # the larger as Python's max
+
+
 def successor_gaps(
     lanelets: Sequence[SourceLanelet], merge_tolerance_m: float, join_tolerance_m: float = JOIN_TOLERANCE_M
 ) -> tuple[EndGap, ...]:
     """Every converter successor relation whose ends are farther apart than
     ``merge_tolerance_m`` (m) on either border, in lanelet order; ``joined`` when both
     lie within ``join_tolerance_m`` (m)."""
-    by_id = {lanelet.id: lanelet for lanelet in lanelets}
-    gaps = []
-    for lanelet in lanelets:
-        for follower in (by_id[i] for i in lanelet.successors if i in by_id):
-            left = float(np.hypot(*(lanelet.left[-1] - follower.left[0])))
-            right = float(np.hypot(*(lanelet.right[-1] - follower.right[0])))
-            if max(left, right) > merge_tolerance_m:
-                joined = max(left, right) <= join_tolerance_m
-                gaps.append(EndGap(lanelet.id, follower.id, left, right, joined))
-    return tuple(gaps)
+    before, after, left, right, largest = successor_distances(lanelets)
+    return tuple(
+        EndGap(lanelets[b].id, lanelets[a].id, l, r, m <= join_tolerance_m)
+        for b, a, l, r, m in zip(*(v[largest > merge_tolerance_m].tolist() for v in (before, after, left, right, largest)))
+    )
 
 
 def join_ends(

@@ -37,7 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
-from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_gaps
+from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_distances
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import arc_lengths, simplify
 
@@ -143,7 +143,11 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     """Index of each point's representative: the first earlier-or-same point within
     ``tolerance`` (m) that represents itself. Every point is within ``tolerance`` of
     its representative; with ``tolerance`` 0 only equal points share one."""
-    if tolerance == 0.0:  # equal rows are neighbours in lexicographic order (stable: the first comes first)
+    if tolerance == 0.0:
+        hashed = _first_equal_by_hash(points)
+        if hashed is not None:
+            return hashed
+        # equal rows are neighbours in lexicographic order (stable: the first comes first)
         order = np.argsort(np.ascontiguousarray(points, dtype=np.float64).view(np.complex128)[:, 0], kind="stable")
         ordered = points[order]
         starts = np.ones(len(points), dtype=bool)
@@ -165,36 +169,92 @@ def merge_points(points: NDArrayFloat, tolerance: float) -> NDArrayInt:
     return representative
 
 
+def _first_equal_by_hash(points: NDArrayFloat) -> NDArrayInt | None:
+    """``merge_points(points, 0.0)`` from a 64-bit hash of each point (-0.0 as 0.0): only
+    the points whose hash another shares are compared (most points of a map are unique,
+    and sorting hashes is cheaper than sorting points); None when two different points
+    share a hash or a NaN point does."""
+    xy = np.ascontiguousarray(points, dtype=np.float64) + 0.0
+    bits = xy.view(np.uint64)
+    key = _mixed(_mixed(bits[:, 0]) ^ bits[:, 1])
+    ordered = np.sort(key)
+    shared = np.unique(ordered[1:][ordered[1:] == ordered[:-1]])
+    representative = np.arange(len(points), dtype=np.int64)
+    if not len(shared):
+        return representative
+    slot = np.minimum(np.searchsorted(shared, key), len(shared) - 1)
+    members = np.flatnonzero(shared[slot] == key)
+    members = members[np.argsort(slot[members], kind="stable")]  # by hash, each hash's points in index order
+    group = slot[members]
+    first = np.ones(len(members), dtype=bool)
+    first[1:] = group[1:] != group[:-1]
+    leader = members[first][np.cumsum(first) - 1]
+    if not (xy[members] == xy[leader]).all():
+        return None
+    representative[members] = leader
+    return representative
+
+
+def _mixed(values: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
+    """splitmix64's finaliser of each value (a bijection that spreads every input bit)."""
+    values = (values ^ (values >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    values = (values ^ (values >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return values ^ (values >> np.uint64(31))
+
+
 def left_on_left(lanelet: SourceLanelet) -> SourceLanelet:
     """``lanelet`` with its borders swapped when its left border lies on the driver's
     right. crdesigner 0.8.5 does that for every lane of an LHT road (it reverses the
     vertex order for the driving direction but keeps inner as left); Lanelet2's loader
     would then invert both borders and flip the driving direction."""
-    if len(lanelet.left) != len(lanelet.right) or len(lanelet.left) < 2:
-        return lanelet
-    centre = 0.5 * (lanelet.left + lanelet.right)
-    tangent = np.gradient(centre, axis=0)
-    across = lanelet.left - lanelet.right
-    leftness = np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
-    if leftness >= 0.0:
-        return lanelet
-    return replace(
-        lanelet,
-        left=lanelet.right,
-        right=lanelet.left,
-        left_marking=lanelet.right_marking,
-        right_marking=lanelet.left_marking,
-        left_tags=lanelet.right_tags,
-        right_tags=lanelet.left_tags,
-        left_z=lanelet.right_z,
-        right_z=lanelet.left_z,
-    )
+    return lefts_on_left([lanelet])[0]
 
 
-def _without_repeats(ids: NDArrayInt) -> tuple[int, ...]:
+def lefts_on_left(lanelets: Sequence[SourceLanelet]) -> list[SourceLanelet]:
+    """``left_on_left`` of each lanelet: the sum over its vertices of the mid-line's
+    tangent (``np.gradient``) crossed with the left-minus-right offset, negative on the
+    right; the products of all lanelets in one pass, each lanelet's sum as ``np.sum`` of
+    its own (only lanelets whose borders have the same two or more vertices are judged)."""
+    judged = [index for index, lanelet in enumerate(lanelets) if len(lanelet.left) == len(lanelet.right) >= 2]
+    result = list(lanelets)
+    if not judged:
+        return result
+    left = np.concatenate([lanelets[index].left for index in judged])
+    right = np.concatenate([lanelets[index].right for index in judged])
+    ends = np.cumsum([len(lanelets[index].left) for index in judged])
+    begins = np.concatenate(([0], ends[:-1]))
+    centre = 0.5 * (left + right)
+    tangent = np.empty_like(centre)  # np.gradient along each lanelet (unit spacing, first-order ends)
+    tangent[1:-1] = (centre[2:] - centre[:-2]) / 2.0
+    tangent[begins] = centre[begins + 1] - centre[begins]
+    tangent[ends - 1] = centre[ends - 1] - centre[ends - 2]
+    across = left - right
+    products = tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0]
+    for index, first, end in zip(judged, begins.tolist(), ends.tolist()):
+        if not np.sum(products[first:end]) >= 0.0:  # a NaN sum swaps too
+            lanelet = lanelets[index]
+            result[index] = replace(
+                lanelet,
+                left=lanelet.right,
+                right=lanelet.left,
+                left_marking=lanelet.right_marking,
+                right_marking=lanelet.left_marking,
+                left_tags=lanelet.right_tags,
+                right_tags=lanelet.left_tags,
+                left_z=lanelet.right_z,
+                right_z=lanelet.left_z,
+            )
+    return result
+
+
+def _without_repeats(ids: NDArrayInt, starts: NDArrayInt) -> tuple[NDArrayInt, list[int]]:
+    """``ids`` of the borders that begin at ``starts`` (the last: the end) without a
+    border's repeats of its previous id, and where each border begins in the result."""
     keep = np.ones(len(ids), dtype=bool)
     keep[1:] = ids[1:] != ids[:-1]
-    return tuple(ids[keep].tolist())
+    keep[starts[:-1][starts[:-1] < len(ids)]] = True
+    kept_before = np.concatenate(([0], np.cumsum(keep)))
+    return ids[keep], kept_before[starts].tolist()
 
 
 def _dense(values: NDArrayInt) -> tuple[NDArrayInt, NDArrayInt]:
@@ -210,24 +270,27 @@ def _joined_ends(
 ) -> list[tuple[int, int]]:
     """(border end, successor's border start) point pairs, as indices into the stacked
     borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
-    across a gap (``converters.joins.successor_gaps``)."""
-    slot = {lanelet.id: index for index, lanelet in enumerate(lanelets)}
-    pairs = []
-    for gap in successor_gaps(lanelets, merge_tolerance_m, join_tolerance_m):
-        if gap.joined:
-            before, after = slot[gap.lanelet], slot[gap.successor]
-            for side in (0, 1):
-                pairs.append((int(starts[2 * before + side + 1]) - 1, int(starts[2 * after + side])))
-    return pairs
+    across a gap (``converters.joins.successor_gaps``' joined ones)."""
+    before, after, _, _, largest = successor_distances(lanelets)
+    joined = (largest > merge_tolerance_m) & (largest <= join_tolerance_m)
+    sides = np.arange(2)
+    ends = starts[2 * before[joined, None] + sides + 1] - 1  # (relation, left/right)
+    begins = starts[2 * after[joined, None] + sides]
+    return list(zip(ends.ravel().tolist(), begins.ravel().tolist()))
 
 
 def _keep_short_borders(representative: NDArrayInt, starts: NDArrayInt) -> NDArrayInt:
     """``representative`` with the last point of each border that the merge reduced to a
     single node made a node of its own, so every border keeps two nodes."""
     kept = representative.copy()
-    for first, end in zip(starts[:-1], starts[1:]):
-        if end - first >= 2 and np.all(representative[first:end] == representative[first]):
-            kept[end - 1] = end - 1
+    if not len(representative):
+        return kept
+    sizes = np.diff(starts)
+    filled = sizes > 0
+    firsts = starts[:-1][filled]  # a border's span in reduceat runs to the next non-empty border
+    single = np.minimum.reduceat(representative, firsts) == np.maximum.reduceat(representative, firsts)
+    ends = starts[1:][filled][single & (sizes[filled] >= 2)]
+    kept[ends - 1] = ends - 1
     return kept
 
 
@@ -250,7 +313,7 @@ def build_osm(
     when a lanelet has a border with fewer than two distinct points, or when nothing is
     left to write.
     """
-    lanelets = [left_on_left(lanelet) for lanelet in lanelets]
+    lanelets = lefts_on_left(lanelets)
     borders = [border for lanelet in lanelets for border in (lanelet.left, lanelet.right)]
     if not borders:
         raise ConversionError(source, "no lanelets to write")
@@ -262,7 +325,9 @@ def build_osm(
     representative = _keep_short_borders(representative, starts)
     unique, point_index = _dense(representative)
     coordinates = np.column_stack((positions[unique], heights[unique]))
-    ways: dict[tuple[int, ...], int] = {}
+    kept_ids, kept_starts = _without_repeats(point_index, starts)
+    last_ids = np.append(kept_ids, -1)[np.array(kept_starts[1:]) - 1].tolist()  # each border's last id
+    ways: dict[bytes, int] = {}  # a way's point ids (int64 bytes) in its stored order
     way_points: list[NDArrayInt] = []
     way_tags: list[dict[str, str]] = []
     members: list[tuple[int, int]] = []
@@ -274,14 +339,17 @@ def build_osm(
             ("left", 2 * index, dict(lanelet.left_tags) or _MARKINGS.get(lanelet.left_marking, {})),
             ("right", 2 * index + 1, dict(lanelet.right_tags) or _MARKINGS.get(lanelet.right_marking, {})),
         ):
-            points = _without_repeats(point_index[starts[position] : starts[position + 1]])
-            if len(points) < 2:
+            first, end = kept_starts[position], kept_starts[position + 1]
+            if end - first < 2:
                 raise ConversionError(source, f"lanelet {lanelet.id}: {side} border shorter than {merge_tolerance_m} m")
-            ends.append(points[-1])
-            way = ways.get(points, ways.get(points[::-1]))
+            ends.append(last_ids[position])
+            chain = kept_ids[first:end]
+            points = chain.tobytes()
+            way = ways.get(points)
+            if way is None:
+                way = ways.get(chain[::-1].tobytes())
             if way is None:
                 way = ways[points] = len(way_points)
-                chain = np.asarray(points)
                 kept = chain if simplify_tolerance_m is None else chain[_kept_vertices(coordinates[chain], simplify_tolerance_m)]
                 way_points.append(kept)
                 way_tags.append({})
@@ -298,13 +366,7 @@ def build_osm(
 
     root = etree.Element("osm", version="0.6", generator=frame.GENERATOR)
     root.append(etree.Comment(_recipe_comment(geo_reference)))
-    bulk = _nodes_text(node_id[used], coordinates[used]) + "".join(
-        f'  <way id="{way_id_base + way}">\n    <nd ref="' + '"/>\n    <nd ref="'.join(map(str, node_id[chain].tolist()))
-        + '"/>\n'
-        + "".join(f'    <tag k="{_escape(key)}" v="{_escape(value)}"/>\n' for key, value in way_tags[way].items())
-        + "  </way>\n"
-        for way, chain in enumerate(way_points)
-    )
+    bulk = [*_nodes_text(node_id[used], coordinates[used]), *_ways_text(way_id_base, node_id, way_points, way_tags)]
     urban = urban_places(lanelets)
     exits = {}
     for lanelet, (left, right), (left_end, right_end) in zip(lanelets, members, exit_points):
@@ -320,7 +382,7 @@ def build_osm(
 
     def new_node(xyz: NDArrayFloat) -> int:
         identifier = next(fresh)
-        text = _nodes_text(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
+        (text,) = _nodes_text(np.array([identifier]), np.asarray(xyz, dtype=np.float64)[None, :])
         root.append(etree.fromstring(text, etree.XMLParser(remove_blank_text=True)))
         return identifier
 
@@ -330,7 +392,7 @@ def build_osm(
     # The bulk of nodes and ways, written as text in lxml's pretty-printed form (an element
     # per node is slow), goes right after the recipe comment, where the tree would put it.
     after_comment = document.index(b"-->\n") + len(b"-->\n")
-    return document[:after_comment] + bulk.encode("utf-8") + document[after_comment:]
+    return b"".join([document[:after_comment], *bulk, document[after_comment:]])
 
 
 def _escape(value: str) -> str:
@@ -338,29 +400,57 @@ def _escape(value: str) -> str:
     return value.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 
-def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> str:
-    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1."""
+def _ways_text(
+    first_id: int, node_id: NDArrayInt, way_points: Sequence[NDArrayInt], way_tags: Sequence[dict[str, str]]
+) -> list[bytes]:
+    """Ways ``first_id`` on of these points (indices into ``node_id``) and tags,
+    pretty-printed at depth 1 (UTF-8)."""
+    import orjson
+
+    tags_text: dict[tuple[tuple[str, str], ...], bytes] = {}
+    texts = []
+    for way, (chain, tags) in enumerate(zip(way_points, way_tags)):
+        key = tuple(tags.items())
+        if key not in tags_text:
+            tags_text[key] = "".join(f'    <tag k="{_escape(k)}" v="{_escape(v)}"/>\n' for k, v in key).encode("utf-8")
+        refs = orjson.dumps(node_id[chain], option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
+        texts.append(b'  <way id="%d">\n    <nd ref="%s"/>\n%s  </way>\n'
+                     % (first_id + way, refs.replace(b",", b'"/>\n    <nd ref="'), tags_text[key]))
+    return texts
+
+
+def _nodes_text(identifiers: NDArrayInt, xyz: NDArrayFloat) -> list[bytes]:
+    """Nodes at ``xyz`` ((N, 3) x, y, z in m; z NaN: no ``ele``), pretty-printed at depth 1
+    (ASCII), in pieces of up to ``_NODES_AT_ONCE`` nodes."""
     lat, lon = frame.lat_lon_deg(xyz[:, 0], xyz[:, 1])
     known = np.isfinite(xyz[:, 2])
     parts = []
     for first in range(0, len(xyz), _NODES_AT_ONCE):
         at = slice(first, first + _NODES_AT_ONCE)
-        values: list[object] = [None] * (4 * len(known[at]))  # id, lat, lon, height of each node
+        nodes = len(known[at])
+        values: list[object] = [None] * (4 * nodes)  # id, lat, lon, height of each node
         values[0::4], values[1::4], values[2::4], values[3::4] = (
             identifiers[at].tolist(), float_texts(lat[at]), float_texts(lon[at]), _heights_text(xyz[at, 2]))
-        parts.append("".join(map(_NODE_FORMATS.__getitem__, known[at].tolist())) % tuple(values))
-    return "".join(parts)
+        if known[at].all():
+            formats = _NODE_FORMATS[1] * nodes
+        else:
+            formats = b"".join(map(_NODE_FORMATS.__getitem__, known[at].tolist()))
+        parts.append(formats % tuple(values))
+    return parts
 
 
-def _heights_text(z: NDArrayFloat) -> list[str]:
-    """``"%.4f" % h`` of each height (m), each distinct value (bit pattern) formatted once."""
-    distinct, inverse = np.unique(np.ascontiguousarray(z, dtype=np.float64).view(np.int64), return_inverse=True)
-    return np.array(["%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
+def _heights_text(z: NDArrayFloat) -> list[bytes]:
+    """``b"%.4f" % h`` of each height (m), each distinct value (bit pattern) formatted once."""
+    bits = np.ascontiguousarray(z, dtype=np.float64).view(np.int64)
+    if len(bits) and (bits == bits[0]).all():
+        return [b"%.4f" % z[0]] * len(bits)
+    distinct, inverse = np.unique(bits, return_inverse=True)
+    return np.array([b"%.4f" % h for h in distinct.view(np.float64).tolist()], dtype=object)[inverse].tolist()
 
 
-def float_texts(values: NDArrayFloat) -> list[str]:
-    """The shortest decimal text of each float of ``values`` that reads back as the same
-    float (orjson's, the digits ``repr`` has; its notation: "0.0000123", "1.5e-6"),
+def float_texts(values: NDArrayFloat) -> list[bytes]:
+    """The shortest decimal text (ASCII) of each float of ``values`` that reads back as the
+    same float (orjson's, the digits ``repr`` has; its notation: "0.0000123", "1.5e-6"),
     ``repr`` for values not finite."""
     import orjson
 
@@ -369,8 +459,8 @@ def float_texts(values: NDArrayFloat) -> list[str]:
     if not values.size:
         return []
     if finite.all():
-        return orjson.dumps(values, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].decode("ascii").split(",")
-    texts = np.array(list(map(repr, values.tolist())), dtype=object)
+        return orjson.dumps(values, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",")
+    texts = np.array([repr(value).encode("ascii") for value in values.tolist()], dtype=object)
     texts[finite] = float_texts(values[finite])
     return texts.tolist()
 
@@ -379,9 +469,9 @@ _NODES_AT_ONCE: Final[int] = 65536
 """Nodes ``_nodes_text`` formats in one ``%`` (bounds the argument tuple)."""
 
 
-_NODE_FORMATS: Final[tuple[str, str]] = (
-    '  <node id="%d" lat="%s" lon="%s"/>\n%.0s',  # no height: the height is formatted as nothing
-    '  <node id="%d" lat="%s" lon="%s">\n    <tag k="ele" v="%s"/>\n  </node>\n',
+_NODE_FORMATS: Final[tuple[bytes, bytes]] = (
+    b'  <node id="%d" lat="%s" lon="%s"/>\n%.0s',  # no height: the height is formatted as nothing
+    b'  <node id="%d" lat="%s" lon="%s">\n    <tag k="ele" v="%s"/>\n  </node>\n',
 )
 """An OSM node without and with its ``ele`` tag, pretty-printed at depth 1 (``%`` fields)."""
 

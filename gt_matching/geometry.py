@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from itertools import chain
+from operator import attrgetter
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
@@ -23,13 +25,17 @@ COARSE_STEP_M: Final = 0.5
 #: Coarse samples per chunk (a chunk is found or not as a whole).
 CHUNK_SAMPLES: Final = 20
 
+_XY: Final = attrgetter("x", "y")
+"""A Lanelet2 point's x, y (m)."""
+
 LaneletKey = tuple[int, bool]
 """A lanelet as (id, inverted): a bidirectional lanelet is driven in either orientation."""
 
 
 def line_xy(line: Any, owner: str) -> NDArrayFloat:
-    """x, y of a Lanelet2 line string as an ``(N, 2)`` array in its own orientation."""
-    points = np.array([(p.x, p.y) for p in line], dtype=np.float64).reshape(-1, 2)
+    """x, y of a Lanelet2 line string as an ``(N, 2)`` array in its own orientation (read
+    point by point: lanelet2's Python bindings have no bulk accessor; in C-level loops)."""
+    points = np.fromiter(chain.from_iterable(map(_XY, line)), np.float64, count=2 * len(line)).reshape(-1, 2)
     if len(points) < 2 or not np.all(np.isfinite(points)):
         raise MatchingError(f"line string {line.id} of {owner} needs >= 2 finite points, got {points.tolist()}")
     return points

@@ -74,38 +74,36 @@ def resample_many(polylines: list[NDArrayFloat], step_m: float) -> list[NDArrayF
 def _resampled(polylines: list[NDArrayFloat], step_m: float) -> tuple[NDArrayFloat, NDArrayInt, list[int]]:
     """``resample`` of each polyline, concatenated: the points, the index of each one's
     segment among all the polylines' vertices, and how many points each polyline has. The
-    arc lengths and segment searches go line by line, the interpolation of all in one pass."""
-    counts = [len(polyline) for polyline in polylines]
+    arc lengths go line by line, the stations (``np.arange``'s values and length), segment
+    searches and interpolation of all in one pass."""
+    counts = np.array([len(polyline) for polyline in polylines], dtype=np.int64)
     vertices = np.concatenate(polylines)
     step = vertices[1:] - vertices[:-1]
     lengths = np.hypot(step[:, 0], step[:, 1])
     cum = np.empty(len(vertices))
-    stations, segments, flat = [], [], []
-    start = 0
-    for count in counts:
-        line_cum = cum[start:start + count]
-        line_cum[0] = 0.0
-        np.cumsum(lengths[start:start + count - 1], out=line_cum[1:])
-        total = line_cum[-1]
-        flat.append(total <= ZERO_LENGTH_M)
-        if flat[-1]:
-            s = np.zeros(1)
-            segments.append(np.full(1, start, dtype=np.int64))
-        else:
-            s = np.arange(0.0, total, step_m)
-            if total - s[-1] > ZERO_LENGTH_M:
-                s = np.append(s, total)
-            segments.append(start + np.clip(line_cum.searchsorted(s, side="right") - 1, 0, count - 2))
-        stations.append(s)
-        start += count
-    sizes = [len(s) for s in stations]
-    s, seg = np.concatenate(stations), np.concatenate(segments).astype(np.int64)
+    firsts = np.cumsum(counts) - counts
+    for first, count in zip(firsts.tolist(), counts.tolist()):
+        cum[first] = 0.0
+        np.cumsum(lengths[first:first + count - 1], out=cum[first + 1:first + count])
+    total = cum[firsts + counts - 1]
+    flat = total <= ZERO_LENGTH_M
+    arange_sizes = np.where(flat, 1, np.ceil(total / step_m)).astype(np.int64)  # np.arange(0.0, total, step_m)'s
+    closed = ~flat & (total - (arange_sizes - 1) * step_m > ZERO_LENGTH_M)  # the end appended
+    sizes = arange_sizes + closed
+    line = np.repeat(np.arange(len(counts)), sizes)
+    within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    s = within * step_m  # np.arange's i-th value: 0.0 + i * step_m
+    s[(np.cumsum(sizes) - 1)[closed]] = total[closed]
+    # each station's place in its own line's arc lengths: (line, arc length) pairs as complex numbers, in order
+    found = np.searchsorted(np.repeat(np.arange(len(counts)), counts) + 1j * cum, line + 1j * s, side="right")
+    seg = firsts[line] + np.clip(found - firsts[line] - 1, 0, counts[line] - 2)
+    seg[flat[line]] = firsts[line][flat[line]]
     seg_len = cum[seg + 1] - cum[seg]
     t = np.divide(s - cum[seg], seg_len, out=np.zeros_like(s), where=seg_len > ZERO_LENGTH_M)
     points = vertices[seg] + np.clip(t, 0.0, 1.0)[:, None] * (vertices[seg + 1] - vertices[seg])
-    at_first = np.repeat(flat, sizes)
+    at_first = flat[line]
     points[at_first] = vertices[seg[at_first]]  # a zero-length polyline: its first point as it is
-    return points, seg, sizes
+    return points, seg, sizes.tolist()
 
 
 def segment_distances(

@@ -15,6 +15,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -25,12 +26,13 @@ from hypothesis import strategies as st
 import converters
 from converters import api, frame
 from converters.cache import atomic_write, cache_path, cache_root
-from converters.crdesigner_bridge import SourceLanelet, crdesigner_version
+from converters.crdesigner_bridge import SourceLanelet, crdesigner_version, read_geo_reference
 from converters.osm import (
     MERGE_TOLERANCE_M,
     OPENDRIVE_TAG,
     float_texts,
     left_on_left,
+    lefts_on_left,
     merge_points,
     opendrive_lanes_tag,
     parse_opendrive_lanes_tag,
@@ -214,12 +216,16 @@ def test_merge_points_moves_no_point_farther_than_the_tolerance(points, toleranc
     assert np.all(representative[alone] == np.flatnonzero(alone))
 
 
-@given(st.lists(st.tuples(st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-300]), st.sampled_from([0.0, -0.0, 3.0, 7.5])),
-                min_size=1, max_size=60))
-def test_merge_points_without_tolerance_gives_each_point_the_first_equal_one(points) -> None:
+@given(st.lists(st.tuples(st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-300, math.nan]),
+                          st.sampled_from([0.0, -0.0, 3.0, 7.5])), min_size=1, max_size=60), st.booleans())
+def test_merge_points_without_tolerance_gives_each_point_the_first_equal_one(points, collide) -> None:
+    """Also when every point's hash is the same (the exact sort then decides); NaN equals nothing."""
     array = np.array(points, dtype=np.float64)
-    first_equal = [next(j for j, q in enumerate(points) if q[0] == p[0] and q[1] == p[1]) for p in points]
-    assert merge_points(array, 0.0).tolist() == first_equal
+    first_equal = [next((j for j, q in enumerate(points) if q[0] == p[0] and q[1] == p[1]), i)
+                   for i, p in enumerate(points)]
+    hashing = (lambda values: values & np.uint64(0)) if collide else converters.osm._mixed
+    with mock.patch.object(converters.osm, "_mixed", hashing):
+        assert merge_points(array, 0.0).tolist() == first_equal
 
 
 @settings(max_examples=50, deadline=None)
@@ -253,7 +259,7 @@ def _assert_shortest_round_trip(values: np.ndarray) -> None:
     def digits(text: str) -> str:
         return text.lower().lstrip("-").partition("e")[0].replace(".", "").strip("0")
 
-    texts = float_texts(values)
+    texts = [text.decode("ascii") for text in float_texts(values)]
     assert len(texts) == len(values)
     for value, text in zip(values.tolist(), texts):
         assert np.float64(text).view(np.int64) == np.float64(value).view(np.int64) or (value != value and text == "nan")
@@ -264,8 +270,9 @@ def test_node_heights_are_written_as_four_decimals_each_bit_pattern_its_own() ->
     from converters.osm import _heights_text
 
     heights = np.array([0.0, -0.0, 1.23455, 1.23465, -2.5, 0.0, np.nan])
-    assert _heights_text(heights) == ["%.4f" % h for h in heights.tolist()]
-    assert _heights_text(heights)[:2] == ["0.0000", "-0.0000"]
+    assert _heights_text(heights) == [b"%.4f" % h for h in heights.tolist()]
+    assert _heights_text(heights)[:2] == [b"0.0000", b"-0.0000"]
+    assert _heights_text(np.full(3, -0.0)) == [b"-0.0000"] * 3
 
 
 def test_float_texts_in_every_decade_and_at_the_notation_changes() -> None:
@@ -292,6 +299,39 @@ def test_left_on_left_swaps_only_lanelets_whose_left_border_is_on_the_right() ->
     assert left_on_left(good) is good
     swapped = left_on_left(SourceLanelet(7, good.right, good.left, good.types))
     assert np.array_equal(swapped.left, good.left) and np.array_equal(swapped.right, good.right)
+
+
+def test_lefts_on_left_judges_each_lanelet_by_its_own_gradient_sum() -> None:
+    rng = np.random.default_rng(5)
+    lanelets = [SourceLanelet(i, rng.normal(size=(n, 2)), rng.normal(size=(m, 2)), frozenset())
+                for i, (n, m) in enumerate([(2, 2), (3, 3), (7, 7), (130, 130), (5, 4), (1, 1)] * 20)]
+
+    def leftness(lanelet: SourceLanelet) -> float:
+        tangent = np.gradient(0.5 * (lanelet.left + lanelet.right), axis=0)
+        across = lanelet.left - lanelet.right
+        return np.sum(tangent[:, 0] * across[:, 1] - tangent[:, 1] * across[:, 0])
+
+    judged = [len(lanelet.left) == len(lanelet.right) >= 2 for lanelet in lanelets]
+    swapped = [judge and leftness(lanelet) < 0.0 for judge, lanelet in zip(judged, lanelets)]
+    assert 0 < sum(swapped) < sum(judged)
+    for lanelet, result, swap in zip(lanelets, lefts_on_left(lanelets), swapped):
+        assert (result is not lanelet) == swap
+        assert result.left is (lanelet.right if swap else lanelet.left)
+
+
+def test_a_border_merged_into_one_node_keeps_its_last_point_as_its_own() -> None:
+    from converters.osm import _keep_short_borders
+
+    rng = np.random.default_rng(6)
+    for _ in range(500):
+        starts = np.cumsum(np.concatenate(([0], rng.integers(0, 5, rng.integers(0, 8)))))
+        representative = rng.integers(0, 3, starts[-1])
+        kept = _keep_short_borders(representative, starts)
+        for first, end in zip(starts[:-1].tolist(), starts[1:].tolist()):
+            if end > first:
+                single = end - first >= 2 and len(set(representative[first:end].tolist())) == 1
+                assert kept[first:end - 1].tolist() == representative[first:end - 1].tolist()
+                assert kept[end - 1] == (end - 1 if single else representative[end - 1])
 
 
 # --- cache -----------------------------------------------------------------------------
@@ -374,6 +414,25 @@ def test_cache_folder_precedence(tmp_path, monkeypatch) -> None:
     name = cache_path(b"abc", "9.9", tmp_path).name
     assert name.startswith("ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad")
     assert "crdesigner9.9" in name and f"format{frame.FORMAT_VERSION}" in name
+
+
+def test_geo_reference_read_from_the_header_alone_is_the_whole_file_s(tmp_path) -> None:
+    header = "<header><geoReference><![CDATA[ +proj=utm  +zone=32 ]]></geoReference></header>"
+    whole = tmp_path / "whole.xodr"
+    whole.write_text(f"<OpenDRIVE>{header}<road/></OpenDRIVE>")
+    cut = tmp_path / "cut.xodr"
+    cut.write_text(f"<OpenDRIVE>{header}<road")
+    assert read_geo_reference(whole) == read_geo_reference(whole, header_only=True) == "+proj=utm +zone=32"
+    assert read_geo_reference(cut, header_only=True) == "+proj=utm +zone=32"  # what follows the header is not read
+    with pytest.raises(converters.ConversionError, match="not well-formed XML"):
+        read_geo_reference(cut)
+    for content, message in (("<OpenDRIVE><header", "not well-formed XML"), ("<osm/>", "root element is <osm>"),
+                             ('<!DOCTYPE x [<!ENTITY a "b">]><OpenDRIVE/>', "DOCTYPE is not allowed")):
+        whole.write_text(content)
+        with pytest.raises(converters.ConversionError, match=message):
+            read_geo_reference(whole, header_only=True)
+    whole.write_text("<OpenDRIVE><road/></OpenDRIVE>")
+    assert read_geo_reference(whole, header_only=True) == ""
 
 
 # --- errors and CLI --------------------------------------------------------------------
