@@ -41,8 +41,9 @@ Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
+from functools import cache
 from pathlib import Path
 from typing import Final, Literal
 
@@ -53,7 +54,7 @@ from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
-from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
+from cold_maps.opendrive.road_marks import NO_MARK, BorderMarking, BoundaryType, classify_border, uniform_marking
 from cold_maps.opendrive.sampling import (
     LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, stacked_section_points)
 from converters import Converter, ConversionError
@@ -338,22 +339,45 @@ def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
     return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
 
 
-def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
-              way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
-              ) -> tuple[tuple[str, str], ...]:
-    """Lanelet2 way tags of a lane border (classified at stations ``s``, m; ``borders``:
-    ``section_borders`` there) whose way runs along s when ``way_along_s``: the boundary
-    kind covering most of its length (module docstring)."""
-    marking = classify_border(road, section_index, lane_id, side, s, borders)
+def _longest(marking: BorderMarking, s: NDArrayFloat) -> int:
+    """The first station (index into ``s``, m) of the (type, owner, mark) covering most of the length."""
     # (type, owner, mark index) as one integer in the same lexicographic order
     owners = marking.owner - marking.owner.min()
     marks = marking.mark_index - NO_MARK
     keys = (marking.type * (int(owners.max()) + 1) + owners) * (int(marks.max()) + 1) + marks
+    if not (keys != keys[0]).any():
+        return 0
+    unique, inverse = np.unique(keys, return_inverse=True)
+    best = int(np.argmax(np.bincount(inverse, weights=np.gradient(s), minlength=len(unique))))
+    return int(np.argmax(inverse == best))
+
+
+SectionStations = Callable[[], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]]
+"""A section's ``mark_stations`` and ``section_borders`` there, computed on the first call."""
+
+
+def section_stations(road: Road, section_index: int) -> SectionStations:
+    """The ``SectionStations`` of a section (computed once, when a border needs them)."""
+    @cache
+    def stations() -> tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]:
+        s = mark_stations(road, section_index)
+        return s, section_borders(road, section_index, s)
+
+    return stations
+
+
+def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], way_along_s: bool,
+              stations: SectionStations | None = None) -> tuple[tuple[str, str], ...]:
+    """Lanelet2 way tags of a lane border whose way runs along s when ``way_along_s``: the
+    boundary kind covering most of its length (module docstring), classified at the
+    section's ``mark_stations`` (``stations``: the section's ``section_stations``) unless
+    ``uniform_marking`` gives it at once."""
+    marking = uniform_marking(road, section_index, lane_id, side)
     at = 0
-    if (keys != keys[0]).any():
-        unique, inverse = np.unique(keys, return_inverse=True)
-        best = int(np.argmax(np.bincount(inverse, weights=np.gradient(s), minlength=len(unique))))
-        at = int(np.argmax(inverse == best))
+    if marking is None:
+        s, borders = (stations or section_stations(road, section_index))()
+        marking = classify_border(road, section_index, lane_id, side, s, borders)
+        at = _longest(marking, s)
     kind, owner = int(marking.type[at]), int(marking.owner[at])
     if kind in _EDGE_TAGS:
         return tuple(_EDGE_TAGS[kind].items())
@@ -424,8 +448,7 @@ def engine_lanelets(
     for road, samples, lane_type in sampled:
         if section_key != (road.id, samples.section):  # a section's lanes come one after the other
             section_key = road.id, samples.section
-            mark_s = mark_stations(road, samples.section)
-            mark_borders = section_borders(road, samples.section, mark_s)
+            stations = section_stations(road, samples.section)
         key = LaneKey(samples.road_id, samples.section, samples.lane_id)
         along = road.drives_along_s(samples.lane_id, samples.section)
         left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
@@ -445,8 +468,8 @@ def engine_lanelets(
             regulations=replace(regulations.get(key, LaneletRegulations()),
                                 priority_lanelets=tuple(ids[n] for n in priority.get(key, ()) if n in ids)),
             successors=tuple(ids[n] for n in graph.successors[key] if n in ids),
-            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, mark_s, along, mark_borders),
-            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, mark_s, along, mark_borders),
+            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, along, stations),
+            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, along, stations),
         ))
     return lanelets
 
