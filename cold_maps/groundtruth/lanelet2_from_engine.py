@@ -56,7 +56,7 @@ from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BorderMarking, BoundaryType, classify_border, uniform_marking
 from cold_maps.opendrive.sampling import (
-    LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, stacked_section_points)
+    LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, section_stack, stack_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -251,6 +251,7 @@ def _refine_together(
     active = np.arange(len(sections))
     lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
     fractions = np.asarray(CHECK_FRACTIONS)
+    stack = section_stack(sections)
     for round_ in range(MAX_ROUNDS):
         count = np.bincount(owner, minlength=len(active))
         begin = np.cumsum(count) - count
@@ -264,7 +265,7 @@ def _refine_together(
         request[request_begin[owner] + np.arange(len(s)) - begin[owner]] = s
         for rank, fraction in enumerate(CHECK_FRACTIONS):
             request[request_begin[of] + count[of] + rank * opened[of] + place] = low + fraction * (high - low)
-        values, starts = stacked_section_points([sections[i] for i in active.tolist()], request, size)
+        values, starts = stack_points(stack, active, request, size)
         # every (border, fraction, interval) of every section: checked point and chord
         borders = 2 * lanes[active]
         border_of = np.repeat(np.arange(len(active)), borders)

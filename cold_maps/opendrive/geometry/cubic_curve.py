@@ -15,6 +15,7 @@ from functools import lru_cache
 from typing import Final
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import Geometry
@@ -92,25 +93,61 @@ class ArcLengthTable:
         return p
 
 
+@dataclass(frozen=True)
+class CurveStack:
+    """Arc-length tables of several curves end to end, for ``stacked_parameters``.
+
+    Fields:
+        params: (M,) each table's parameters, table after table.
+        lengths: (M,) each table's cumulative arc lengths (m), table after table.
+        first: (n,) index into ``params`` of each table's first entry.
+        last: (n,) each table's last interval (its size - 2).
+        coefficients: (8, n) u[0..3] and v[0..3] (m) of each table's curve.
+    """
+
+    params: NDArrayFloat
+    lengths: NDArrayFloat
+    first: npt.NDArray[np.int64]
+    last: npt.NDArray[np.int64]
+    coefficients: NDArrayFloat
+
+
+def curve_stack(tables: Sequence[ArcLengthTable]) -> CurveStack:
+    """The ``CurveStack`` of these tables."""
+    sizes = np.array([table.params.size for table in tables], dtype=np.int64)
+    return CurveStack(
+        np.concatenate([table.params for table in tables] or [np.zeros(0)]),
+        np.concatenate([table.lengths for table in tables] or [np.zeros(0)]),
+        np.cumsum(sizes) - sizes, sizes - 2,
+        np.array([table.curve.u + table.curve.v for table in tables], dtype=np.float64).reshape(-1, 8).T.copy())
+
+
 def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequence[int]) -> NDArrayFloat:
     """``tables[i].parameter`` of each consecutive block of ``counts[i]`` arc lengths (m) in
-    ``s``, bit for bit, evaluated together: the Newton steps of a block stop together, as
-    in one call, and each block's quadrature sums are its own matrix product (OpenBLAS
-    rounds a row by its place in the product)."""
+    ``s``, bit for bit (``stacked_parameters`` of all the tables)."""
+    return stacked_parameters(curve_stack(tables), np.arange(len(tables)), s, np.asarray(counts, dtype=np.int64))
+
+
+def stacked_parameters(
+    stack: CurveStack, which: npt.NDArray[np.int64], s: NDArrayFloat, counts: npt.NDArray[np.int64]
+) -> NDArrayFloat:
+    """``ArcLengthTable.parameter`` of the stack's table ``which[i]`` of each consecutive
+    block of ``counts[i]`` arc lengths (m) in ``s``, bit for bit, evaluated together: the
+    Newton steps of a block stop together, as in one call, and each block's quadrature
+    sums are its own matrix product (OpenBLAS rounds a row by its place in the product)."""
     s = np.asarray(s, dtype=np.float64)
     bounds = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-    k = np.concatenate([np.clip(np.searchsorted(table.lengths, s[a:b], side="right") - 1, 0, table.params.size - 2)
-                        for table, a, b in zip(tables, bounds[:-1], bounds[1:])] or [np.zeros(0, dtype=np.int64)])
-    first = np.concatenate(([0], np.cumsum([table.params.size for table in tables])))[:-1].astype(np.int64)
+    first, last = stack.first[which], stack.last[which]
+    found = [np.searchsorted(stack.lengths[f:f + n + 2], s[a:b], side="right")
+             for f, n, a, b in zip(first.tolist(), last.tolist(), bounds[:-1].tolist(), bounds[1:].tolist())]
+    last = np.repeat(last, counts)
+    k = np.minimum(np.maximum(np.concatenate(found or [np.zeros(0, dtype=np.int64)]) - 1, 0), last)
     at = np.repeat(first, counts) + k
-    params = np.concatenate([table.params for table in tables] or [np.zeros(0)])
-    lengths = np.concatenate([table.lengths for table in tables] or [np.zeros(0)])
-    p_lo, p_hi, s_lo, s_hi = params[at], params[at + 1], lengths[at], lengths[at + 1]
-    last = np.repeat([table.params.size - 2 for table in tables], counts)
+    p_lo, p_hi, s_lo, s_hi = stack.params[at], stack.params[at + 1], stack.lengths[at], stack.lengths[at + 1]
     span = np.where(s_hi > s_lo, s_hi - s_lo, 1.0)
     p = p_lo + (s - s_lo) / span * (p_hi - p_lo)
     upper = np.where(k == last, np.inf, p_hi)
-    _, u1, u2, u3, _, v1, v2, v3 = _coefficients([table.curve for table in tables], counts)
+    _, u1, u2, u3, _, v1, v2, v3 = np.repeat(stack.coefficients[:, which], counts, axis=1)
     active = np.flatnonzero(np.diff(bounds) > 0)  # blocks still iterating
     for _ in range(NEWTON_ITERATIONS):
         if not len(active):
@@ -163,18 +200,23 @@ def poses_at_parameters(
 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
     """``pose_at_parameter(records[i], curves[i], ...)`` of each consecutive block of
     ``counts[i]`` parameters in ``p``, bit for bit."""
-    u0, u1, u2, u3, v0, v1, v2, v3 = _coefficients(curves, counts)
-    cos_h, sin_h = (np.repeat(f(np.array([record.hdg for record in records])), counts) for f in (np.cos, np.sin))
+    coefficients = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8).T
+    starts = np.array([(record.x, record.y, record.hdg) for record in records], dtype=np.float64).reshape(-1, 3).T.copy()
+    return stacked_poses(coefficients, starts, p, np.asarray(counts, dtype=np.int64))
+
+
+def stacked_poses(
+    coefficients: NDArrayFloat, starts: NDArrayFloat, p: NDArrayFloat, counts: npt.NDArray[np.int64]
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """``pose_at_parameter`` of curves of ``coefficients`` (8, n; u[0..3], v[0..3], m)
+    whose records start at ``starts`` (3, n, C order; x, y in m, heading in rad) at each
+    consecutive block of ``counts[i]`` parameters in ``p``, bit for bit."""
+    u0, u1, u2, u3, v0, v1, v2, v3 = np.repeat(coefficients, counts, axis=1)
+    cos_h, sin_h = (np.repeat(f(starts[2]), counts) for f in (np.cos, np.sin))
     u, v = u0 + p * (u1 + p * (u2 + p * u3)), v0 + p * (v1 + p * (v2 + p * v3))
     du, dv = u1 + p * (2.0 * u2 + p * 3.0 * u3), v1 + p * (2.0 * v2 + p * 3.0 * v3)
-    x0, y0, hdg0 = (np.repeat([getattr(record, name) for record in records], counts) for name in ("x", "y", "hdg"))
+    x0, y0, hdg0 = np.repeat(starts, counts, axis=1)
     return x0 + u * cos_h - v * sin_h, y0 + u * sin_h + v * cos_h, hdg0 + np.arctan2(dv, du)
-
-
-def _coefficients(curves: Sequence[CubicCurve], counts: Sequence[int]) -> list[NDArrayFloat]:
-    """u[0..3], v[0..3] of each curve, repeated ``counts`` times (contiguous arrays)."""
-    table = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8)
-    return list(np.repeat(table.T, counts, axis=1))
 
 
 def pose_at_parameter(
