@@ -250,7 +250,6 @@ def _refine_together(
     owner = np.repeat(np.arange(len(sections)), [len(block) for block in initial])  # index into `active`
     active = np.arange(len(sections))
     lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
-    fractions = np.asarray(CHECK_FRACTIONS)
     stack = section_stack(sections)
     for round_ in range(MAX_ROUNDS):
         count = np.bincount(owner, minlength=len(active))
@@ -266,25 +265,20 @@ def _refine_together(
         for rank, fraction in enumerate(CHECK_FRACTIONS):
             request[request_begin[of] + count[of] + rank * opened[of] + place] = low + fraction * (high - low)
         values, starts = stack_points(stack, active, request, size)
-        # every (border, fraction, interval) of every section: checked point and chord
+        # each interval's largest distance of a checked point from its chord, border by border
         borders = 2 * lanes[active]
-        border_of = np.repeat(np.arange(len(active)), borders)
-        border_row = np.repeat(np.asarray(starts[:-1]), borders) + (
-            np.arange(int(borders.sum())) - np.repeat(np.cumsum(borders) - borders, borders)) * size[border_of]
-        per_border = len(CHECK_FRACTIONS) * opened[border_of]
-        triple_border = np.repeat(np.arange(len(border_of)), per_border)
-        rank_in_border = np.arange(int(per_border.sum())) - np.repeat(np.cumsum(per_border) - per_border, per_border)
-        section_of_triple = border_of[triple_border]
-        width = np.maximum(opened[section_of_triple], 1)
-        rank, interval = rank_in_border // width, rank_in_border % width
-        global_interval = (np.cumsum(opened) - opened)[section_of_triple] + interval
-        station = intervals[global_interval] - begin[section_of_triple]
-        row = border_row[triple_border]
-        fraction = fractions[rank][:, None]
-        chord = (1.0 - fraction) * values[row + station] + fraction * values[row + station + 1]
-        checked = values[row + count[section_of_triple] + rank * opened[section_of_triple] + interval]
+        station = intervals - begin[of]
+        checks = count[of] + place
         errors = np.zeros(len(intervals))
-        np.maximum.at(errors, global_interval, np.sqrt(np.square(checked - chord).sum(axis=1)))
+        for border in range(int(borders.max())):
+            here: slice | NDArrayInt = slice(None) if border < borders.min() else np.flatnonzero(borders[of] > border)
+            row = np.asarray(starts)[of[here]] + border * size[of[here]]
+            low_at = row + station[here]
+            low_point, high_point, checked_at = values[low_at], values[low_at + 1], row + checks[here]
+            for rank, fraction in enumerate(CHECK_FRACTIONS):
+                chord = (1.0 - fraction) * low_point + fraction * high_point
+                checked = values[checked_at + rank * opened[of[here]]]
+                errors[here] = np.maximum(errors[here], np.sqrt(np.square(checked - chord).sum(axis=1)))
         refine, extra, added = _splits(low, high, errors, tolerance_m)
         finished = (np.bincount(of[refine], minlength=len(active)) == 0) | (round_ == MAX_ROUNDS - 1)
         for i in np.flatnonzero(finished).tolist():
