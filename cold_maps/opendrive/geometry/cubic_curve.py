@@ -25,6 +25,9 @@ TABLE_INTERVAL_M: Final[float] = 2.0
 MAX_TABLE_INTERVALS: Final[int] = 4096
 NEWTON_ITERATIONS: Final[int] = 8
 NEWTON_TOLERANCE_M: Final[float] = 1e-12
+NEWTON_CHUNK: Final[int] = 2048
+"""Rows whose quadrature nodes ``stacked_parameters`` evaluates at once (their (nodes, rows)
+arrays stay in the processor's cache)."""
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_ORDER)
 
 
@@ -157,10 +160,14 @@ def stacked_parameters(
         rows: slice | np.ndarray = slice(None) if ends[-1] == len(s) else (  # all of them: views, no copies
             np.arange(ends[-1]) + np.repeat(bounds[active] - (ends - blocks), blocks))
         lo, now, c1, c2, c3, d1, d2, d3 = (a[rows] for a in (p_lo, p, u1, u2, u3, v1, v2, v3))
-        half = 0.5 * (now - lo)
-        nodes = np.multiply(half, _NODES[:, None])  # (nodes, rows): long inner loops
-        nodes += 0.5 * (now + lo)
-        speeds = np.hypot(_tangent_at(nodes, c1, c2, c3), _tangent_at(nodes, d1, d2, d3)).T.copy()
+        half, mid = 0.5 * (now - lo), 0.5 * (now + lo)
+        speeds = np.empty((len(now), GAUSS_ORDER))
+        for a in range(0, len(now), NEWTON_CHUNK):
+            b = a + NEWTON_CHUNK
+            nodes = np.multiply(half[a:b], _NODES[:, None])  # (nodes, rows): long inner loops
+            nodes += mid[a:b]
+            speeds[a:b] = np.hypot(_tangent_at(nodes, c1[a:b], c2[a:b], c3[a:b]),
+                                   _tangent_at(nodes, d1[a:b], d2[a:b], d3[a:b])).T
         sums = np.concatenate([speeds[b - n:b] @ _WEIGHTS for b, n in zip(ends.tolist(), blocks.tolist())])
         residual = s_lo[rows] + half * sums - s[rows]
         speed = np.hypot(c1 + now * (2.0 * c2 + now * 3.0 * c3), d1 + now * (2.0 * d2 + now * 3.0 * d3))
