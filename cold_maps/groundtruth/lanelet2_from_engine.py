@@ -56,7 +56,8 @@ from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BorderMarking, BoundaryType, classify_border, uniform_marking
 from cold_maps.opendrive.sampling import (
-    LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, section_stack, stack_points)
+    MAX_SAMPLES, SLIVER_FRACTION, LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points,
+    section_stack, stack_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -141,11 +142,38 @@ def _initial_stations(road: Road, section_index: int) -> NDArrayFloat:
     """Where ``adaptive_section_samples`` starts (m): the section's ends, the record
     starts inside it, a station ``END_VERTEX_M`` inside each end, at most
     ``INITIAL_STEP_M`` apart."""
-    section = road.lane_sections[section_index]
-    length = section.s_end - section.s
-    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
-    return np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M),
-                                     _breakpoints(road, section_index), np.asarray(ends, dtype=np.float64))))
+    return _initial_together([(road, section_index)])[0]
+
+
+def _initial_together(sections: Sequence[tuple[Road, int]]) -> tuple[NDArrayFloat, NDArrayInt]:
+    """``_initial_stations`` (m) of each (road, section index), end to end (``sample_s``'s
+    grid, then ``np.unique`` of each section's stations, bit for bit), and the index of
+    the section of each."""
+    parts = [road.lane_sections[index] for road, index in sections]
+    first = np.array([part.s for part in parts], dtype=np.float64)
+    last = np.array([part.s_end for part in parts], dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        intervals = np.ceil((last - first) / INITIAL_STEP_M)  # sample_s's
+        bad = np.flatnonzero(~(np.isfinite(first) & np.isfinite(last) & (last >= first) & (intervals < MAX_SAMPLES)))
+    if len(bad):  # its ValueError
+        sample_s(float(first[bad[0]]), float(last[bad[0]]), INITIAL_STEP_M)
+    count = intervals.astype(np.int64)
+    rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    grid = np.repeat(first, count) + INITIAL_STEP_M * rank.astype(np.float64)
+    inside = (rank > 0) & (grid < np.repeat(last - SLIVER_FRACTION * INITIAL_STEP_M, count))
+    extra = [(number, s) for number, ((road, index), part) in enumerate(zip(sections, parts))
+             for s in [*_breakpoints(road, index).tolist(),
+                       *((part.s + END_VERTEX_M, part.s_end - END_VERTEX_M)
+                         if part.s_end - part.s > 2.0 * END_VERTEX_M else ())]]
+    numbers = np.arange(len(parts))
+    s = np.concatenate((first, grid[inside], last, np.array([value for _, value in extra], dtype=np.float64)))
+    owner = np.concatenate((numbers, np.repeat(numbers, count)[inside], numbers,
+                            np.array([number for number, _ in extra], dtype=np.int64)))
+    order = np.lexsort((s, owner))
+    s, owner = s[order], owner[order]
+    new = np.ones(len(s), dtype=bool)
+    new[1:] = (s[1:] != s[:-1]) | (owner[1:] != owner[:-1])
+    return s[new], owner[new]
 
 
 def _splits(
@@ -245,9 +273,7 @@ def _refine_together(
     """Stations (m) and borders (lanes, 2, stations, 3) of ``adaptive_section_samples`` of
     each ``batchable`` section: its rounds on the sections' concatenated stations."""
     done: list[tuple[NDArrayFloat, NDArrayFloat] | None] = [None] * len(sections)
-    initial = [_initial_stations(road, index) for road, index, _ in sections]
-    s = np.concatenate(initial)
-    owner = np.repeat(np.arange(len(sections)), [len(block) for block in initial])  # index into `active`
+    s, owner = _initial_together([(road, index) for road, index, _ in sections])  # owner: index into `active`
     active = np.arange(len(sections))
     lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
     stack = section_stack(sections)
