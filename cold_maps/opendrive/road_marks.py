@@ -118,7 +118,8 @@ class BorderMarking:
         return lane.road_marks[int(self.mark_index[i])]
 
 
-def _walk(road: Road, section: LaneSection, lane_id: int, side: Literal["inner", "outer"]) -> tuple[list[int], int, int]:
+def _walk(road: Road, section: LaneSection, lane_id: int, side: Literal["inner", "outer"]
+          ) -> tuple[list[int], int, int]:
     """The owners of the section's borders from the leftmost to the rightmost (lane id, 0:
     the centre line), the index of lane ``lane_id``'s ``side`` border among them and the
     step (±1) away from the lane."""

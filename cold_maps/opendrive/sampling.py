@@ -416,7 +416,8 @@ def stack_points(
         for place in range(int(stack.depth[sign][which].max(initial=0))):
             outer = inner + float(sign) * _stack_widths(stack, sign, place, which, s, counts)
             plane = 4 * (first + place)
-            stacked[plane:plane + 4] = x + inner * normal_x, y + inner * normal_y, x + outer * normal_x, y + outer * normal_y
+            stacked[plane:plane + 4] = (x + inner * normal_x, y + inner * normal_y,
+                                        x + outer * normal_x, y + outer * normal_y)
             inner = outer
     borders = stack.border_first[which + 1] - stack.border_first[which]
     planes = stack.border_planes[_ragged(stack.border_first[which], borders)]

@@ -125,12 +125,6 @@ def curve_stack(tables: Sequence[ArcLengthTable]) -> CurveStack:
         np.array([table.curve.u + table.curve.v for table in tables], dtype=np.float64).reshape(-1, 8).T.copy())
 
 
-def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequence[int]) -> NDArrayFloat:
-    """``tables[i].parameter`` of each consecutive block of ``counts[i]`` arc lengths (m) in
-    ``s``, bit for bit (``stacked_parameters`` of all the tables)."""
-    return stacked_parameters(curve_stack(tables), np.arange(len(tables)), s, np.asarray(counts, dtype=np.int64))
-
-
 def stacked_parameters(
     stack: CurveStack, which: npt.NDArray[np.int64], s: NDArrayFloat, counts: npt.NDArray[np.int64]
 ) -> NDArrayFloat:
@@ -200,16 +194,6 @@ def arc_length_table(curve: CubicCurve) -> ArcLengthTable:
     params = np.linspace(0.0, curve.p_end, intervals + 1)
     pieces = curve.integral(params[:-1], params[1:])
     return ArcLengthTable(curve, params, np.concatenate(([0.0], np.cumsum(pieces))))
-
-
-def poses_at_parameters(
-    records: Sequence[Geometry], curves: Sequence[CubicCurve], p: NDArrayFloat, counts: Sequence[int]
-) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """``pose_at_parameter(records[i], curves[i], ...)`` of each consecutive block of
-    ``counts[i]`` parameters in ``p``, bit for bit."""
-    coefficients = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8).T
-    starts = np.array([(record.x, record.y, record.hdg) for record in records], dtype=np.float64).reshape(-1, 3).T.copy()
-    return stacked_poses(coefficients, starts, p, np.asarray(counts, dtype=np.int64))
 
 
 def stacked_poses(
