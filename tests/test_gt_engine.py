@@ -21,7 +21,7 @@ from cold_maps.network.lane_graph import build_lane_graph
 from cold_maps.opendrive.parser import load_opendrive, parse_opendrive
 from converters import load_lanelet2
 from converters.osm import SIMPLIFY_TOLERANCE_M
-from tests.conftest import bundled_map, load_tool
+from tests.conftest import bundled_map, carla_map, load_tool
 from tests.gap_maps import branch_gap_map
 
 AGREEMENT_M = 1e-3
@@ -303,3 +303,29 @@ def test_crossing_connections_evaluated_together_equal_one_by_one_bit_for_bit() 
     values, starts = stacked_section_points(sections, np.concatenate(stations), np.array([len(s) for s in stations]))
     for (road, index, lane_ids), s, first, end in zip(sections, stations, starts[:-1], starts[1:]):
         assert values[first:end].tobytes() == section_points(road, index, s, lane_ids)[1].tobytes()
+
+
+@pytest.mark.parametrize("name", ["junction", "highway", "rural", "Town04"])
+def test_a_uniform_marking_is_the_classification_at_every_mark_station(name) -> None:
+    """Where ``uniform_marking`` answers, ``classify_border`` at every mark station of the
+    section gives that type, owner and mark; it answers for some borders and leaves others
+    (a mark changing inside the section, an unpainted border with a lane beyond) to it."""
+    from cold_maps.groundtruth.lanelet2_from_engine import mark_stations
+    from cold_maps.opendrive.road_marks import classify_border, uniform_marking
+
+    odr_map = load_opendrive(carla_map(name) if name.startswith("Town") else bundled_map(name))
+    answered = left = 0
+    for road in odr_map.roads.values():
+        for index, section in enumerate(road.lane_sections):
+            s = mark_stations(road, index)
+            for lane in section.lanes:
+                for side in ("inner", "outer"):
+                    uniform = uniform_marking(road, index, lane.id, side)
+                    if uniform is None:
+                        left += 1
+                        continue
+                    answered += 1
+                    marking = classify_border(road, index, lane.id, side, s)
+                    for field in ("type", "owner", "mark_index"):
+                        assert (getattr(marking, field) == getattr(uniform, field)).all(), (road.id, lane.id, side)
+    assert answered and (left > 0) == name.startswith("Town")  # the bundled maps: all painted or outermost

@@ -325,14 +325,16 @@ def test_reference_pose_picks_the_record_by_s():
 
 
 def test_parameters_of_many_curves_at_once_equal_one_curve_at_a_time_bit_for_bit():
-    from cold_maps.opendrive.geometry.cubic_curve import CubicCurve, arc_length_table, parameters
+    from cold_maps.opendrive.geometry.cubic_curve import CubicCurve, arc_length_table, curve_stack, stacked_parameters
 
     rng = np.random.default_rng(3)
-    tables, blocks = [], []
+    tables = []
     for index in range(60):
         curve = CubicCurve(tuple(rng.normal(size=4) * [0, 10, 1, 0.1]), tuple(rng.normal(size=4) * [0, 1, 1, 0.1]),
                            float(rng.uniform(0.5, 3.0)) if index % 2 else 1.0)
         tables.append(arc_length_table(curve))
-        blocks.append(rng.uniform(-0.1, 1.05, size=int(rng.integers(0, 40))) * tables[-1].total)
-    together = parameters(tables, np.concatenate(blocks), [len(block) for block in blocks])
-    assert together.tobytes() == np.concatenate([t.parameter(b) for t, b in zip(tables, blocks)]).tobytes()
+    which = rng.permutation(len(tables))[:45]  # some of the stack's curves, in another order
+    blocks = [rng.uniform(-0.1, 1.05, size=int(rng.integers(0, 40))) * tables[i].total for i in which]
+    together = stacked_parameters(curve_stack(tables), which, np.concatenate(blocks),
+                                  np.array([len(block) for block in blocks]))
+    assert together.tobytes() == np.concatenate([tables[i].parameter(b) for i, b in zip(which, blocks)]).tobytes()

@@ -41,8 +41,9 @@ Lanelet2 writer and cache (``converters.Converter`` of kind "engine").
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
+from functools import cache
 from pathlib import Path
 from typing import Final, Literal
 
@@ -53,9 +54,10 @@ from cold_maps.network.lane_graph import LaneGraph, LaneKey, build_lane_graph
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
-from cold_maps.opendrive.road_marks import NO_MARK, BoundaryType, classify_border
+from cold_maps.opendrive.road_marks import NO_MARK, BorderMarking, BoundaryType, classify_border, uniform_marking
 from cold_maps.opendrive.sampling import (
-    LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points, stacked_section_points)
+    MAX_SAMPLES, SLIVER_FRACTION, LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points,
+    section_stack, stack_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -140,11 +142,38 @@ def _initial_stations(road: Road, section_index: int) -> NDArrayFloat:
     """Where ``adaptive_section_samples`` starts (m): the section's ends, the record
     starts inside it, a station ``END_VERTEX_M`` inside each end, at most
     ``INITIAL_STEP_M`` apart."""
-    section = road.lane_sections[section_index]
-    length = section.s_end - section.s
-    ends = [section.s + END_VERTEX_M, section.s_end - END_VERTEX_M] if length > 2.0 * END_VERTEX_M else []
-    return np.unique(np.concatenate((sample_s(section.s, section.s_end, INITIAL_STEP_M),
-                                     _breakpoints(road, section_index), np.asarray(ends, dtype=np.float64))))
+    return _initial_together([(road, section_index)])[0]
+
+
+def _initial_together(sections: Sequence[tuple[Road, int]]) -> tuple[NDArrayFloat, NDArrayInt]:
+    """``_initial_stations`` (m) of each (road, section index), end to end (``sample_s``'s
+    grid, then ``np.unique`` of each section's stations, bit for bit), and the index of
+    the section of each."""
+    parts = [road.lane_sections[index] for road, index in sections]
+    first = np.array([part.s for part in parts], dtype=np.float64)
+    last = np.array([part.s_end for part in parts], dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        intervals = np.ceil((last - first) / INITIAL_STEP_M)  # sample_s's
+        bad = np.flatnonzero(~(np.isfinite(first) & np.isfinite(last) & (last >= first) & (intervals < MAX_SAMPLES)))
+    if len(bad):  # its ValueError
+        sample_s(float(first[bad[0]]), float(last[bad[0]]), INITIAL_STEP_M)
+    count = intervals.astype(np.int64)
+    rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    grid = np.repeat(first, count) + INITIAL_STEP_M * rank.astype(np.float64)
+    inside = (rank > 0) & (grid < np.repeat(last - SLIVER_FRACTION * INITIAL_STEP_M, count))
+    extra = [(number, s) for number, ((road, index), part) in enumerate(zip(sections, parts))
+             for s in [*_breakpoints(road, index).tolist(),
+                       *((part.s + END_VERTEX_M, part.s_end - END_VERTEX_M)
+                         if part.s_end - part.s > 2.0 * END_VERTEX_M else ())]]
+    numbers = np.arange(len(parts))
+    s = np.concatenate((first, grid[inside], last, np.array([value for _, value in extra], dtype=np.float64)))
+    owner = np.concatenate((numbers, np.repeat(numbers, count)[inside], numbers,
+                            np.array([number for number, _ in extra], dtype=np.int64)))
+    order = np.lexsort((s, owner))
+    s, owner = s[order], owner[order]
+    new = np.ones(len(s), dtype=bool)
+    new[1:] = (s[1:] != s[:-1]) | (owner[1:] != owner[:-1])
+    return s[new], owner[new]
 
 
 def _splits(
@@ -244,12 +273,10 @@ def _refine_together(
     """Stations (m) and borders (lanes, 2, stations, 3) of ``adaptive_section_samples`` of
     each ``batchable`` section: its rounds on the sections' concatenated stations."""
     done: list[tuple[NDArrayFloat, NDArrayFloat] | None] = [None] * len(sections)
-    initial = [_initial_stations(road, index) for road, index, _ in sections]
-    s = np.concatenate(initial)
-    owner = np.repeat(np.arange(len(sections)), [len(block) for block in initial])  # index into `active`
+    s, owner = _initial_together([(road, index) for road, index, _ in sections])  # owner: index into `active`
     active = np.arange(len(sections))
     lanes = np.array([len(lane_ids) for _, _, lane_ids in sections], dtype=np.int64)
-    fractions = np.asarray(CHECK_FRACTIONS)
+    stack = section_stack(sections)
     for round_ in range(MAX_ROUNDS):
         count = np.bincount(owner, minlength=len(active))
         begin = np.cumsum(count) - count
@@ -263,26 +290,21 @@ def _refine_together(
         request[request_begin[owner] + np.arange(len(s)) - begin[owner]] = s
         for rank, fraction in enumerate(CHECK_FRACTIONS):
             request[request_begin[of] + count[of] + rank * opened[of] + place] = low + fraction * (high - low)
-        values, starts = stacked_section_points([sections[i] for i in active.tolist()], request, size)
-        # every (border, fraction, interval) of every section: checked point and chord
+        values, starts = stack_points(stack, active, request, size)
+        # each interval's largest distance of a checked point from its chord, border by border
         borders = 2 * lanes[active]
-        border_of = np.repeat(np.arange(len(active)), borders)
-        border_row = np.repeat(np.asarray(starts[:-1]), borders) + (
-            np.arange(int(borders.sum())) - np.repeat(np.cumsum(borders) - borders, borders)) * size[border_of]
-        per_border = len(CHECK_FRACTIONS) * opened[border_of]
-        triple_border = np.repeat(np.arange(len(border_of)), per_border)
-        rank_in_border = np.arange(int(per_border.sum())) - np.repeat(np.cumsum(per_border) - per_border, per_border)
-        section_of_triple = border_of[triple_border]
-        width = np.maximum(opened[section_of_triple], 1)
-        rank, interval = rank_in_border // width, rank_in_border % width
-        global_interval = (np.cumsum(opened) - opened)[section_of_triple] + interval
-        station = intervals[global_interval] - begin[section_of_triple]
-        row = border_row[triple_border]
-        fraction = fractions[rank][:, None]
-        chord = (1.0 - fraction) * values[row + station] + fraction * values[row + station + 1]
-        checked = values[row + count[section_of_triple] + rank * opened[section_of_triple] + interval]
+        station = intervals - begin[of]
+        checks = count[of] + place
         errors = np.zeros(len(intervals))
-        np.maximum.at(errors, global_interval, np.sqrt(np.square(checked - chord).sum(axis=1)))
+        for border in range(int(borders.max())):
+            here: slice | NDArrayInt = slice(None) if border < borders.min() else np.flatnonzero(borders[of] > border)
+            row = np.asarray(starts)[of[here]] + border * size[of[here]]
+            low_at = row + station[here]
+            low_point, high_point, checked_at = values[low_at], values[low_at + 1], row + checks[here]
+            for rank, fraction in enumerate(CHECK_FRACTIONS):
+                chord = (1.0 - fraction) * low_point + fraction * high_point
+                checked = values[checked_at + rank * opened[of[here]]]
+                errors[here] = np.maximum(errors[here], np.sqrt(np.square(checked - chord).sum(axis=1)))
         refine, extra, added = _splits(low, high, errors, tolerance_m)
         finished = (np.bincount(of[refine], minlength=len(active)) == 0) | (round_ == MAX_ROUNDS - 1)
         for i in np.flatnonzero(finished).tolist():
@@ -338,22 +360,45 @@ def mark_stations(road: Road, section_index: int) -> NDArrayFloat:
     return np.union1d(sample_s(section.s, section.s_end, MARK_STEP_M), np.asarray(inside, dtype=np.float64))
 
 
-def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], s: NDArrayFloat,
-              way_along_s: bool, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
-              ) -> tuple[tuple[str, str], ...]:
-    """Lanelet2 way tags of a lane border (classified at stations ``s``, m; ``borders``:
-    ``section_borders`` there) whose way runs along s when ``way_along_s``: the boundary
-    kind covering most of its length (module docstring)."""
-    marking = classify_border(road, section_index, lane_id, side, s, borders)
+def _longest(marking: BorderMarking, s: NDArrayFloat) -> int:
+    """The first station (index into ``s``, m) of the (type, owner, mark) covering most of the length."""
     # (type, owner, mark index) as one integer in the same lexicographic order
     owners = marking.owner - marking.owner.min()
     marks = marking.mark_index - NO_MARK
     keys = (marking.type * (int(owners.max()) + 1) + owners) * (int(marks.max()) + 1) + marks
+    if not (keys != keys[0]).any():
+        return 0
+    unique, inverse = np.unique(keys, return_inverse=True)
+    best = int(np.argmax(np.bincount(inverse, weights=np.gradient(s), minlength=len(unique))))
+    return int(np.argmax(inverse == best))
+
+
+SectionStations = Callable[[], tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]]
+"""A section's ``mark_stations`` and ``section_borders`` there, computed on the first call."""
+
+
+def section_stations(road: Road, section_index: int) -> SectionStations:
+    """The ``SectionStations`` of a section (computed once, when a border needs them)."""
+    @cache
+    def stations() -> tuple[NDArrayFloat, dict[int, tuple[NDArrayFloat, NDArrayFloat]]]:
+        s = mark_stations(road, section_index)
+        return s, section_borders(road, section_index, s)
+
+    return stations
+
+
+def line_tags(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"], way_along_s: bool,
+              stations: SectionStations | None = None) -> tuple[tuple[str, str], ...]:
+    """Lanelet2 way tags of a lane border whose way runs along s when ``way_along_s``: the
+    boundary kind covering most of its length (module docstring), classified at the
+    section's ``mark_stations`` (``stations``: the section's ``section_stations``) unless
+    ``uniform_marking`` gives it at once."""
+    marking = uniform_marking(road, section_index, lane_id, side)
     at = 0
-    if (keys != keys[0]).any():
-        unique, inverse = np.unique(keys, return_inverse=True)
-        best = int(np.argmax(np.bincount(inverse, weights=np.gradient(s), minlength=len(unique))))
-        at = int(np.argmax(inverse == best))
+    if marking is None:
+        s, borders = (stations or section_stations(road, section_index))()
+        marking = classify_border(road, section_index, lane_id, side, s, borders)
+        at = _longest(marking, s)
     kind, owner = int(marking.type[at]), int(marking.owner[at])
     if kind in _EDGE_TAGS:
         return tuple(_EDGE_TAGS[kind].items())
@@ -424,8 +469,7 @@ def engine_lanelets(
     for road, samples, lane_type in sampled:
         if section_key != (road.id, samples.section):  # a section's lanes come one after the other
             section_key = road.id, samples.section
-            mark_s = mark_stations(road, samples.section)
-            mark_borders = section_borders(road, samples.section, mark_s)
+            stations = section_stations(road, samples.section)
         key = LaneKey(samples.road_id, samples.section, samples.lane_id)
         along = road.drives_along_s(samples.lane_id, samples.section)
         left_side, right_side = ("inner", "outer") if (samples.lane_id > 0) != along else ("outer", "inner")
@@ -445,8 +489,8 @@ def engine_lanelets(
             regulations=replace(regulations.get(key, LaneletRegulations()),
                                 priority_lanelets=tuple(ids[n] for n in priority.get(key, ()) if n in ids)),
             successors=tuple(ids[n] for n in graph.successors[key] if n in ids),
-            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, mark_s, along, mark_borders),
-            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, mark_s, along, mark_borders),
+            left_tags=line_tags(road, samples.section, samples.lane_id, left_side, along, stations),
+            right_tags=line_tags(road, samples.section, samples.lane_id, right_side, along, stations),
         ))
     return lanelets
 

@@ -56,6 +56,8 @@ def record_index(road: Road, s: NDArrayFloat, *, before: float | None = None) ->
     """Index of the ``<geometry>`` record :func:`reference_pose` evaluates each s (m) on:
     the last one starting at or before it, among those starting before ``before`` (m)
     when given (the road has at least one record)."""
+    if len(road.plan_view) == 1:
+        return np.zeros(np.shape(s), dtype=np.intp)
     starts = np.array([g.s for g in road.plan_view])
     last = len(starts) if before is None else max(int(np.searchsorted(starts, before, side="left")), 1)
     return np.clip(np.searchsorted(starts[:last], s, side="right") - 1, 0, last - 1)

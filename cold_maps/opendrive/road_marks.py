@@ -20,6 +20,7 @@ type is not "none") or where it is a physical edge of the road. Classified like 
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Literal
@@ -29,7 +30,7 @@ import numpy.typing as npt
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import section_borders, section_of
-from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, Lane, Road, RoadMark
+from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, Lane, LaneSection, Road, RoadMark
 
 NDArrayInt = npt.NDArray[np.int64]
 
@@ -117,6 +118,48 @@ class BorderMarking:
         return lane.road_marks[int(self.mark_index[i])]
 
 
+def _walk(road: Road, section: LaneSection, lane_id: int, side: Literal["inner", "outer"]
+          ) -> tuple[list[int], int, int]:
+    """The owners of the section's borders from the leftmost to the rightmost (lane id, 0:
+    the centre line), the index of lane ``lane_id``'s ``side`` border among them and the
+    step (±1) away from the lane."""
+    owners = [lane.id for lane in reversed(section.left)] + [0] + [lane.id for lane in section.right]
+    position = {owner: i for i, owner in enumerate(owners)}
+    if lane_id > 0:
+        return (owners, position[lane_id], -1) if side == "outer" else (owners, position[lane_id - 1], 1)
+    if lane_id < 0:
+        return (owners, position[lane_id], 1) if side == "outer" else (owners, position[lane_id + 1], -1)
+    raise ValueError(f"road {road.id}: lane 0 has no area and no borders to classify")
+
+
+def _edge_type(road: Road) -> BoundaryType:
+    """Boundary type of an unpainted border with no lane beyond it (module docstring)."""
+    return BoundaryType.NO_LINE if road.junction != "-1" else BoundaryType.ROAD_EDGE
+
+
+def uniform_marking(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"]
+                    ) -> BorderMarking | None:
+    """``classify_border``'s marking at the section's start (one station) when the section's
+    records make it the same at every s of the section: the ``<roadMark>`` of the border's
+    own lane in force at the start holds to the section's end, and either paints the border
+    or leaves no border beyond it; None otherwise (the marking may change along s)."""
+    section = section_of(road, section_index)
+    owners, start, step = _walk(road, section, lane_id, side)
+    marks = section.lane(owners[start]).road_marks
+    starts = [mark.s_offset for mark in marks]
+    index = bisect.bisect_right(starts, 0.0) - 1  # mark_indices at ds 0 and at the end
+    if index != bisect.bisect_right(starts, section.s_end - section.s) - 1:
+        return None
+    kind = mark_type(marks[index]) if index != NO_MARK else BoundaryType.NO_LINE
+    if kind != BoundaryType.NO_LINE:
+        return BorderMarking(np.array([kind], dtype=np.int64), np.array([owners[start]], dtype=np.int64),
+                             np.array([index], dtype=np.int64))
+    if 0 <= start + step < len(owners):
+        return None
+    return BorderMarking(np.array([_edge_type(road)], dtype=np.int64), np.zeros(1, dtype=np.int64),
+                         np.array([NO_MARK], dtype=np.int64))
+
+
 def classify_border(road: Road, section_index: int, lane_id: int, side: Literal["inner", "outer"],
                     s: NDArrayFloat, borders: dict[int, tuple[NDArrayFloat, NDArrayFloat]] | None = None
                     ) -> BorderMarking:
@@ -125,19 +168,12 @@ def classify_border(road: Road, section_index: int, lane_id: int, side: Literal[
     ``borders``: ``section_borders`` of every lane at ``s``, if already known."""
     section = section_of(road, section_index)
     s = np.asarray(s, dtype=np.float64)
+    owners, start, step = _walk(road, section, lane_id, side)
     borders = section_borders(road, section_index, s) if borders is None else borders
     # Borders across the section from the leftmost to the rightmost: (owner lane id, t).
-    slots = [(lane.id, borders[lane.id][1]) for lane in reversed(section.left)] + [(0, borders[0][0])]
-    slots += [(lane.id, borders[lane.id][1]) for lane in section.right]
-    position = {owner: i for i, (owner, _) in enumerate(slots)}
+    slots = [(owner, borders[owner][1]) for owner in owners]
     # The lane between slots i and i + 1: left lanes lie outside their inner slot.
     between = [slots[i][0] if slots[i][0] > 0 else slots[i + 1][0] for i in range(len(slots) - 1)]
-    if lane_id > 0:
-        start, step = (position[lane_id], -1) if side == "outer" else (position[lane_id - 1], 1)
-    elif lane_id < 0:
-        start, step = (position[lane_id], 1) if side == "outer" else (position[lane_id + 1], -1)
-    else:
-        raise ValueError(f"road {road.id}: lane 0 has no area and no borders to classify")
     n = s.shape[0]
     kind = np.full(n, BoundaryType.UNKNOWN, dtype=np.int64)
     owner = np.zeros(n, dtype=np.int64)
@@ -157,7 +193,7 @@ def classify_border(road: Road, section_index: int, lane_id: int, side: Literal[
             open_ &= ~painted
         after = slot + step
         if not 0 <= after < len(slots):
-            kind[open_] = BoundaryType.NO_LINE if road.junction != "-1" else BoundaryType.ROAD_EDGE
+            kind[open_] = _edge_type(road)
             break
         beyond = section.lane(between[min(slot, after)])
         wide = open_ & (np.abs(slots[after][1] - t) >= ZERO_WIDTH_M)

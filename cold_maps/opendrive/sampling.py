@@ -23,6 +23,8 @@ from cold_maps.opendrive import cubic_poly
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.lanes import lane_of, section_borders, section_of
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, Geometry, Lane, LaneSection, Road
+from cold_maps.opendrive.geometry.cubic_curve import (
+    CurveStack, arc_length_table, curve_stack, stacked_parameters, stacked_poses)
 from cold_maps.opendrive.reference_line import check_s, record_index, record_joint, reference_pose
 
 NDArrayInt = npt.NDArray[np.int64]
@@ -104,6 +106,8 @@ class LaneBorderSamples:
     def __post_init__(self) -> None:
         """ValueError naming road, section, lane and s where a border point is not finite."""
         for side, points in (("inner", self.inner), ("outer", self.outer)):
+            if np.isfinite(points).all():
+                continue
             bad = ~np.all(np.isfinite(points), axis=1)
             if np.any(bad):
                 raise ValueError(f"road {self.road_id}: lane section {self.section}, lane {self.lane_id}: the {side} "
@@ -239,60 +243,141 @@ def _record_of(road: Road, section: LaneSection) -> Geometry:
     return road.plan_view[int(record_index(road, np.float64(section.s), before=section.s_end))]
 
 
-def _records_poses(
-    records: Sequence[Geometry], s: NDArrayFloat, counts: NDArrayInt
-) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """``geometry.evaluate(records[i], max(s - records[i].s, 0))`` of each consecutive
-    block of ``counts[i]`` road s (m), bit for bit: lines and paramPoly3 records together,
-    the others one by one; NaN where a record cannot be evaluated (the caller names it)."""
-    from cold_maps.opendrive.geometry import evaluate
-    from cold_maps.opendrive.geometry.cubic_curve import arc_length_table, parameters, poses_at_parameters
+@dataclass(frozen=True)
+class SectionStack:
+    """``batchable`` sections whose listed lanes ``stack_points`` evaluates together, with
+    what does not depend on the stations prepared once.
+
+    Fields:
+        sections: the (road, section index, listed lane ids).
+        records: (n,) the ``<geometry>`` record each section lies on (``_record_of``).
+        record_s: (n,) where each record starts (m).
+        record_starts: (3, n) x, y (m, inertial frame) and heading (rad) of each record's start.
+        lines: (n,) whether the record is a line of positive length.
+        curve: (n,) the record's table in ``curves`` (a paramPoly3 of positive length and
+            arc length), -1 for the others.
+        curves: the tables of those records.
+        scales: per table of ``curves``, its arc length over its record's length.
+        profiled: (n,) whether the road has elevation or laneOffset records.
+        section_s: (n,) each section's start (m).
+        widths: per side (1 left, -1 right), per place from the reference line outwards:
+            (n, 5) s0, a, b, c, d of the lane's one ``<width>`` (zeros for none).
+        has_width: the same places: (n,) whether the lane is there (out to the section's
+            outermost listed lane) and has a ``<width>``.
+        depth: per side, (n,) how many lanes out the section is evaluated.
+        border_planes: each section's borders (2 per listed lane, inner then outer) as
+            planes (4 per place: inner x, inner y, outer x, outer y; left places, then
+            right), section after section.
+        border_first: (n + 1,) where each section's borders start in ``border_planes``.
+    """
+
+    sections: tuple[tuple[Road, int, Sequence[int]], ...]
+    records: tuple[Geometry, ...]
+    record_s: NDArrayFloat
+    record_starts: NDArrayFloat
+    lines: npt.NDArray[np.bool_]
+    curve: NDArrayInt
+    curves: CurveStack
+    scales: NDArrayFloat
+    profiled: npt.NDArray[np.bool_]
+    section_s: NDArrayFloat
+    widths: dict[int, list[NDArrayFloat]]
+    has_width: dict[int, list[npt.NDArray[np.bool_]]]
+    depth: dict[int, NDArrayInt]
+    border_planes: NDArrayInt
+    border_first: NDArrayInt
+
+
+def section_stack(sections: Sequence[tuple[Road, int, Sequence[int]]]) -> SectionStack:
+    """The ``SectionStack`` of ``batchable`` (road, section index, lanes); ValueError where
+    a paramPoly3 record's arc length is not finite."""
     from cold_maps.opendrive.geometry.param_poly3 import curve_of
 
+    parts = [section_of(road, index) for road, index, _ in sections]
+    records = tuple(_record_of(road, part) for (road, _, _), part in zip(sections, parts))
+    tables = {i: arc_length_table(curve_of(record)) for i, record in enumerate(records)
+              if record.kind == "paramPoly3" and record.length > 0.0}
+    tables = {i: table for i, table in tables.items() if table.total > 0.0}
+    curve = np.full(len(sections), -1, dtype=np.int64)
+    curve[list(tables)] = np.arange(len(tables))
+    outermost = [max((abs(i) for i in ids), default=0) for _, _, ids in sections]
+    widths, has_width, depth = {}, {}, {}
+    for sign in (1, -1):
+        depth[sign] = np.array([min(len(_side(part, sign)), deepest) for part, deepest in zip(parts, outermost)],
+                               dtype=np.int64)
+        lanes = [[_side(part, sign)[place] for place in range(reach)] for part, reach in zip(parts, depth[sign])]
+        widths[sign], has_width[sign] = [], []
+        for place in range(int(depth[sign].max(initial=0))):
+            records_at = [side[place].widths[0] if place < len(side) and side[place].widths else None for side in lanes]
+            widths[sign].append(np.array([(r.s0, r.a, r.b, r.c, r.d) if r is not None else (0.0,) * 5
+                                          for r in records_at], dtype=np.float64).reshape(-1, 5))
+            has_width[sign].append(np.array([r is not None for r in records_at], dtype=bool))
+    left = int(depth[1].max(initial=0))
+    borders = [[4 * (place if lane_id > 0 else left + place) + outer
+                for lane_id in ids for place in [abs(lane_id) - 1] for outer in (0, 2)] for _, _, ids in sections]
+    return SectionStack(
+        tuple(sections), records, np.array([record.s for record in records], dtype=np.float64),
+        np.array([(record.x, record.y, record.hdg) for record in records], dtype=np.float64).reshape(-1, 3).T.copy(),
+        np.array([record.kind == "line" and record.length > 0.0 for record in records], dtype=bool),
+        curve, curve_stack(list(tables.values())),
+        np.array([table.total / records[i].length for i, table in tables.items()], dtype=np.float64),
+        np.array([bool(road.elevation or road.lane_offsets) for road, _, _ in sections], dtype=bool),
+        np.array([part.s for part in parts], dtype=np.float64), widths, has_width, depth,
+        np.array([plane for block in borders for plane in block], dtype=np.int64),
+        np.concatenate(([0], np.cumsum([len(block) for block in borders]))).astype(np.int64))
+
+
+def _ragged(first: NDArrayInt, sizes: NDArrayInt) -> NDArrayInt:
+    """first[0], first[0] + 1, ..., first[0] + sizes[0] - 1, first[1], ...: consecutive runs."""
+    ends = np.cumsum(sizes)
+    return np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(first - (ends - sizes), sizes)
+
+
+def _stack_poses(
+    stack: SectionStack, which: NDArrayInt, s: NDArrayFloat, counts: NDArrayInt
+) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """``geometry.evaluate(record, max(s - record.s, 0))`` of the record of each section
+    ``which[i]`` of the stack at its consecutive block of ``counts[i]`` road s (m), bit for
+    bit: lines and paramPoly3 records together, the others one by one; NaN where a record
+    cannot be evaluated (the caller names it)."""
+    from cold_maps.opendrive.geometry import evaluate
+
     bounds = np.concatenate(([0], np.cumsum(counts)))
-    ds = np.maximum(s - np.repeat([record.s for record in records], counts), 0.0)
+    ds = np.maximum(s - np.repeat(stack.record_s[which], counts), 0.0)
     x, y, hdg = np.full(len(s), np.nan), np.full(len(s), np.nan), np.full(len(s), np.nan)
-    done = np.zeros(len(records), dtype=bool)
-    lines = np.array([record.kind == "line" and record.length > 0.0 for record in records], dtype=bool)
+    lines = stack.lines[which]
     if lines.any():
         at = np.repeat(lines, counts)
-        angle = np.repeat([record.hdg for record in records], counts)[at]
-        x[at] = np.repeat([record.x for record in records], counts)[at] + ds[at] * np.cos(angle)
-        y[at] = np.repeat([record.y for record in records], counts)[at] + ds[at] * np.sin(angle)
+        x0, y0, angle = (np.repeat(start[which], counts)[at] for start in stack.record_starts)
+        x[at] = x0 + ds[at] * np.cos(angle)
+        y[at] = y0 + ds[at] * np.sin(angle)
         hdg[at] = angle
-        done |= lines
-    curved = [(i, arc_length_table(curve_of(record))) for i, record in enumerate(records)
-              if record.kind == "paramPoly3" and record.length > 0.0]
-    curved = [(i, table) for i, table in curved if table.total > 0.0]
-    if curved:
-        chosen = [records[i] for i, _ in curved]
-        tables = [table for _, table in curved]
-        sizes = counts[[i for i, _ in curved]]
-        at = np.repeat(np.isin(np.arange(len(records)), [i for i, _ in curved]), counts)
-        scale = np.repeat([table.total / record.length for table, record in zip(tables, chosen)], sizes)
+    curve = stack.curve[which]
+    curved = curve >= 0
+    if curved.any():
+        chosen, sizes = curve[curved], counts[curved]
+        at = np.repeat(curved, counts)
         with np.errstate(over="ignore", invalid="ignore"):
-            p = parameters(tables, ds[at] * scale, sizes)
-            x[at], y[at], hdg[at] = poses_at_parameters(chosen, [table.curve for table in tables], p, sizes)
-        done[[i for i, _ in curved]] = True
-    for i in np.flatnonzero(~done).tolist():
+            p = stacked_parameters(stack.curves, chosen, ds[at] * np.repeat(stack.scales[chosen], sizes), sizes)
+            x[at], y[at], hdg[at] = stacked_poses(stack.curves.coefficients[:, chosen],
+                                                  stack.record_starts[:, which[curved]], p, sizes)
+    for i in np.flatnonzero(~(lines | curved)).tolist():
         a, b = int(bounds[i]), int(bounds[i + 1])
         try:
-            x[a:b], y[a:b], hdg[a:b] = evaluate(records[i], ds[a:b])
+            x[a:b], y[a:b], hdg[a:b] = evaluate(stack.records[which[i]], ds[a:b])
         except ValueError:
             continue
     return x, y, hdg
 
 
-def _single_width(
-    lanes: Sequence[Lane | None], sections: Sequence[LaneSection], s: NDArrayFloat, counts: NDArrayInt
-) -> NDArrayFloat:
-    """``cubic_poly.evaluate(lane.widths, s, s_offset=section.s)`` of each lane (at most one
-    record; None: no lane, 0) over its block of ``counts`` stations (m), bit for bit."""
-    records = [lane.widths[0] if lane is not None and lane.widths else None for lane in lanes]
-    table = np.array([(r.s0, r.a, r.b, r.c, r.d) if r is not None else (0.0,) * 5 for r in records]).reshape(-1, 5)
-    s0, c0, c1, c2, c3 = np.repeat(table.T, counts, axis=1)  # contiguous rows
-    local = s - np.repeat([section.s for section in sections], counts)
-    applies = np.repeat([r is not None for r in records], counts) & (s0 <= local)
+def _stack_widths(stack: SectionStack, sign: int, place: int, which: NDArrayInt, s: NDArrayFloat,
+                  counts: NDArrayInt) -> NDArrayFloat:
+    """``cubic_poly.evaluate(lane.widths, s, s_offset=section.s)`` of the lane at ``place``
+    on side ``sign`` of each section ``which[i]`` (0 where it has none) over its block of
+    ``counts[i]`` stations (m), bit for bit."""
+    s0, c0, c1, c2, c3 = np.repeat(stack.widths[sign][place][which].T, counts, axis=1)  # contiguous rows
+    local = s - np.repeat(stack.section_s[which], counts)
+    applies = np.repeat(stack.has_width[sign][place][which], counts) & (s0 <= local)
     ds = np.where(applies, local - s0, 0.0)
     return np.where(applies, c0 + ds * (c1 + ds * (c2 + ds * c3)), 0.0)
 
@@ -300,55 +385,52 @@ def _single_width(
 def stacked_section_points(
     sections: Sequence[tuple[Road, int, Sequence[int]]], s: NDArrayFloat, counts: NDArrayInt
 ) -> tuple[NDArrayFloat, list[int]]:
-    """x, y, z (m, inertial frame) of the borders of the listed lanes of each (road,
-    section index, lanes), all ``batchable``, at its block of ``counts`` stations in ``s``
-    (m): (rows, 3), section by section, lane by lane, inner then outer, station by
-    station (``section_points``' borders, bit for bit: the same elementwise arithmetic on
-    all stations at once), and the row where each section starts (and the end).
-    ValueError as ``section_points`` where a point is not finite."""
+    """``stack_points`` of all the sections (``batchable`` road, section index, lanes)."""
+    return stack_points(section_stack(sections), np.arange(len(sections)), s, counts)
+
+
+def stack_points(
+    stack: SectionStack, which: NDArrayInt, s: NDArrayFloat, counts: NDArrayInt
+) -> tuple[NDArrayFloat, list[int]]:
+    """x, y, z (m, inertial frame) of the borders of the listed lanes of each section
+    ``which[i]`` of the stack at its block of ``counts[i]`` stations in ``s`` (m): (rows,
+    3), section by section, lane by lane, inner then outer, station by station
+    (``section_points``' borders, bit for bit: the same elementwise arithmetic on all
+    stations at once), and the row where each section starts (and the end). ValueError
+    as ``section_points`` where a point is not finite."""
     bounds = np.concatenate(([0], np.cumsum(counts)))
-    parts = [section_of(road, index) for road, index, _ in sections]
-    x, y, hdg = _records_poses([_record_of(road, part) for (road, _, _), part in zip(sections, parts)], s, counts)
+    x, y, hdg = _stack_poses(stack, which, s, counts)
     normal_x, normal_y = -np.sin(hdg), np.cos(hdg)
     z, offset = np.zeros(len(s)), np.zeros(len(s))
-    for (road, _, _), part, a, b in zip(sections, parts, bounds[:-1].tolist(), bounds[1:].tolist()):
+    for i in np.flatnonzero(stack.profiled[which]).tolist():
+        (road, index, _), a, b = stack.sections[which[i]], int(bounds[i]), int(bounds[i + 1])
+        part = road.lane_sections[index]
         if road.elevation:
             z[a:b] = cubic_poly.evaluate(road.elevation, s[a:b], before=part.s_end)
         if road.lane_offsets:
             offset[a:b] = cubic_poly.evaluate(road.lane_offsets, s[a:b], before=part.s_end)
-    depth = max((abs(i) for _, _, ids in sections for i in ids), default=0)
-    planes = {}  # (side, place) → the plane index of its inner x, y (outer: + 2)
-    xy = []
-    for sign in (1, -1):
+    left = len(stack.widths[1])
+    stacked = np.empty((4 * (left + len(stack.widths[-1])), len(s)))
+    for sign, first in ((1, 0), (-1, left)):
         inner = offset
-        for place in range(depth):
-            lanes = [_side(part, sign)[place] if place < min(len(_side(part, sign)), max(map(abs, ids), default=0))
-                     else None for part, (_, _, ids) in zip(parts, sections)]
-            if not any(lanes):
-                break
-            outer = inner + float(sign) * _single_width(lanes, parts, s, counts)
-            planes[sign, place] = len(xy)
-            xy += [x + inner * normal_x, y + inner * normal_y, x + outer * normal_x, y + outer * normal_y]
+        for place in range(int(stack.depth[sign][which].max(initial=0))):
+            outer = inner + float(sign) * _stack_widths(stack, sign, place, which, s, counts)
+            plane = 4 * (first + place)
+            stacked[plane:plane + 4] = (x + inner * normal_x, y + inner * normal_y,
+                                        x + outer * normal_x, y + outer * normal_y)
             inner = outer
-    # each border row: its plane (x; y is the next) and its section's block of stations
-    plane, first, size = [], [], []
-    for (_, _, ids), part, a, count in zip(sections, parts, bounds[:-1].tolist(), counts.tolist()):
-        places = {lane.id: (sign, place) for sign in (1, -1) for place, lane in enumerate(_side(part, sign))}
-        for lane_id in ids:
-            plane += [planes[places[lane_id]], planes[places[lane_id]] + 2]
-            first += [a, a]
-            size += [count, count]
-    sizes = np.asarray(size, dtype=np.int64)
-    ends = np.cumsum(sizes)
-    at = np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(np.asarray(first, dtype=np.int64) - (ends - sizes), sizes)
-    stacked = np.stack(xy) if xy else np.zeros((0, len(s)))
-    rows = np.repeat(np.asarray(plane, dtype=np.int64), sizes) * len(s) + at
-    values = np.column_stack((stacked.ravel()[rows], stacked.ravel()[rows + len(s)], z[at]))
-    starts = np.concatenate(([0], np.cumsum([2 * len(ids) * count for (_, _, ids), count
-                                              in zip(sections, counts.tolist())]))).tolist()
+    borders = stack.border_first[which + 1] - stack.border_first[which]
+    planes = stack.border_planes[_ragged(stack.border_first[which], borders)]
+    sizes = np.repeat(counts, borders)
+    at = _ragged(np.repeat(bounds[:-1], borders), sizes)
+    rows = np.repeat(planes, sizes) * len(s) + at
+    flat = stacked.ravel()
+    values = np.column_stack((flat[rows], flat[rows + len(s)], z[at]))
+    starts = np.concatenate(([0], np.cumsum(borders * counts))).tolist()
     if not np.isfinite(values).all():  # section_points names the road, section, lane and s
-        for (road, index, ids), a, b, low, high in zip(sections, bounds[:-1], bounds[1:], starts[:-1], starts[1:]):
+        for i, (a, b, low, high) in enumerate(zip(bounds[:-1], bounds[1:], starts[:-1], starts[1:])):
             if not np.isfinite(values[low:high]).all():
+                road, index, ids = stack.sections[which[i]]
                 section_points(road, index, s[a:b], ids)
         raise ValueError("a lane border is not finite")  # not reached: section_points raised
     return values, starts

@@ -15,6 +15,7 @@ from functools import lru_cache
 from typing import Final
 
 import numpy as np
+import numpy.typing as npt
 
 from cold_maps.opendrive.cubic_poly import NDArrayFloat
 from cold_maps.opendrive.model import Geometry
@@ -24,6 +25,9 @@ TABLE_INTERVAL_M: Final[float] = 2.0
 MAX_TABLE_INTERVALS: Final[int] = 4096
 NEWTON_ITERATIONS: Final[int] = 8
 NEWTON_TOLERANCE_M: Final[float] = 1e-12
+NEWTON_CHUNK: Final[int] = 2048
+"""Rows whose quadrature nodes ``stacked_parameters`` evaluates at once (their (nodes, rows)
+arrays stay in the processor's cache)."""
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_ORDER)
 
 
@@ -92,25 +96,55 @@ class ArcLengthTable:
         return p
 
 
-def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequence[int]) -> NDArrayFloat:
-    """``tables[i].parameter`` of each consecutive block of ``counts[i]`` arc lengths (m) in
-    ``s``, bit for bit, evaluated together: the Newton steps of a block stop together, as
-    in one call, and each block's quadrature sums are its own matrix product (OpenBLAS
-    rounds a row by its place in the product)."""
+@dataclass(frozen=True)
+class CurveStack:
+    """Arc-length tables of several curves end to end, for ``stacked_parameters``.
+
+    Fields:
+        params: (M,) each table's parameters, table after table.
+        lengths: (M,) each table's cumulative arc lengths (m), table after table.
+        first: (n,) index into ``params`` of each table's first entry.
+        last: (n,) each table's last interval (its size - 2).
+        coefficients: (8, n) u[0..3] and v[0..3] (m) of each table's curve.
+    """
+
+    params: NDArrayFloat
+    lengths: NDArrayFloat
+    first: npt.NDArray[np.int64]
+    last: npt.NDArray[np.int64]
+    coefficients: NDArrayFloat
+
+
+def curve_stack(tables: Sequence[ArcLengthTable]) -> CurveStack:
+    """The ``CurveStack`` of these tables."""
+    sizes = np.array([table.params.size for table in tables], dtype=np.int64)
+    return CurveStack(
+        np.concatenate([table.params for table in tables] or [np.zeros(0)]),
+        np.concatenate([table.lengths for table in tables] or [np.zeros(0)]),
+        np.cumsum(sizes) - sizes, sizes - 2,
+        np.array([table.curve.u + table.curve.v for table in tables], dtype=np.float64).reshape(-1, 8).T.copy())
+
+
+def stacked_parameters(
+    stack: CurveStack, which: npt.NDArray[np.int64], s: NDArrayFloat, counts: npt.NDArray[np.int64]
+) -> NDArrayFloat:
+    """``ArcLengthTable.parameter`` of the stack's table ``which[i]`` of each consecutive
+    block of ``counts[i]`` arc lengths (m) in ``s``, bit for bit, evaluated together: the
+    Newton steps of a block stop together, as in one call, and each block's quadrature
+    sums are its own matrix product (OpenBLAS rounds a row by its place in the product)."""
     s = np.asarray(s, dtype=np.float64)
     bounds = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-    k = np.concatenate([np.clip(np.searchsorted(table.lengths, s[a:b], side="right") - 1, 0, table.params.size - 2)
-                        for table, a, b in zip(tables, bounds[:-1], bounds[1:])] or [np.zeros(0, dtype=np.int64)])
-    first = np.concatenate(([0], np.cumsum([table.params.size for table in tables])))[:-1].astype(np.int64)
+    first, last = stack.first[which], stack.last[which]
+    found = [np.searchsorted(stack.lengths[f:f + n + 2], s[a:b], side="right")
+             for f, n, a, b in zip(first.tolist(), last.tolist(), bounds[:-1].tolist(), bounds[1:].tolist())]
+    last = np.repeat(last, counts)
+    k = np.minimum(np.maximum(np.concatenate(found or [np.zeros(0, dtype=np.int64)]) - 1, 0), last)
     at = np.repeat(first, counts) + k
-    params = np.concatenate([table.params for table in tables] or [np.zeros(0)])
-    lengths = np.concatenate([table.lengths for table in tables] or [np.zeros(0)])
-    p_lo, p_hi, s_lo, s_hi = params[at], params[at + 1], lengths[at], lengths[at + 1]
-    last = np.repeat([table.params.size - 2 for table in tables], counts)
+    p_lo, p_hi, s_lo, s_hi = stack.params[at], stack.params[at + 1], stack.lengths[at], stack.lengths[at + 1]
     span = np.where(s_hi > s_lo, s_hi - s_lo, 1.0)
     p = p_lo + (s - s_lo) / span * (p_hi - p_lo)
     upper = np.where(k == last, np.inf, p_hi)
-    _, u1, u2, u3, _, v1, v2, v3 = _coefficients([table.curve for table in tables], counts)
+    _, u1, u2, u3, _, v1, v2, v3 = np.repeat(stack.coefficients[:, which], counts, axis=1)
     active = np.flatnonzero(np.diff(bounds) > 0)  # blocks still iterating
     for _ in range(NEWTON_ITERATIONS):
         if not len(active):
@@ -120,10 +154,14 @@ def parameters(tables: Sequence[ArcLengthTable], s: NDArrayFloat, counts: Sequen
         rows: slice | np.ndarray = slice(None) if ends[-1] == len(s) else (  # all of them: views, no copies
             np.arange(ends[-1]) + np.repeat(bounds[active] - (ends - blocks), blocks))
         lo, now, c1, c2, c3, d1, d2, d3 = (a[rows] for a in (p_lo, p, u1, u2, u3, v1, v2, v3))
-        half = 0.5 * (now - lo)
-        nodes = np.multiply(half, _NODES[:, None])  # (nodes, rows): long inner loops
-        nodes += 0.5 * (now + lo)
-        speeds = np.hypot(_tangent_at(nodes, c1, c2, c3), _tangent_at(nodes, d1, d2, d3)).T.copy()
+        half, mid = 0.5 * (now - lo), 0.5 * (now + lo)
+        speeds = np.empty((len(now), GAUSS_ORDER))
+        for a in range(0, len(now), NEWTON_CHUNK):
+            b = a + NEWTON_CHUNK
+            nodes = np.multiply(half[a:b], _NODES[:, None])  # (nodes, rows): long inner loops
+            nodes += mid[a:b]
+            speeds[a:b] = np.hypot(_tangent_at(nodes, c1[a:b], c2[a:b], c3[a:b]),
+                                   _tangent_at(nodes, d1[a:b], d2[a:b], d3[a:b])).T
         sums = np.concatenate([speeds[b - n:b] @ _WEIGHTS for b, n in zip(ends.tolist(), blocks.tolist())])
         residual = s_lo[rows] + half * sums - s[rows]
         speed = np.hypot(c1 + now * (2.0 * c2 + now * 3.0 * c3), d1 + now * (2.0 * d2 + now * 3.0 * d3))
@@ -158,23 +196,18 @@ def arc_length_table(curve: CubicCurve) -> ArcLengthTable:
     return ArcLengthTable(curve, params, np.concatenate(([0.0], np.cumsum(pieces))))
 
 
-def poses_at_parameters(
-    records: Sequence[Geometry], curves: Sequence[CubicCurve], p: NDArrayFloat, counts: Sequence[int]
+def stacked_poses(
+    coefficients: NDArrayFloat, starts: NDArrayFloat, p: NDArrayFloat, counts: npt.NDArray[np.int64]
 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """``pose_at_parameter(records[i], curves[i], ...)`` of each consecutive block of
-    ``counts[i]`` parameters in ``p``, bit for bit."""
-    u0, u1, u2, u3, v0, v1, v2, v3 = _coefficients(curves, counts)
-    cos_h, sin_h = (np.repeat(f(np.array([record.hdg for record in records])), counts) for f in (np.cos, np.sin))
+    """``pose_at_parameter`` of curves of ``coefficients`` (8, n; u[0..3], v[0..3], m)
+    whose records start at ``starts`` (3, n, C order; x, y in m, heading in rad) at each
+    consecutive block of ``counts[i]`` parameters in ``p``, bit for bit."""
+    u0, u1, u2, u3, v0, v1, v2, v3 = np.repeat(coefficients, counts, axis=1)
+    cos_h, sin_h = (np.repeat(f(starts[2]), counts) for f in (np.cos, np.sin))
     u, v = u0 + p * (u1 + p * (u2 + p * u3)), v0 + p * (v1 + p * (v2 + p * v3))
     du, dv = u1 + p * (2.0 * u2 + p * 3.0 * u3), v1 + p * (2.0 * v2 + p * 3.0 * v3)
-    x0, y0, hdg0 = (np.repeat([getattr(record, name) for record in records], counts) for name in ("x", "y", "hdg"))
+    x0, y0, hdg0 = np.repeat(starts, counts, axis=1)
     return x0 + u * cos_h - v * sin_h, y0 + u * sin_h + v * cos_h, hdg0 + np.arctan2(dv, du)
-
-
-def _coefficients(curves: Sequence[CubicCurve], counts: Sequence[int]) -> list[NDArrayFloat]:
-    """u[0..3], v[0..3] of each curve, repeated ``counts`` times (contiguous arrays)."""
-    table = np.array([curve.u + curve.v for curve in curves], dtype=np.float64).reshape(-1, 8)
-    return list(np.repeat(table.T, counts, axis=1))
 
 
 def pose_at_parameter(
