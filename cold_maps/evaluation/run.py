@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable, Final, Sequence, TextIO
 
 import numpy as np
 
+from cold_maps.common.memory import release_free_heap
 from cold_maps.common.progress import ProgressBar
 from cold_maps.common.provenance import Provenance
 from cold_maps.common.signals import signals_ignored
@@ -352,6 +353,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             LOG.debug("run ended early", exc_info=True)
             _stop(executor)
             executor = None
+        evaluators.clear()  # the report reads the collector alone: the drives and ground truths go first
+        release_free_heap()
         try:
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
                                     partial=error is not None, provenance=options.provenance)
