@@ -42,8 +42,8 @@ MAX_SEQUENCES: Final = 4096
 #: already misses no more than one of any size).
 ROUTE_CACHE_SIZE: Final = 32
 #: Samples (both borders, every ``step_m``) the routes kept hold together at most, the
-#: latest route always kept: with their KD-trees and windows about 80 bytes each (32 MB
-#: here), bounding the cache where lanelets are long (1 to 2 km routes near the end of a
+#: latest route always kept: with their KD-trees and windows about 80 bytes each (about 32 MB
+#: together), bounding the cache where lanelets are long (1 to 2 km routes near the end of a
 #: 10 000-frame drive on Town04 hold 3 to 15 MB each). A route dropped for it keeps its
 #: place and its borders' call counts among the ``ROUTE_CACHE_SIZE`` and is assembled again
 #: when used: the same results as had it been kept.
