@@ -41,6 +41,13 @@ MAX_SEQUENCES: Final = 4096
 #: bounds a long drive's memory: 600 frames on Town04 touch 154 routes, and an LRU of 16
 #: already misses no more than one of any size).
 ROUTE_CACHE_SIZE: Final = 32
+#: Samples (both borders, every ``step_m``) the routes kept hold together at most, the
+#: latest route always kept: with their KD-trees and windows about 80 bytes each (about 32 MB
+#: together), bounding the cache where lanelets are long (1 to 2 km routes near the end of a
+#: 10 000-frame drive on Town04 hold 3 to 15 MB each). A route dropped for it keeps its
+#: place and its borders' call counts among the ``ROUTE_CACHE_SIZE`` and is assembled again
+#: when used: the same results as had it been kept.
+ROUTE_CACHE_SAMPLES: Final = 400_000
 #: Lanelet borders a ``GroundTruth`` prepared on first use keeps (LRU; with their clearances
 #: about 160 kB each on Town04, 1746 of them), and line strings whose samples and KD-tree it
 #: keeps (``MapLines``, about 80 kB each): a long drive touching much of a map stays bounded;
@@ -103,6 +110,11 @@ class _Route:
     keys: tuple[LaneletKey, ...]
     left: RouteBorder
     right: RouteBorder
+
+    @property
+    def samples(self) -> int:
+        """Samples of both borders."""
+        return len(self.left.samples) + len(self.right.samples)
 
 
 @dataclass(frozen=True)
@@ -252,7 +264,7 @@ class GroundTruth:
     ``prepare_all=False`` the lanelets' geometry, border samples, clearances and KD-trees
     are built on first use instead: the same results, cheaper when frames match few of the map's lanelets); lanelet
     sequences matched by frames are assembled from them on first use (joining arrays) and
-    kept (LRU, ``ROUTE_CACHE_SIZE``).
+    kept (LRU, ``ROUTE_CACHE_SIZE`` and ``ROUTE_CACHE_SAMPLES``).
 
     The map must not change after construction.
     """
@@ -289,7 +301,9 @@ class GroundTruth:
             weakref.WeakValueDictionary())
         self._parts: OrderedDict[tuple[LaneletKey, str], BorderPart] = OrderedDict()
         self._parts_kept = None if prepare_all else PART_CACHE_SIZE
-        self._routes: OrderedDict[tuple[LaneletKey, ...], _Route] = OrderedDict()
+        self._routes: OrderedDict[tuple[LaneletKey, ...], _Route | tuple[int, int]] = OrderedDict()
+        """The latest routes (LRU, ``ROUTE_CACHE_SIZE``): assembled, or (beyond
+        ``ROUTE_CACHE_SAMPLES``) the call counts of their left and right borders."""
         self._near_pose: OrderedDict[Pose, list[_Candidate]] = OrderedDict()
         self._graph_neighbours: dict[tuple[LaneletKey, str], list[tuple[LaneletKey, Any]]] = {}
         self._joined: OrderedDict[tuple[tuple[LaneletKey, ...], str], SegmentIndex] = OrderedDict()
@@ -617,10 +631,33 @@ class GroundTruth:
         return scored
 
     def _route(self, lanelets: Sequence[LaneletGeometry]) -> _Route:
+        """The assembled borders of a lanelet sequence, kept (``ROUTE_CACHE_SIZE``,
+        ``ROUTE_CACHE_SAMPLES``)."""
         keys = tuple(g.key for g in lanelets)
-        return lru_get(self._routes, keys, lambda: self._build_route(keys, lanelets), ROUTE_CACHE_SIZE)
+        kept = self._routes.get(keys)
+        if isinstance(kept, _Route):
+            self._routes.move_to_end(keys)
+            return kept
+        route = self._routes[keys] = self._build_route(keys, lanelets, kept or (0, 0))
+        self._routes.move_to_end(keys)
+        if len(self._routes) > ROUTE_CACHE_SIZE:
+            self._routes.popitem(last=False)
+        self._shed_routes()
+        return route
 
-    def _build_route(self, keys: tuple[LaneletKey, ...], lanelets: Sequence[LaneletGeometry]) -> _Route:
+    def _shed_routes(self) -> None:
+        """Beyond ``ROUTE_CACHE_SAMPLES``, the least recently used assembled routes (never
+        the latest) keep only their borders' call counts."""
+        assembled = [(keys, route) for keys, route in self._routes.items() if isinstance(route, _Route)]
+        samples = sum(route.samples for _, route in assembled)
+        for keys, route in assembled[:-1]:
+            if samples <= ROUTE_CACHE_SAMPLES:
+                break
+            self._routes[keys] = (route.left.calls, route.right.calls)
+            samples -= route.samples
+
+    def _build_route(self, keys: tuple[LaneletKey, ...], lanelets: Sequence[LaneletGeometry],
+                     calls: tuple[int, int]) -> _Route:
         overlapping = {
             int(line.id)
             for g in lanelets
@@ -629,11 +666,11 @@ class GroundTruth:
             for line in (other.leftBound, other.rightBound)
         }
 
-        def border(side: str) -> RouteBorder:
+        def border(side: str, count: int) -> RouteBorder:
             own = {getattr(g, f"{side}_line") for g in lanelets}
-            return RouteBorder(self.lines, [self._part(g, side) for g in lanelets], own | overlapping)
+            return RouteBorder(self.lines, [self._part(g, side) for g in lanelets], own | overlapping, count)
 
-        return _Route(keys=keys, left=border("left"), right=border("right"))
+        return _Route(keys=keys, left=border("left", calls[0]), right=border("right", calls[1]))
 
 
 _GROUND_TRUTHS: OrderedDict[tuple[int, int, MatchingConfig], tuple[Any, Any, GroundTruth]] = OrderedDict()

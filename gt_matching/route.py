@@ -233,12 +233,14 @@ class RouteBorder:
     Assembly only joins the parts' arrays: clearances live in the parts; a KD-tree of the
     samples is built only for long borders, on first use."""
 
-    def __init__(self, lines: MapLines, parts: list[BorderPart], ignored: set[int]) -> None:
+    def __init__(self, lines: MapLines, parts: list[BorderPart], ignored: set[int], calls: int = 0) -> None:
         """``parts``: the lanelets' borders in driving order (same ``step_m``, reach and
         margin); ``ignored``: line string ids that are never another lane's border (this
-        border's own lines and those of lanelets overlapping the route)."""
+        border's own lines and those of lanelets overlapping the route); ``calls``: the
+        :attr:`calls` of the same border assembled before (dropped from a cache), so that
+        the same method answers as had it been kept."""
         first = parts[0]
-        self._calls = 0
+        self._calls = calls
         self.step_m = first.step_m
         self.reach_m = first.reach_m
         self.other_margin_m = first.other_margin_m
@@ -439,6 +441,11 @@ class RouteBorder:
         if len(check):
             smooth[check] = self._clear_of_breaks(arc[check], distance[check], low[check], high[check])
         return smooth
+
+    @property
+    def calls(self) -> int:
+        """Calls for distances to the samples so far (``_uses_tree`` counts them)."""
+        return self._calls
 
     def _uses_tree(self) -> bool:
         """Whether nearest samples come from a KD-tree of all samples: for a long border,

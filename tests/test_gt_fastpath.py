@@ -185,6 +185,39 @@ def test_preparing_on_first_use_gives_the_same_matches_and_errors(grid: tuple[An
         assert len(lazy._parts) == len(lazy.lines._trees) == len(lazy.lines._samples) == len(lazy._geometry) == kept
 
 
+def test_routes_dropped_for_their_samples_give_the_same_errors(grid: tuple[Any, Any, GroundTruth],
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """Beyond ``ROUTE_CACHE_SAMPLES`` the older assembled routes keep only their borders' call
+    counts (a budget of one sample: only the latest stays assembled); used again they are
+    assembled anew and continue their counts, so the resampled distances (windows for a
+    short border's first ``KD_TREE_CALLS`` calls, its KD-tree after) and the exact errors
+    are bit-identical to those of a GroundTruth that keeps every route."""
+    from gt_matching import ground_truth
+
+    lanelet_map, graph, _ = grid
+    frames = random_frames(lanelet_map, graph, 4, seed=5)
+    found: dict[str, list[Any]] = {}
+    routes: dict[str, Any] = {}
+    for kind, budget in (("keeping", ground_truth.ROUTE_CACHE_SAMPLES), ("shedding", 1)):
+        monkeypatch.setattr(ground_truth, "ROUTE_CACHE_SAMPLES", budget)
+        gt = GroundTruth(lanelet_map, graph, prepare_all=False)
+        found[kind] = []
+        for _ in range(KD_TREE_CALLS + 2):
+            for left, right, pose in frames:
+                found[kind] += [gt.errors(left, right, gt.match(left, right, pose), exact=exact) for exact in (False, True)]
+                assembled = sum(isinstance(route, ground_truth._Route) for route in gt._routes.values())
+                assert assembled == (1 if kind == "shedding" else len(gt._routes))
+        routes[kind] = {keys: route if isinstance(route, tuple) else (route.left.calls, route.right.calls)
+                        for keys, route in gt._routes.items()}
+    for expected, errors in zip(found["keeping"], found["shedding"], strict=True):
+        for a, b in ((errors.left, expected.left), (errors.right, expected.right)):
+            for field in ("distances_m", "arc_m", "unmatched"):
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert len(routes["keeping"]) == len(frames)
+    assert min(min(pair) for pair in routes["keeping"].values()) > KD_TREE_CALLS
+    assert routes["shedding"] == routes["keeping"]
+
+
 def test_lanes_matched_at_one_pose_share_its_candidates(grid: tuple[Any, Any, GroundTruth]) -> None:
     """Every lane of a frame is matched at the ego's pose: Lanelet2's matching runs once per
     pose, and each lane's match equals that of a GroundTruth that never saw the pose."""

@@ -103,6 +103,7 @@ from typing import TYPE_CHECKING, Any, Final, Iterable, Iterator, Literal, Mappi
 
 import numpy as np
 
+from cold_maps.common.memory import release_free_heap
 from cold_maps.evaluation.safety import (
     LANE_ACCURACY_M,
     STOPPING_FORMULA,
@@ -803,7 +804,8 @@ class ScenarioAccumulator:
     def result(self) -> ScenarioResult:
         """The aggregate over all records (pooled distances, see the module docstring),
         computed from the store's columns: the per-record columns loaded whole, the points
-        pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory."""
+        pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory (their pages
+        handed back to the system after)."""
         spool = Spool()
         try:
             pooled, within = self._pools(spool)
@@ -812,6 +814,7 @@ class ScenarioAccumulator:
             for pool in pooled.values() if "pooled" in locals() else ():
                 pool.close()
             spool.close()
+            release_free_heap()
 
     def _result(self, c: Mapping[str, Any], pooled: Mapping[str, PointPool],
                 within: Mapping[str, list[int]]) -> ScenarioResult:
@@ -1090,6 +1093,7 @@ def write_frames(csv_path: str | os.PathLike[str], parquet_path: str | os.PathLi
                 if rows >= ROW_GROUP_ROWS:
                     parquet.write_table(pa.Table.from_batches(group, schema))
                     group, rows = [], 0
+                    release_free_heap()
         if group:
             parquet.write_table(pa.Table.from_batches(group, schema))
         csv_stream.write(buffer.getvalue().encode("utf-8"))

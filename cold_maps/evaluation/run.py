@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable, Final, Sequence, TextIO
 
 import numpy as np
 
+from cold_maps.common.memory import release_free_heap
 from cold_maps.common.progress import ProgressBar
 from cold_maps.common.provenance import Provenance
 from cold_maps.common.signals import signals_ignored
@@ -317,12 +318,7 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         if options.osi is not None:
             created[:0] = _missing_folders(options.osi.parent)
             prepare_out_dir(options.osi.parent)
-        evaluators = [MapEvaluator(plan) for plan in plans]
-        for evaluator in evaluators:
-            LOG.info("%s: preparing ground truth", evaluator.plan.path)
-            evaluator.prepare()
-            if LOG.isEnabledFor(logging.DEBUG):  # the check costs a pass over the driven lanes: once, in note_drives
-                LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
+        evaluators = _prepared(plans)
     except BaseException:
         for folder in created:
             if any(folder.iterdir()):
@@ -352,6 +348,8 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             LOG.debug("run ended early", exc_info=True)
             _stop(executor)
             executor = None
+        evaluators.clear()  # the report reads the collector alone: the drives and ground truths go first
+        release_free_heap()
         try:
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
                                     partial=error is not None, provenance=options.provenance)
@@ -367,6 +365,18 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
         if error is None:
             held.enter_context(signals_ignored())
     return RunResult(results, collector, error is not None, error)
+
+
+def _prepared(plans: Sequence[MapPlan]) -> list[MapEvaluator]:
+    """An evaluator per plan, its ground truth loaded (a function: no loop variable of the
+    run keeps one alive once the run drops them)."""
+    evaluators = [MapEvaluator(plan) for plan in plans]
+    for evaluator in evaluators:
+        LOG.info("%s: preparing ground truth", evaluator.plan.path)
+        evaluator.prepare()
+        if LOG.isEnabledFor(logging.DEBUG):  # the check costs a pass over the driven lanes: once, in note_drives
+            LOG.debug("%s: %s", evaluator.plan.name, evaluator.gt_warning or "ground truth trustworthy on the drives")
+    return evaluators
 
 
 def _stop(executor: Executor | None) -> None:
