@@ -223,9 +223,10 @@ def _cpu(action: Callable[[], object]) -> tuple[float, object]:
 
 def bench(path: Path, frames: int, routing: bool = False) -> None:
     """CPU seconds of ``cold-maps info`` (read + ``map_info``) and of the ground-truth
-    preparation of ``cold-eval`` (read, lane graph, engine conversion to Lanelet2 without
-    cache, ``lanelet2.io.load``, ``GroundTruth``, whose routing relations are computed
-    per lanelet when frames reach it), then, with ``routing``, lanelet2's
+    preparation of ``cold-eval`` (read, engine conversion to Lanelet2 without cache — which
+    builds the lane graph it needs, as in ``Evaluator.prepare`` —, ``lanelet2.io.load``,
+    ``GroundTruth``, whose routing relations are computed per lanelet when frames reach
+    it), then, with ``routing``, lanelet2's
     ``RoutingGraph`` of the converted map (what a user of ``cold-maps convert`` builds;
     not part of ``cold-eval``), and with ``frames`` > 0 a small ``cold-eval`` (one route
     of ``frames`` frames) end to end."""
@@ -234,8 +235,7 @@ def bench(path: Path, frames: int, routing: bool = False) -> None:
     import lanelet2.io
 
     from cold_maps.cli.maps import map_info
-    from cold_maps.groundtruth.lanelet2_from_engine import LANE_TYPES, engine_converter
-    from cold_maps.network.lane_graph import build_lane_graph
+    from cold_maps.groundtruth.lanelet2_from_engine import engine_converter
     from cold_maps.opendrive.parser import load_opendrive
     from converters import convert, frame, routing_graph
     from gt_matching import GroundTruth
@@ -249,7 +249,6 @@ def bench(path: Path, frames: int, routing: bool = False) -> None:
         osm = Path(folder) / "gt.osm"
         stages = {}
         stages["read"], gt_map = _cpu(lambda: load_opendrive(path))
-        stages["lane graph"], _ = _cpu(lambda: build_lane_graph(gt_map, LANE_TYPES))
         stages["convert"], _ = _cpu(lambda: convert(path, osm, cache=False, converter=engine_converter(gt_map)))
         print("  ground truth: " + ", ".join(f"{k} {v:.2f} s" for k, v in stages.items()), end="", flush=True)
         stages["lanelet2 load"], lanelet_map = _cpu(lambda: lanelet2.io.load(str(osm), frame.projector()))
