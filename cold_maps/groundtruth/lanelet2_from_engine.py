@@ -56,8 +56,8 @@ from cold_maps.opendrive.lanes import section_borders
 from cold_maps.opendrive.model import VEHICLE_LANE_TYPES, OpenDriveMap, Road
 from cold_maps.opendrive.road_marks import NO_MARK, BorderMarking, BoundaryType, classify_border, uniform_marking
 from cold_maps.opendrive.sampling import (
-    MAX_SAMPLES, SLIVER_FRACTION, LaneBorderSamples, NDArrayInt, batchable, record_joints, sample_s, section_points,
-    section_stack, stack_points)
+    MAX_SAMPLES, SLIVER_FRACTION, LaneBorderSamples, NDArrayInt, batchable, ragged_ranges, record_joints, sample_s,
+    section_points, section_stack, stack_points)
 from converters import Converter, ConversionError
 from converters.crdesigner_bridge import SourceLanelet
 from converters.regulatory import LaneletRegulations
@@ -158,7 +158,7 @@ def _initial_together(sections: Sequence[tuple[Road, int]]) -> tuple[NDArrayFloa
     if len(bad):  # its ValueError
         sample_s(float(first[bad[0]]), float(last[bad[0]]), INITIAL_STEP_M)
     count = intervals.astype(np.int64)
-    rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    rank = ragged_ranges(np.zeros_like(count), count)
     grid = np.repeat(first, count) + INITIAL_STEP_M * rank.astype(np.float64)
     inside = (rank > 0) & (grid < np.repeat(last - SLIVER_FRACTION * INITIAL_STEP_M, count))
     extra = [(number, s) for number, ((road, index), part) in enumerate(zip(sections, parts))
@@ -186,7 +186,7 @@ def _splits(
     # the chord error grows with the square of the interval: split into that many pieces at once
     pieces = np.clip(np.ceil(SPLIT_MARGIN * np.sqrt(errors[refine] / tolerance_m)), 2, MAX_PIECES).astype(np.int64)
     extra = pieces - 1
-    offsets = (np.arange(int(extra.sum())) - np.repeat(np.cumsum(extra) - extra, extra) + 1) / np.repeat(pieces, extra)
+    offsets = (ragged_ranges(np.zeros_like(extra), extra) + 1) / np.repeat(pieces, extra)
     return refine, extra, np.repeat(low[refine], extra) + offsets * np.repeat((high - low)[refine], extra)
 
 

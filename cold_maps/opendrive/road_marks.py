@@ -20,7 +20,6 @@ type is not "none") or where it is a physical edge of the road. Classified like 
 
 from __future__ import annotations
 
-import bisect
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Final, Literal
@@ -145,12 +144,11 @@ def uniform_marking(road: Road, section_index: int, lane_id: int, side: Literal[
     or leaves no border beyond it; None otherwise (the marking may change along s)."""
     section = section_of(road, section_index)
     owners, start, step = _walk(road, section, lane_id, side)
-    marks = section.lane(owners[start]).road_marks
-    starts = [mark.s_offset for mark in marks]
-    index = bisect.bisect_right(starts, 0.0) - 1  # mark_indices at ds 0 and at the end
-    if index != bisect.bisect_right(starts, section.s_end - section.s) - 1:
+    lane = section.lane(owners[start])
+    index, last = mark_indices(lane, np.array([0.0, section.s_end - section.s])).tolist()
+    if index != last:
         return None
-    kind = mark_type(marks[index]) if index != NO_MARK else BoundaryType.NO_LINE
+    kind = mark_type(lane.road_marks[index]) if index != NO_MARK else BoundaryType.NO_LINE
     if kind != BoundaryType.NO_LINE:
         return BorderMarking(np.array([kind], dtype=np.int64), np.array([owners[start]], dtype=np.int64),
                              np.array([index], dtype=np.int64))

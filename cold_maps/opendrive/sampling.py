@@ -327,8 +327,9 @@ def section_stack(sections: Sequence[tuple[Road, int, Sequence[int]]]) -> Sectio
         np.concatenate(([0], np.cumsum([len(block) for block in borders]))).astype(np.int64))
 
 
-def _ragged(first: NDArrayInt, sizes: NDArrayInt) -> NDArrayInt:
-    """first[0], first[0] + 1, ..., first[0] + sizes[0] - 1, first[1], ...: consecutive runs."""
+def ragged_ranges(first: NDArrayInt, sizes: NDArrayInt) -> NDArrayInt:
+    """first[0], first[0] + 1, ..., first[0] + sizes[0] - 1, first[1], ...: consecutive runs
+    (``first`` 0: each element's rank in its run)."""
     ends = np.cumsum(sizes)
     return np.arange(int(ends[-1]) if len(ends) else 0) + np.repeat(first - (ends - sizes), sizes)
 
@@ -420,9 +421,9 @@ def stack_points(
                                         x + outer * normal_x, y + outer * normal_y)
             inner = outer
     borders = stack.border_first[which + 1] - stack.border_first[which]
-    planes = stack.border_planes[_ragged(stack.border_first[which], borders)]
+    planes = stack.border_planes[ragged_ranges(stack.border_first[which], borders)]
     sizes = np.repeat(counts, borders)
-    at = _ragged(np.repeat(bounds[:-1], borders), sizes)
+    at = ragged_ranges(np.repeat(bounds[:-1], borders), sizes)
     rows = np.repeat(planes, sizes) * len(s) + at
     flat = stacked.ravel()
     values = np.column_stack((flat[rows], flat[rows + len(s)], z[at]))
