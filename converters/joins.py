@@ -79,10 +79,21 @@ def successor_gaps(
     ``merge_tolerance_m`` (m) on either border, in lanelet order; ``joined`` when both
     lie within ``join_tolerance_m`` (m)."""
     before, after, left, right, largest = successor_distances(lanelets)
+    gap, joined = gap_kinds(largest, merge_tolerance_m, join_tolerance_m)
     return tuple(
-        EndGap(lanelets[b].id, lanelets[a].id, l, r, m <= join_tolerance_m)
-        for b, a, l, r, m in zip(*(v[largest > merge_tolerance_m].tolist() for v in (before, after, left, right, largest)))
+        EndGap(lanelets[b].id, lanelets[a].id, l, r, j)
+        for b, a, l, r, j in zip(*(v[gap].tolist() for v in (before, after, left, right, joined)))
     )
+
+
+def gap_kinds(
+    largest: NDArrayFloat, merge_tolerance_m: float, join_tolerance_m: float
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """Of each successor relation (``successor_distances``' larger end distance, m):
+    whether its ends are farther apart than ``merge_tolerance_m`` on either border (a gap,
+    ``successor_gaps``), and whether that gap is joined (both within ``join_tolerance_m``)."""
+    gap = largest > merge_tolerance_m
+    return gap, gap & (largest <= join_tolerance_m)
 
 
 def join_ends(

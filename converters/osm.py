@@ -37,7 +37,7 @@ from lxml import etree
 from converters import frame
 from converters.crdesigner_bridge import NDArrayFloat, SourceLanelet
 from converters.errors import ConversionError
-from converters.joins import JOIN_TOLERANCE_M, join_ends, successor_distances
+from converters.joins import JOIN_TOLERANCE_M, gap_kinds, join_ends, successor_distances
 from converters.regulatory import LaneletExit, append_regulatory_elements
 from gt_matching.polyline import arc_lengths, simplify
 
@@ -272,7 +272,7 @@ def _joined_ends(
     borders (left of lanelet i at 2i, right at 2i + 1), of the successor relations joined
     across a gap (``converters.joins.successor_gaps``' joined ones)."""
     before, after, _, _, largest = successor_distances(lanelets)
-    joined = (largest > merge_tolerance_m) & (largest <= join_tolerance_m)
+    _, joined = gap_kinds(largest, merge_tolerance_m, join_tolerance_m)
     sides = np.arange(2)
     ends = starts[2 * before[joined, None] + sides + 1] - 1  # (relation, left/right)
     begins = starts[2 * after[joined, None] + sides]
