@@ -107,10 +107,13 @@ class SourceLanelet:
     right_tags: tuple[tuple[str, str], ...] = ()
 
 
+_HARDENED: Final[dict[str, bool]] = {
+    "resolve_entities": False, "no_network": True, "load_dtd": False, "huge_tree": False, "remove_pis": True}
+"""lxml parser options for untrusted maps: no entities, DTD or network, bounded trees."""
+
+
 def _hardened_parser() -> etree.XMLParser:
-    return etree.XMLParser(
-        resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False, remove_pis=True
-    )
+    return etree.XMLParser(**_HARDENED)
 
 
 def read_geo_reference(path: Path, *, header_only: bool = False) -> str:
@@ -149,8 +152,7 @@ def _read_to_header(data: bytes) -> tuple[etree._Element, etree._Element | None]
     """The root of the XML ``data`` and its first ``<header>`` child, parsed (hardened) up
     to that header's end; without a header (or under another root than ``<OpenDRIVE>``,
     given back at once), None for the header."""
-    parser = etree.XMLPullParser(events=("start", "end"), resolve_entities=False, no_network=True, load_dtd=False,
-                                 huge_tree=False, remove_pis=True)
+    parser = etree.XMLPullParser(events=("start", "end"), **_HARDENED)
     root = None
     for first in range(0, len(data), _HEADER_CHUNK_BYTES):
         parser.feed(data[first : first + _HEADER_CHUNK_BYTES])
