@@ -634,15 +634,15 @@ class GroundTruth:
         """The assembled borders of a lanelet sequence, kept (``ROUTE_CACHE_SIZE``,
         ``ROUTE_CACHE_SAMPLES``)."""
         keys = tuple(g.key for g in lanelets)
-        kept = self._routes.get(keys)
-        if isinstance(kept, _Route):
-            self._routes.move_to_end(keys)
-            return kept
-        route = self._routes[keys] = self._build_route(keys, lanelets, kept or (0, 0))
-        self._routes.move_to_end(keys)
-        if len(self._routes) > ROUTE_CACHE_SIZE:
-            self._routes.popitem(last=False)
-        self._shed_routes()
+        calls = self._routes.get(keys)
+        if isinstance(calls, tuple):  # shed: assembled again, its place taken anew
+            del self._routes[keys]
+        route = lru_get(self._routes, keys,
+                        lambda: self._build_route(keys, lanelets, calls if isinstance(calls, tuple) else (0, 0)),
+                        ROUTE_CACHE_SIZE)
+        assert isinstance(route, _Route)
+        if route is not calls:
+            self._shed_routes()
         return route
 
     def _shed_routes(self) -> None:
