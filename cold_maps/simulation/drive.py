@@ -56,10 +56,10 @@ BESIDE_MAX_DISTANCE_M: Final[float] = 8.0
 ROUTE_MARGIN_M: Final[float] = 5.0
 """Extra route length (m) beyond what the vehicles and their sensors need."""
 MAX_BRANCHES: Final[int] = 2
+"""Branch (turning) tracks built per drive at most."""
 BESIDE_TRACKS_KEPT: Final[int] = 16
 """Tracks of the lanes beside the ego's that a drive keeps built (:class:`BesideTracks`,
 latest used; a block of frames asks for those of a few lanes)."""
-"""Branch (turning) tracks built per drive at most."""
 MAX_COVER_ROUTES: Final[int] = 1000
 """Most routes drawn to cover a map's lanes."""
 
