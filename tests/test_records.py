@@ -311,6 +311,38 @@ def test_merge_adopts_a_pickled_collectors_segments_in_order(tiny_limits: None) 
     assert not folder.exists()
 
 
+def test_merged_units_write_the_segments_of_one_store(tiny_limits: None, tmp_path: Any) -> None:
+    key = ScenarioKey("m", "convoy", "", 0.0, "left")
+    records = make_records(7, 90, sigma=True)
+    whole = Collector()
+    for record in records:
+        whole.add(key, record)
+    units: list[list[FrameRecord]] = [[]]
+    for record in records:  # units of 1 to 3 records, none filling a segment of its own
+        if len(units[-1]) > len(units) % 3 or sum(len(r.errors_m) for r in [*units[-1], record]) >= 50:
+            units.append([])
+        units[-1].append(record)
+    parent = Collector()
+    for part in units:  # each pickled as a worker hands it back
+        unit = Collector(spool=Spool(parent.spool.path))
+        for record in part:
+            unit.add(key, record)
+        assert not unit.accumulators[key].records.segments
+        pickled = pickle.loads(pickle.dumps(unit))
+        assert not pickled.accumulators[key].records.pending  # the records travel encoded
+        parent.merge(pickled)
+    merged, single = parent.accumulators[key].records, whole.accumulators[key].records
+    assert len(merged) == 90 and merged.pending_rows == single.pending_rows
+    sizes = [[(batch.num_rows, len(batch.column("errors_m").values)) for batch in store.batches()]
+             for store in (merged, single)]
+    assert sizes[0] == sizes[1] and len(sizes[0]) > 10  # the same segments: the same parquet row groups
+    for name, collector in (("merged", parent), ("single", whole)):
+        write_frames(tmp_path / f"{name}.csv", tmp_path / f"{name}.parquet", collector.accumulators.values())
+    for suffix in ("csv", "parquet"):
+        assert (tmp_path / f"merged.{suffix}").read_bytes() == (tmp_path / f"single.{suffix}").read_bytes()
+    assert parent.accumulators[key].result().to_dict() == whole.accumulators[key].result().to_dict()
+
+
 finite = st.floats(min_value=0.0, max_value=1e3, allow_nan=False, width=64)
 
 

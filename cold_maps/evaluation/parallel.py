@@ -4,10 +4,11 @@ ranges when its frames are independent (:attr:`MapEvaluator.frames_independent`)
 A worker evaluates a unit into a fresh :class:`Collector` that streams its records into
 the parent collector's spool folder (segment files, :mod:`cold_maps.evaluation.records`)
 and a detached ``Recorder`` (the MCAP messages encoded there); the parent merges the
-collectors (adopting the segments: what comes back is their names, the unit's counters,
-check runtimes and overlays) and writes the messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the
-same records in the same (frame) order as a run in one process. After the evaluation the
-same workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
+collectors (adopting the segments: what comes back is their names, the records not yet in a
+segment as one Arrow batch, the unit's counters, check runtimes and overlays) and writes the
+messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the same
+records in the same (frame) order as a run in one process. After the evaluation the same
+workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
 
 On Linux the run's workers are forked from the parent once it has prepared the maps: they
 start with its evaluators (lane graphs, ground truth, drives) instead of importing and
@@ -19,6 +20,7 @@ workers and writes partial outputs as a one-process run does.
 
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import signal
@@ -145,6 +147,10 @@ def run_pool(evaluators: Sequence[MapEvaluator], workers: int) -> Iterator[Execu
     workers start at the first :func:`submit_units`."""
     forked = RUN_START_METHOD == "fork"
     if forked:
+        # the workers hand back their records encoded (RecordStore pickles them as Arrow):
+        # pyarrow imported once here instead of in each of them
+        importlib.import_module("pyarrow")
+
         _EVALUATORS.update(enumerate(evaluators))
     plans = () if forked else tuple(e.plan for e in evaluators)
     try:

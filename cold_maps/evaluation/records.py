@@ -3,7 +3,8 @@
 A :class:`RecordStore` keeps the records of one scenario (``report.FrameRecord`` s, encoded
 by ``report.records_to_batch``): a few in memory, the rest in Arrow IPC segment files (one
 record batch each) in a spool folder, so a run's memory does not grow with its frames. A worker process spools into
-the run's folder and the parent adopts its segments in order (no copy) and its pending records.
+the run's folder and the parent adopts its segments in order (no copy) and the records it holds in
+memory (encoded).
 
 A :class:`PointPool` pools float samples (error distances, σ) in order and gives the same
 statistics as numpy over the whole array (``np.mean``, ``np.percentile``, ...), bit for bit,
@@ -97,7 +98,12 @@ class RecordStore:
     latest few in memory (module docstring). ``encode`` turns records into one record batch
     (each record's error samples in its list column ``errors_m``), ``decode`` a batch back
     into records (both module-level functions: a store is pickled with them); iterating
-    yields the records."""
+    yields the records.
+
+    The records in memory are written as one segment past :data:`FLUSH_RECORDS` records or
+    :data:`FLUSH_POINTS` samples, whether they were added one by one or came encoded from a
+    pickled store (a worker's): the segments, and so the row groups of ``frames.parquet``,
+    are the same for any number of workers."""
 
     def __init__(self, spool: Spool, encode: Callable[[Sequence[Any]], pa.RecordBatch],
                  decode: Callable[[pa.RecordBatch], Iterator[Any]]) -> None:
@@ -107,8 +113,15 @@ class RecordStore:
         self.segments: list[Path] = []
         self.pending: list[Any] = []
         self.count = 0
+        self._encoded: list[pa.RecordBatch] = []
+        self._encoded_rows = 0
         self._pending_points = 0
         self._pending_batch: pa.RecordBatch | None = None
+
+    @property
+    def pending_rows(self) -> int:
+        """Records held in memory: the encoded ones (a pickled store's), then :attr:`pending`."""
+        return self._encoded_rows + len(self.pending)
 
     def add(self, record: Any) -> None:
         """Appends one record (written out with the pending ones past the flush limits)."""
@@ -116,32 +129,64 @@ class RecordStore:
         self._pending_batch = None
         self.count += 1
         self._pending_points += len(record.errors_m)
-        if len(self.pending) >= FLUSH_RECORDS or self._pending_points >= FLUSH_POINTS:
+        if self.pending_rows >= FLUSH_RECORDS or self._pending_points >= FLUSH_POINTS:
             self.flush()
 
+    def _add_encoded(self, batch: pa.RecordBatch) -> None:
+        """Appends encoded records, written out where adding them one by one would write them."""
+        if self.pending:  # encoded first, so the records stay in order
+            self._encoded.append(self.encode(self.pending))
+            self._encoded_rows += len(self.pending)
+            self.pending = []
+        points = np.diff(list_values(batch.column("errors_m"))[1])
+        start = 0
+        while start < batch.num_rows:
+            rows = self._encoded_rows + np.arange(1, batch.num_rows - start + 1)
+            total = self._pending_points + np.cumsum(points[start:])
+            full = np.flatnonzero((rows >= FLUSH_RECORDS) | (total >= FLUSH_POINTS))
+            stop = start + int(full[0]) + 1 if full.size else batch.num_rows
+            self._encoded.append(batch.slice(start, stop - start))
+            self._encoded_rows += stop - start
+            self._pending_points = int(total[stop - start - 1])
+            self.count += stop - start
+            self._pending_batch = None
+            if full.size:
+                self.flush()
+            start = stop
+
+    def _pending(self) -> pa.RecordBatch:
+        """The records held in memory as one batch (kept until the next change)."""
+        if self._pending_batch is None:
+            import pyarrow as pa
+
+            parts = [*self._encoded, *([self.encode(self.pending)] if self.pending else [])]
+            self._pending_batch = parts[0] if len(parts) == 1 else pa.concat_batches(parts)
+        return self._pending_batch
+
     def flush(self) -> None:
-        """Writes the pending records as one segment."""
-        if not self.pending:
+        """Writes the records held in memory as one segment."""
+        if not self.pending_rows:
             return
         import pyarrow as pa
 
-        batch = self.encode(self.pending)
+        batch = self._pending()
         path = self.spool.new_file(".arrow")
         with pa.OSFile(str(path), "wb") as sink, pa.ipc.new_file(sink, batch.schema) as writer:
             writer.write_batch(batch)
         self.segments.append(path)
-        self.pending = []
-        self._pending_points = 0
+        self.pending, self._encoded = [], []
+        self._encoded_rows = self._pending_points = 0
         self._pending_batch = None
 
     def extend(self, later: RecordStore) -> None:
-        """Appends the records of ``later``: its segments adopted as they are, its pending
-        records added (a worker's store hands those back unencoded: a small work unit then
-        never loads pyarrow, whose first array conversion imports pandas)."""
+        """Appends the records of ``later``: its segments adopted as they are, the records it
+        holds in memory added (a pickled store holds them encoded, see :meth:`__getstate__`)."""
         if later.segments:
             self.flush()
             self.segments.extend(later.segments)
-            self.count += later.count - len(later.pending)
+            self.count += later.count - later.pending_rows
+        for batch in later._encoded:
+            self._add_encoded(batch)
         for record in later.pending:
             self.add(record)
 
@@ -155,10 +200,8 @@ class RecordStore:
                 for index in range(reader.num_record_batches):
                     batch = reader.get_batch(index)
                     yield batch if columns is None else batch.select(list(columns))
-        if self.pending:
-            if self._pending_batch is None:
-                self._pending_batch = self.encode(self.pending)
-            batch = self._pending_batch
+        if self.pending_rows:
+            batch = self._pending()
             yield batch if columns is None else batch.select(list(columns))
 
     def values(self, column: str) -> Iterator[Any]:
@@ -174,13 +217,18 @@ class RecordStore:
         return self.count
 
     def __getstate__(self) -> dict[str, Any]:
+        """The store with the records it holds in memory as one encoded batch: a worker's
+        store travels to the parent as Arrow buffers, which pickle several times faster than
+        the records."""
         return {"spool": self.spool, "encode": self.encode, "decode": self.decode, "segments": self.segments,
-                "count": self.count, "pending": self.pending, "pending_points": self._pending_points}
+                "count": self.count, "encoded": [self._pending()] if self.pending_rows else [],
+                "pending_points": self._pending_points}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["spool"], state["encode"], state["decode"])  # type: ignore[misc]
         self.segments, self.count = state["segments"], state["count"]
-        self.pending, self._pending_points = state["pending"], state["pending_points"]
+        self._encoded, self._pending_points = state["encoded"], state["pending_points"]
+        self._encoded_rows = sum(batch.num_rows for batch in self._encoded)
 
 
 def pairwise_sum(read: Callable[[int, int], NDArrayFloat], start: int, count: int) -> float:
