@@ -36,7 +36,7 @@ FLUSH_RECORDS: Final[int] = 2048
 """Records a store holds in memory before it writes them as one segment."""
 FLUSH_POINTS: Final[int] = 1 << 16
 """Error samples (8 bytes each) a store holds in memory before it writes a segment."""
-POOL_MEMORY_POINTS: Final[int] = 1 << 18
+POOL_MEMORY_POINTS: Final[int] = 1 << 20
 """Samples (8 bytes each) a :class:`PointPool` holds in memory before it spills to a file."""
 READ_POINTS: Final[int] = 1 << 16
 """Samples a spilled pool reads at a time."""

@@ -804,8 +804,8 @@ class ScenarioAccumulator:
     def result(self) -> ScenarioResult:
         """The aggregate over all records (pooled distances, see the module docstring),
         computed from the store's columns: the per-record columns loaded whole, the points
-        pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory (their pages
-        handed back to the system after)."""
+        pooled with at most ``records.POOL_MEMORY_POINTS`` each in memory (:func:`scenario_results`
+        hands their pages back to the system after all scenarios)."""
         spool = Spool()
         try:
             pooled, within = self._pools(spool)
@@ -814,7 +814,6 @@ class ScenarioAccumulator:
             for pool in pooled.values() if "pooled" in locals() else ():
                 pool.close()
             spool.close()
-            release_free_heap()
 
     def _result(self, c: Mapping[str, Any], pooled: Mapping[str, PointPool],
                 within: Mapping[str, list[int]]) -> ScenarioResult:
@@ -915,6 +914,15 @@ class ScenarioAccumulator:
         """The scenario's ``frames.parquet`` rows (:func:`frames_batch`), batch by batch."""
         for batch in self.records.batches(FRAMES_COLUMNS_STORED):
             yield frames_batch(self.key, batch)
+
+
+def scenario_results(accumulators: Iterable[ScenarioAccumulator]) -> list[ScenarioResult]:
+    """Each scenario's :meth:`ScenarioAccumulator.result`, in order; the heap's free pages
+    handed back to the system once after them all (after each one, the pages a scenario
+    frees would be faulted in again by the next one's pools)."""
+    results = [accumulator.result() for accumulator in accumulators]
+    release_free_heap()
+    return results
 
 
 def _calibration(pooled: Mapping[str, PointPool], within: Mapping[str, list[int]], name: str) -> Calibration:
@@ -1413,7 +1421,7 @@ def write_report(out_dir: str | os.PathLike[str], accumulators: Sequence[Scenari
     out = Path(out_dir)
     if not out.is_dir():
         raise ReportError(f"{out}: output folder does not exist")
-    results = [a.result() for a in accumulators]
+    results = scenario_results(accumulators)
     write_frames(out / "frames.csv", out / "frames.parquet", accumulators)
     write_summary_md(out / "summary.md", results, partial=partial, road_types=road_types)
     write_metrics_json(out / "metrics.json", results, partial=partial)

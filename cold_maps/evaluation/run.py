@@ -39,6 +39,7 @@ from cold_maps.evaluation.report import (
     atomic_write_text,
     flags,
     scenario_label,
+    scenario_results,
     summary_markdown,
     write_frames,
     write_metrics_json,
@@ -241,7 +242,7 @@ def write_outputs(out: Path, collector: Collector, *, partial: bool, sections: S
     ``metrics.json`` (with the same ``provenance``) and the plots; returns the scenario
     results (``results``: the collector's, when the caller has them already)."""
     accumulators = list(collector.accumulators.values())
-    results = [a.result() for a in accumulators] if results is None else list(results)
+    results = scenario_results(accumulators) if results is None else list(results)
     write_frames(out / "frames.csv", out / "frames.parquet", accumulators)
     text = summary_markdown(results, partial=partial, warnings=run_warnings(collector), program=program,
                             provenance=provenance, check_ms=collector.check_ms)
@@ -393,7 +394,7 @@ def _write_report(out: Path, collector: Collector, plots: bool, executor: Execut
     """The report of a run (:func:`write_outputs`), the plots (when ``plots``) drawn on
     ``executor``'s workers meanwhile; returns the scenario results."""
     plotted = start_plots(out, collector, executor) if plots else None
-    results = [a.result() for a in collector.accumulators.values()]
+    results = scenario_results(collector.accumulators.values())
     sections = list(extra_sections(collector, results)) if extra_sections is not None else []
     results = write_outputs(out, collector, partial=partial, sections=sections, plots=False, results=results,
                             provenance=provenance)

@@ -194,13 +194,15 @@ def run_cell(cell: Cell, map_bytes: bytes | None = None) -> list[dict[str, Any]]
     shipped with the cell, else it is read from ``cell.map_path``. Returns its rows."""
     from cold_maps.evaluation.collector import Collector
     from cold_maps.evaluation.parallel import cached_evaluator
+    from cold_maps.evaluation.report import scenario_results
 
     path = _local_map(cell) if map_bytes is None else _shipped_map(cell, map_bytes)
     collector = Collector()
     try:
         cached_evaluator(cell_plan(cell, path)).run(collector)
         made = cell_provenance(cell)
-        return [{**flat_record(a.result().to_dict()), **cell.params(), **made} for a in collector.accumulators.values()]
+        return [{**flat_record(result.to_dict()), **cell.params(), **made}
+                for result in scenario_results(collector.accumulators.values())]
     finally:
         collector.spool.close()  # its records' files: a long sweep leaves none behind
 
