@@ -15,7 +15,8 @@ from conftest import bundled_map
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cold_maps.evaluation.columns import from_lists, from_numpy, from_values, nulls, to_numpy, to_strings
+from cold_maps.evaluation.columns import (from_lists, from_numpy, from_values, nulls, repeated_string, to_numpy,
+                                         to_strings)
 
 FLOATS = st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True, width=64))
 INTS = st.one_of(st.none(), st.integers(-(2 ** 63), 2 ** 63 - 1))
@@ -44,6 +45,14 @@ def test_from_lists_equals_pyarrows_converter(lists):
     built = from_lists([None if v is None else np.array(v, dtype=np.float64) for v in lists])
     built.validate(full=True)
     assert built.equals(pa.array(lists, type=pa.list_(pa.float64())))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.text(max_size=6), st.integers(0, 40))
+def test_repeated_string_equals_pyarrows_converter(value, length):
+    built = repeated_string(value, length)
+    built.validate(full=True)
+    assert built.equals(pa.array([value] * length, type=pa.string())) and built.null_count == 0
 
 
 @settings(max_examples=300, deadline=None)

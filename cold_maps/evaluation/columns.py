@@ -63,6 +63,17 @@ def from_strings(values: Sequence[str | None]) -> pa.Array:
                                  null_count=nulls)
 
 
+def repeated_string(value: str, length: int) -> pa.Array:
+    """A string column of ``length`` copies of ``value`` (no nulls): :func:`from_strings` of
+    them, without encoding each."""
+    import pyarrow as pa
+
+    encoded = value.encode("utf-8")
+    offsets = np.arange(length + 1, dtype=np.int32) * np.int32(len(encoded))
+    return pa.Array.from_buffers(pa.string(), length, [None, pa.py_buffer(offsets), pa.py_buffer(encoded * length)],
+                                 null_count=0)
+
+
 def from_lists(arrays: Sequence[np.ndarray | None]) -> pa.Array:
     """A list<float64> column of ``arrays`` (None: null)."""
     import pyarrow as pa

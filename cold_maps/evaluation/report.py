@@ -92,6 +92,7 @@ Every file is written to a temporary name and renamed, so none is ever half-writ
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import math
@@ -114,7 +115,8 @@ from cold_maps.evaluation.safety import (
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.common.provenance import Provenance
 from converters.atomic_io import atomic_output
-from cold_maps.evaluation.columns import from_lists, from_numpy, from_strings, from_values, nulls, to_numpy, to_strings
+from cold_maps.evaluation.columns import (from_lists, from_numpy, from_values, nulls, repeated_string, to_numpy,
+                                         to_strings)
 from cold_maps.evaluation.records import PointPool, RecordStore, Spool, list_values, pools
 from gt_matching.metrics import NEAR_FAR_SPLIT_M, P95, Calibration, ErrorStats
 
@@ -967,6 +969,12 @@ def frames_schema() -> Any:
     return pa.schema([(name, types[name]) for name in FRAMES_CSV_COLUMNS])
 
 
+@functools.lru_cache(maxsize=64)
+def _stopping_distance_m(speed_mps: float, reaction_time_s: float, deceleration_mps2: float) -> float:
+    """``StoppingRule.distance_m`` (m), once per rule and speed (a run has few of them)."""
+    return StoppingRule(reaction_time_s, deceleration_mps2).distance_m(speed_mps)
+
+
 def frames_batch(key: ScenarioKey, batch: Any) -> Any:
     """The ``frames.parquet`` rows of a batch of stored records (:data:`FRAMES_COLUMNS_STORED`)
     of the scenario ``key``."""
@@ -982,13 +990,13 @@ def frames_batch(key: ScenarioKey, batch: Any) -> Any:
     speed = batch.column("stopping_speed_mps").to_pylist()
     reaction = batch.column("stopping_reaction_time_s").to_pylist()
     deceleration = batch.column("stopping_deceleration_mps2").to_pylist()
-    distance = [math.nan if v is None else StoppingRule(t, a).distance_m(v)
+    distance = [math.nan if v is None else _stopping_distance_m(v, t, a)
                 for v, t, a in zip(speed, reaction, deceleration)]
     columns = {
-        "map": from_strings([key.map] * rows), "fusion": from_strings([key.fusion] * rows),
-        "interpolation": from_strings([key.interpolation] * rows),
+        "map": repeated_string(key.map, rows), "fusion": repeated_string(key.fusion, rows),
+        "interpolation": repeated_string(key.interpolation, rows),
         "d_s": from_numpy(np.full(rows, float(key.d_s)), pa.float64()),
-        "boundary": from_strings([key.boundary] * rows), "frame": batch.column("frame"),
+        "boundary": repeated_string(key.boundary, rows), "frame": batch.column("frame"),
         "stamp_s": finite(batch.column("stamp_s")), "ego": batch.column("ego"), "coop": batch.column("coop"),
         "fused": from_numpy(lengths > 0, pa.bool_()), "rejected": batch.column("rejected"),
         "points": from_numpy(lengths, pa.int64()),
@@ -1008,7 +1016,7 @@ def _csv_cells(column: Any) -> list[Any]:
     values = column.to_pylist()
     kind = str(column.type)
     if kind == "double":
-        return ["" if v is None else repr(v) for v in values]
+        return ["" if v is None else repr(v) for v in values] if column.null_count else list(map(repr, values))
     if kind == "bool":
         return ["" if v is None else int(v) for v in values]
     return ["" if v is None else v for v in values]
