@@ -182,7 +182,9 @@ class MapEvaluator:
         return drives, (len(covered), len(self.graph.lanes))
 
     def prepare(self) -> None:
-        """Loads (or converts, cached) the Lanelet2 ground truth if not given."""
+        """Loads (or converts, cached) the Lanelet2 ground truth if not given, and with the
+        engine's finds where the map is broken (:attr:`broken`): here, so that the worker
+        processes forked after it share them instead of each finding them again."""
         if self.meter is not None:
             return
         if self._ground_truth is None:
@@ -193,6 +195,8 @@ class MapEvaluator:
             converter = converter_named(self.plan.ground_truth, self.graph.odr_map)
             self._ground_truth = GroundTruth(load_lanelet_map(self.plan.path, converter=converter), prepare_all=False)
         self.meter = GroundTruthMeter(self._ground_truth)
+        if self.plan.ground_truth == "engine":
+            self.broken  # noqa: B018 - computed now (a cached property)
 
     @cached_property
     def broken(self) -> BrokenStretches:
