@@ -27,7 +27,6 @@ import numpy as np
 import numpy.typing as npt
 
 from cold_maps.evaluation.collector import Collector
-from cold_maps.groundtruth.check import check_lanelet_map
 from cold_maps.network.lane_strip import NDArrayFloat
 
 if TYPE_CHECKING:
@@ -137,6 +136,8 @@ def check_driven(map_name: str, graph: LaneGraph, lanelet_map: Any, routing_grap
                  lanes: frozenset[LaneKey]) -> str | None:
     """A warning naming the driven ``lanes`` that ``cold-maps check`` flags on this map,
     or None when it flags none."""
+    from cold_maps.groundtruth.check import check_lanelet_map  # crdesigner's ground truth alone
+
     report = check_lanelet_map(graph.odr_map, lanelet_map, routing_graph=routing_graph, lane_types=graph.lane_types,
                                only={tuple(lane) for lane in lanes}, lane_graph=graph)
     flagged = sorted(report.flagged_lanes())
