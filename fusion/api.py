@@ -130,12 +130,13 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
 
 class _PairWork:
     """What :func:`fuse` and :func:`assess` work out of a pair before fusing it: ``framed``
-    (:func:`ego_frame_borders`), ``fits`` (:func:`end_fits`, each fit made on first use) and
-    the decision per mode (:meth:`decision`). Kept for the last :data:`_MAX_PAIRS` pairs
-    (:func:`_pair_work`): an evaluation fuses one pair with several interpolations and checks
-    it again; a :class:`LaneDetection` is immutable (read-only arrays), so the work is the same."""
+    (:func:`ego_frame_borders`), ``fits`` (:func:`end_fits`, each fit made on first use), the
+    decision per mode (:meth:`decision`) and the result of a refused pair (:meth:`refused`).
+    Kept for the last :data:`_MAX_PAIRS` pairs (:func:`_pair_work`): an evaluation fuses one
+    pair with several interpolations and checks it again; a :class:`LaneDetection` is
+    immutable (read-only arrays), so the work is the same."""
 
-    __slots__ = ("pair", "framed", "fits", "_decided")
+    __slots__ = ("pair", "framed", "fits", "_decided", "_refused")
 
     def __init__(self, ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> None:
         self.pair = (ego, coop, params)  # held, so the ids that key the entry stay theirs
@@ -144,6 +145,7 @@ class _PairWork:
             border.flags.writeable = False  # shared by every call of the pair
         self.fits = end_fits(ego, coop, self.framed[0], params)
         self._decided: dict[str, tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]] = {}
+        self._refused: dict[str, FusionResult] = {}
 
     def decision(self, mode: str) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
         """:func:`_decide` of the pair in ``mode``, made once."""
@@ -151,6 +153,16 @@ class _PairWork:
         if found is None:
             ego, coop, params = self.pair
             found = self._decided[mode] = _decide(ego, coop, mode, params, self.framed[0], self.framed[1][0], self.fits)
+        return found
+
+    def refused(self, mode: str) -> FusionResult:
+        """:func:`ego_result` of the pair that its :meth:`decision` in ``mode`` refuses, made
+        once (a :class:`FusionResult` is immutable: read-only arrays)."""
+        found = self._refused.get(mode)
+        if found is None:
+            _, association, ends, _ = self.decision(mode)
+            el, er, _, _ = self.framed[0]
+            found = self._refused[mode] = ego_result(self.pair[0], (el, er), ends.gap_m, association.reason)
         return found
 
 
@@ -219,7 +231,7 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     kind, association, ends, starts = work.decision(mode)
     el, er, _, _ = borders
     if association.reason:
-        return ego_result(ego, (el, er), ends.gap_m, association.reason)
+        return work.refused(mode)
     uncertainty = pair_uncertainty(ego, coop, borders, (x_rel, y_rel))
     posed = uncertainty  # for the convoy's pose update and weights; without σ under a pose covariance: exact points
     if uncertainty is None and kind == "convoy" and params.convoy_weights == "inverse-variance" and (

@@ -245,7 +245,8 @@ def bridge_end(points: NDArrayFloat, variance: BorderVariance, at_end: bool, sen
     """The :class:`BridgeEnd` of a border's last (``at_end``) or first point; ``points``,
     ``sender_xy`` and ``covariance`` in one frame."""
     k = -1 if at_end else 0
-    t = tangents(points[-2:] if at_end else points[:2])[k]
+    step = points[-1] - points[-2] if at_end else points[1] - points[0]  # tangents() of the two end points
+    t = step / (np.hypot(step[0], step[1]) or 1.0)
     lever = float(t @ (points[k] - np.asarray(sender_xy)))
     jacobian = np.array([-t[1], t[0], lever])
     return BridgeEnd(float(variance.sensor[k]), jacobian, covariance)
