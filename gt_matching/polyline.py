@@ -6,6 +6,7 @@ these helpers: the converter, the recording and the lane strips use them too."""
 
 from __future__ import annotations
 
+from itertools import chain
 from typing import Any, Final
 
 import numpy as np
@@ -175,6 +176,13 @@ def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[N
     return segment_distances(points, np.concatenate(polylines), segments, arc_lengths_many(polylines))
 
 
+def _flattened(found: Any) -> tuple[NDArrayInt, NDArrayInt]:
+    """The lists of indices of a KD-tree's ``query_ball_point`` (one per point): how many
+    each holds, and all of them in order."""
+    counts = np.fromiter(map(len, found), dtype=np.int64, count=len(found))
+    return counts, np.fromiter(chain.from_iterable(found), dtype=np.int64, count=int(counts.sum()))
+
+
 class SegmentIndex:
     """The segments of a polyline (``(M >= 2, 2)`` vertices, m) indexed for distances
     capped at a bound (KD-trees built on first use): :meth:`capped` gives
@@ -210,8 +218,7 @@ class SegmentIndex:
         by_vertex, by_piece, segment = self._index()
         radius = np.minimum(by_vertex.query(points)[0], cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
         near = by_piece.query_ball_point(points, r=radius)
-        counts = np.fromiter((len(found) for found in near), dtype=np.int64, count=len(points))
-        flat = np.fromiter((index for found in near for index in found), dtype=np.int64, count=int(counts.sum()))
+        counts, flat = _flattened(near)
         capped = np.full(len(points), cap_m)
         rows = np.flatnonzero(counts)  # the others are farther than the cap from every segment
         if len(rows):
@@ -235,9 +242,8 @@ def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     half = 0.5 * float(np.max(np.hypot(*(vertices[1:] - vertices[:-1]).T)))
     to_vertex = cKDTree(vertices).query(points)[0]
     candidates = cKDTree(mids).query_ball_point(points, r=to_vertex + half + 1e-9)
-    counts = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=len(points))
+    counts, segment = _flattened(candidates)
     owner = np.repeat(np.arange(len(points)), counts)
-    segment = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=int(counts.sum()))
     start = vertices[segment]
     delta = vertices[segment + 1] - start
     length_sq = np.einsum("nd,nd->n", delta, delta)
