@@ -156,15 +156,21 @@ def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
 
 
 def arc_lengths_many(polylines: list[NDArrayFloat]) -> NDArrayFloat:
-    """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated."""
+    """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated: the
+    segment lengths of all at once, the running sums line by line."""
     if len(polylines) == 1:
         return arc_lengths(polylines[0])
-    counts = np.array([len(polyline) for polyline in polylines])
     vertices = np.concatenate(polylines)
     step = vertices[1:] - vertices[:-1]
-    inner = np.ones(len(step), dtype=bool)
-    inner[np.cumsum(counts)[:-1] - 1] = False
-    return restarting_cumsum(np.hypot(step[:, 0], step[:, 1])[inner], counts - 1)
+    lengths = np.hypot(step[:, 0], step[:, 1])
+    cum = np.empty(len(vertices))
+    first = 0
+    for polyline in polylines:
+        end = first + len(polyline)
+        cum[first] = 0.0
+        np.cumsum(lengths[first:end - 1], out=cum[first + 1:end])
+        first = end
+    return cum
 
 
 def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -25,7 +25,7 @@ import numpy as np
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.lru import lru_get
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline, restarting_cumsum
+from gt_matching.polyline import NDArrayInt, arc_lengths, arc_lengths_many, as_polyline, restarting_cumsum
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch, MatchingError
@@ -255,12 +255,7 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
         near_end |= np.all((low <= end) & (end <= high), axis=1)
     beyond = np.zeros(len(borders), dtype=bool)
     beyond[owner[~(errors <= RANGE_ERROR_THRESHOLD_M)]] = True
-    step = points[1:] - points[:-1]
-    segments = np.hypot(step[:, 0], step[:, 1])
-    arc = np.empty(len(points))
-    for start, count in zip(starts.tolist(), counts.tolist()):  # each border's arc_lengths
-        arc[start] = 0.0
-        np.cumsum(segments[start:start + count - 1], out=arc[start + 1:start + count])
+    arc = arc_lengths_many(list(borders))
     stations = _chord_numbers(arc)
     is_end = np.empty(len(points), dtype=bool)
     np.not_equal(stations[1:], stations[:-1], out=is_end[1:])
