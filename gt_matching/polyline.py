@@ -199,10 +199,10 @@ class SegmentIndex:
 
     def __init__(self, vertices: NDArrayFloat) -> None:
         self.vertices = vertices
-        self._trees: tuple[Any, Any, NDArrayInt] | None = None
+        self._trees: tuple[Any, NDArrayInt] | None = None
 
-    def _index(self) -> tuple[Any, Any, NDArrayInt]:
-        """KD-trees of the vertices and of the piece midpoints, and each piece's segment."""
+    def _index(self) -> tuple[Any, NDArrayInt]:
+        """KD-tree of the piece midpoints, and each piece's segment."""
         if self._trees is None:
             from scipy.spatial import cKDTree
 
@@ -211,18 +211,19 @@ class SegmentIndex:
             segment = np.repeat(np.arange(len(delta)), pieces)
             within = np.arange(len(segment)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
             middles = start[segment] + ((within + 0.5) / pieces[segment])[:, None] * delta[segment]
-            self._trees = cKDTree(self.vertices), cKDTree(middles), segment
+            self._trees = cKDTree(middles), segment
         return self._trees
 
     def capped(self, points: NDArrayFloat, cap_m: float) -> NDArrayFloat:
         """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
-        is smaller, m. The closest segment has a piece midpoint within the smaller of
-        ``cap_m`` and the distance to the nearest vertex, plus half a piece (and a micrometre
-        for rounding), of the point; those segments are measured by
-        :func:`segment_distances` (each point's list padded with its last); a point with
-        none is farther than the cap."""
-        by_vertex, by_piece, segment = self._index()
-        radius = np.minimum(by_vertex.query(points)[0], cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
+        is smaller, m. The closest segment is no farther than the segment of the nearest
+        piece midpoint, so it has a piece midpoint within the smaller of ``cap_m`` and that
+        segment's distance, plus half a piece (and a micrometre for rounding), of the point;
+        those segments are measured by :func:`segment_distances` (each point's list padded
+        with its last); a point with none is farther than the cap."""
+        by_piece, segment = self._index()
+        bound = segment_distances(points, self.vertices, segment[by_piece.query(points)[1]][:, None])[0]
+        radius = np.minimum(bound, cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
         near = by_piece.query_ball_point(points, r=radius)
         counts, flat = _flattened(near)
         capped = np.full(len(points), cap_m)
