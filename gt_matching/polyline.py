@@ -155,12 +155,13 @@ def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
     return summed
 
 
-def arc_lengths_many(polylines: list[NDArrayFloat]) -> NDArrayFloat:
+def arc_lengths_many(polylines: list[NDArrayFloat], joined: NDArrayFloat | None = None) -> NDArrayFloat:
     """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated: the
-    segment lengths of all at once, the running sums line by line."""
+    segment lengths of all at once, the running sums line by line (``joined``: the
+    polylines concatenated, if at hand)."""
     if len(polylines) == 1:
         return arc_lengths(polylines[0])
-    vertices = np.concatenate(polylines)
+    vertices = np.concatenate(polylines) if joined is None else joined
     step = vertices[1:] - vertices[:-1]
     lengths = np.hypot(step[:, 0], step[:, 1])
     cum = np.empty(len(vertices))
@@ -179,7 +180,8 @@ def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[N
     counts = np.array([len(polyline) for polyline in polylines])
     starts = np.cumsum(counts) - counts
     segments = np.minimum(starts[:, None] + np.arange(int(counts.max()) - 1), (starts + counts - 2)[:, None])
-    return segment_distances(points, np.concatenate(polylines), segments, arc_lengths_many(polylines))
+    vertices = np.concatenate(polylines)
+    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices))
 
 
 def _flattened(found: Any) -> tuple[NDArrayInt, NDArrayInt]:

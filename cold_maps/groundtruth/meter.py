@@ -255,7 +255,7 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
         near_end |= np.all((low <= end) & (end <= high), axis=1)
     beyond = np.zeros(len(borders), dtype=bool)
     beyond[owner[~(errors <= RANGE_ERROR_THRESHOLD_M)]] = True
-    arc = arc_lengths_many(list(borders))
+    arc = arc_lengths_many(list(borders), points)
     stations = _chord_numbers(arc)
     is_end = np.empty(len(points), dtype=bool)
     np.not_equal(stations[1:], stations[:-1], out=is_end[1:])
