@@ -140,21 +140,6 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     return segment_distances(points, vertices, all_segments)
 
 
-def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
-    """Per group of ``counts`` consecutive ``values``, 0 and then their running sums: each
-    group's ``[0, *np.cumsum(group)]`` bit for bit (rows of a zero-padded array summed in
-    order), the groups concatenated."""
-    width = int(counts.max()) + 1
-    padded = np.zeros(len(counts) * width)
-    at = np.arange(1, len(values) + 1) + np.repeat(np.arange(len(counts)) * width - (np.cumsum(counts) - counts),
-                                                   counts)
-    padded[at] = values
-    rows = padded.reshape(len(counts), width)
-    np.cumsum(rows, axis=1, out=rows)
-    summed: NDArrayFloat = rows[np.arange(width) <= counts[:, None]]
-    return summed
-
-
 def arc_lengths_many(polylines: list[NDArrayFloat], joined: NDArrayFloat | None = None) -> NDArrayFloat:
     """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated: the
     segment lengths of all at once, the running sums line by line (``joined``: the

@@ -25,7 +25,7 @@ import numpy as np
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.lru import lru_get
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import NDArrayInt, arc_lengths, arc_lengths_many, as_polyline, restarting_cumsum
+from gt_matching.polyline import NDArrayInt, arc_lengths, arc_lengths_many, as_polyline
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch, MatchingError
@@ -237,9 +237,8 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
     """Per detected border (``(N >= 2, 2)``, world frame, driving order; ``errors_m`` its
     points' GT distances, m; its sender's pose or None), against one GT border (its
     ``gt_ends``): :func:`points_past_ends`, :func:`covered_length_m` and
-    :func:`ahead_of_m`, bit for bit, the borders in one pass: arc lengths, chords and their
-    running sums of all at once, the end check only for the borders that come near an end
-    vertex."""
+    :func:`ahead_of_m`, bit for bit, the borders in one pass: arc lengths and chords of all
+    at once, the end check only for the borders that come near an end vertex."""
     counts = np.array([len(border) for border in borders])
     starts = np.cumsum(counts) - counts
     lasts = starts + counts - 1
@@ -269,7 +268,6 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
     step = points[second] - points[first]
     lengths = np.hypot(step[:, 0], step[:, 1])
     chords = np.bincount(owner[ends], minlength=len(borders)) - 1
-    along = restarting_cumsum(lengths, chords)
     arc_at_ends = arc[ends]
     figures = []
     chord_start = 0
@@ -277,10 +275,12 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
         start, count, chord_count = int(starts[index]), int(counts[index]), int(chords[index])
         border_arc = arc[start:start + count]
         past = points_past_ends(border, gt, border_errors, step_m) if near_end[index] else 0
-        covered = (_covered(border, border_arc, border_errors)[0] if beyond[index]
-                   else float(lengths[chord_start:chord_start + chord_count].sum()))
-        ahead = np.interp(border_arc, arc_at_ends[chord_start + index:chord_start + index + chord_count + 1],
-                          along[chord_start + index:chord_start + index + chord_count + 1])
+        chord_lengths = lengths[chord_start:chord_start + chord_count]
+        covered = _covered(border, border_arc, border_errors)[0] if beyond[index] else float(chord_lengths.sum())
+        along = np.empty(chord_count + 1)
+        along[0] = 0.0
+        np.cumsum(chord_lengths, out=along[1:])
+        ahead = np.interp(border_arc, arc_at_ends[chord_start + index:chord_start + index + chord_count + 1], along)
         if pose is not None:
             x, y, yaw = pose
             ahead = ahead + max(math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y), 0.0)
