@@ -268,7 +268,6 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
     step = points[second] - points[first]
     lengths = np.hypot(step[:, 0], step[:, 1])
     chords = np.bincount(owner[ends], minlength=len(borders)) - 1
-    arc_at_ends = arc[ends]
     figures = []
     chord_start = 0
     for index, (border, border_errors, pose) in enumerate(zip(borders, errors_m, poses)):
@@ -277,14 +276,8 @@ def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFl
         past = points_past_ends(border, gt, border_errors, step_m) if near_end[index] else 0
         chord_lengths = lengths[chord_start:chord_start + chord_count]
         covered = _covered(border, border_arc, border_errors)[0] if beyond[index] else float(chord_lengths.sum())
-        along = np.empty(chord_count + 1)
-        along[0] = 0.0
-        np.cumsum(chord_lengths, out=along[1:])
-        ahead = np.interp(border_arc, arc_at_ends[chord_start + index:chord_start + index + chord_count + 1], along)
-        if pose is not None:
-            x, y, yaw = pose
-            ahead = ahead + max(math.cos(yaw) * (border[0, 0] - x) + math.sin(yaw) * (border[0, 1] - y), 0.0)
-        figures.append((past, covered, ahead))
+        border_ends = ends[chord_start + index:chord_start + index + chord_count + 1] - start
+        figures.append((past, covered, _ahead(border, border_arc, (border_ends, chord_lengths), pose)))
         chord_start += chord_count
     return figures
 
