@@ -122,8 +122,65 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
     neighbour lanes matched (:class:`fusion.association.Association`); ``framed`` is
     :func:`ego_frame_borders` of the pair and ``ends`` its :func:`fusion.fusibility.lane_ends`
     when the caller has them already."""
+    if framed is None and ends is None:
+        return _pair_work(ego, coop, params).decision(mode)[1]
     borders, (x_rel, _, _) = framed or ego_frame_borders(ego, coop)
     return _decide(ego, coop, mode, params, borders, x_rel, end_fits(ego, coop, borders, params), ends)[1]
+
+
+class _PairWork:
+    """What :func:`fuse` and :func:`assess` work out of a pair before fusing it: ``framed``
+    (:func:`ego_frame_borders`), ``fits`` (:func:`end_fits`, each fit made on first use), the
+    decision per mode (:meth:`decision`) and the result of a refused pair (:meth:`refused`).
+    Kept for the last :data:`_MAX_PAIRS` pairs (:func:`_pair_work`): an evaluation fuses one
+    pair with several interpolations and checks it again; a :class:`LaneDetection` is
+    immutable (read-only arrays), so the work is the same."""
+
+    __slots__ = ("pair", "framed", "fits", "_decided", "_refused")
+
+    def __init__(self, ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> None:
+        self.pair = (ego, coop, params)  # held, so the ids that key the entry stay theirs
+        self.framed = ego_frame_borders(ego, coop)
+        for border in self.framed[0][2:]:
+            border.flags.writeable = False  # shared by every call of the pair
+        self.fits = end_fits(ego, coop, self.framed[0], params)
+        self._decided: dict[str, tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]] = {}
+        self._refused: dict[str, FusionResult] = {}
+
+    def decision(self, mode: str) -> tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]:
+        """:func:`_decide` of the pair in ``mode``, made once."""
+        found = self._decided.get(mode)
+        if found is None:
+            ego, coop, params = self.pair
+            found = self._decided[mode] = _decide(ego, coop, mode, params, self.framed[0], self.framed[1][0], self.fits)
+        return found
+
+    def refused(self, mode: str) -> FusionResult:
+        """:func:`ego_result` of the pair that its :meth:`decision` in ``mode`` refuses, made
+        once (a :class:`FusionResult` is immutable: read-only arrays)."""
+        found = self._refused.get(mode)
+        if found is None:
+            _, association, ends, _ = self.decision(mode)
+            el, er, _, _ = self.framed[0]
+            found = self._refused[mode] = ego_result(self.pair[0], (el, er), ends.gap_m, association.reason)
+        return found
+
+
+_PAIRS: dict[tuple[int, int, int], _PairWork] = {}
+_MAX_PAIRS: Final[int] = 32
+
+
+def _pair_work(ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> _PairWork:
+    """The :class:`_PairWork` of (``ego``, ``coop``, ``params``), made on first use, the
+    oldest of :data:`_MAX_PAIRS` dropped."""
+    key = (id(ego), id(coop), id(params))
+    work = _PAIRS.get(key)
+    if work is None:
+        work = _PairWork(ego, coop, params)
+        if len(_PAIRS) >= _MAX_PAIRS:
+            _PAIRS.pop(next(iter(_PAIRS)), None)
+        _PAIRS[key] = work
+    return work
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
@@ -168,12 +225,13 @@ def fuse(ego: LaneDetection, coop: LaneDetection, *, mode: str = "auto", interpo
     """
     if interpolation not in _INTERPOLATIONS:
         raise InvalidParameterError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    borders, (x_rel, y_rel, _) = ego_frame_borders(ego, coop)
-    fits = end_fits(ego, coop, borders, params)
-    kind, association, ends, starts = _decide(ego, coop, mode, params, borders, x_rel, fits)
+    work = _pair_work(ego, coop, params)
+    borders, (x_rel, y_rel, _) = work.framed
+    fits = work.fits
+    kind, association, ends, starts = work.decision(mode)
     el, er, _, _ = borders
     if association.reason:
-        return ego_result(ego, (el, er), ends.gap_m, association.reason)
+        return work.refused(mode)
     uncertainty = pair_uncertainty(ego, coop, borders, (x_rel, y_rel))
     posed = uncertainty  # for the convoy's pose update and weights; without σ under a pose covariance: exact points
     if uncertainty is None and kind == "convoy" and params.convoy_weights == "inverse-variance" and (

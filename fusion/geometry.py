@@ -182,19 +182,34 @@ class _EndDesign:
     p3_quartic_leak: float
 
 
-_DESIGNS: dict[tuple[tuple[int, ...], int], _EndDesign] = {}
+_DESIGNS: dict[tuple[tuple[int, ...], int, bytes | None], _EndDesign] = {}
 _MAX_DESIGNS: Final[int] = 256
 
 
-def _end_design(counts: tuple[int, ...], n_noise: int) -> _EndDesign:
+def _end_designs(counts: tuple[int, ...], n_noise: int,
+                 weights: Sequence[NDArrayFloat | None]) -> list[_EndDesign]:
     """The filters of windows of ``counts`` points and of the noise over ``n_noise`` points,
-    unweighted (memoised: they depend on the sizes only)."""
-    design = _DESIGNS.get((counts, n_noise))
-    if design is None:
-        if len(_DESIGNS) >= _MAX_DESIGNS:
-            _DESIGNS.clear()
-        design = _DESIGNS[counts, n_noise] = _designs(counts, n_noise, None)[0]
-    return design
+    per border unweighted (``None``) or weighted by its ``weights`` (from the end inward,
+    ≥ ``counts[-1]`` of them), memoised by sizes and weights: a detection's σ is fitted again
+    with every partner and method. The designs not held are made in one :func:`_designs`
+    call; each border's is its own pseudo-inverse, so it is the same bit for bit whichever
+    borders share the call."""
+    keys = [(counts, n_noise, None if w is None else w[: counts[-1]].tobytes()) for w in weights]
+    found = [_DESIGNS.get(key) for key in keys]
+    missing = {key: w for key, w, design in zip(keys, weights, found) if design is None}
+    if not missing:
+        return found  # type: ignore[return-value]  # every key was held
+    made: dict[tuple[tuple[int, ...], int, bytes | None], _EndDesign] = {}
+    if (counts, n_noise, None) in missing:
+        made[counts, n_noise, None] = _designs(counts, n_noise, None)[0]
+    weighted = [key for key in missing if key[2] is not None]
+    if weighted:
+        stacked = np.array([missing[key][: counts[-1]] for key in weighted])  # type: ignore[index]
+        made.update(zip(weighted, _designs(counts, n_noise, stacked)))
+    if len(_DESIGNS) + len(made) > _MAX_DESIGNS:
+        _DESIGNS.clear()
+    _DESIGNS.update(made)
+    return [design or made[key] for key, design in zip(keys, found)]
 
 
 def _designs(counts: tuple[int, ...], n_noise: int, weights: NDArrayFloat | None) -> list[_EndDesign]:
@@ -272,16 +287,15 @@ def fit_ends(borders: Sequence[NDArrayFloat], at_end: Sequence[bool], windows_m:
             counts = [min(n, count) for count in counts]
         groups.setdefault((tuple(counts), -1 if weights[e] is None else e), []).append(e)
     n_noise = min(n_min, max(3, int(round(noise_window_m / 0.1))))
-    weighted_by_counts: dict[tuple[int, ...], list[int]] = {}
+    by_counts: dict[tuple[int, ...], list[int]] = {}
     for counts, weighted in groups:
-        if weighted >= 0:
-            weighted_by_counts.setdefault(counts, []).append(weighted)
-    designs = {(counts, e): design for counts, borders_ in weighted_by_counts.items()
-               for e, design in zip(borders_, _designs(counts, min(n_noise, counts[-1]),
-                                                       np.array([weights[e][: counts[-1]] for e in borders_])))}
+        by_counts.setdefault(counts, []).append(weighted)
+    designs = {(counts, e): design for counts, group in by_counts.items()
+               for e, design in zip(group, _end_designs(counts, min(n_noise, counts[-1]),
+                                                        [None if e < 0 else weights[e] for e in group]))}
     filtered, squares, n_squares = [], 0.0, 0
     for (counts, weighted), members in groups.items():
-        design = designs[counts, weighted] if weighted >= 0 else _end_design(counts, min(n_noise, counts[-1]))
+        design = designs[counts, weighted]
         k = design.rows.shape[1]
         window = np.concatenate([borders[e][:-k - 1:-1] if at_end[e] else borders[e][:k] for e in members])
         values = (design.rows @ window.reshape(len(members), k, 2)).view(np.complex128)[..., 0]

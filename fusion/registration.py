@@ -10,13 +10,17 @@ prior gives its estimate and the covariance left after it, in closed form:
 
 with d the measured lateral differences (coop minus ego, along the ego border's left normal
 n), H their rows (n_x, n_y, n·R₉₀(p − s_c)) (p the coop point, s_c the coop, R₉₀ the
-quarter turn), R the two detections' stated sensor variances there, and T = [[1, 0, −s_y],
-[0, 1, s_x], [0, 0, 1]] carrying the ego's pose error (about the ego) to the coop. The
+quarter turn), R the covariance of the two detections' sensor errors there, and
+T = [[1, 0, −s_y], [0, 1, s_x], [0, 0, 1]] carrying the ego's pose error (about the ego) to the coop. The
 measurements are the overlap's two ends on each border: a lane detection's error is
 correlated along the border (a lane model's offset and heading), so its many points carry
 about as much information as a line through its ends, not one independent draw each; with
 a short overlap the two ends nearly coincide, the yaw is not observed and the prior keeps
-it. The coop's whole detection is moved by −δ̂ before the overlap is fused point by point.
+it. R's diagonal is the stated variances; a detection that states its lane model
+(:attr:`fusion.LaneDetection.lane_model_sigma`) adds the covariance of its error at the two
+ends of one border (:func:`fusion.uncertainty.lane_model_covariance`; the borders
+independent), without it the ends are independent. The coop's whole detection is moved by
+−δ̂ before the overlap is fused point by point.
 
 The update holds only while the overlap agrees with the model: when the normalised innovation
 squared dᵀ(H P Hᵀ + R)⁻¹d exceeds the χ² quantile of its M dof at the false rejection rate
@@ -36,7 +40,7 @@ import numpy as np
 from fusion.convoy import OverlapStart, overlap_length, overlap_start
 from fusion.geometry import norms, points_at, segment_at, transform
 from fusion.types import NDArrayFloat
-from fusion.uncertainty import BorderVariance, PairUncertainty, lateral_jacobian, pose_variance
+from fusion.uncertainty import BorderVariance, PairUncertainty, lane_model_basis, lateral_jacobian, pose_variance
 
 INCONSISTENT_RATE: Final[float] = 1e-9
 """False rejection rate of the update's consistency test (module docstring): the overlap's
@@ -64,13 +68,19 @@ class PoseUpdate:
 
 
 def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, start: OverlapStart,
-                 ego_sensor: NDArrayFloat, coop_sensor: NDArrayFloat, coop_xy: tuple[float, float]
-                 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-    """(H (2, 3), d (2,), R (2,), the ego's part of R (2,)) of one border pair at the overlap's
-    start and end (the coop start's foot on the ego border and the arc length
+                 ego_sensor: NDArrayFloat, coop_sensor: NDArrayFloat, coop_xy: tuple[float, float],
+                 lane_models: tuple[NDArrayFloat | None, NDArrayFloat | None],
+                 forward: tuple[NDArrayFloat, NDArrayFloat]
+                 ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """(H (2, 3), d (2,), R (2, 2), the ego's variances in R (2,), the coop's
+    :func:`fusion.uncertainty.lane_model_basis` there (2, 4)) of one border pair at the
+    overlap's start and end (the coop start's foot on the ego border and the arc length
     ``convoy_border`` pairs last, :func:`fusion.convoy.overlap_length`), ego frame: the
     lateral difference coop minus ego along the ego border's left normal, how the coop's
-    pose error moves it, and the sum of the two sensor variances there [m²]."""
+    pose error moves it, and the sum of the two detections' sensor error covariances there
+    [m²] (:func:`fusion.uncertainty.lane_model_covariance` of the (ego's, coop's)
+    ``lane_models`` at the (ego's, coop's) ``forward`` coordinates of the border points,
+    each in its sender's vehicle frame; independent ends without a lane model)."""
     u = np.array([0.0, overlap_length(start, s_coop)[0]])
     s = start.s0 + u
     p_ego, p_coop = points_at(ego, start.s_ego, s), points_at(coop, s_coop, u)
@@ -82,21 +92,25 @@ def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, st
     lever = p_coop - np.asarray(coop_xy)
     rows = np.column_stack((normal, normal[:, 1] * lever[:, 0] - normal[:, 0] * lever[:, 1]))
     differences = np.einsum("ij,ij->i", normal, p_coop - p_ego)
-    ego_noise = np.interp(s, start.s_ego, ego_sensor)
-    return rows, differences, ego_noise + np.interp(u, s_coop, coop_sensor), ego_noise
+    ego_noise, coop_noise = np.interp(s, start.s_ego, ego_sensor), np.interp(u, s_coop, coop_sensor)
+    ego_basis = lane_model_basis(lane_models[0], np.interp(s, start.s_ego, forward[0]), ego_noise)
+    coop_basis = lane_model_basis(lane_models[1], np.interp(u, s_coop, forward[1]), coop_noise)
+    shared = ego_basis @ ego_basis.T + coop_basis @ coop_basis.T
+    return rows, differences, shared + np.diag(ego_noise + coop_noise - np.diag(shared)), ego_noise, coop_basis
 
 
 def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFloat, coop_cov: NDArrayFloat,
                 ego_cov: NDArrayFloat, coop_xy: tuple[float, float]) -> PoseUpdate:
     """:class:`PoseUpdate` from measurements H (``rows``, (M, 3)), d (``differences``) and their
-    variances R (``noise``, [m²]) with the senders' (x, y, yaw) covariances in the ego frame
+    error covariance R (``noise``, (M, M) [m²], or (M,) the variances of independent ones)
+    with the senders' (x, y, yaw) covariances in the ego frame
     (see the module docstring). Zero covariances give δ̂ = 0 (the identity); a singular
     innovation covariance (no sensor noise and an unobserved direction) is pseudo-inverted."""
     sx, sy = coop_xy
     carry = np.array([[1.0, 0.0, -sy], [0.0, 1.0, sx], [0.0, 0.0, 1.0]])
     ego_part = carry @ ego_cov @ carry.T
     prior = coop_cov + ego_part
-    noise_cov = np.diag(noise)
+    noise_cov = np.diag(noise) if noise.ndim == 1 else noise
     innovation = rows @ prior @ rows.T + noise_cov
     inverse = np.linalg.pinv(innovation, hermitian=True)
     gain = prior @ rows.T @ inverse
@@ -126,14 +140,27 @@ def corrected(points: NDArrayFloat, coop_xy: tuple[float, float], estimate: NDAr
 
 
 def corrected_variance(points: NDArrayFloat, sensor: NDArrayFloat, coop_xy: tuple[float, float],
-                       update: PoseUpdate) -> BorderVariance:
+                       update: PoseUpdate, own: NDArrayFloat) -> BorderVariance:
     """:class:`BorderVariance` of a corrected coop border (``points`` ego frame): its sensor
-    variance, the world pose variance left after the update (J·``world``·Jᵀ) as ``pose`` and
-    the ego-frame one less that (J·(``relative`` − ``world``)·Jᵀ, negative where the
-    correction took on more of the ego's pose error than it left of the coop's) as
-    ``relative``, so that sensor + pose + relative is the ego-frame variance."""
+    variance, the world pose variance left after the update (J·``world``·Jᵀ) less 2·``own``
+    as ``pose`` and the ego-frame one less the world one (J·(``relative`` − ``world``)·Jᵀ,
+    negative where the correction took on more of the ego's pose error than it left of the
+    coop's) as ``relative``, so that sensor + pose + relative is the ego-frame variance.
+    ``own`` [m²] per point is the covariance of the correction J·K·v with the point's own
+    sensor error (:func:`own_shared`): the update subtracts the share of the coop's lane model
+    that it read at the overlap's ends as pose."""
     world = pose_variance(points, coop_xy, update.world)
-    return BorderVariance(sensor, world, pose_variance(points, coop_xy, update.relative) - world)
+    return BorderVariance(sensor, world - 2.0 * own, pose_variance(points, coop_xy, update.relative) - world)
+
+
+def own_shared(points: NDArrayFloat, coop_xy: tuple[float, float], gain: NDArrayFloat, ends: NDArrayFloat,
+               basis: NDArrayFloat) -> NDArrayFloat:
+    """Per point of a corrected coop border (``points`` ego frame), the covariance [m²] of
+    the correction's sensor part J·K·v with the point's own sensor error: v holds the coop's
+    errors at that border's overlap ends (``gain`` their columns of K, (3, 2)), which share
+    the coop's lane model with its points, B_ends·B_pᵀ (:func:`fusion.uncertainty.lane_model_basis`
+    of the ends, ``ends`` (2, 4), and of the points, ``basis`` (N, 4)); zero without a lane model."""
+    return np.einsum("ik,ki->i", lateral_jacobian(points, coop_xy) @ gain, ends @ basis.T)
 
 
 def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat],
@@ -149,18 +176,25 @@ def registered(borders: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayF
     the update) and the coop borders' :func:`ego_shared`; None when the overlap contradicts
     the model (its innovation above :func:`consistency_limit`: no update)."""
     xy = uncertainty.coop_xy
+    forward = uncertainty.forward
     measured = [overlap_rows(borders[side], borders[2 + side], arclengths[side], starts[side],
-                             uncertainty.borders[side].sensor, uncertainty.borders[2 + side].sensor, xy)
+                             uncertainty.borders[side].sensor, uncertainty.borders[2 + side].sensor, xy,
+                             uncertainty.lane_models, (forward[side], forward[2 + side]))
                 for side in (0, 1)]
-    rows, differences, noise, ego_noise = (np.concatenate([m[i] for m in measured]) for i in range(4))
+    rows, differences, ego_noise = (np.concatenate([m[i] for m in measured]) for i in (0, 1, 3))
+    noise = np.zeros((4, 4))
+    noise[:2, :2], noise[2:, 2:] = measured[0][2], measured[1][2]
     update = pose_update(rows, differences, noise, uncertainty.coop_cov, uncertainty.ego_cov, xy)
     if update.innovation > consistency_limit(differences.shape[0]):
         return None
     left, right = (corrected(borders[2 + side], xy, update.estimate) for side in (0, 1))
     moved_starts = (overlap_start(borders[0], left, starts[0].s_ego), overlap_start(borders[1], right, starts[1].s_ego))
     variances = (uncertainty.borders[0], uncertainty.borders[1],
-                 corrected_variance(left, uncertainty.borders[2].sensor, xy, update),
-                 corrected_variance(right, uncertainty.borders[3].sensor, xy, update))
+                 *(corrected_variance(points, uncertainty.borders[2 + side].sensor, xy, update,
+                                      own_shared(points, xy, update.gain[:, 2 * side: 2 * side + 2], measured[side][4],
+                                                 lane_model_basis(uncertainty.lane_models[1], forward[2 + side],
+                                                                  uncertainty.borders[2 + side].sensor)))
+                   for side, points in enumerate((left, right))))
     shared = tuple(ego_shared(points, xy, update.gain[:, 2 * side: 2 * side + 2], ego_noise[2 * side: 2 * side + 2])
                    for side, points in enumerate((left, right)))
     return left, right, moved_starts, variances, shared

@@ -173,6 +173,15 @@ def _validated_sigma(name: str, sigma: object, n_points: int, kept: npt.NDArray[
     return _frozen(array if kept is None else array[kept])
 
 
+def _validated_lane_model(name: str, sigma: object) -> NDArrayFloat:
+    """Read-only ``(4,)`` 1σ of a lane model's coefficient errors, finite and >= 0."""
+    array = _float_array(name, sigma)
+    if array.shape != (4,) or not (np.isfinite(array).all() and (array >= 0.0).all()):
+        raise InvalidDetectionError(f"{name} must be 4 finite values >= 0 (c0 m, c1 rad, c2 1/m, c3 1/m²), "
+                                    f"got shape {array.shape}")
+    return _frozen(array)
+
+
 def _validated_covariance(name: str, covariance: object) -> NDArrayFloat:
     """Read-only symmetric positive semi-definite ``(3, 3)`` covariance."""
     array = _float_array(name, covariance)
@@ -311,6 +320,13 @@ class LaneDetection:
             the sender states no uncertainty (default).
         pose_cov: ``(3, 3)`` covariance of the sender's pose error in (x [m], y [m],
             yaw [rad]), world frame, or None when unknown (default).
+        lane_model_sigma: ``(4,)`` 1σ of the errors of a cubic lane model's coefficients
+            (δc0 [m], δc1 [rad], δc2 [1/m], δc3 [1/m²]): the part of the stated σ that one
+            error of each border shares over its points, e(x) = δc0 + δc1·x + δc2·x²/2 +
+            δc3·x³/6 at the point's forward coordinate x [m] (vehicle frame), the two
+            borders' independent; the rest of a point's stated variance is its own. None
+            (default): the stated σ says nothing of how points' errors correlate (used by
+            the convoy's pose update, :mod:`fusion.registration`).
         end_reason: why the detection ended, one of :data:`END_REASONS`, or None when not
             stated (default); ``association="fork"`` reads it (:mod:`fusion.association`).
     """
@@ -328,6 +344,7 @@ class LaneDetection:
     right_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     pose_cov: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     end_reason: str | None = field(default=None, compare=False)
+    lane_model_sigma: NDArrayFloat | None = field(default=None, repr=False, compare=False)
     points: NDArrayFloat = field(init=False, repr=False, compare=False)
     arclength: NDArrayFloat = field(init=False, repr=False, compare=False)
 
@@ -343,6 +360,9 @@ class LaneDetection:
                 object.__setattr__(self, name, _validated_sigma(f"LaneDetection.{name}", sigma, len(raw), kept))
         if self.pose_cov is not None:
             object.__setattr__(self, "pose_cov", _validated_covariance("LaneDetection.pose_cov", self.pose_cov))
+        if self.lane_model_sigma is not None:
+            object.__setattr__(self, "lane_model_sigma",
+                               _validated_lane_model("LaneDetection.lane_model_sigma", self.lane_model_sigma))
         points = _frozen(np.concatenate((left, right)))
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "left", points[: left.shape[0]])
@@ -377,19 +397,20 @@ class LaneDetection:
                 neighbours: tuple[NeighbourLane, ...] = (), road_edges: RoadEdges | None = None,
                 branches: tuple[LaneBranch, ...] = (), left_sigma: NDArrayFloat | None = None,
                 right_sigma: NDArrayFloat | None = None, pose_cov: NDArrayFloat | None = None,
-                arclength: NDArrayFloat | None = None, end_reason: str | None = None) -> LaneDetection:
+                arclength: NDArrayFloat | None = None, end_reason: str | None = None,
+                lane_model_sigma: NDArrayFloat | None = None) -> LaneDetection:
         """The detection of borders already checked as a block (:func:`clean_borders` true for
         both, ``points`` the stacked left and right, float64, read-only), sigmas, covariance
         and (if given) ``arclength`` (:func:`stacked_arclengths`) already valid and read-only,
-        ``end_reason`` one of :data:`END_REASONS` or None:
+        ``end_reason`` one of :data:`END_REASONS` or None, ``lane_model_sigma`` valid:
         equal to the constructor's, without its per-detection checks and copies."""
         detection = object.__new__(cls)
         put = object.__setattr__
         for name, value in (("pose", pose), ("stamp", stamp), ("sender", sender), ("history", None),
                             ("neighbours", neighbours), ("road_edges", road_edges), ("branches", branches),
                             ("left_sigma", left_sigma), ("right_sigma", right_sigma), ("pose_cov", pose_cov),
-                            ("end_reason", end_reason), ("points", points), ("left", points[:n_left]),
-                            ("right", points[n_left:]),
+                            ("end_reason", end_reason), ("lane_model_sigma", lane_model_sigma), ("points", points),
+                            ("left", points[:n_left]), ("right", points[n_left:]),
                             ("arclength", _frozen(stacked_arclength(points, n_left)) if arclength is None else arclength)):
             put(detection, name, value)
         return detection

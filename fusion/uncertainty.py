@@ -172,19 +172,50 @@ def own_variances(detection: LaneDetection,
     return out[0], out[1]
 
 
+def lane_model_basis(sigma: NDArrayFloat | None, x_m: NDArrayFloat, variance: NDArrayFloat) -> NDArrayFloat:
+    """``(N, 4)`` rows B of points of one border at forward distances ``x_m`` (``(N,)``,
+    vehicle frame) with stated variances ``variance`` [m²]: B_i·B_j is the covariance [m²] of
+    the lane model's shared error at points i and j (``sigma`` the coefficients' 1σ,
+    :attr:`fusion.LaneDetection.lane_model_sigma`), B = Φ diag(σ) with the rows
+    Φ(x) = (1, x, x²/2, x³/6); a point whose lane-model variance |B_i|² exceeds its stated
+    one has its row scaled down to it. Zeros without ``sigma`` (independent points)."""
+    x = np.asarray(x_m, dtype=np.float64)
+    if sigma is None:
+        return np.zeros((x.shape[0], 4))
+    basis = np.column_stack((np.ones_like(x), x, x * x / 2.0, x**3 / 6.0)) * sigma
+    shared = np.einsum("ij,ij->i", basis, basis)
+    return basis * np.sqrt(np.minimum(1.0, variance / np.where(shared > 0.0, shared, 1.0)))[:, None]
+
+
+def lane_model_covariance(sigma: NDArrayFloat | None, x_m: NDArrayFloat, variance: NDArrayFloat) -> NDArrayFloat:
+    """``(N, N)`` covariance [m²] of the lateral errors of points of one border at forward
+    distances ``x_m`` with stated variances ``variance``: the lane model's shared part B Bᵀ
+    (:func:`lane_model_basis`) plus the rest of each point's stated variance as its own, so
+    the diagonal is the stated variance and the matrix positive semi-definite; without
+    ``sigma`` diag(``variance``), independent points."""
+    basis = lane_model_basis(sigma, x_m, variance)
+    shared = basis @ basis.T
+    return shared + np.diag(variance - np.diag(shared))
+
+
 @dataclass(frozen=True)
 class PairUncertainty:
     """What the fusion of a pair needs to know of its uncertainty, in the ego frame.
 
     Fields: ``borders`` :class:`BorderVariance` of (ego left, ego right, coop left, coop
     right); ``ego_cov``, ``coop_cov`` the senders' (x, y, yaw) pose covariances rotated into
-    the ego frame (zeros when exact); ``coop_xy`` the coop's position there [m].
+    the ego frame (zeros when exact); ``coop_xy`` the coop's position there [m];
+    ``lane_models`` the (ego's, coop's) :attr:`fusion.LaneDetection.lane_model_sigma` (None
+    when not stated) and ``forward`` the four borders' points' forward coordinates [m] in
+    their own sender's vehicle frame, where the lane model is evaluated.
     """
 
     borders: tuple[BorderVariance, BorderVariance, BorderVariance, BorderVariance]
     ego_cov: NDArrayFloat
     coop_cov: NDArrayFloat
     coop_xy: tuple[float, float]
+    lane_models: tuple[NDArrayFloat | None, NDArrayFloat | None]
+    forward: tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat, NDArrayFloat]
 
 
 def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDArrayFloat, ...],
@@ -203,7 +234,9 @@ def pair_uncertainty(ego: LaneDetection, coop: LaneDetection, borders: tuple[NDA
     for points, sigma in zip(borders[2:], coop_sigmas):
         coop_parts.append(BorderVariance(sigma * sigma, pose_variance(points, coop_xy, coop_cov),
                                          pose_variance(points, (0.0, 0.0), ego_cov)))
-    return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy)
+    return PairUncertainty((own[0], own[1], coop_parts[0], coop_parts[1]), ego_cov, coop_cov, coop_xy,
+                           (ego.lane_model_sigma, coop.lane_model_sigma),
+                           (ego.left[:, 0], ego.right[:, 0], coop.left[:, 0], coop.right[:, 0]))
 
 
 def fused_variance(w: NDArrayFloat | float, ego_world: NDArrayFloat, coop_world: NDArrayFloat,
@@ -245,7 +278,8 @@ def bridge_end(points: NDArrayFloat, variance: BorderVariance, at_end: bool, sen
     """The :class:`BridgeEnd` of a border's last (``at_end``) or first point; ``points``,
     ``sender_xy`` and ``covariance`` in one frame."""
     k = -1 if at_end else 0
-    t = tangents(points[-2:] if at_end else points[:2])[k]
+    step = points[-1] - points[-2] if at_end else points[1] - points[0]  # tangents() of the two end points
+    t = step / (np.hypot(step[0], step[1]) or 1.0)
     lever = float(t @ (points[k] - np.asarray(sender_xy)))
     jacobian = np.array([-t[1], t[0], lever])
     return BridgeEnd(float(variance.sensor[k]), jacobian, covariance)

@@ -6,6 +6,7 @@ these helpers: the converter, the recording and the lane strips use them too."""
 
 from __future__ import annotations
 
+from itertools import chain
 from typing import Any, Final
 
 import numpy as np
@@ -139,31 +140,23 @@ def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     return segment_distances(points, vertices, all_segments)
 
 
-def restarting_cumsum(values: NDArrayFloat, counts: NDArrayInt) -> NDArrayFloat:
-    """Per group of ``counts`` consecutive ``values``, 0 and then their running sums: each
-    group's ``[0, *np.cumsum(group)]`` bit for bit (rows of a zero-padded array summed in
-    order), the groups concatenated."""
-    width = int(counts.max()) + 1
-    padded = np.zeros(len(counts) * width)
-    at = np.arange(1, len(values) + 1) + np.repeat(np.arange(len(counts)) * width - (np.cumsum(counts) - counts),
-                                                   counts)
-    padded[at] = values
-    rows = padded.reshape(len(counts), width)
-    np.cumsum(rows, axis=1, out=rows)
-    summed: NDArrayFloat = rows[np.arange(width) <= counts[:, None]]
-    return summed
-
-
-def arc_lengths_many(polylines: list[NDArrayFloat]) -> NDArrayFloat:
-    """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated."""
+def arc_lengths_many(polylines: list[NDArrayFloat], joined: NDArrayFloat | None = None) -> NDArrayFloat:
+    """``arc_lengths`` of each polyline (at least 2 vertices), bit for bit, concatenated: the
+    segment lengths of all at once, the running sums line by line (``joined``: the
+    polylines concatenated, if at hand)."""
     if len(polylines) == 1:
         return arc_lengths(polylines[0])
-    counts = np.array([len(polyline) for polyline in polylines])
-    vertices = np.concatenate(polylines)
+    vertices = np.concatenate(polylines) if joined is None else joined
     step = vertices[1:] - vertices[:-1]
-    inner = np.ones(len(step), dtype=bool)
-    inner[np.cumsum(counts)[:-1] - 1] = False
-    return restarting_cumsum(np.hypot(step[:, 0], step[:, 1])[inner], counts - 1)
+    lengths = np.hypot(step[:, 0], step[:, 1])
+    cum = np.empty(len(vertices))
+    first = 0
+    for polyline in polylines:
+        end = first + len(polyline)
+        cum[first] = 0.0
+        np.cumsum(lengths[first:end - 1], out=cum[first + 1:end])
+        first = end
+    return cum
 
 
 def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:
@@ -172,7 +165,15 @@ def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[N
     counts = np.array([len(polyline) for polyline in polylines])
     starts = np.cumsum(counts) - counts
     segments = np.minimum(starts[:, None] + np.arange(int(counts.max()) - 1), (starts + counts - 2)[:, None])
-    return segment_distances(points, np.concatenate(polylines), segments, arc_lengths_many(polylines))
+    vertices = np.concatenate(polylines)
+    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices))
+
+
+def _flattened(found: Any) -> tuple[NDArrayInt, NDArrayInt]:
+    """The lists of indices of a KD-tree's ``query_ball_point`` (one per point): how many
+    each holds, and all of them in order."""
+    counts = np.fromiter(map(len, found), dtype=np.int64, count=len(found))
+    return counts, np.fromiter(chain.from_iterable(found), dtype=np.int64, count=int(counts.sum()))
 
 
 class SegmentIndex:
@@ -185,10 +186,10 @@ class SegmentIndex:
 
     def __init__(self, vertices: NDArrayFloat) -> None:
         self.vertices = vertices
-        self._trees: tuple[Any, Any, NDArrayInt] | None = None
+        self._trees: tuple[Any, NDArrayInt] | None = None
 
-    def _index(self) -> tuple[Any, Any, NDArrayInt]:
-        """KD-trees of the vertices and of the piece midpoints, and each piece's segment."""
+    def _index(self) -> tuple[Any, NDArrayInt]:
+        """KD-tree of the piece midpoints, and each piece's segment."""
         if self._trees is None:
             from scipy.spatial import cKDTree
 
@@ -197,21 +198,21 @@ class SegmentIndex:
             segment = np.repeat(np.arange(len(delta)), pieces)
             within = np.arange(len(segment)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
             middles = start[segment] + ((within + 0.5) / pieces[segment])[:, None] * delta[segment]
-            self._trees = cKDTree(self.vertices), cKDTree(middles), segment
+            self._trees = cKDTree(middles), segment
         return self._trees
 
     def capped(self, points: NDArrayFloat, cap_m: float) -> NDArrayFloat:
         """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
-        is smaller, m. The closest segment has a piece midpoint within the smaller of
-        ``cap_m`` and the distance to the nearest vertex, plus half a piece (and a micrometre
-        for rounding), of the point; those segments are measured by
-        :func:`segment_distances` (each point's list padded with its last); a point with
-        none is farther than the cap."""
-        by_vertex, by_piece, segment = self._index()
-        radius = np.minimum(by_vertex.query(points)[0], cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
+        is smaller, m. The closest segment is no farther than the segment of the nearest
+        piece midpoint, so it has a piece midpoint within the smaller of ``cap_m`` and that
+        segment's distance, plus half a piece (and a micrometre for rounding), of the point;
+        those segments are measured by :func:`segment_distances` (each point's list padded
+        with its last); a point with none is farther than the cap."""
+        by_piece, segment = self._index()
+        bound = segment_distances(points, self.vertices, segment[by_piece.query(points)[1]][:, None])[0]
+        radius = np.minimum(bound, cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
         near = by_piece.query_ball_point(points, r=radius)
-        counts = np.fromiter((len(found) for found in near), dtype=np.int64, count=len(points))
-        flat = np.fromiter((index for found in near for index in found), dtype=np.int64, count=int(counts.sum()))
+        counts, flat = _flattened(near)
         capped = np.full(len(points), cap_m)
         rows = np.flatnonzero(counts)  # the others are farther than the cap from every segment
         if len(rows):
@@ -235,9 +236,8 @@ def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDA
     half = 0.5 * float(np.max(np.hypot(*(vertices[1:] - vertices[:-1]).T)))
     to_vertex = cKDTree(vertices).query(points)[0]
     candidates = cKDTree(mids).query_ball_point(points, r=to_vertex + half + 1e-9)
-    counts = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=len(points))
+    counts, segment = _flattened(candidates)
     owner = np.repeat(np.arange(len(points)), counts)
-    segment = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=int(counts.sum()))
     start = vertices[segment]
     delta = vertices[segment + 1] - start
     length_sq = np.einsum("nd,nd->n", delta, delta)

@@ -73,7 +73,8 @@ def _same_array(a, b) -> bool:
 def _assert_same_detection(a: fusion.LaneDetection, b: fusion.LaneDetection) -> None:
     assert (a.pose, a.stamp, a.sender, a.road_edges, a.end_reason) == (b.pose, b.stamp, b.sender, b.road_edges,
                                                                        b.end_reason)
-    for name in ("points", "left", "right", "arclength", "left_sigma", "right_sigma", "pose_cov"):
+    for name in ("points", "left", "right", "arclength", "left_sigma", "right_sigma", "pose_cov",
+                 "lane_model_sigma"):
         assert _same_array(getattr(a, name), getattr(b, name)), name
     assert [n.index for n in a.neighbours] == [n.index for n in b.neighbours]
     for one, other in zip((*a.neighbours, *a.branches), (*b.neighbours, *b.branches)):

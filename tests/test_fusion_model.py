@@ -114,9 +114,12 @@ def test_detection_sigma_follows_the_points_it_keeps_and_is_validated() -> None:
                               right_sigma=np.zeros(2), pose_cov=np.diag([0.01, 0.01, 1e-4]))
     assert detection.left_sigma.tolist() == [0.1, 0.3, 0.4]
     assert detection.left_sigma.shape[0] == detection.left.shape[0]
+    model = LaneDetection(Pose2D(0.0, 0.0, 0.0), left, right, lane_model_sigma=(0.05, 0.002, 4e-5, 0.0))
+    assert model.lane_model_sigma.tolist() == [0.05, 0.002, 4e-5, 0.0] and not model.lane_model_sigma.flags.writeable
     for bad in ({"left_sigma": [0.1]}, {"right_sigma": [0.1, -0.1]}, {"right_sigma": [0.1, np.nan]},
                 {"pose_cov": np.eye(2)}, {"pose_cov": np.array([[1.0, 2, 0], [0, 1, 0], [0, 0, 1]])},
-                {"pose_cov": -np.eye(3)}):
+                {"pose_cov": -np.eye(3)}, {"lane_model_sigma": [0.05, 0.002, 4e-5]},
+                {"lane_model_sigma": [0.05, -0.002, 0.0, 0.0]}, {"lane_model_sigma": [np.inf, 0.0, 0.0, 0.0]}):
         with pytest.raises(InvalidDetectionError, match="LaneDetection"):
             LaneDetection(Pose2D(0.0, 0.0, 0.0), left, right, **bad)
 

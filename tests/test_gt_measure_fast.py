@@ -16,8 +16,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, GroundTruthMeter,
-                                         Measurement, _end_direction, ahead_of_m, covered_length_m, gt_ends,
-                                         points_past_ends)
+                                         Measurement, _end_direction, ahead_of_m, border_figures, covered_length_m,
+                                         gt_ends, points_past_ends)
 from gt_matching.polyline import SegmentIndex, arc_lengths, closest_distances
 from conftest import bundled_map
 
@@ -104,6 +104,31 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
         distances = rng.uniform(0.0, 3.0, count)
         assert points_past_ends(border, gt, distances, 0.02) == _past_reference(border, gt, distances, 0.02)
         assert points_past_ends(border, gt_ends(gt), distances, 0.02) == _past_reference(border, gt, distances, 0.02)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.floats(0.001, 1.0), st.floats(0.0, 0.3))
+def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(seed: int, borders: int, scale: float,
+                                                                             far_share: float) -> None:
+    """Borders of 2 to 200 points, some ending at (or running past) an end of the GT, some
+    with points beyond the range threshold, with and without poses."""
+    rng = np.random.default_rng(seed)
+    gt = _polyline(seed + 1, 40, 0.3)
+    lanes, errors, poses = [], [], []
+    for index in range(borders):
+        border = _polyline(seed + 2 + index, int(rng.integers(2, 200)), scale)
+        if rng.random() < 0.5:
+            border += gt[[0, -1][index % 2]] - border[int(rng.integers(0, len(border)))]
+        lanes.append(border)
+        errors.append(rng.uniform(0.0, 0.9, len(border)))
+        errors[-1][rng.random(len(border)) < far_share] = 1.5
+        poses.append(None if index % 3 == 2 else (float(border[0, 0]) - 1.0, float(border[0, 1]),
+                                                 float(rng.uniform(-np.pi, np.pi))))
+    found = border_figures(lanes, errors, poses, gt_ends(gt), 0.02)
+    pasts = [points_past_ends(border, gt, error, 0.02) for border, error in zip(lanes, errors)]
+    assert [past for past, _, _ in found] == pasts
+    for (_, covered, ahead), border, error, pose in zip(found, lanes, errors, poses):
+        assert covered == covered_length_m(border, error)
+        assert np.array_equal(ahead, ahead_of_m(border, pose))
 
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:

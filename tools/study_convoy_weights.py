@@ -4,7 +4,7 @@ Each pair: an ego and a coop ``--lead`` m ahead on a random road (straight, an a
 100–500 m, or an S-bend of two such arcs), both detecting ``--range`` m of their lane with
 the camera's cubic lane-model error (``cold_maps.simulation.lane_model_error``: per
 detection and border δc0…δc3 and white noise, the camera profile's σ by default) and
-stating its closed-form σ(x); the coop's reported pose carries a Gaussian error of
+stating its closed-form σ(x) and its lane model (``LaneDetection.lane_model_sigma``); the coop's reported pose carries a Gaussian error of
 ``σ_xy``/``σ_yaw`` and states that covariance (the ego is the reference, exact). The same
 pairs are fused with each weighting; per pose-error level the table gives the max / p95 /
 mean error of all fused points against the true borders, the inverse-variance coop weight
@@ -56,6 +56,7 @@ from cold_maps.simulation.lane_model_error import LaneModelErrorParams  # noqa: 
 from fusion.analytic import AnalyticRoad, Segment, detect  # noqa: E402
 from fusion.geometry import distance_to_polyline  # noqa: E402
 from fusion.registration import pose_update  # noqa: E402
+from fusion.uncertainty import lane_model_basis, lane_model_covariance  # noqa: E402
 from study_sensor import MAPS, StudyMap, correct_errors, run_eval, sha256, shown  # noqa: E402
 
 PARTS = ("ego", "overlap", "coop")
@@ -71,16 +72,24 @@ SENSORS = ("ideal", "camera")
 def middle_weight(lead_m: float, range_m: float, sigma_xy: float, sigma_yaw: float) -> float:
     """The inverse-variance w_coop at the overlap's middle on a straight road (closed form):
     the coop's pose error after the update from the overlap's ends (both borders, levers 0
-    and range − lead from the coop, the camera's σ there), then σ_e² / (σ_e² + σ_c² + J P⁺ Jᵀ)."""
+    and range − lead from the coop, the camera's σ and lane model there), then
+    σ_e² / (σ_e² + σ_c² + J P⁺ Jᵀ − 2·own), own the correction's share of the coop point's
+    own lane model (``fusion.registration.own_shared``)."""
     overlap = range_m - lead_m
     sigma = lambda x: float(CAMERA.sigma_m(np.array(x)))  # noqa: E731
     rows = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, overlap]] * 2)
-    noise = np.array([sigma(lead_m) ** 2 + sigma(0.0) ** 2, sigma(range_m) ** 2 + sigma(overlap) ** 2] * 2)
+    model = CAMERA.coefficient_sigmas
+    ends = [np.array([lead_m, range_m]), np.array([0.0, overlap])]
+    border = sum(lane_model_covariance(model, x, CAMERA.sigma_m(x) ** 2) for x in ends)
+    noise = np.kron(np.eye(2), border)
     cov = np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2])
-    left = pose_update(rows, np.zeros(4), noise, cov, np.zeros((3, 3)), (lead_m, 0.0)).relative
+    update = pose_update(rows, np.zeros(4), noise, cov, np.zeros((3, 3)), (lead_m, 0.0))
     x = 0.5 * (lead_m + range_m)
     jacobian = np.array([0.0, 1.0, x - lead_m])
-    ego_var, coop_var = sigma(x) ** 2, sigma(x - lead_m) ** 2 + float(jacobian @ left @ jacobian)
+    basis = [lane_model_basis(model, np.array(at), CAMERA.sigma_m(np.array(at)) ** 2) for at in (ends[1], [x - lead_m])]
+    own = float(jacobian @ update.gain[:, :2] @ basis[0] @ basis[1][0])
+    ego_var = sigma(x) ** 2
+    coop_var = sigma(x - lead_m) ** 2 + float(jacobian @ update.relative @ jacobian) - 2.0 * own
     return ego_var / (ego_var + coop_var)
 
 
@@ -94,7 +103,7 @@ def random_road(rng: np.random.Generator) -> AnalyticRoad:
 
 def sensed(road: AnalyticRoad, s_from: float, range_m: float, model: LaneModelErrorParams,
            rng: np.random.Generator) -> fusion.LaneDetection:
-    """A detection with the lane-model error drawn per border, stating its σ(x)."""
+    """A detection with the lane-model error drawn per border, stating its σ(x) and its lane model."""
     det = detect(road, s_from, range_m, HALF_WIDTH_M, -HALF_WIDTH_M)
     borders, sigmas = [], []
     for border in (det.left, det.right):
@@ -103,7 +112,8 @@ def sensed(road: AnalyticRoad, s_from: float, range_m: float, model: LaneModelEr
         error = c[0] + c[1] * x + c[2] * x**2 / 2 + c[3] * x**3 / 6 + rng.normal(0.0, model.white_m, x.shape)
         borders.append(border + np.column_stack((np.zeros_like(x), error)))
         sigmas.append(model.sigma_m(x))
-    return fusion.LaneDetection(det.pose, borders[0], borders[1], left_sigma=sigmas[0], right_sigma=sigmas[1])
+    return fusion.LaneDetection(det.pose, borders[0], borders[1], left_sigma=sigmas[0], right_sigma=sigmas[1],
+                                lane_model_sigma=model.coefficient_sigmas)
 
 
 def with_pose_error(det: fusion.LaneDetection, sigma_xy: float, sigma_yaw: float,

@@ -25,7 +25,7 @@ import numpy as np
 from cold_maps.network.lane_strip import NDArrayFloat
 from gt_matching.lru import lru_get
 from gt_matching.metrics import known_distance_m, near_count
-from gt_matching.polyline import NDArrayInt, arc_lengths, as_polyline
+from gt_matching.polyline import NDArrayInt, arc_lengths, arc_lengths_many, as_polyline
 
 if TYPE_CHECKING:
     from gt_matching import GroundTruth, LaneMatch, MatchingError
@@ -52,12 +52,20 @@ points 0.1 m apart lengthens a polyline by about σ²/step² (5 cm: +25 %), alon
 chords by σ²/chord² (1 %); a chord shortens an arc of radius R by chord²/(24 R²) (R 6 m: 0.03 %)."""
 
 
+def _chord_numbers(arc: NDArrayFloat) -> NDArrayFloat:
+    """Which ``RANGE_CHORD_M`` of arc length each arc length (m, >= 0) lies in: the floor of
+    their quotient (``arc // RANGE_CHORD_M`` bit for bit while ``RANGE_CHORD_M`` is a power of
+    two; numpy's floor division costs several times more)."""
+    numbers: NDArrayFloat = np.floor(arc / RANGE_CHORD_M)
+    return numbers
+
+
 def _chords(border: NDArrayFloat, arc: NDArrayFloat, first: int, end: int) -> tuple[NDArrayInt, NDArrayFloat]:
     """The chords of about ``RANGE_CHORD_M`` along the points ``first`` to ``end - 1`` of a
     border (``arc``: its ``arc_lengths``): the indices of their ends (the first point, each
     point that starts another ``RANGE_CHORD_M`` of arc length from the first, the last)
     and their lengths (m)."""
-    stations = (arc[first:end] if first == 0 else arc[first:end] - arc[first]) // RANGE_CHORD_M
+    stations = _chord_numbers(arc[first:end] if first == 0 else arc[first:end] - arc[first])
     change = np.flatnonzero(stations[1:] != stations[:-1])
     ends = np.empty(len(change) + 2, dtype=np.int64)
     ends[0], ends[-1] = first, end - 1
@@ -223,6 +231,57 @@ def points_past_ends(points: NDArrayFloat, gt: NDArrayFloat | GtEnds, distances_
     return count
 
 
+def border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayFloat],
+                   poses: Sequence[tuple[float, float, float] | None], gt: GtEnds, step_m: float
+                   ) -> list[tuple[int, float, NDArrayFloat]]:
+    """Per detected border (``(N >= 2, 2)``, world frame, driving order; ``errors_m`` its
+    points' GT distances, m; its sender's pose or None), against one GT border (its
+    ``gt_ends``): :func:`points_past_ends`, :func:`covered_length_m` and
+    :func:`ahead_of_m`, bit for bit, the borders in one pass: arc lengths and chords of all
+    at once, the end check only for the borders that come near an end vertex."""
+    counts = np.array([len(border) for border in borders])
+    starts = np.cumsum(counts) - counts
+    lasts = starts + counts - 1
+    points = borders[0] if len(borders) == 1 else np.concatenate(borders)
+    errors = errors_m[0] if len(errors_m) == 1 else np.concatenate(errors_m)
+    owner = np.repeat(np.arange(len(borders)), counts)
+    # A point past an end lies within its GT distance plus a step of it: not beside a
+    # border's bounding box grown by its largest GT distance plus two steps (one for rounding).
+    reach = np.fmax.reduceat(errors, starts)[:, None] + 2.0 * step_m
+    low, high = np.minimum.reduceat(points, starts) - reach, np.maximum.reduceat(points, starts) + reach
+    near_end = np.zeros(len(borders), dtype=bool)
+    for end, _ in gt:
+        near_end |= np.all((low <= end) & (end <= high), axis=1)
+    beyond = np.zeros(len(borders), dtype=bool)
+    beyond[owner[~(errors <= RANGE_ERROR_THRESHOLD_M)]] = True
+    arc = arc_lengths_many(list(borders), points)
+    stations = _chord_numbers(arc)
+    is_end = np.empty(len(points), dtype=bool)
+    np.not_equal(stations[1:], stations[:-1], out=is_end[1:])
+    is_end[starts] = True
+    is_end[lasts] = True
+    ends = np.flatnonzero(is_end)
+    paired = np.ones(len(points), dtype=bool)
+    paired[lasts] = False  # a chord joins two ends of the same border
+    chord_of = paired[ends[:-1]]
+    first, second = ends[:-1][chord_of], ends[1:][chord_of]
+    step = points[second] - points[first]
+    lengths = np.hypot(step[:, 0], step[:, 1])
+    chords = np.bincount(owner[ends], minlength=len(borders)) - 1
+    figures = []
+    chord_start = 0
+    for index, (border, border_errors, pose) in enumerate(zip(borders, errors_m, poses)):
+        start, count, chord_count = int(starts[index]), int(counts[index]), int(chords[index])
+        border_arc = arc[start:start + count]
+        past = points_past_ends(border, gt, border_errors, step_m) if near_end[index] else 0
+        chord_lengths = lengths[chord_start:chord_start + chord_count]
+        covered = _covered(border, border_arc, border_errors)[0] if beyond[index] else float(chord_lengths.sum())
+        border_ends = ends[chord_start + index:chord_start + index + chord_count + 1] - start
+        figures.append((past, covered, _ahead(border, border_arc, (border_ends, chord_lengths), pose)))
+        chord_start += chord_count
+    return figures
+
+
 class GroundTruthMeter:
     """Closest-point errors of lanes against a ``gt_matching.GroundTruth``
     (``GroundTruth.errors``: per-point distances to the GT borders resampled every
@@ -299,19 +358,14 @@ class GroundTruthMeter:
     def _measured(self, matches: list[LaneMatch], lanes: list[tuple[NDArrayFloat, NDArrayFloat]],
                   poses: Sequence[tuple[float, float, float] | None]) -> list[Measurement]:
         """:meth:`errors` of validated lanes against matches of one GT lanelet sequence."""
-        measured = []
         distances = self.ground_truth.resampled(matches[0], lanes)
-        for match, (left, right), (left_errors, right_errors), pose in zip(matches, lanes, distances, poses):
-            past = 0
-            figures = []
-            for points, side, errors in ((left, "left", left_errors), (right, "right", right_errors)):
-                past += points_past_ends(points, self._ends(match, side), errors, self.step_m)
-                arc = arc_lengths(points)
-                covered, chords = _covered(points, arc, errors)
-                figures.append((covered, _ahead(points, arc, _chords(points, arc, 0, len(arc))
-                                                if chords is None else chords, pose)))
-            reason = OFF_LANE if not match.matched else PAST_GT_END if past else ""
-            (left_range, left_ahead), (right_range, right_ahead) = figures
+        left, right = (border_figures([lane[column] for lane in lanes], [found[column] for found in distances], poses,
+                                      self._ends(matches[0], side), self.step_m)
+                       for column, side in ((0, "left"), (1, "right")))
+        measured = []
+        for match, (left_errors, right_errors), (left_past, left_range, left_ahead), \
+                (right_past, right_range, right_ahead) in zip(matches, distances, left, right):
+            reason = OFF_LANE if not match.matched else PAST_GT_END if left_past + right_past else ""
             measured.append(Measurement(left_errors, right_errors, left_range, right_range, match.left_gt,
                                         match.right_gt, match.matched, reason, left_ahead, right_ahead))
         return measured

@@ -39,6 +39,6 @@ def offset_inside(graph: LaneGraph, lane: LaneKey, point: tuple[float, float]) -
     width there), else None."""
     strip = lane_strip(graph, lane)
     distance, station = closest_distances(np.array([point], dtype=np.float64), strip.centerline)
-    _, left, right = strip.interpolate(station)
+    left, right = strip.borders_at(station)
     half_width = 0.5 * float(np.hypot(*(left[0] - right[0])))
     return float(station[0]) if float(distance[0]) <= half_width else None

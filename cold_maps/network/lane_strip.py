@@ -107,13 +107,23 @@ class LaneStrip:
         span = self.station[index + 1] - self.station[index]
         return index, ((stations - self.station[index]) / span)[:, None]
 
-    def interpolate(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
-        """Centreline, left and right points at the given stations (clamped to the strip)."""
+    def _lines_at(self, lines: tuple[NDArrayFloat, ...], stations: NDArrayFloat) -> tuple[NDArrayFloat, ...]:
+        """The points of ``lines`` (the strip's, index-aligned with ``station``) at the given
+        stations (clamped to the strip), linearly between cross-sections."""
         index, w = self._weights(stations)
         after = index + 1
-        return (self.centerline[index] * (1.0 - w) + self.centerline[after] * w,
-                self.left[index] * (1.0 - w) + self.left[after] * w,
-                self.right[index] * (1.0 - w) + self.right[after] * w)
+        return tuple(line[index] * (1.0 - w) + line[after] * w for line in lines)
+
+    def interpolate(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+        """Centreline, left and right points at the given stations (clamped to the strip)."""
+        centre, left, right = self._lines_at((self.centerline, self.left, self.right), stations)
+        return centre, left, right
+
+    def borders_at(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """Left and right points at the given stations (clamped to the strip): those of
+        :meth:`interpolate`, without the centreline."""
+        left, right = self._lines_at((self.left, self.right), stations)
+        return left, right
 
     def poses(self, stations: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
         """:meth:`pose` of every station (m): x, y (m) and heading (rad) arrays, the same

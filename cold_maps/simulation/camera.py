@@ -60,6 +60,8 @@ VISIBLE: Final[int] = 0
 SEARCH_MARGIN_M: Final[float] = 5.0
 """Centreline length (m) searched beyond the farthest station a point in range and view can
 have on a circle through the camera, for the lane's half width."""
+_RULE_BITS: Final[NDArrayInt] = 1 << np.arange(RULES)
+"""Bit i of a mask: rule END_REASONS[i], i < :data:`RULES`."""
 ANGLE_TOLERANCE_RAD: Final[float] = 1e-9
 """A point this much below the horizon of the nearer points still counts as over it."""
 
@@ -234,8 +236,7 @@ def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_to
         gap = ending[0]
         reach = int(np.searchsorted(position, position[before[gap]] + gap_tolerance_m, side="right"))
         window = mask[first[gap]: max(min(reach, after[gap]), first[gap] + 1)]
-        counts = [int(np.count_nonzero(window & (1 << bit))) for bit in range(RULES)]
-        end, why = int(first[gap]) - 1, int(np.argmax(counts))
+        end, why = int(first[gap]) - 1, int(np.argmax(np.count_nonzero(window[:, None] & _RULE_BITS, axis=0)))
     return end, why
 
 
@@ -282,7 +283,7 @@ class CameraSensor:
         last_station = min(station + self.search_m, strip.length)
         count = max(int(math.ceil((last_station - station) / self.step_m - 1e-9)), 1)
         stations = np.minimum(station + self.step_m * np.arange(count + 1), last_station)
-        _, left, right = strip.interpolate(stations)
+        left, right = strip.borders_at(stations)
         points = np.stack((left, right))
         surface = self.surface(track)
         z, detectable = surface.at(stations)
@@ -319,7 +320,7 @@ class CameraSensor:
         frame_of = np.repeat(np.arange(len(stations)), counts)
         local = np.arange(starts[-1]) - starts[frame_of]
         candidates = np.minimum(stations[frame_of] + self.step_m * local, last[frame_of])
-        _, left, right = strip.interpolate(candidates)
+        left, right = strip.borders_at(candidates)
         surface = self.surface(track)
         z, detectable = surface.at(candidates)
         x, y, yaw = strip.poses(stations)

@@ -99,14 +99,16 @@ def sense(state: VehicleState, sensor: LaneSensor | CameraSensor, errors: Sensor
     if lane_error is not None:
         borders = lane_error.perturb(state.name, stamp_s, *borders)
     borders = tuple(np.round(border, DETECTION_DECIMALS) for border in borders)
-    sigmas = lateral_sigmas(borders, errors, None if lane_error is None else lane_error.params)
+    params = None if lane_error is None else lane_error.params
+    sigmas = lateral_sigmas(borders, errors, params)
     lanes, edges, branches = _beside(state, raw, sensor, errors, rng, neighbours)
     pose = _reported_pose(state, raw, errors, rng)
     return Sensed(state, fusion.LaneDetection(pose, borders[0], borders[1], stamp=stamp_s, sender=state.name,
                                               neighbours=lanes, road_edges=edges, branches=branches,
                                               left_sigma=sigmas[0], right_sigma=sigmas[1],
                                               pose_cov=pose_covariance(errors, state.role),
-                                              end_reason=end_reason or None),
+                                              end_reason=end_reason or None,
+                                              lane_model_sigma=lane_model_sigma(params)),
                   end_reason, read_ends=ends)
 
 
@@ -264,6 +266,7 @@ def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_erro
     sigma = _point_sigmas(points[:, 0], errors, params)
     sigma = None if sigma is None else _frozen(sigma)
     covariances = {role: _frozen_or_none(pose_covariance(errors, role)) for role in ("ego", "coop")}
+    model = lane_model_sigma(params)
     out = []
     for k, item in enumerate(pending):
         start, middle, stop = offsets[2 * k], offsets[2 * k + 1], offsets[2 * k + 2]
@@ -274,13 +277,14 @@ def _detections(pending: Sequence[_Pending], errors: SensorErrorModel, lane_erro
             out.append(fusion.LaneDetection.trusted(
                 item.pose, points[start:stop], int(middle - start), stamp=stamps_s[item.frame], sender=item.state.name,
                 neighbours=lanes, road_edges=edges, branches=branches, left_sigma=sigmas[0], right_sigma=sigmas[1],
-                pose_cov=pose_cov, arclength=arclength[start:stop], end_reason=item.end_reason or None))
+                pose_cov=pose_cov, arclength=arclength[start:stop], end_reason=item.end_reason or None,
+                lane_model_sigma=model))
         else:
             out.append(fusion.LaneDetection(item.pose, points[start:middle], points[middle:stop],
                                             stamp=stamps_s[item.frame], sender=item.state.name, neighbours=lanes,
                                             road_edges=edges, branches=branches, left_sigma=sigmas[0],
                                             right_sigma=sigmas[1], pose_cov=pose_cov,
-                                            end_reason=item.end_reason or None))
+                                            end_reason=item.end_reason or None, lane_model_sigma=model))
     return out
 
 
@@ -313,6 +317,15 @@ def _point_sigmas(x: NDArrayFloat, errors: SensorErrorModel,
         return np.full(len(x), noise)
     out = lane_error.sigma_m(x)
     return np.hypot(out, noise) if noise > 0.0 else out
+
+
+def lane_model_sigma(lane_error: LaneModelErrorParams | None) -> NDArrayFloat | None:
+    """The coefficients' 1σ a detection states as its lane model
+    (:attr:`fusion.LaneDetection.lane_model_sigma`, read-only), None without that model: the
+    part of the stated σ (:func:`lateral_sigmas`) that each border's error shares over its points."""
+    if lane_error is None or not lane_error.coefficient_sigmas.any():
+        return None
+    return _frozen(lane_error.coefficient_sigmas)
 
 
 def pose_covariance(errors: SensorErrorModel, role: str) -> NDArrayFloat | None:

@@ -131,7 +131,7 @@ class Track:
         strip = self.strip
         first = int(np.searchsorted(strip.station, start, side="right"))
         last = int(np.searchsorted(strip.station, end, side="left"))
-        _, left_ends, right_ends = strip.interpolate(np.array([start, end]))
+        left_ends, right_ends = strip.borders_at(np.array([start, end]))
         return (np.concatenate((left_ends[:1], strip.left[first:last], left_ends[1:])),
                 np.concatenate((right_ends[:1], strip.right[first:last], right_ends[1:])))
 
