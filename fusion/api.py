@@ -7,6 +7,7 @@ one transform, the result to the world frame in another); all checks are frame-i
 from __future__ import annotations
 
 import math
+import threading
 from typing import Final, Sequence
 
 import numpy as np
@@ -168,6 +169,9 @@ class _PairWork:
 
 _PAIRS: dict[tuple[int, int, int], _PairWork] = {}
 _MAX_PAIRS: Final[int] = 32
+_PAIRS_CHANGING = threading.Lock()
+"""Held while :data:`_PAIRS` drops and adds entries: fusing from several threads at once
+finds the oldest entry while no other thread adds one."""
 
 
 def _pair_work(ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> _PairWork:
@@ -177,9 +181,10 @@ def _pair_work(ego: LaneDetection, coop: LaneDetection, params: FusionParams) ->
     work = _PAIRS.get(key)
     if work is None:
         work = _PairWork(ego, coop, params)
-        if len(_PAIRS) >= _MAX_PAIRS:
-            _PAIRS.pop(next(iter(_PAIRS)), None)
-        _PAIRS[key] = work
+        with _PAIRS_CHANGING:
+            if len(_PAIRS) >= _MAX_PAIRS:
+                _PAIRS.pop(next(iter(_PAIRS)))
+            _PAIRS[key] = work
     return work
 
 

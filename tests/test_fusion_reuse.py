@@ -89,3 +89,26 @@ def test_weighted_end_fits_are_the_same_kept_and_each_design_the_same_made_alone
                 alone.p3_quartic_leak) == (design.p1_gains, design.p2_gains, design.p3_gain, design.cubic_leaks,
                                            design.quartic_leaks, design.p3_quartic_leak)
     assert len({design.rows.tobytes() for design in stacked}) == 3  # three different weightings
+
+
+def test_pairs_fused_from_several_threads_give_the_values_of_one_thread() -> None:
+    """Threads that fuse more pairs than are kept, at once, each get the values fused alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    params = FusionParams(convoy_weights="inverse-variance")
+    egos = [noisy(5.0 + k, seed=k) for k in range(4)]
+    coops = [noisy(33.0 + 2 * k, seed=20 + k, lane_m=3.5 * (k % 5 == 4)) for k in range(12)]
+    calls = [(e, c, i) for e in egos for c in coops for i in ("paper", "hermite")]  # 96 calls, 48 pairs
+    expected = [fresh(lambda: fusion.fuse(copy(e), copy(c), interpolation=i, params=params)) for e, c, i in calls]
+    fusion.api._PAIRS.clear()
+
+    def fuse_all(offset: int) -> list[bool]:
+        order = calls[offset:] + calls[:offset]
+        found = [fusion.fuse(e, c, interpolation=i, params=params) for e, c, i in order]
+        return [same(result, expected[(offset + n) % len(calls)]) for n, result in enumerate(found)]
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        outcomes = list(pool.map(fuse_all, (0, 24, 48, 72)))
+    assert all(all(outcome) for outcome in outcomes)
+    assert len(fusion.api._PAIRS) == fusion.api._MAX_PAIRS
+    assert {r.kind for r in expected} >= {"convoy", "none"}
