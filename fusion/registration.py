@@ -40,7 +40,8 @@ import numpy as np
 from fusion.convoy import OverlapStart, overlap_length, overlap_start
 from fusion.geometry import norms, points_at, segment_at, transform
 from fusion.types import NDArrayFloat
-from fusion.uncertainty import BorderVariance, PairUncertainty, lane_model_basis, lateral_jacobian, pose_variance
+from fusion.uncertainty import (BorderVariance, PairUncertainty, lane_model_basis, lateral_jacobian, pose_variance,
+                                shared_covariance)
 
 INCONSISTENT_RATE: Final[float] = 1e-9
 """False rejection rate of the update's consistency test (module docstring): the overlap's
@@ -78,7 +79,7 @@ def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, st
     ``convoy_border`` pairs last, :func:`fusion.convoy.overlap_length`), ego frame: the
     lateral difference coop minus ego along the ego border's left normal, how the coop's
     pose error moves it, and the sum of the two detections' sensor error covariances there
-    [m²] (:func:`fusion.uncertainty.lane_model_covariance` of the (ego's, coop's)
+    [m²] (:func:`fusion.uncertainty.shared_covariance` of the (ego's, coop's)
     ``lane_models`` at the (ego's, coop's) ``forward`` coordinates of the border points,
     each in its sender's vehicle frame; independent ends without a lane model)."""
     u = np.array([0.0, overlap_length(start, s_coop)[0]])
@@ -95,8 +96,7 @@ def overlap_rows(ego: NDArrayFloat, coop: NDArrayFloat, s_coop: NDArrayFloat, st
     ego_noise, coop_noise = np.interp(s, start.s_ego, ego_sensor), np.interp(u, s_coop, coop_sensor)
     ego_basis = lane_model_basis(lane_models[0], np.interp(s, start.s_ego, forward[0]), ego_noise)
     coop_basis = lane_model_basis(lane_models[1], np.interp(u, s_coop, forward[1]), coop_noise)
-    shared = ego_basis @ ego_basis.T + coop_basis @ coop_basis.T
-    return rows, differences, shared + np.diag(ego_noise + coop_noise - np.diag(shared)), ego_noise, coop_basis
+    return rows, differences, shared_covariance((ego_basis, coop_basis), ego_noise + coop_noise), ego_noise, coop_basis
 
 
 def pose_update(rows: NDArrayFloat, differences: NDArrayFloat, noise: NDArrayFloat, coop_cov: NDArrayFloat,

@@ -189,12 +189,17 @@ def lane_model_basis(sigma: NDArrayFloat | None, x_m: NDArrayFloat, variance: ND
 
 def lane_model_covariance(sigma: NDArrayFloat | None, x_m: NDArrayFloat, variance: NDArrayFloat) -> NDArrayFloat:
     """``(N, N)`` covariance [m²] of the lateral errors of points of one border at forward
-    distances ``x_m`` with stated variances ``variance``: the lane model's shared part B Bᵀ
-    (:func:`lane_model_basis`) plus the rest of each point's stated variance as its own, so
-    the diagonal is the stated variance and the matrix positive semi-definite; without
-    ``sigma`` diag(``variance``), independent points."""
-    basis = lane_model_basis(sigma, x_m, variance)
-    shared = basis @ basis.T
+    distances ``x_m`` with stated variances ``variance``: :func:`shared_covariance` of its
+    :func:`lane_model_basis`; without ``sigma`` diag(``variance``), independent points."""
+    return shared_covariance((lane_model_basis(sigma, x_m, variance),), variance)
+
+
+def shared_covariance(bases: Sequence[NDArrayFloat], variance: NDArrayFloat) -> NDArrayFloat:
+    """``(N, N)`` covariance [m²] of N errors whose lane models' shared parts have the
+    :func:`lane_model_basis` rows ``bases`` (one per detection, summed: Σ B Bᵀ) and whose
+    stated variances are ``variance`` (the rest of each one its own), so the diagonal is the
+    stated variance and the matrix positive semi-definite."""
+    shared = sum(basis @ basis.T for basis in bases)
     return shared + np.diag(variance - np.diag(shared))
 
 
