@@ -284,9 +284,12 @@ class PointPool:
         return self._file is not None
 
     def array(self) -> NDArrayFloat:
-        """All samples (only while not :attr:`spilled`)."""
+        """All samples (only while not :attr:`spilled`; do not change them): the chunks are
+        joined once, not at every statistic."""
         assert self._file is None, "a spilled pool is read in blocks"
-        return np.concatenate(self._chunks) if self._chunks else np.empty(0)
+        if len(self._chunks) > 1:
+            self._chunks = [np.concatenate(self._chunks)]
+        return self._chunks[0] if self._chunks else np.empty(0)
 
     def read(self, start: int, count: int) -> NDArrayFloat:
         """``count`` samples from index ``start``."""

@@ -22,7 +22,7 @@ from concurrent.futures import Executor
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Final, Sequence, TextIO
+from typing import TYPE_CHECKING, Callable, Final, Iterator, Sequence, TextIO
 
 import numpy as np
 
@@ -85,14 +85,15 @@ def _file_part(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
-def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
+def plot_jobs(out: Path, collector: Collector) -> Iterator[functools.partial[None]]:
     """The plots of a run, each a call drawing one PNG into ``out/plots`` (created) from
-    the data it needs (picklable, for a worker process): per map and scenario the error per
-    frame of its own coop (Fig. 7), routes marked, and the overlay of its worst frame (Fig. 8,
-    the frame of the scenario's max error over all its pairs); per map and spline kind (gap,
-    vehicles) with more than one method, the methods' errors on one axis; per map,
-    when the run records vehicle counts, the max error against the perception range of
-    every fusion; per map, when its lanes state σ, the reliability of that σ."""
+    the data it needs (picklable, for a worker process), made one at a time: per map and
+    scenario the overlay of its worst frame (Fig. 8, the frame of the scenario's max error
+    over all its pairs; first, as they need no pass over the records) and the error per frame
+    of its own coop (Fig. 7), routes marked; per map and spline kind (gap, vehicles) with more
+    than one method, the methods' errors on one axis; per map, when the run records vehicle
+    counts, the max error against the perception range of every fusion; per map, when its
+    lanes state σ, the reliability of that σ."""
     from cold_maps.evaluation.plots import (
         ErrorSeries,
         plot_error_series,
@@ -105,7 +106,12 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
 
     folder = out / PLOTS_DIR
     folder.mkdir(exist_ok=True)
-    jobs = []
+    for (map_name, label), overlay in collector.overlays.items():
+        path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
+        yield functools.partial(
+            plot_frame_overlay, path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
+            title=f"{map_name}: {label}, frame {overlay.frame}, {' + '.join(overlay.detections)} "
+                  f"(max error {overlay.max_error_m:.3f} m)")
     groups: dict[tuple[str, str], list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         groups.setdefault((key.map, key.label), []).append(accumulator)
@@ -115,9 +121,8 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
         if not any(np.isfinite(line.means).any() for line in series):
             continue
         path = folder / f"errors_{_file_part(map_name)}_{_file_part(label)}.png"
-        jobs.append(functools.partial(plot_error_series, path, series,
-                                      title=f"{map_name}: {label}, error per frame (own coop)",
-                                      route_starts=collector.route_starts(map_name)))
+        yield functools.partial(plot_error_series, path, series, title=f"{map_name}: {label}, error per frame (own coop)",
+                                route_starts=collector.route_starts(map_name))
         key = accumulators[0].key
         if key.fusion == "spline":
             kind = scenario_label(key.fusion, "", key.d_s, key.vehicles).replace("spline--", "spline-")
@@ -126,10 +131,10 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
         if len(by_method) < 2:
             continue
         path = folder / f"methods_{_file_part(map_name)}_{_file_part(kind)}.png"
-        jobs.append(functools.partial(
+        yield functools.partial(
             plot_error_series, path, [ErrorSeries.pooled(method, a, own_only=True) for method, a in by_method.items()],
             title=f"{map_name}: {kind}, methods, error per frame (own coop, both borders)",
-            route_starts=collector.route_starts(map_name)))
+            route_starts=collector.route_starts(map_name))
     extended: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         if key.vehicles > 1 and any(np.diff(list_values(batch.column(0))[1]).any()
@@ -137,8 +142,8 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
             extended.setdefault(key.map, []).append(accumulator)
     for map_name, accumulators in extended.items():
         path = folder / f"error_vs_range_{_file_part(map_name)}.png"
-        jobs.append(functools.partial(plot_error_vs_range, path, range_points(accumulators),
-                                      title=f"{map_name}: max error against perception range"))
+        yield functools.partial(plot_error_vs_range, path, range_points(accumulators),
+                                title=f"{map_name}: max error against perception range")
     by_map: dict[str, list[ScenarioAccumulator]] = {}
     for key, accumulator in collector.accumulators.items():
         by_map.setdefault(key.map, []).append(accumulator)
@@ -146,23 +151,20 @@ def plot_jobs(out: Path, collector: Collector) -> list[functools.partial[None]]:
         curves = reliability_points(accumulators)
         if curves:
             path = folder / f"reliability_{_file_part(map_name)}.png"
-            jobs.append(functools.partial(plot_reliability, path, curves,
-                                          title=f"{map_name}: reliability of the stated σ"))
-    for (map_name, label), overlay in collector.overlays.items():
-        path = folder / f"overlay_{_file_part(map_name)}_{_file_part(label)}.png"
-        jobs.append(functools.partial(
-            plot_frame_overlay, path, gt=overlay.gt, detections=overlay.detections, fused=overlay.fused,
-            title=f"{map_name}: {label}, frame {overlay.frame}, {' + '.join(overlay.detections)} "
-                  f"(max error {overlay.max_error_m:.3f} m)"))
-    return jobs
+            yield functools.partial(plot_reliability, path, curves,
+                                    title=f"{map_name}: reliability of the stated σ")
 
 
 def start_plots(out: Path, collector: Collector, executor: Executor | None) -> Callable[[], list[Path]]:
-    """Starts drawing the :func:`plot_jobs` of a run on ``executor``'s workers; returns the
-    call that waits for them (without an executor: that draws them here) and returns the
-    files."""
-    jobs = plot_jobs(out, collector)
-    drawing = [executor.submit(job) for job in jobs] if executor is not None else []
+    """Starts drawing the :func:`plot_jobs` of a run on ``executor``'s workers, each as soon
+    as its data is made; returns the call that waits for them (without an executor: that
+    draws them here) and returns the files."""
+    jobs = []
+    drawing = []
+    for job in plot_jobs(out, collector):
+        jobs.append(job)
+        if executor is not None:
+            drawing.append(executor.submit(job))
 
     def finish() -> list[Path]:
         for job in jobs if executor is None else ():
