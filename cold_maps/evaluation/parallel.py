@@ -7,8 +7,8 @@ and a detached ``Recorder`` (the MCAP messages encoded there); the parent merges
 collectors (adopting the segments: what comes back is their names, the records not yet in a
 segment as one Arrow batch, the unit's counters, check runtimes and overlays) and writes the
 messages in unit order, so ``metrics.json``, ``frames.csv`` and ``run.mcap`` hold the same
-records in the same (frame) order as a run in one process. After the evaluation the same
-workers draw the plots (:func:`cold_maps.evaluation.run.write_outputs`).
+records in the same (frame) order as a run in one process. After the evaluation the plots
+are drawn in worker processes too (:func:`plot_pool`).
 
 On Linux the run's workers are forked from the parent once it has prepared the maps: they
 start with its evaluators (lane graphs, ground truth, drives) instead of importing and
@@ -158,6 +158,34 @@ def run_pool(evaluators: Sequence[MapEvaluator], workers: int) -> Iterator[Execu
             yield executor
     finally:
         _EVALUATORS.clear()
+
+
+def prepare_plots(executor: Executor, workers: int) -> None:
+    """Has matplotlib imported for the plots of a run whose units ``executor`` (its
+    ``workers``) runs: on Linux here, while the units run (:func:`plot_pool` forks the
+    plot workers from this process), elsewhere in each worker once it has no unit left."""
+    from cold_maps.evaluation.plots import preload
+
+    if RUN_START_METHOD == "fork":
+        preload()
+        return
+    for _ in range(workers):
+        executor.submit(preload)
+
+
+@contextmanager
+def plot_pool(run: Executor, workers: int) -> Iterator[Executor]:
+    """The workers that draw a run's plots once its units are merged: on Linux ``workers``
+    processes forked from this one after ``run``'s workers have exited (they start with
+    the matplotlib of :func:`prepare_plots`, and the run's memory is freed: one import
+    instead of one per worker; this process's only other thread then is tqdm's idle
+    monitor, which they never use), elsewhere ``run``'s own workers."""
+    if RUN_START_METHOD != "fork":
+        yield run
+        return
+    run.shutdown()
+    with process_pool(workers, RUN_START_METHOD) as executor:
+        yield executor
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,8 @@ grid, ticks and their text layouts are kept, each plot replaces the lines and le
 
 
 def preload() -> None:
-    """Imports matplotlib's figure and Agg canvas now (in a worker idle before the plots)."""
+    """Imports matplotlib's figure and Agg canvas now (before the plots, in a process whose
+    cores are busy with the run's units)."""
     _figure()
 
 

@@ -353,6 +353,10 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             executor = None
         evaluators.clear()  # the report reads the collector alone: the drives and ground truths go first
         release_free_heap()
+        if executor is not None and options.plots:
+            from cold_maps.evaluation.parallel import plot_pool
+
+            executor = stack.enter_context(plot_pool(executor, workers))
         try:
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
                                     partial=error is not None, provenance=options.provenance)
@@ -440,7 +444,8 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
              options: RunOptions, executor: Executor | None, workers: int) -> None:
     """Evaluates every drive, on ``executor``'s workers if given, into ``collector`` and the
     recording. The workers start (fork) before the progress bar and the recording start
-    threads."""
+    threads; with plots, matplotlib is imported meanwhile
+    (:func:`cold_maps.evaluation.parallel.prepare_plots`)."""
     stamp_base_ns = time.time_ns() if options.stamp_base_ns is None else options.stamp_base_ns
     submitted = None
     if executor is not None:
@@ -449,10 +454,9 @@ def _run_all(plans: Sequence[MapPlan], evaluators: Sequence[MapEvaluator], colle
         submitted = submit_units(executor, evaluators, workers, _detached_recording(plans, options, stamp_base_ns),
                                  collector.spool.path)
         if options.plots:
-            from cold_maps.evaluation.plots import preload
+            from cold_maps.evaluation.parallel import prepare_plots
 
-            for _ in range(workers):  # a worker without units left imports matplotlib meanwhile
-                executor.submit(preload)
+            prepare_plots(executor, workers)
     with ExitStack() as stack:
         bar = stack.enter_context(ProgressBar(sum(e.total_frames for e in evaluators), "cold-eval",
                                               stream=options.progress))
