@@ -107,6 +107,18 @@ def test_two_workers_agree_with_one_when_drives_are_cut_into_frame_ranges(tmp_pa
     _assert_same_outputs(_run(tmp_path / "one", maps, 1, *common), _run(tmp_path / "two", maps, 2, *common))
 
 
+def test_plots_drawn_by_two_workers_are_those_of_one_process(tmp_path):
+    """The plot workers (forked after the run's workers exit, from a parent that imported
+    matplotlib while the units ran) draw the same PNG bytes as a run in one process."""
+    drawn = {}
+    for workers in (1, 2):
+        out = tmp_path / str(workers)
+        assert evaluate.main(["--map", str(bundled_map("rural")), "--frames", "20", "--routes", "2", "--gaps", "20",
+                              "--workers", str(workers), "--no-mcap", "--out", str(out)]) == 0
+        drawn[workers] = {path.name: path.read_bytes() for path in (out / "plots").glob("*.png")}
+    assert len(drawn[1]) >= 6 and drawn[1] == drawn[2]
+
+
 def test_sigint_with_workers_leaves_partial_outputs(tmp_path):
     """Ctrl-C of a run in two workers: exit 130, the finished drives in a valid partial MCAP
     and a partial report, no worker left behind."""

@@ -138,3 +138,24 @@ def test_png_decodes_to_the_same_pixels_with_matplotlib_s_chunks():
     np.testing.assert_array_equal(np.asarray(image), rgba)
     assert image.info["Software"] == "Matplotlib version9, https://matplotlib.org/"
     assert image.info["dpi"] == pytest.approx((DPI, DPI), abs=1e-3)
+
+
+def test_a_pooled_series_merges_the_scenarios_frame_by_frame():
+    """Per frame the mean and max of the own coops' errors of both scenarios; a distractor's
+    record is left out, a frame whose records hold no error is NaN."""
+    from cold_maps.evaluation.plots import ErrorSeries
+
+    left = ScenarioAccumulator(ScenarioKey("m", "convoy", "", 0.0, "left"))
+    right = ScenarioAccumulator(ScenarioKey("m", "convoy", "", 0.0, "right"))
+    left.add(FrameRecord(0, 0.0, "ego", "coop1", np.array([0.1, 0.3])))
+    left.add(FrameRecord(0, 0.0, "ego", "adjacent_left", np.array([9.0])))  # a distractor
+    left.add(FrameRecord(2, 0.2, "ego", "coop1", np.empty(0), rejected="gap"))
+    left.add(FrameRecord(5, 0.5, "ego", "coop1", np.array([0.4])))
+    right.add(FrameRecord(0, 0.0, "ego", "coop1", np.array([0.2])))
+    right.add(FrameRecord(1, 0.1, "ego", "coop2", np.array([0.6, 0.8])))
+    right.add(FrameRecord(5, 0.5, "ego", "", np.array([1.0])))
+    series = ErrorSeries.pooled("both", [left, right], own_only=True)
+    assert series.frames.tolist() == [0.0, 1.0, 2.0, 5.0]
+    np.testing.assert_allclose(series.means, [0.2, 0.7, np.nan, 0.7])
+    np.testing.assert_allclose(series.maxima, [0.3, 0.8, np.nan, 1.0])
+    assert ErrorSeries.pooled("all", [left], own_only=False).maxima[0] == 9.0
