@@ -236,6 +236,17 @@ def test_progress_bar_is_silent_on_a_non_tty_stream():
     assert bar.done == 5 and stream.getvalue() == ""
 
 
+def test_a_progress_bar_starts_no_thread():
+    """Drawn or not, a bar leaves its process single-threaded (no tqdm monitor): the plot
+    workers of a run are forked from it after the bar."""
+    import threading
+
+    for stream in (io.StringIO(), FakeTerminal()):
+        with ProgressBar(3, "frames", stream=stream) as bar:
+            bar.update(3)
+            assert threading.active_count() == 1
+
+
 def test_progress_bar_draws_proportionally_on_a_tty():
     stream = FakeTerminal()
     with ProgressBar(8, "frames", stream=stream, width=16, min_interval_s=0.0) as bar:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from types import TracebackType
 from typing import Final, Self, TextIO
@@ -32,6 +33,16 @@ class _ClosedOnExit:
         self.close()
 
 
+@functools.cache
+def _unmonitored_tqdm() -> type:
+    """tqdm without its monitor thread, which only lowers a bar's ``miniters`` after a
+    stall (a :class:`ProgressBar` redraws at every step past its interval anyway): a
+    process stays single-threaded for the workers it forks once its bar is closed."""
+    from tqdm import tqdm
+
+    return type("UnmonitoredTqdm", (tqdm,), {"monitor_interval": 0})
+
+
 class ProgressBar(_ClosedOnExit):
     """``label [#####.....] 12/100  ETA 00:03`` on one line of ``stream`` (stderr by default).
 
@@ -46,15 +57,13 @@ class ProgressBar(_ClosedOnExit):
             raise ValueError(f"ProgressBar total: expected an integer > 0, got {total!r}")
         if width <= 0:
             raise ValueError(f"ProgressBar width: expected > 0 characters, got {width!r}")
-        from tqdm import tqdm
-
         self.total = total
         self.label = label
         self.stream = sys.stderr if stream is None else stream
         self.done = 0
         enabled = is_terminal(self.stream)
         prefix = "{desc} " if label else ""
-        self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not enabled, ascii=".#",
+        self._bar = _unmonitored_tqdm()(total=total, desc=label, file=self.stream, disable=not enabled, ascii=".#",
                          bar_format=prefix + "[{bar:%d}] {n_fmt}/{total_fmt}  ETA {remaining}%s"
                          % (width, ERASE_LINE_END),
                          mininterval=min_interval_s, miniters=1, dynamic_ncols=False)

@@ -177,9 +177,9 @@ def prepare_plots(executor: Executor, workers: int) -> None:
 def plot_pool(run: Executor, workers: int) -> Iterator[Executor]:
     """The workers that draw a run's plots once its units are merged: on Linux ``workers``
     processes forked from this one after ``run``'s workers have exited (they start with
-    the matplotlib of :func:`prepare_plots`, and the run's memory is freed: one import
-    instead of one per worker; this process's only other thread then is tqdm's idle
-    monitor, which they never use), elsewhere ``run``'s own workers."""
+    the matplotlib of :func:`prepare_plots`: one import instead of one per worker; with
+    ``run``'s threads joined and the recording and progress bar closed, this process has
+    no other thread then), elsewhere ``run``'s own workers."""
     if RUN_START_METHOD != "fork":
         yield run
         return
