@@ -16,13 +16,14 @@ Colours match the Foxglove channels of :mod:`cold_maps.recording.recorder`.
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import math
 import os
 import struct
 import zlib
 from dataclasses import dataclass
-from typing import Any, Final, Mapping, Sequence
+from typing import Any, Final, Iterator, Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -153,25 +154,16 @@ class ErrorSeries:
     def pooled(cls, label: str, scenarios: Sequence[ScenarioAccumulator], *, own_only: bool = False) -> ErrorSeries:
         """One series over the records of ``scenarios`` (usually both borders of one method;
         ``own_only``: only the ego's own coops, :func:`is_own_coop`): per frame the mean and the
-        max of all their errors, taken in scenario then record order (each scenario's records are
-        in frame order); NaN for a frame whose records hold no error."""
-        parts = [_record_errors(s, own_only) for s in scenarios]
-        frames = np.concatenate([np.empty(0, dtype=np.int64), *(part[0] for part in parts)])
-        values = np.concatenate([np.empty(0), *(part[1] for part in parts)])
-        lengths = np.concatenate([np.empty(0, dtype=np.int64), *(part[2] for part in parts)])
-        order = np.argsort(frames, kind="stable")  # the scenarios merged, a frame's records in scenario order
-        starts = (np.cumsum(lengths) - lengths)[order]
-        frames, lengths = frames[order], lengths[order]
-        ends = np.cumsum(lengths)
-        merged = values[np.repeat(starts - (ends - lengths), lengths) + np.arange(values.size)]
-        first = np.flatnonzero(np.diff(frames, prepend=frames[:1] - 1))  # each frame's first record
-        bounds = np.append((ends - lengths)[first], values.size).tolist()
-        means, maxima = np.full(first.size, np.nan), np.full(first.size, np.nan)
-        for index, (start, stop) in enumerate(itertools.pairwise(bounds)):
-            if stop > start:
-                means[index] = merged[start:stop].mean()
-                maxima[index] = merged[start:stop].max()
-        return cls(label, frames[first].astype(float), means, maxima)
+        max of all their errors. Streamed from the records' columns, a frame at a time (each
+        scenario's records are in frame order)."""
+        frames, means, maxima = [], [], []
+        merged = heapq.merge(*(_frame_errors(s, own_only) for s in scenarios), key=lambda item: item[0])
+        for frame, group in itertools.groupby(merged, key=lambda item: item[0]):
+            errors = np.concatenate([e for _, e in group])
+            frames.append(frame)
+            means.append(errors.mean() if errors.size else np.nan)
+            maxima.append(errors.max() if errors.size else np.nan)
+        return cls(label, np.array(frames, dtype=float), np.array(means, dtype=float), np.array(maxima, dtype=float))
 
 
 def is_own_coop(coop: str) -> bool:
@@ -179,19 +171,13 @@ def is_own_coop(coop: str) -> bool:
     return coop == "" or coop.startswith("coop")
 
 
-def _record_errors(scenario: ScenarioAccumulator, own_only: bool) -> tuple[np.ndarray, NDArrayFloat, np.ndarray]:
-    """A scenario's records (``own_only``: those of its own coops) as (frame of each, their
-    errors (m) one after the other, number of errors of each)."""
-    frames, values, lengths = [np.empty(0, dtype=np.int64)], [np.empty(0)], [np.empty(0, dtype=np.int64)]
+def _frame_errors(scenario: ScenarioAccumulator, own_only: bool) -> Iterator[tuple[int, NDArrayFloat]]:
+    """(frame, errors m) of each of a scenario's records, in order."""
     for batch in scenario.records.batches(("frame", "coop", "errors_m")):
-        errors, offsets = list_values(batch.column("errors_m"))
-        counts = np.diff(offsets)
-        chosen = np.ones(batch.num_rows, dtype=bool) if not own_only else \
-            np.array([is_own_coop(coop) for coop in batch.column("coop").to_pylist()], dtype=bool)
-        frames.append(to_numpy(batch.column("frame"))[chosen])
-        values.append(errors[offsets[0]:offsets[-1]][np.repeat(chosen, counts)])
-        lengths.append(counts[chosen])
-    return np.concatenate(frames), np.concatenate(values), np.concatenate(lengths)
+        values, offsets = list_values(batch.column("errors_m"))
+        for i, (frame, coop) in enumerate(zip(batch.column("frame").to_pylist(), batch.column("coop").to_pylist())):
+            if not own_only or is_own_coop(coop):
+                yield frame, values[offsets[i]:offsets[i + 1]]
 
 
 def plot_frame_errors(path: str | os.PathLike[str], scenarios: Sequence[ScenarioAccumulator], title: str = "",
