@@ -189,6 +189,33 @@ def test_interrupt_while_drawing_plots_rewrites_the_report_as_partial(tmp_path, 
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"  # every frame was recorded
 
 
+def test_interrupt_while_the_run_workers_exit_rewrites_the_report_as_partial(tmp_path, monkeypatch, capsys):
+    """Ctrl-C after the last frame of a run in two workers, while its workers exit before
+    the plot workers start: a partial report without plots, one line, exit 130."""
+    from cold_maps.evaluation import parallel
+
+    class Interrupted:
+        def __init__(self, run, workers):
+            self.run = run
+
+        def __enter__(self):
+            raise KeyboardInterrupt
+
+        def __exit__(self, *exc_info):
+            return False
+
+    monkeypatch.setattr(parallel, "plot_pool", Interrupted)
+    out = tmp_path / "out"
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "20", "--routes", "2", "--workers", "2",
+                            "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert status == 130 and err == f"cold-eval: error: interrupted; partial report in {out}"
+    document, records = _records(out)
+    assert document["partial"] is True and records[("curve90", "local", "", 0.0, "left")]["frames"] == 40
+    assert not (out / "plots").exists()
+    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"
+
+
 def test_signals_are_held_inside_signals_ignored():
     import os
     import signal

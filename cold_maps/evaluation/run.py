@@ -353,11 +353,11 @@ def run_evaluation(plans: Sequence[MapPlan], options: RunOptions, *,
             executor = None
         evaluators.clear()  # the report reads the collector alone: the drives and ground truths go first
         release_free_heap()
-        if executor is not None and options.plots:
-            from cold_maps.evaluation.parallel import plot_pool
-
-            executor = stack.enter_context(plot_pool(executor, workers))
         try:
+            if executor is not None and options.plots:
+                from cold_maps.evaluation.parallel import plot_pool
+
+                executor = stack.enter_context(plot_pool(executor, workers))
             results = _write_report(out, collector, options.plots and error is None, executor, extra_sections,
                                     partial=error is not None, provenance=options.provenance)
         except KeyboardInterrupt as exc:  # while writing a complete report: rewritten as partial, without plots
