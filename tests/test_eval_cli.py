@@ -176,14 +176,19 @@ def test_interrupt_while_drawing_plots_rewrites_the_report_as_partial(tmp_path, 
         path.write_bytes(b"PNG")
 
     monkeypatch.setattr(plots, "plot_error_series", interrupted)
-    out = tmp_path / "out"
-    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "6", "--routes", "1", "--workers", "1",
-                            "--out", str(out)])
+    _assert_interrupted_after_the_frames(tmp_path / "out", capsys, frames=6, routes=1, workers=1)
+    assert len(drawn) == 2
+
+
+def _assert_interrupted_after_the_frames(out, capsys, *, frames: int, routes: int, workers: int) -> None:
+    """A curve90 run interrupted after its last frame: exit 130 with one line, a partial
+    report of every frame without plots, the recording complete."""
+    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", str(frames), "--routes", str(routes),
+                            "--workers", str(workers), "--out", str(out)])
     err = capsys.readouterr().err.strip()
     assert status == 130 and err == f"cold-eval: error: interrupted; partial report in {out}"
-    assert len(drawn) == 2
     document, records = _records(out)
-    assert document["partial"] is True and records[("curve90", "local", "", 0.0, "left")]["frames"] == 6
+    assert document["partial"] is True and records[("curve90", "local", "", 0.0, "left")]["frames"] == frames * routes
     assert "PARTIAL RUN" in (out / "summary.md").read_text()
     assert not (out / "plots").exists()
     assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"  # every frame was recorded
@@ -205,15 +210,7 @@ def test_interrupt_while_the_run_workers_exit_rewrites_the_report_as_partial(tmp
             return False
 
     monkeypatch.setattr(parallel, "plot_pool", Interrupted)
-    out = tmp_path / "out"
-    status = evaluate.main(["--map", str(bundled_map("curve90")), "--frames", "20", "--routes", "2", "--workers", "2",
-                            "--out", str(out)])
-    err = capsys.readouterr().err.strip()
-    assert status == 130 and err == f"cold-eval: error: interrupted; partial report in {out}"
-    document, records = _records(out)
-    assert document["partial"] is True and records[("curve90", "local", "", 0.0, "left")]["frames"] == 40
-    assert not (out / "plots").exists()
-    assert read_metadata(out / "run.mcap")[METADATA_STATUS]["status"] == "complete"
+    _assert_interrupted_after_the_frames(tmp_path / "out", capsys, frames=20, routes=2, workers=2)
 
 
 def test_signals_are_held_inside_signals_ignored():
