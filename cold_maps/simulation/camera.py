@@ -64,6 +64,11 @@ _RULE_BITS: Final[NDArrayInt] = 1 << np.arange(RULES)
 """Bit i of a mask: rule END_REASONS[i], i < :data:`RULES`."""
 ANGLE_TOLERANCE_RAD: Final[float] = 1e-9
 """A point this much below the horizon of the nearer points still counts as over it."""
+WEDGE_MARGIN_M: Final[float] = 1e-3
+"""A footprint is grown by this much (m) for the bearings it may hide (:func:`behind_footprints`):
+far more than rounding, so no point its exact clipping hides is left out."""
+_CORNERS: Final[NDArrayFloat] = np.array([[-1.0, -1.0], [-1.0, 1.0], [1.0, -1.0], [1.0, 1.0]])
+"""A footprint's corners in its frame, in half lengths and half widths."""
 
 
 @dataclass(frozen=True)
@@ -129,8 +134,8 @@ def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, ca
     horizon = np.maximum.accumulate(elevation, axis=-1)
     below = np.zeros(points.shape[:-1], dtype=bool)
     below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(flat, np.array([x, y]), obstacles, profile.vehicle_length_m,
-                                 profile.vehicle_width_m).reshape(points.shape[:-1])
+    occluded = behind_footprints(flat, np.array([0, len(flat)]), np.array([[x, y, yaw]]), [obstacles],
+                                 profile.vehicle_length_m, profile.vehicle_width_m).reshape(points.shape[:-1])
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
@@ -159,56 +164,81 @@ def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBoo
     below = np.zeros(len(points), dtype=bool)
     later = column > 0
     below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
-    occluded = np.zeros(len(points), dtype=bool)
-    for f, (start, stop) in enumerate(zip(offsets[:-1].tolist(), offsets[1:].tolist())):
-        # Frame by frame: a frame's footprints × points fit the cache, a block's do not.
-        occluded[start:stop] = behind_footprints(points[start:stop], cameras[f, :2],
-                                                 np.asarray(obstacles[f], dtype=np.float64).reshape(-1, 3),
-                                                 profile.vehicle_length_m, profile.vehicle_width_m)
+    occluded = behind_footprints(points, offsets, cameras[:, :3], obstacles, profile.vehicle_length_m,
+                                 profile.vehicle_width_m)
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(len(points), np.int64))
 
 
-def behind_footprints(points: NDArrayFloat, camera: NDArrayFloat, obstacles: NDArrayFloat, length_m: float,
-                      width_m: float) -> NDArrayBool:
-    """(K,) whether the segment from ``camera`` (2,) to each of ``points`` (K, 2) crosses
-    a ``length_m`` × ``width_m`` footprint centred on one of ``obstacles`` (M, 3: x, y,
-    yaw), world frame, m (Liang–Barsky clipping in each footprint's frame, vectorised over
-    footprints and points). A footprint that contains the camera is ignored (the vehicle's
-    own); footprints out of every segment's reach are skipped."""
+def behind_footprints(points: NDArrayFloat, offsets: NDArrayInt, cameras: NDArrayFloat,
+                      obstacles: Sequence[NDArrayFloat], length_m: float, width_m: float) -> NDArrayBool:
+    """(P,) whether the segment from its frame's camera to each point crosses a ``length_m``
+    × ``width_m`` footprint centred on one of that frame's obstacles, world frame, m: frame
+    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2), its camera ``cameras[f]``
+    (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw rad). A footprint
+    that contains the camera is ignored (the vehicle's own).
+
+    Exact Liang–Barsky clipping in each footprint's frame, run only on the point and
+    footprint pairs that can cross: the point's bearing from the camera inside the
+    footprint's (grown by :data:`WEDGE_MARGIN_M`), the footprint not wholly behind or beyond
+    the frame's points."""
     hidden = np.zeros(len(points), dtype=bool)
-    if len(obstacles) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
+    counts = np.diff(offsets)
+    tables = [np.asarray(table, dtype=np.float64).reshape(-1, 3) for table in obstacles]
+    jobs = np.repeat(np.arange(len(tables)), [len(table) for table in tables])  # each footprint's frame
+    if len(jobs) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
         return hidden
+    footprints = np.concatenate(tables)
     half = np.array([0.5 * length_m, 0.5 * width_m])
-    reach = float(np.hypot(*half))
-    rays = points - camera
-    centres = obstacles[:, :2] - camera
-    direction = rays.mean(axis=0)
-    direction = direction / max(float(np.hypot(*direction)), 1e-12)
-    near = np.hypot(centres[:, 0], centres[:, 1]) <= np.hypot(rays[:, 0], rays[:, 1]).max() + reach
-    ahead = centres @ direction + reach >= min(0.0, float((rays @ direction).min()))
-    kept = obstacles[near & ahead]
-    if len(kept) == 0:
+    grown = half + WEDGE_MARGIN_M
+    owner = np.repeat(np.arange(len(counts)), counts)
+    rays = points - cameras[owner, :2]
+    heading_cos, heading_sin = np.cos(cameras[:, 2]), np.sin(cameras[:, 2])
+    seen = _into_frame(rays, 0.0, 0.0, heading_cos[owner], heading_sin[owner])
+    reach = np.maximum.reduceat(np.hypot(seen[:, 0], seen[:, 1]), offsets[:-1]) if len(counts) else np.empty(0)
+    nearest_x = np.minimum(np.minimum.reduceat(seen[:, 0], offsets[:-1]), 0.0)
+    cos, sin = np.cos(footprints[:, 2]), np.sin(footprints[:, 2])
+    offset = cameras[jobs, :2] - footprints[:, :2]
+    start = np.stack((cos * offset[:, 0] + sin * offset[:, 1], -sin * offset[:, 0] + cos * offset[:, 1]), axis=-1)
+    corner_x = -offset[:, :1] + cos[:, None] * _CORNERS[:, 0] * grown[0] - sin[:, None] * _CORNERS[:, 1] * grown[1]
+    corner_y = -offset[:, 1:] + sin[:, None] * _CORNERS[:, 0] * grown[0] + cos[:, None] * _CORNERS[:, 1] * grown[1]
+    local_x = heading_cos[jobs, None] * corner_x + heading_sin[jobs, None] * corner_y
+    local_y = heading_cos[jobs, None] * corner_y - heading_sin[jobs, None] * corner_x
+    kept = (np.any(np.abs(start) > half, axis=1) & (local_x.max(axis=1) >= nearest_x[jobs])
+            & (np.hypot(offset[:, 0], offset[:, 1]) - float(np.hypot(*grown)) <= reach[jobs]))
+    angle = np.arctan2(local_y[kept], local_x[kept])
+    low, high = angle.min(axis=1), angle.max(axis=1)
+    wide = (high - low > math.pi) | np.all(np.abs(start[kept]) <= grown, axis=1)
+    low[wide], high[wide] = -np.inf, np.inf
+    jobs, index = jobs[kept], np.flatnonzero(kept)
+    if len(jobs) == 0:
         return hidden
-    cos, sin = np.cos(kept[:, 2])[:, None], np.sin(kept[:, 2])[:, None]
-    offset = camera - kept[:, :2]  # camera relative to each footprint centre, world axes
-    start = np.stack((cos[:, 0] * offset[:, 0] + sin[:, 0] * offset[:, 1],
-                      -sin[:, 0] * offset[:, 0] + cos[:, 0] * offset[:, 1]), axis=-1)  # (M, 2)
-    outside = np.any(np.abs(start) > half, axis=1)
-    start, cos, sin = start[outside], cos[outside], sin[outside]
-    d = np.stack((cos * rays[:, 0] + sin * rays[:, 1], -sin * rays[:, 0] + cos * rays[:, 1]), axis=-1)  # (M, K, 2)
-    enter, leave = np.zeros(d.shape[:2]), np.ones(d.shape[:2])
+    # The pairs to clip: each frame's kept footprints against its points, as a padded table.
+    slot = np.arange(len(jobs)) - np.searchsorted(jobs, jobs)
+    table = np.full((len(counts), int(slot.max()) + 1, 2), (np.inf, -np.inf))
+    table[jobs, slot] = np.column_stack((low, high))
+    which = np.full(table.shape[:2], -1)
+    which[jobs, slot] = index
+    column = np.arange(len(points)) - offsets[owner]
+    bearing = np.full((len(counts), int(counts.max())), np.nan)
+    bearing[owner, column] = np.arctan2(seen[:, 1], seen[:, 0])
+    f, s, c = np.nonzero((bearing[:, None, :] >= table[:, :, None, 0]) & (bearing[:, None, :] <= table[:, :, None, 1]))
+    job, point = which[f, s], offsets[f] + c
+    ray_x, ray_y = rays[point, 0], rays[point, 1]
+    d = np.stack((cos[job] * ray_x + sin[job] * ray_y, -sin[job] * ray_x + cos[job] * ray_y), axis=-1)
+    enter, leave = np.zeros(len(job)), np.ones(len(job))
     for axis in range(2):
-        step = d[..., axis]
-        origin = start[:, axis: axis + 1]
+        step = d[:, axis]
+        origin = start[job, axis]
         moving = np.abs(step) > 1e-12
         safe = np.where(moving, step, 1.0)
         t1, t2 = (-half[axis] - origin) / safe, (half[axis] - origin) / safe
         inside = np.abs(origin) <= half[axis]
         enter = np.where(moving, np.maximum(enter, np.minimum(t1, t2)), np.where(inside, enter, np.inf))
         leave = np.where(moving, np.minimum(leave, np.maximum(t1, t2)), leave)
-    return np.any(enter <= leave, axis=0) if len(start) else hidden
+    hidden[point[enter <= leave]] = True
+    return hidden
 
 
 def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_tolerance_m: float) -> tuple[int, int]:
