@@ -249,24 +249,51 @@ def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_to
     border. The reason is -1 when no gap ends the lane (the candidates run out). The last
     candidate is ``start - 1`` when a border is hidden from ``start`` on.
     """
-    count = hidden.shape[1]
-    end, why = count - 1, -1
-    for mask, position in zip(hidden, along):
-        off = mask[start:] != VISIBLE
-        if not off.any():
-            continue
-        edges = np.diff(np.concatenate(([False], off, [False])).astype(np.int8))
-        first = np.flatnonzero(edges == 1) + start
-        after = np.flatnonzero(edges == -1) + start  # first visible candidate after each gap
-        before = np.maximum(first - 1, start)
-        span = position[np.minimum(after, count - 1)] - position[before]
-        ending = np.flatnonzero((after >= count) | (span > gap_tolerance_m))
-        if ending.size == 0 or first[ending[0]] - 1 >= end:
-            continue
-        gap = ending[0]
-        reach = int(np.searchsorted(position, position[before[gap]] + gap_tolerance_m, side="right"))
-        window = mask[first[gap]: max(min(reach, after[gap]), first[gap] + 1)]
-        end, why = int(first[gap]) - 1, int(np.argmax(np.count_nonzero(window[:, None] & _RULE_BITS, axis=0)))
+    end, why = detection_windows(hidden[None], along[None], np.array([hidden.shape[1]]), np.array([start]),
+                                 gap_tolerance_m)
+    return int(end[0]), int(why[0])
+
+
+def detection_windows(hidden: NDArrayInt, along: NDArrayFloat, counts: NDArrayInt, starts: NDArrayInt,
+                      gap_tolerance_m: float) -> tuple[NDArrayInt, NDArrayInt]:
+    """:func:`detection_window` of F frames at once: frame f's (B, K) masks and arc lengths
+    are ``hidden[f, :, :counts[f]]`` and ``along[f, :, :counts[f]]`` (the rest padding), read
+    from candidate ``starts[f]`` on; (F,) last candidates and reasons.
+
+    The lane ends at the first gap of any border that ends it (the earliest, the first
+    border on ties)."""
+    frames, borders, width = hidden.shape
+    column = np.arange(width)
+    off = np.zeros((frames, borders, width + 2), dtype=np.int8)
+    off[:, :, 1:-1] = (hidden != VISIBLE) & ((column >= starts[:, None]) & (column < counts[:, None]))[:, None, :]
+    change = np.diff(off, axis=2)
+    frame, border, first = np.nonzero(change == 1)  # each gap: its first hidden candidate ...
+    after = np.nonzero(change == -1)[2]  # ... and the first visible one after it, in the same order
+    before = np.maximum(first - 1, starts[frame])
+    last = counts[frame] - 1
+    span = along[frame, border, np.minimum(after, last)] - along[frame, border, before]
+    ending = np.flatnonzero((after > last) | (span > gap_tolerance_m))
+    earliest = np.full((frames, borders), width)
+    gap = np.full((frames, borders), -1)
+    row = frame[ending] * borders + border[ending]
+    lead = ending[np.diff(row, prepend=-1) != 0]  # each border's first ending gap
+    earliest[frame[lead], border[lead]] = first[lead]
+    gap[frame[lead], border[lead]] = lead
+    chosen = gap[np.arange(frames), np.argmin(earliest, axis=1)]
+    end, why = counts - 1, np.full(frames, -1)
+    ended = np.flatnonzero(chosen >= 0)
+    if len(ended) == 0:
+        return end, why
+    pick = chosen[ended]
+    f, b, lo = frame[pick], border[pick], first[pick]
+    target = along[f, b, before[pick]] + gap_tolerance_m
+    reach = np.count_nonzero((along[f, b] <= target[:, None]) & (column < counts[f, None]), axis=1)
+    size = np.maximum(np.minimum(reach, after[pick]), lo + 1) - lo
+    offsets = np.concatenate(([0], np.cumsum(size)[:-1]))
+    inside = np.repeat(lo - offsets, size) + np.arange(int(size.sum()))
+    window = hidden[np.repeat(f, size), np.repeat(b, size), inside]
+    rules = np.add.reduceat((window[:, None] & _RULE_BITS) != 0, offsets, axis=0)
+    end[ended], why[ended] = lo - 1, np.argmax(rules, axis=1)
     return end, why
 
 
@@ -367,23 +394,29 @@ class CameraSensor:
                                 np.concatenate((detectable[0], detectable[1]))[pick], 2 * starts, counts,
                                 np.column_stack((x, y, yaw, camera_z)), obstacles, profile)
         near = np.hypot(points[:, 0] - x[owner], points[:, 1] - y[owner]) >= profile.min_range_m
-        along_left = np.interp(candidates, strip.station, strip.left_distance)
-        along_right = np.interp(candidates, strip.station, strip.right_distance)
+        # Each frame's candidates as a row of padded (F, 2, K) tables: left border, then right.
+        width = int(counts.max())
+        table = np.zeros((len(stations), 2, width), dtype=np.int64)
+        along = np.zeros((len(stations), 2, width))
+        both = np.zeros((len(stations), width), dtype=bool)
+        on_left = 2 * starts[frame_of] + local
+        table[frame_of, 0, local], table[frame_of, 1, local] = hidden[on_left], hidden[on_left + counts[frame_of]]
+        along[frame_of, 0, local] = np.interp(candidates, strip.station, strip.left_distance)
+        along[frame_of, 1, local] = np.interp(candidates, strip.station, strip.right_distance)
+        both[frame_of, local] = near[on_left] & near[on_left + counts[frame_of]]
+        started = both.any(axis=1)
+        first = np.where(started, np.argmax(both, axis=1), counts)
+        ends, whys = detection_windows(table, along, counts, first, profile.gap_tolerance_m)
         out: list[tuple[Detection | None, str]] = []
         windows: list[tuple[int, float, float, str]] = []
-        for f, (first, count) in enumerate(zip(starts[:-1].tolist(), counts.tolist())):
+        for f, (begin, start, end, why) in enumerate(zip(starts[:-1].tolist(), first.tolist(), ends.tolist(),
+                                                          whys.tolist())):
             ran_out = "map_end" if last[f] >= strip.length else "range"
-            both = near[2 * first: 2 * first + count] & near[2 * first + count: 2 * first + 2 * count]
-            started = np.flatnonzero(both)
-            if started.size == 0:
+            if not started[f]:
                 out.append((None, ran_out))
                 continue
-            start = int(started[0])
-            mask = hidden[2 * first: 2 * first + 2 * count].reshape(2, count)
-            along = np.stack((along_left[first: first + count], along_right[first: first + count]))
-            end, why = detection_window(mask, along, start, profile.gap_tolerance_m)
             reason = END_REASONS[why] if why >= 0 else ran_out
-            here = candidates[first: first + count]
+            here = candidates[begin: begin + counts[f]]
             if end <= start or here[end] - here[start] < self.step_m:
                 out.append((None, reason))
                 continue
