@@ -134,8 +134,9 @@ def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, ca
     horizon = np.maximum.accumulate(elevation, axis=-1)
     below = np.zeros(points.shape[:-1], dtype=bool)
     below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(flat, np.array([0, len(flat)]), np.array([[x, y, yaw]]), [obstacles],
-                                 profile.vehicle_length_m, profile.vehicle_width_m).reshape(points.shape[:-1])
+    occluded = behind_footprints(flat, local.reshape(-1, 2), np.array([0, len(flat)]), np.array([[x, y, yaw]]),
+                                 [obstacles], profile.vehicle_length_m, profile.vehicle_width_m
+                                 ).reshape(points.shape[:-1])
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
@@ -164,20 +165,21 @@ def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBoo
     below = np.zeros(len(points), dtype=bool)
     later = column > 0
     below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(points, offsets, cameras[:, :3], obstacles, profile.vehicle_length_m,
+    occluded = behind_footprints(points, local, offsets, cameras[:, :3], obstacles, profile.vehicle_length_m,
                                  profile.vehicle_width_m)
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(len(points), np.int64))
 
 
-def behind_footprints(points: NDArrayFloat, offsets: NDArrayInt, cameras: NDArrayFloat,
+def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArrayInt, cameras: NDArrayFloat,
                       obstacles: Sequence[NDArrayFloat], length_m: float, width_m: float) -> NDArrayBool:
     """(P,) whether the segment from its frame's camera to each point crosses a ``length_m``
     × ``width_m`` footprint centred on one of that frame's obstacles, world frame, m: frame
-    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2), its camera ``cameras[f]``
-    (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw rad). A footprint
-    that contains the camera is ignored (the vehicle's own).
+    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``seen``: the same in the
+    camera's frame, :func:`world_to_vehicle`), its camera ``cameras[f]`` (x, y m, yaw rad),
+    its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw rad). A footprint that contains the
+    camera is ignored (the vehicle's own).
 
     Exact Liang–Barsky clipping in each footprint's frame, run only on the point and
     footprint pairs that can cross: the point's bearing from the camera inside the
@@ -192,11 +194,9 @@ def behind_footprints(points: NDArrayFloat, offsets: NDArrayInt, cameras: NDArra
     footprints = np.concatenate(tables)
     half = np.array([0.5 * length_m, 0.5 * width_m])
     grown = half + WEDGE_MARGIN_M
-    owner = np.repeat(np.arange(len(counts)), counts)
-    rays = points - cameras[owner, :2]
+    rays = points - np.repeat(cameras[:, :2], counts, axis=0)
     heading_cos, heading_sin = np.cos(cameras[:, 2]), np.sin(cameras[:, 2])
-    seen = _into_frame(rays, 0.0, 0.0, heading_cos[owner], heading_sin[owner])
-    reach = np.maximum.reduceat(np.hypot(seen[:, 0], seen[:, 1]), offsets[:-1]) if len(counts) else np.empty(0)
+    reach = np.sqrt(np.maximum.reduceat(seen[:, 0] ** 2 + seen[:, 1] ** 2, offsets[:-1]))
     nearest_x = np.minimum(np.minimum.reduceat(seen[:, 0], offsets[:-1]), 0.0)
     cos, sin = np.cos(footprints[:, 2]), np.sin(footprints[:, 2])
     offset = cameras[jobs, :2] - footprints[:, :2]
@@ -220,9 +220,10 @@ def behind_footprints(points: NDArrayFloat, offsets: NDArrayInt, cameras: NDArra
     table[jobs, slot] = np.column_stack((low, high))
     which = np.full(table.shape[:2], -1)
     which[jobs, slot] = index
-    column = np.arange(len(points)) - offsets[owner]
-    bearing = np.full((len(counts), int(counts.max())), np.nan)
-    bearing[owner, column] = np.arctan2(seen[:, 1], seen[:, 0])
+    width = int(counts.max())
+    bearing = np.full((len(counts), width), np.nan)
+    bearing.ravel()[np.arange(len(points)) + np.repeat(np.arange(len(counts)) * width - offsets[:-1], counts)] = \
+        np.arctan2(seen[:, 1], seen[:, 0])
     f, s, c = np.nonzero((bearing[:, None, :] >= table[:, :, None, 0]) & (bearing[:, None, :] <= table[:, :, None, 1]))
     job, point = which[f, s], offsets[f] + c
     ray_x, ray_y = rays[point, 0], rays[point, 1]
