@@ -224,8 +224,9 @@ def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArray
     bearing = np.full((len(counts), width), np.nan)
     bearing.ravel()[np.arange(len(points)) + np.repeat(np.arange(len(counts)) * width - offsets[:-1], counts)] = \
         np.arctan2(seen[:, 1], seen[:, 0])
-    f, s, c = np.nonzero((bearing[:, None, :] >= table[:, :, None, 0]) & (bearing[:, None, :] <= table[:, :, None, 1]))
-    job, point = which[f, s], offsets[f] + c
+    pair, column = np.divmod(np.flatnonzero((bearing[:, None, :] >= table[:, :, None, 0])
+                                            & (bearing[:, None, :] <= table[:, :, None, 1])), width)
+    job, point = which.ravel()[pair], offsets[pair // which.shape[1]] + column
     ray_x, ray_y = rays[point, 0], rays[point, 1]
     d = np.stack((cos[job] * ray_x + sin[job] * ray_y, -sin[job] * ray_x + cos[job] * ray_y), axis=-1)
     enter, leave = np.zeros(len(job)), np.ones(len(job))
@@ -268,16 +269,16 @@ def detection_windows(hidden: NDArrayInt, along: NDArrayFloat, counts: NDArrayIn
     off = np.zeros((frames, borders, width + 2), dtype=np.int8)
     off[:, :, 1:-1] = (hidden != VISIBLE) & ((column >= starts[:, None]) & (column < counts[:, None]))[:, None, :]
     change = np.diff(off, axis=2)
-    frame, border, first = np.nonzero(change == 1)  # each gap: its first hidden candidate ...
-    after = np.nonzero(change == -1)[2]  # ... and the first visible one after it, in the same order
+    row, first = np.divmod(np.flatnonzero(change == 1), width + 1)  # each gap: its first hidden candidate ...
+    after = np.flatnonzero(change == -1) % (width + 1)  # ... and the first visible one after it, in the same order
+    frame, border = np.divmod(row, borders)
     before = np.maximum(first - 1, starts[frame])
     last = counts[frame] - 1
     span = along[frame, border, np.minimum(after, last)] - along[frame, border, before]
     ending = np.flatnonzero((after > last) | (span > gap_tolerance_m))
     earliest = np.full((frames, borders), width)
     gap = np.full((frames, borders), -1)
-    row = frame[ending] * borders + border[ending]
-    lead = ending[np.diff(row, prepend=-1) != 0]  # each border's first ending gap
+    lead = ending[np.diff(row[ending], prepend=-1) != 0]  # each border's first ending gap
     earliest[frame[lead], border[lead]] = first[lead]
     gap[frame[lead], border[lead]] = lead
     chosen = gap[np.arange(frames), np.argmin(earliest, axis=1)]
