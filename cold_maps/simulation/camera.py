@@ -44,8 +44,7 @@ from cold_maps.network.route import route_from_lanes
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.opendrive.road_marks import classify_border
 from cold_maps.simulation.drive import Track
-from cold_maps.simulation.sensor import (Detection, LaneSensor, _into_frame, detection_between, detections_between,
-                                         world_to_vehicle)
+from cold_maps.simulation.sensor import Detection, LaneSensor, detection_between, detections_between
 from cold_maps.simulation.sensor_profile import SensorProfile
 
 NDArrayBool = npt.NDArray[np.bool_]
@@ -113,63 +112,36 @@ def border_surface(graph: LaneGraph, track: Track) -> BorderSurface:
     return BorderSurface(route.distance, np.stack((route.left_z, route.right_z)), detectable)
 
 
-def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, camera: NDArrayFloat,
-              obstacles: NDArrayFloat, profile: SensorProfile) -> NDArrayInt:
-    """Why each border point is hidden: a mask of the rules it fails (bit i: rule
-    ``END_REASONS[i]``; ``VISIBLE`` when none), shape (..., K).
+def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, cameras: NDArrayFloat,
+              obstacles: Sequence[NDArrayFloat], profile: SensorProfile) -> NDArrayInt:
+    """Why each border point of F frames is hidden: a mask of the rules it fails (bit i:
+    rule ``END_REASONS[i]``; ``VISIBLE`` when none), shape (F, B, K).
 
     Args:
-        points: (..., K, 2) world x, y (m) of each border's points, nearest first.
-        z: (..., K) their heights (m).
-        detectable: (..., K) painted or a physical edge.
-        camera: (4,) camera x, y (m), yaw (rad) and height z (m), world frame.
-        obstacles: (M, 3) x, y (m), yaw (rad) of the other vehicles.
+        points: (F, B, K, 2) world x, y (m) of each frame's border points, each border's
+            nearest first.
+        z: (F, B, K) their heights (m).
+        detectable: (F, B, K) painted or a physical edge.
+        cameras: (F, 4) each frame's camera x, y (m), yaw (rad) and height z (m), world frame.
+        obstacles: per frame, (M, 3) x, y (m), yaw (rad) of the other vehicles.
     """
-    x, y, yaw, camera_z = camera
-    flat = points.reshape(-1, 2)
-    local = world_to_vehicle(flat, x, y, yaw).reshape(points.shape)
+    x, y, yaw, camera_z = (cameras[:, k, None, None] for k in range(4))
+    c, s = np.cos(yaw), np.sin(yaw)
+    dx, dy = points[..., 0] - x, points[..., 1] - y
+    local = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1)  # world_to_vehicle of each frame's camera
     distance = np.hypot(local[..., 0], local[..., 1])
     bearing = np.abs(np.arctan2(local[..., 1], local[..., 0]))
     elevation = np.arctan2(z - camera_z, distance)
     horizon = np.maximum.accumulate(elevation, axis=-1)
     below = np.zeros(points.shape[:-1], dtype=bool)
     below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(flat, local.reshape(-1, 2), np.array([0, len(flat)]), np.array([[x, y, yaw]]),
-                                 [obstacles], profile.vehicle_length_m, profile.vehicle_width_m
+    frames, size = len(points), points[0, ..., 0].size
+    occluded = behind_footprints(points.reshape(-1, 2), local.reshape(-1, 2), size * np.arange(frames + 1),
+                                 cameras[:, :3], obstacles, profile.vehicle_length_m, profile.vehicle_width_m
                                  ).reshape(points.shape[:-1])
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
               bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
-
-
-def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, offsets: NDArrayInt,
-                   counts: NDArrayInt, cameras: NDArrayFloat, obstacles: Sequence[NDArrayFloat],
-                   profile: SensorProfile) -> NDArrayInt:
-    """:func:`hidden_by` of F frames at once: frame f's points are
-    ``points[offsets[f]:offsets[f + 1]]``, its left border's ``counts[f]`` candidates then its
-    right's (z, detectable alike), seen from ``cameras[f]`` (x, y m, yaw rad, z m) with the
-    other vehicles at ``obstacles[f]`` (M, 3); the (P,) masks, the same values."""
-    owner = np.repeat(np.arange(len(counts)), 2 * counts)
-    x, y, yaw, camera_z = (cameras[:, k][owner] for k in range(4))
-    local = _into_frame(points, x, y, np.cos(cameras[:, 2])[owner], np.sin(cameras[:, 2])[owner])
-    distance = np.hypot(local[:, 0], local[:, 1])
-    bearing = np.abs(np.arctan2(local[:, 1], local[:, 0]))
-    elevation = np.arctan2(z - camera_z, distance)
-    # The running horizon along each border: its candidates as one row of a padded table.
-    border = np.repeat(np.arange(2 * len(counts)), np.repeat(counts, 2))
-    border_start = np.repeat(offsets[:-1], 2) + np.tile([0, 1], len(counts)) * np.repeat(counts, 2)
-    column = np.arange(len(points)) - border_start[border]
-    table = np.full((2 * len(counts), int(counts.max())), -np.inf)
-    table[border, column] = elevation
-    horizon = np.maximum.accumulate(table, axis=1)
-    below = np.zeros(len(points), dtype=bool)
-    later = column > 0
-    below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(points, local, offsets, cameras[:, :3], obstacles, profile.vehicle_length_m,
-                                 profile.vehicle_width_m)
-    failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
-              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
-    return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(len(points), np.int64))
 
 
 def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArrayInt, cameras: NDArrayFloat,
@@ -348,9 +320,8 @@ class CameraSensor:
         z, detectable = surface.at(stations)
         x, y, yaw = strip.pose(station)
         camera_z = float(np.interp(station, surface.station, 0.5 * (surface.z[0] + surface.z[1])))
-        camera = np.array([x, y, yaw, camera_z + profile.camera_height_m])
-        hidden = hidden_by(points, z, detectable, camera, np.asarray(obstacles, dtype=np.float64).reshape(-1, 3),
-                            profile)
+        camera = np.array([[x, y, yaw, camera_z + profile.camera_height_m]])
+        hidden = hidden_by(points[None], z[None], detectable[None], camera, [obstacles], profile)[0]
         near = np.hypot(points[..., 0] - x, points[..., 1] - y) >= profile.min_range_m
         started = np.flatnonzero(near.all(axis=0))
         if started.size == 0:
@@ -367,7 +338,8 @@ class CameraSensor:
     def read_many(self, track: Track, stations: NDArrayFloat,
                   obstacles: Sequence[NDArrayFloat]) -> list[tuple[Detection | None, str]]:
         """:meth:`read` at every station (m) of ``stations`` with the other vehicles at
-        ``obstacles[k]``."""
+        ``obstacles[k]``: the candidates of all stations as (F, 2, K) tables (a station with
+        fewer repeats its last), the same readings."""
         strip = track.strip
         profile = self.profile
         stations = np.asarray(stations, dtype=np.float64)
@@ -375,50 +347,32 @@ class CameraSensor:
             return []
         last = np.minimum(stations + self.search_m, strip.length)
         counts = np.maximum(np.ceil((last - stations) / self.step_m - 1e-9).astype(np.intp), 1) + 1
-        starts = np.concatenate(([0], np.cumsum(counts)))
-        frame_of = np.repeat(np.arange(len(stations)), counts)
-        local = np.arange(starts[-1]) - starts[frame_of]
-        candidates = np.minimum(stations[frame_of] + self.step_m * local, last[frame_of])
-        left, right = strip.borders_at(candidates)
+        frames, width = len(stations), int(counts.max())
+        candidates = np.minimum(stations[:, None] + self.step_m * np.arange(width), last[:, None])
+        left, right = strip.borders_at(candidates.ravel())
+        points = np.stack((left.reshape(frames, width, 2), right.reshape(frames, width, 2)), axis=1)
         surface = self.surface(track)
-        z, detectable = surface.at(candidates)
+        z, detectable = surface.at(candidates.ravel())
         x, y, yaw = strip.poses(stations)
         camera_z = np.interp(stations, surface.station, 0.5 * (surface.z[0] + surface.z[1])) + profile.camera_height_m
-        # Each frame's points as hidden_by sees them: its left border's candidates, then its right's.
-        total = int(starts[-1])
-        order = np.arange(2 * total)
-        owner = np.repeat(np.arange(len(stations)), 2 * counts)
-        within = order - 2 * starts[owner]
-        right_side = within >= counts[owner]
-        pick = starts[owner] + within - counts[owner] * right_side + total * right_side
-        points = np.concatenate((left, right))[pick]
-        hidden = hidden_by_many(points, np.concatenate((z[0], z[1]))[pick],
-                                np.concatenate((detectable[0], detectable[1]))[pick], 2 * starts, counts,
-                                np.column_stack((x, y, yaw, camera_z)), obstacles, profile)
-        near = np.hypot(points[:, 0] - x[owner], points[:, 1] - y[owner]) >= profile.min_range_m
-        # Each frame's candidates as a row of padded (F, 2, K) tables: left border, then right.
-        width = int(counts.max())
-        table = np.zeros((len(stations), 2, width), dtype=np.int64)
-        along = np.zeros((len(stations), 2, width))
-        both = np.zeros((len(stations), width), dtype=bool)
-        on_left = 2 * starts[frame_of] + local
-        table[frame_of, 0, local], table[frame_of, 1, local] = hidden[on_left], hidden[on_left + counts[frame_of]]
-        along[frame_of, 0, local] = np.interp(candidates, strip.station, strip.left_distance)
-        along[frame_of, 1, local] = np.interp(candidates, strip.station, strip.right_distance)
-        both[frame_of, local] = near[on_left] & near[on_left + counts[frame_of]]
+        hidden = hidden_by(points, z.reshape(2, frames, width).swapaxes(0, 1),
+                           detectable.reshape(2, frames, width).swapaxes(0, 1), np.column_stack((x, y, yaw, camera_z)),
+                           obstacles, profile)
+        near = np.hypot(points[..., 0] - x[:, None, None], points[..., 1] - y[:, None, None]) >= profile.min_range_m
+        both = near.all(axis=1) & (np.arange(width) < counts[:, None])
+        along = np.stack([np.interp(candidates, strip.station, d) for d in (strip.left_distance, strip.right_distance)],
+                         axis=1)
         started = both.any(axis=1)
         first = np.where(started, np.argmax(both, axis=1), counts)
-        ends, whys = detection_windows(table, along, counts, first, profile.gap_tolerance_m)
+        ends, whys = detection_windows(hidden, along, counts, first, profile.gap_tolerance_m)
         out: list[tuple[Detection | None, str]] = []
         windows: list[tuple[int, float, float, str]] = []
-        for f, (begin, start, end, why) in enumerate(zip(starts[:-1].tolist(), first.tolist(), ends.tolist(),
-                                                          whys.tolist())):
+        for f, (here, start, end, why) in enumerate(zip(candidates, first.tolist(), ends.tolist(), whys.tolist())):
             ran_out = "map_end" if last[f] >= strip.length else "range"
             if not started[f]:
                 out.append((None, ran_out))
                 continue
             reason = END_REASONS[why] if why >= 0 else ran_out
-            here = candidates[begin: begin + counts[f]]
             if end <= start or here[end] - here[start] < self.step_m:
                 out.append((None, reason))
                 continue
