@@ -306,8 +306,8 @@ def test_occlusion_of_many_frames_is_every_segment_that_crosses_a_footprint() ->
     owner = np.repeat(np.arange(6), counts)
     yaw = cameras[owner, 2]
     dx, dy = points[:, 0] - cameras[owner, 0], points[:, 1] - cameras[owner, 1]
-    seen = np.column_stack((np.cos(yaw) * dx + np.sin(yaw) * dy, -np.sin(yaw) * dx + np.cos(yaw) * dy))
-    hidden = behind_footprints(points, seen, offsets, cameras, obstacles, length_m, width_m)
+    bearing = np.arctan2(-np.sin(yaw) * dx + np.cos(yaw) * dy, np.cos(yaw) * dx + np.sin(yaw) * dy)
+    hidden = behind_footprints(points, np.hypot(dx, dy), bearing, offsets, cameras, obstacles, length_m, width_m)
     corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [0.5 * length_m, 0.5 * width_m]
     expected = np.zeros(len(points), dtype=bool)
     for f, camera in enumerate(cameras):

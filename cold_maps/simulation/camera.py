@@ -130,33 +130,34 @@ def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, ca
     dx, dy = points[..., 0] - x, points[..., 1] - y
     local = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1)  # world_to_vehicle of each frame's camera
     distance = np.hypot(local[..., 0], local[..., 1])
-    bearing = np.abs(np.arctan2(local[..., 1], local[..., 0]))
+    signed = np.arctan2(local[..., 1], local[..., 0])
     elevation = np.arctan2(z - camera_z, distance)
     horizon = np.maximum.accumulate(elevation, axis=-1)
     below = np.zeros(points.shape[:-1], dtype=bool)
     below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
     frames, size = len(points), points[0, ..., 0].size
-    occluded = behind_footprints(points.reshape(-1, 2), local.reshape(-1, 2), size * np.arange(frames + 1),
+    occluded = behind_footprints(points.reshape(-1, 2), distance.ravel(), signed.ravel(), size * np.arange(frames + 1),
                                  cameras[:, :3], obstacles, profile.vehicle_length_m, profile.vehicle_width_m
                                  ).reshape(points.shape[:-1])
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
-              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
+              np.abs(signed) > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
 
 
-def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArrayInt, cameras: NDArrayFloat,
-                      obstacles: Sequence[NDArrayFloat], length_m: float, width_m: float) -> NDArrayBool:
+def behind_footprints(points: NDArrayFloat, distance: NDArrayFloat, bearing: NDArrayFloat, offsets: NDArrayInt,
+                      cameras: NDArrayFloat, obstacles: Sequence[NDArrayFloat], length_m: float,
+                      width_m: float) -> NDArrayBool:
     """(P,) whether the segment from its frame's camera to each point crosses a ``length_m``
     × ``width_m`` footprint centred on one of that frame's obstacles, world frame, m: frame
-    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``seen``: the same in the
-    camera's frame, :func:`world_to_vehicle`), its camera ``cameras[f]`` (x, y m, yaw rad),
-    its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw rad). A footprint that contains the
-    camera is ignored (the vehicle's own).
+    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``distance`` and ``bearing``:
+    their distance, m, and signed bearing, rad, from the camera in its frame), its camera
+    ``cameras[f]`` (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw
+    rad). A footprint that contains the camera is ignored (the vehicle's own).
 
     Exact Liang–Barsky clipping in each footprint's frame, run only on the point and
-    footprint pairs that can cross: the point's bearing from the camera inside the
-    footprint's (grown by :data:`WEDGE_MARGIN_M`), the footprint not wholly behind or beyond
-    the frame's points."""
+    footprint pairs that can cross: the point's bearing inside the footprint's (grown by
+    :data:`WEDGE_MARGIN_M`; a footprint across the bearing ±π as its two sides), the
+    footprint not beyond the frame's farthest point nor beside all its bearings."""
     hidden = np.zeros(len(points), dtype=bool)
     counts = np.diff(offsets)
     tables = [np.asarray(table, dtype=np.float64).reshape(-1, 3) for table in obstacles]
@@ -166,24 +167,31 @@ def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArray
     footprints = np.concatenate(tables)
     half = np.array([0.5 * length_m, 0.5 * width_m])
     grown = half + WEDGE_MARGIN_M
-    rays = points - np.repeat(cameras[:, :2], counts, axis=0)
     heading_cos, heading_sin = np.cos(cameras[:, 2]), np.sin(cameras[:, 2])
-    reach = np.sqrt(np.maximum.reduceat(seen[:, 0] ** 2 + seen[:, 1] ** 2, offsets[:-1]))
-    nearest_x = np.minimum(np.minimum.reduceat(seen[:, 0], offsets[:-1]), 0.0)
     cos, sin = np.cos(footprints[:, 2]), np.sin(footprints[:, 2])
     offset = cameras[jobs, :2] - footprints[:, :2]
     start = np.stack((cos * offset[:, 0] + sin * offset[:, 1], -sin * offset[:, 0] + cos * offset[:, 1]), axis=-1)
     corner_x = -offset[:, :1] + cos[:, None] * _CORNERS[:, 0] * grown[0] - sin[:, None] * _CORNERS[:, 1] * grown[1]
     corner_y = -offset[:, 1:] + sin[:, None] * _CORNERS[:, 0] * grown[0] + cos[:, None] * _CORNERS[:, 1] * grown[1]
-    local_x = heading_cos[jobs, None] * corner_x + heading_sin[jobs, None] * corner_y
-    local_y = heading_cos[jobs, None] * corner_y - heading_sin[jobs, None] * corner_x
-    kept = (np.any(np.abs(start) > half, axis=1) & (local_x.max(axis=1) >= nearest_x[jobs])
-            & (np.hypot(offset[:, 0], offset[:, 1]) - float(np.hypot(*grown)) <= reach[jobs]))
-    angle = np.arctan2(local_y[kept], local_x[kept])
+    angle = np.arctan2(heading_cos[jobs, None] * corner_y - heading_sin[jobs, None] * corner_x,
+                       heading_cos[jobs, None] * corner_x + heading_sin[jobs, None] * corner_y)
     low, high = angle.min(axis=1), angle.max(axis=1)
-    wide = (high - low > math.pi) | np.all(np.abs(start[kept]) <= grown, axis=1)
-    low[wide], high[wide] = -np.inf, np.inf
-    jobs, index = jobs[kept], np.flatnonzero(kept)
+    # A wedge across the bearing ±π behind the camera: its two parts, each a footprint's.
+    across = np.flatnonzero(high - low > math.pi)
+    low[across] = np.where(angle[across] > 0.0, angle[across], np.inf).min(axis=1)
+    high[across] = np.inf
+    order = np.argsort(np.concatenate((jobs, jobs[across])), kind="stable")
+    jobs, index = np.concatenate((jobs, jobs[across]))[order], np.concatenate((np.arange(len(jobs)), across))[order]
+    low = np.concatenate((low, np.full(len(across), -np.inf)))[order]
+    high = np.concatenate((high, np.where(angle[across] < 0.0, angle[across], -np.inf).max(axis=1)))[order]
+    inside = np.all(np.abs(start[index]) <= grown, axis=1)  # the camera in a grown footprint: every bearing
+    low[inside], high[inside] = -np.inf, np.inf
+    first = offsets[:-1]
+    farthest, leftmost, rightmost = (reduce.reduceat(values, first)[jobs] for reduce, values in (
+        (np.maximum, distance), (np.maximum, bearing), (np.minimum, bearing)))
+    kept = (np.any(np.abs(start[index]) > half, axis=1) & (high >= rightmost) & (low <= leftmost)
+            & (np.hypot(offset[index, 0], offset[index, 1]) - float(np.hypot(*grown)) <= farthest))
+    jobs, index, low, high = jobs[kept], index[kept], low[kept], high[kept]
     if len(jobs) == 0:
         return hidden
     # The pairs to clip: each frame's kept footprints against its points, as a padded table.
@@ -193,13 +201,13 @@ def behind_footprints(points: NDArrayFloat, seen: NDArrayFloat, offsets: NDArray
     which = np.full(table.shape[:2], -1)
     which[jobs, slot] = index
     width = int(counts.max())
-    bearing = np.full((len(counts), width), np.nan)
-    bearing.ravel()[np.arange(len(points)) + np.repeat(np.arange(len(counts)) * width - offsets[:-1], counts)] = \
-        np.arctan2(seen[:, 1], seen[:, 0])
-    pair, column = np.divmod(np.flatnonzero((bearing[:, None, :] >= table[:, :, None, 0])
-                                            & (bearing[:, None, :] <= table[:, :, None, 1])), width)
-    job, point = which.ravel()[pair], offsets[pair // which.shape[1]] + column
-    ray_x, ray_y = rays[point, 0], rays[point, 1]
+    bearings = np.full((len(counts), width), np.nan)
+    bearings.ravel()[np.arange(len(points)) + np.repeat(np.arange(len(counts)) * width - first, counts)] = bearing
+    pair, column = np.divmod(np.flatnonzero((bearings[:, None, :] >= table[:, :, None, 0])
+                                            & (bearings[:, None, :] <= table[:, :, None, 1])), width)
+    frame = pair // which.shape[1]
+    job, point = which.ravel()[pair], offsets[frame] + column
+    ray_x, ray_y = points[point, 0] - cameras[frame, 0], points[point, 1] - cameras[frame, 1]
     d = np.stack((cos[job] * ray_x + sin[job] * ray_y, -sin[job] * ray_x + cos[job] * ray_y), axis=-1)
     enter, leave = np.zeros(len(job)), np.ones(len(job))
     for axis in range(2):
