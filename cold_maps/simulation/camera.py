@@ -149,10 +149,10 @@ def behind_footprints(points: NDArrayFloat, distance: NDArrayFloat, bearing: NDA
                       width_m: float) -> NDArrayBool:
     """(P,) whether the segment from its frame's camera to each point crosses a ``length_m``
     × ``width_m`` footprint centred on one of that frame's obstacles, world frame, m: frame
-    f's points are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``distance`` and ``bearing``:
-    their distance, m, and signed bearing, rad, from the camera in its frame), its camera
-    ``cameras[f]`` (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M, 3: x, y m, yaw
-    rad). A footprint that contains the camera is ignored (the vehicle's own).
+    f's points (at least one) are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``distance``
+    and ``bearing``: their distance, m, and signed bearing, rad, from the camera in its
+    frame), its camera ``cameras[f]`` (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M,
+    3: x, y m, yaw rad). A footprint that contains the camera is ignored (the vehicle's own).
 
     Exact Liang–Barsky clipping in each footprint's frame, run only on the point and
     footprint pairs that can cross: the point's bearing inside the footprint's (grown by
