@@ -20,7 +20,8 @@ from cold_maps.network.lane_graph import LaneKey, load_graph
 from cold_maps.network.lane_strip import LaneStrip
 from cold_maps.opendrive.parser import load_opendrive
 from cold_maps.opendrive.road_marks import BoundaryType, classify_border
-from cold_maps.simulation.camera import END_REASONS, CameraSensor, detection_window, lane_sensor
+from cold_maps.simulation.camera import (END_REASONS, CameraSensor, behind_footprints, detection_window,
+                                         detection_windows, lane_sensor)
 from cold_maps.simulation.detection import obstacles_of
 from cold_maps.simulation.drive import Track, VehicleState
 from cold_maps.simulation.sensor import END_MAP, END_RANGE, LaneSensor
@@ -286,3 +287,48 @@ def test_the_detection_window_bridges_short_gaps_and_names_the_rule_that_hides_m
     mask[0, 30:] = range_bit  # open to the end
     assert detection_window(mask, along, 0, 10.0) == (29, 0)
     assert detection_window(mask, along, 5, 3.0) == (4, 4)  # hidden from the start: nothing reported
+
+
+def test_occlusion_of_many_frames_is_every_segment_that_crosses_a_footprint() -> None:
+    """Six frames of random cameras (any heading, so footprints straddle the bearing ±π behind
+    some), footprints (one around each camera, ignored) and points: hidden exactly where
+    shapely finds the camera-to-point segment crossing a footprint that does not hold the camera."""
+    import shapely
+
+    rng = np.random.default_rng(7)
+    length_m, width_m = CAMERA.vehicle_length_m, CAMERA.vehicle_width_m
+    cameras = np.column_stack((rng.uniform(-50, 50, (6, 2)), rng.uniform(-math.pi, math.pi, 6)))
+    counts = rng.integers(50, 400, 6)
+    offsets = np.concatenate(([0], np.cumsum(counts)))
+    points = np.repeat(cameras[:, :2], counts, axis=0) + rng.uniform(-40, 40, (int(offsets[-1]), 2))
+    obstacles = [np.vstack((np.column_stack((camera[:2] + rng.uniform(-25, 25, (8, 2)), rng.uniform(-4, 4, 8))),
+                            [[camera[0] + 1.0, camera[1], rng.uniform(-4, 4)]])) for camera in cameras]
+    owner = np.repeat(np.arange(6), counts)
+    yaw = cameras[owner, 2]
+    dx, dy = points[:, 0] - cameras[owner, 0], points[:, 1] - cameras[owner, 1]
+    bearing = np.arctan2(-np.sin(yaw) * dx + np.cos(yaw) * dy, np.cos(yaw) * dx + np.sin(yaw) * dy)
+    hidden = behind_footprints(points, np.hypot(dx, dy), bearing, offsets, cameras, obstacles, length_m, width_m)
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [0.5 * length_m, 0.5 * width_m]
+    expected = np.zeros(len(points), dtype=bool)
+    for f, camera in enumerate(cameras):
+        segments = shapely.linestrings([[camera[:2], point] for point in points[offsets[f]:offsets[f + 1]]])
+        for x, y, heading in obstacles[f]:
+            turn = np.array([[math.cos(heading), math.sin(heading)], [-math.sin(heading), math.cos(heading)]])
+            box = shapely.Polygon(corners @ turn + [x, y])
+            if not box.contains(shapely.Point(camera[:2])):
+                expected[offsets[f]:offsets[f + 1]] |= shapely.intersects(segments, box)
+    assert 0 < expected.sum() < len(points) and np.array_equal(hidden, expected)
+
+
+def test_the_detection_windows_of_frames_are_each_frame_s_window() -> None:
+    """Frames of 10 to 40 candidates padded with garbage to one table: each frame's (last
+    candidate, reason) is :func:`detection_window` of its own candidates."""
+    rng = np.random.default_rng(3)
+    counts = np.array([40, 10, 25, 33, 17])
+    starts = np.array([0, 3, 24, 5, 0])
+    hidden = rng.integers(0, 32, (5, 2, 40)) * (rng.random((5, 2, 40)) < 0.3)
+    along = np.cumsum(rng.uniform(0.5, 1.5, (5, 2, 40)), axis=2)
+    ends, whys = detection_windows(hidden, along, counts, starts, 3.0)
+    expected = [detection_window(hidden[f, :, :count], along[f, :, :count], int(start), 3.0)
+                for f, (count, start) in enumerate(zip(counts, starts))]
+    assert list(zip(ends.tolist(), whys.tolist())) == expected and {why for _, why in expected} != {-1}

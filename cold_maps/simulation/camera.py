@@ -44,8 +44,7 @@ from cold_maps.network.route import route_from_lanes
 from cold_maps.network.lane_strip import NDArrayFloat
 from cold_maps.opendrive.road_marks import classify_border
 from cold_maps.simulation.drive import Track
-from cold_maps.simulation.sensor import (Detection, LaneSensor, _into_frame, detection_between, detections_between,
-                                         world_to_vehicle)
+from cold_maps.simulation.sensor import Detection, LaneSensor, detection_between, detections_between
 from cold_maps.simulation.sensor_profile import SensorProfile
 
 NDArrayBool = npt.NDArray[np.bool_]
@@ -64,6 +63,11 @@ _RULE_BITS: Final[NDArrayInt] = 1 << np.arange(RULES)
 """Bit i of a mask: rule END_REASONS[i], i < :data:`RULES`."""
 ANGLE_TOLERANCE_RAD: Final[float] = 1e-9
 """A point this much below the horizon of the nearer points still counts as over it."""
+WEDGE_MARGIN_M: Final[float] = 1e-3
+"""A footprint is grown by this much (m) for the bearings it may hide (:func:`behind_footprints`):
+far more than rounding, so no point its exact clipping hides is left out."""
+_CORNERS: Final[NDArrayFloat] = np.array([[-1.0, -1.0], [-1.0, 1.0], [1.0, -1.0], [1.0, 1.0]])
+"""A footprint's corners in its frame, in half lengths and half widths."""
 
 
 @dataclass(frozen=True)
@@ -108,107 +112,115 @@ def border_surface(graph: LaneGraph, track: Track) -> BorderSurface:
     return BorderSurface(route.distance, np.stack((route.left_z, route.right_z)), detectable)
 
 
-def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, camera: NDArrayFloat,
-              obstacles: NDArrayFloat, profile: SensorProfile) -> NDArrayInt:
-    """Why each border point is hidden: a mask of the rules it fails (bit i: rule
-    ``END_REASONS[i]``; ``VISIBLE`` when none), shape (..., K).
+def hidden_by(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, cameras: NDArrayFloat,
+              obstacles: Sequence[NDArrayFloat], profile: SensorProfile) -> NDArrayInt:
+    """Why each border point of F frames is hidden: a mask of the rules it fails (bit i:
+    rule ``END_REASONS[i]``; ``VISIBLE`` when none), shape (F, B, K).
 
     Args:
-        points: (..., K, 2) world x, y (m) of each border's points, nearest first.
-        z: (..., K) their heights (m).
-        detectable: (..., K) painted or a physical edge.
-        camera: (4,) camera x, y (m), yaw (rad) and height z (m), world frame.
-        obstacles: (M, 3) x, y (m), yaw (rad) of the other vehicles.
+        points: (F, B, K, 2) world x, y (m) of each frame's border points, each border's
+            nearest first.
+        z: (F, B, K) their heights (m).
+        detectable: (F, B, K) painted or a physical edge.
+        cameras: (F, 4) each frame's camera x, y (m), yaw (rad) and height z (m), world frame.
+        obstacles: per frame, (M, 3) x, y (m), yaw (rad) of the other vehicles.
     """
-    x, y, yaw, camera_z = camera
-    flat = points.reshape(-1, 2)
-    local = world_to_vehicle(flat, x, y, yaw).reshape(points.shape)
+    x, y, yaw, camera_z = (cameras[:, k, None, None] for k in range(4))
+    c, s = np.cos(yaw), np.sin(yaw)
+    dx, dy = points[..., 0] - x, points[..., 1] - y
+    local = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1)  # world_to_vehicle of each frame's camera
     distance = np.hypot(local[..., 0], local[..., 1])
-    bearing = np.abs(np.arctan2(local[..., 1], local[..., 0]))
+    signed = np.arctan2(local[..., 1], local[..., 0])
     elevation = np.arctan2(z - camera_z, distance)
     horizon = np.maximum.accumulate(elevation, axis=-1)
     below = np.zeros(points.shape[:-1], dtype=bool)
     below[..., 1:] = elevation[..., 1:] < horizon[..., :-1] - ANGLE_TOLERANCE_RAD
-    occluded = behind_footprints(flat, np.array([x, y]), obstacles, profile.vehicle_length_m,
-                                 profile.vehicle_width_m).reshape(points.shape[:-1])
+    frames, size = len(points), points[0, ..., 0].size
+    occluded = behind_footprints(points.reshape(-1, 2), distance.ravel(), signed.ravel(), size * np.arange(frames + 1),
+                                 cameras[:, :3], obstacles, profile.vehicle_length_m, profile.vehicle_width_m
+                                 ).reshape(points.shape[:-1])
     failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
-              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
+              np.abs(signed) > profile.fov_half_angle_rad, below, occluded, ~detectable)
     return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(points.shape[:-1], np.int64))
 
 
-def hidden_by_many(points: NDArrayFloat, z: NDArrayFloat, detectable: NDArrayBool, offsets: NDArrayInt,
-                   counts: NDArrayInt, cameras: NDArrayFloat, obstacles: Sequence[NDArrayFloat],
-                   profile: SensorProfile) -> NDArrayInt:
-    """:func:`hidden_by` of F frames at once: frame f's points are
-    ``points[offsets[f]:offsets[f + 1]]``, its left border's ``counts[f]`` candidates then its
-    right's (z, detectable alike), seen from ``cameras[f]`` (x, y m, yaw rad, z m) with the
-    other vehicles at ``obstacles[f]`` (M, 3); the (P,) masks, the same values."""
-    owner = np.repeat(np.arange(len(counts)), 2 * counts)
-    x, y, yaw, camera_z = (cameras[:, k][owner] for k in range(4))
-    local = _into_frame(points, x, y, np.cos(cameras[:, 2])[owner], np.sin(cameras[:, 2])[owner])
-    distance = np.hypot(local[:, 0], local[:, 1])
-    bearing = np.abs(np.arctan2(local[:, 1], local[:, 0]))
-    elevation = np.arctan2(z - camera_z, distance)
-    # The running horizon along each border: its candidates as one row of a padded table.
-    border = np.repeat(np.arange(2 * len(counts)), np.repeat(counts, 2))
-    border_start = np.repeat(offsets[:-1], 2) + np.tile([0, 1], len(counts)) * np.repeat(counts, 2)
-    column = np.arange(len(points)) - border_start[border]
-    table = np.full((2 * len(counts), int(counts.max())), -np.inf)
-    table[border, column] = elevation
-    horizon = np.maximum.accumulate(table, axis=1)
-    below = np.zeros(len(points), dtype=bool)
-    later = column > 0
-    below[later] = elevation[later] < horizon[border[later], column[later] - 1] - ANGLE_TOLERANCE_RAD
-    occluded = np.zeros(len(points), dtype=bool)
-    for f, (start, stop) in enumerate(zip(offsets[:-1].tolist(), offsets[1:].tolist())):
-        # Frame by frame: a frame's footprints × points fit the cache, a block's do not.
-        occluded[start:stop] = behind_footprints(points[start:stop], cameras[f, :2],
-                                                 np.asarray(obstacles[f], dtype=np.float64).reshape(-1, 3),
-                                                 profile.vehicle_length_m, profile.vehicle_width_m)
-    failed = ((distance < profile.min_range_m) | (distance > profile.max_range_m),
-              bearing > profile.fov_half_angle_rad, below, occluded, ~detectable)
-    return sum((rule.astype(np.int64) << bit for bit, rule in enumerate(failed)), np.zeros(len(points), np.int64))
-
-
-def behind_footprints(points: NDArrayFloat, camera: NDArrayFloat, obstacles: NDArrayFloat, length_m: float,
+def behind_footprints(points: NDArrayFloat, distance: NDArrayFloat, bearing: NDArrayFloat, offsets: NDArrayInt,
+                      cameras: NDArrayFloat, obstacles: Sequence[NDArrayFloat], length_m: float,
                       width_m: float) -> NDArrayBool:
-    """(K,) whether the segment from ``camera`` (2,) to each of ``points`` (K, 2) crosses
-    a ``length_m`` × ``width_m`` footprint centred on one of ``obstacles`` (M, 3: x, y,
-    yaw), world frame, m (Liang–Barsky clipping in each footprint's frame, vectorised over
-    footprints and points). A footprint that contains the camera is ignored (the vehicle's
-    own); footprints out of every segment's reach are skipped."""
+    """(P,) whether the segment from its frame's camera to each point crosses a ``length_m``
+    × ``width_m`` footprint centred on one of that frame's obstacles, world frame, m: frame
+    f's points (at least one) are ``points[offsets[f]:offsets[f + 1]]`` (P, 2; ``distance``
+    and ``bearing``: their distance, m, and signed bearing, rad, from the camera in its
+    frame), its camera ``cameras[f]`` (x, y m, yaw rad), its obstacles ``obstacles[f]`` (M,
+    3: x, y m, yaw rad). A footprint that contains the camera is ignored (the vehicle's own).
+
+    Exact Liang–Barsky clipping in each footprint's frame, run only on the point and
+    footprint pairs that can cross: the point's bearing inside the footprint's (grown by
+    :data:`WEDGE_MARGIN_M`; a footprint across the bearing ±π as its two sides), the
+    footprint not beyond the frame's farthest point nor beside all its bearings."""
     hidden = np.zeros(len(points), dtype=bool)
-    if len(obstacles) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
+    counts = np.diff(offsets)
+    tables = [np.asarray(table, dtype=np.float64).reshape(-1, 3) for table in obstacles]
+    jobs = np.repeat(np.arange(len(tables)), [len(table) for table in tables])  # each footprint's frame
+    if len(jobs) == 0 or len(points) == 0 or length_m <= 0.0 or width_m <= 0.0:
         return hidden
+    footprints = np.concatenate(tables)
     half = np.array([0.5 * length_m, 0.5 * width_m])
-    reach = float(np.hypot(*half))
-    rays = points - camera
-    centres = obstacles[:, :2] - camera
-    direction = rays.mean(axis=0)
-    direction = direction / max(float(np.hypot(*direction)), 1e-12)
-    near = np.hypot(centres[:, 0], centres[:, 1]) <= np.hypot(rays[:, 0], rays[:, 1]).max() + reach
-    ahead = centres @ direction + reach >= min(0.0, float((rays @ direction).min()))
-    kept = obstacles[near & ahead]
-    if len(kept) == 0:
+    grown = half + WEDGE_MARGIN_M
+    heading_cos, heading_sin = np.cos(cameras[:, 2]), np.sin(cameras[:, 2])
+    cos, sin = np.cos(footprints[:, 2]), np.sin(footprints[:, 2])
+    offset = cameras[jobs, :2] - footprints[:, :2]
+    start = np.stack((cos * offset[:, 0] + sin * offset[:, 1], -sin * offset[:, 0] + cos * offset[:, 1]), axis=-1)
+    corner_x = -offset[:, :1] + cos[:, None] * _CORNERS[:, 0] * grown[0] - sin[:, None] * _CORNERS[:, 1] * grown[1]
+    corner_y = -offset[:, 1:] + sin[:, None] * _CORNERS[:, 0] * grown[0] + cos[:, None] * _CORNERS[:, 1] * grown[1]
+    angle = np.arctan2(heading_cos[jobs, None] * corner_y - heading_sin[jobs, None] * corner_x,
+                       heading_cos[jobs, None] * corner_x + heading_sin[jobs, None] * corner_y)
+    low, high = angle.min(axis=1), angle.max(axis=1)
+    # A wedge across the bearing ±π behind the camera: its two parts, each a footprint's.
+    across = np.flatnonzero(high - low > math.pi)
+    low[across] = np.where(angle[across] > 0.0, angle[across], np.inf).min(axis=1)
+    high[across] = np.inf
+    order = np.argsort(np.concatenate((jobs, jobs[across])), kind="stable")
+    jobs, index = np.concatenate((jobs, jobs[across]))[order], np.concatenate((np.arange(len(jobs)), across))[order]
+    low = np.concatenate((low, np.full(len(across), -np.inf)))[order]
+    high = np.concatenate((high, np.where(angle[across] < 0.0, angle[across], -np.inf).max(axis=1)))[order]
+    inside = np.all(np.abs(start[index]) <= grown, axis=1)  # the camera in a grown footprint: every bearing
+    low[inside], high[inside] = -np.inf, np.inf
+    first = offsets[:-1]
+    farthest, leftmost, rightmost = (reduce.reduceat(values, first)[jobs] for reduce, values in (
+        (np.maximum, distance), (np.maximum, bearing), (np.minimum, bearing)))
+    kept = (np.any(np.abs(start[index]) > half, axis=1) & (high >= rightmost) & (low <= leftmost)
+            & (np.hypot(offset[index, 0], offset[index, 1]) - float(np.hypot(*grown)) <= farthest))
+    jobs, index, low, high = jobs[kept], index[kept], low[kept], high[kept]
+    if len(jobs) == 0:
         return hidden
-    cos, sin = np.cos(kept[:, 2])[:, None], np.sin(kept[:, 2])[:, None]
-    offset = camera - kept[:, :2]  # camera relative to each footprint centre, world axes
-    start = np.stack((cos[:, 0] * offset[:, 0] + sin[:, 0] * offset[:, 1],
-                      -sin[:, 0] * offset[:, 0] + cos[:, 0] * offset[:, 1]), axis=-1)  # (M, 2)
-    outside = np.any(np.abs(start) > half, axis=1)
-    start, cos, sin = start[outside], cos[outside], sin[outside]
-    d = np.stack((cos * rays[:, 0] + sin * rays[:, 1], -sin * rays[:, 0] + cos * rays[:, 1]), axis=-1)  # (M, K, 2)
-    enter, leave = np.zeros(d.shape[:2]), np.ones(d.shape[:2])
+    # The pairs to clip: each frame's kept footprints against its points, as a padded table.
+    slot = np.arange(len(jobs)) - np.searchsorted(jobs, jobs)
+    table = np.full((len(counts), int(slot.max()) + 1, 2), (np.inf, -np.inf))
+    table[jobs, slot] = np.column_stack((low, high))
+    which = np.full(table.shape[:2], -1)
+    which[jobs, slot] = index
+    width = int(counts.max())
+    bearings = np.full((len(counts), width), np.nan)
+    bearings.ravel()[np.arange(len(points)) + np.repeat(np.arange(len(counts)) * width - first, counts)] = bearing
+    pair, column = np.divmod(np.flatnonzero((bearings[:, None, :] >= table[:, :, None, 0])
+                                            & (bearings[:, None, :] <= table[:, :, None, 1])), width)
+    frame = pair // which.shape[1]
+    job, point = which.ravel()[pair], offsets[frame] + column
+    ray_x, ray_y = points[point, 0] - cameras[frame, 0], points[point, 1] - cameras[frame, 1]
+    d = np.stack((cos[job] * ray_x + sin[job] * ray_y, -sin[job] * ray_x + cos[job] * ray_y), axis=-1)
+    enter, leave = np.zeros(len(job)), np.ones(len(job))
     for axis in range(2):
-        step = d[..., axis]
-        origin = start[:, axis: axis + 1]
+        step = d[:, axis]
+        origin = start[job, axis]
         moving = np.abs(step) > 1e-12
         safe = np.where(moving, step, 1.0)
         t1, t2 = (-half[axis] - origin) / safe, (half[axis] - origin) / safe
         inside = np.abs(origin) <= half[axis]
         enter = np.where(moving, np.maximum(enter, np.minimum(t1, t2)), np.where(inside, enter, np.inf))
         leave = np.where(moving, np.minimum(leave, np.maximum(t1, t2)), leave)
-    return np.any(enter <= leave, axis=0) if len(start) else hidden
+    hidden[point[enter <= leave]] = True
+    return hidden
 
 
 def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_tolerance_m: float) -> tuple[int, int]:
@@ -219,24 +231,51 @@ def detection_window(hidden: NDArrayInt, along: NDArrayFloat, start: int, gap_to
     border. The reason is -1 when no gap ends the lane (the candidates run out). The last
     candidate is ``start - 1`` when a border is hidden from ``start`` on.
     """
-    count = hidden.shape[1]
-    end, why = count - 1, -1
-    for mask, position in zip(hidden, along):
-        off = mask[start:] != VISIBLE
-        if not off.any():
-            continue
-        edges = np.diff(np.concatenate(([False], off, [False])).astype(np.int8))
-        first = np.flatnonzero(edges == 1) + start
-        after = np.flatnonzero(edges == -1) + start  # first visible candidate after each gap
-        before = np.maximum(first - 1, start)
-        span = position[np.minimum(after, count - 1)] - position[before]
-        ending = np.flatnonzero((after >= count) | (span > gap_tolerance_m))
-        if ending.size == 0 or first[ending[0]] - 1 >= end:
-            continue
-        gap = ending[0]
-        reach = int(np.searchsorted(position, position[before[gap]] + gap_tolerance_m, side="right"))
-        window = mask[first[gap]: max(min(reach, after[gap]), first[gap] + 1)]
-        end, why = int(first[gap]) - 1, int(np.argmax(np.count_nonzero(window[:, None] & _RULE_BITS, axis=0)))
+    end, why = detection_windows(hidden[None], along[None], np.array([hidden.shape[1]]), np.array([start]),
+                                 gap_tolerance_m)
+    return int(end[0]), int(why[0])
+
+
+def detection_windows(hidden: NDArrayInt, along: NDArrayFloat, counts: NDArrayInt, starts: NDArrayInt,
+                      gap_tolerance_m: float) -> tuple[NDArrayInt, NDArrayInt]:
+    """:func:`detection_window` of F frames at once: frame f's (B, K) masks and arc lengths
+    are ``hidden[f, :, :counts[f]]`` and ``along[f, :, :counts[f]]`` (the rest padding), read
+    from candidate ``starts[f]`` on; (F,) last candidates and reasons.
+
+    The lane ends at the first gap of any border that ends it (the earliest, the first
+    border on ties)."""
+    frames, borders, width = hidden.shape
+    column = np.arange(width)
+    off = np.zeros((frames, borders, width + 2), dtype=np.int8)
+    off[:, :, 1:-1] = (hidden != VISIBLE) & ((column >= starts[:, None]) & (column < counts[:, None]))[:, None, :]
+    change = np.diff(off, axis=2)
+    row, first = np.divmod(np.flatnonzero(change == 1), width + 1)  # each gap: its first hidden candidate ...
+    after = np.flatnonzero(change == -1) % (width + 1)  # ... and the first visible one after it, in the same order
+    frame, border = np.divmod(row, borders)
+    before = np.maximum(first - 1, starts[frame])
+    last = counts[frame] - 1
+    span = along[frame, border, np.minimum(after, last)] - along[frame, border, before]
+    ending = np.flatnonzero((after > last) | (span > gap_tolerance_m))
+    earliest = np.full((frames, borders), width)
+    gap = np.full((frames, borders), -1)
+    lead = ending[np.diff(row[ending], prepend=-1) != 0]  # each border's first ending gap
+    earliest[frame[lead], border[lead]] = first[lead]
+    gap[frame[lead], border[lead]] = lead
+    chosen = gap[np.arange(frames), np.argmin(earliest, axis=1)]
+    end, why = counts - 1, np.full(frames, -1)
+    ended = np.flatnonzero(chosen >= 0)
+    if len(ended) == 0:
+        return end, why
+    pick = chosen[ended]
+    f, b, lo = frame[pick], border[pick], first[pick]
+    target = along[f, b, before[pick]] + gap_tolerance_m
+    reach = np.count_nonzero((along[f, b] <= target[:, None]) & (column < counts[f, None]), axis=1)
+    size = np.maximum(np.minimum(reach, after[pick]), lo + 1) - lo
+    offsets = np.concatenate(([0], np.cumsum(size)[:-1]))
+    inside = np.repeat(lo - offsets, size) + np.arange(int(size.sum()))
+    window = hidden[np.repeat(f, size), np.repeat(b, size), inside]
+    rules = np.add.reduceat((window[:, None] & _RULE_BITS) != 0, offsets, axis=0)
+    end[ended], why[ended] = lo - 1, np.argmax(rules, axis=1)
     return end, why
 
 
@@ -289,9 +328,8 @@ class CameraSensor:
         z, detectable = surface.at(stations)
         x, y, yaw = strip.pose(station)
         camera_z = float(np.interp(station, surface.station, 0.5 * (surface.z[0] + surface.z[1])))
-        camera = np.array([x, y, yaw, camera_z + profile.camera_height_m])
-        hidden = hidden_by(points, z, detectable, camera, np.asarray(obstacles, dtype=np.float64).reshape(-1, 3),
-                            profile)
+        camera = np.array([[x, y, yaw, camera_z + profile.camera_height_m]])
+        hidden = hidden_by(points[None], z[None], detectable[None], camera, [obstacles], profile)[0]
         near = np.hypot(points[..., 0] - x, points[..., 1] - y) >= profile.min_range_m
         started = np.flatnonzero(near.all(axis=0))
         if started.size == 0:
@@ -308,7 +346,8 @@ class CameraSensor:
     def read_many(self, track: Track, stations: NDArrayFloat,
                   obstacles: Sequence[NDArrayFloat]) -> list[tuple[Detection | None, str]]:
         """:meth:`read` at every station (m) of ``stations`` with the other vehicles at
-        ``obstacles[k]``."""
+        ``obstacles[k]``: the candidates of all stations as (F, 2, K) tables (a station with
+        fewer repeats its last), the same readings."""
         strip = track.strip
         profile = self.profile
         stations = np.asarray(stations, dtype=np.float64)
@@ -316,44 +355,32 @@ class CameraSensor:
             return []
         last = np.minimum(stations + self.search_m, strip.length)
         counts = np.maximum(np.ceil((last - stations) / self.step_m - 1e-9).astype(np.intp), 1) + 1
-        starts = np.concatenate(([0], np.cumsum(counts)))
-        frame_of = np.repeat(np.arange(len(stations)), counts)
-        local = np.arange(starts[-1]) - starts[frame_of]
-        candidates = np.minimum(stations[frame_of] + self.step_m * local, last[frame_of])
-        left, right = strip.borders_at(candidates)
+        frames, width = len(stations), int(counts.max())
+        candidates = np.minimum(stations[:, None] + self.step_m * np.arange(width), last[:, None])
+        left, right = strip.borders_at(candidates.ravel())
+        points = np.stack((left.reshape(frames, width, 2), right.reshape(frames, width, 2)), axis=1)
         surface = self.surface(track)
-        z, detectable = surface.at(candidates)
+        z, detectable = surface.at(candidates.ravel())
         x, y, yaw = strip.poses(stations)
         camera_z = np.interp(stations, surface.station, 0.5 * (surface.z[0] + surface.z[1])) + profile.camera_height_m
-        # Each frame's points as hidden_by sees them: its left border's candidates, then its right's.
-        total = int(starts[-1])
-        order = np.arange(2 * total)
-        owner = np.repeat(np.arange(len(stations)), 2 * counts)
-        within = order - 2 * starts[owner]
-        right_side = within >= counts[owner]
-        pick = starts[owner] + within - counts[owner] * right_side + total * right_side
-        points = np.concatenate((left, right))[pick]
-        hidden = hidden_by_many(points, np.concatenate((z[0], z[1]))[pick],
-                                np.concatenate((detectable[0], detectable[1]))[pick], 2 * starts, counts,
-                                np.column_stack((x, y, yaw, camera_z)), obstacles, profile)
-        near = np.hypot(points[:, 0] - x[owner], points[:, 1] - y[owner]) >= profile.min_range_m
-        along_left = np.interp(candidates, strip.station, strip.left_distance)
-        along_right = np.interp(candidates, strip.station, strip.right_distance)
+        hidden = hidden_by(points, z.reshape(2, frames, width).swapaxes(0, 1),
+                           detectable.reshape(2, frames, width).swapaxes(0, 1), np.column_stack((x, y, yaw, camera_z)),
+                           obstacles, profile)
+        near = np.hypot(points[..., 0] - x[:, None, None], points[..., 1] - y[:, None, None]) >= profile.min_range_m
+        both = near.all(axis=1) & (np.arange(width) < counts[:, None])
+        along = np.stack([np.interp(candidates, strip.station, d) for d in (strip.left_distance, strip.right_distance)],
+                         axis=1)
+        started = both.any(axis=1)
+        first = np.where(started, np.argmax(both, axis=1), counts)
+        ends, whys = detection_windows(hidden, along, counts, first, profile.gap_tolerance_m)
         out: list[tuple[Detection | None, str]] = []
         windows: list[tuple[int, float, float, str]] = []
-        for f, (first, count) in enumerate(zip(starts[:-1].tolist(), counts.tolist())):
+        for f, (here, start, end, why) in enumerate(zip(candidates, first.tolist(), ends.tolist(), whys.tolist())):
             ran_out = "map_end" if last[f] >= strip.length else "range"
-            both = near[2 * first: 2 * first + count] & near[2 * first + count: 2 * first + 2 * count]
-            started = np.flatnonzero(both)
-            if started.size == 0:
+            if not started[f]:
                 out.append((None, ran_out))
                 continue
-            start = int(started[0])
-            mask = hidden[2 * first: 2 * first + 2 * count].reshape(2, count)
-            along = np.stack((along_left[first: first + count], along_right[first: first + count]))
-            end, why = detection_window(mask, along, start, profile.gap_tolerance_m)
             reason = END_REASONS[why] if why >= 0 else ran_out
-            here = candidates[first: first + count]
             if end <= start or here[end] - here[start] < self.step_m:
                 out.append((None, reason))
                 continue
