@@ -41,6 +41,12 @@ NEAREST_CHUNK: Final = 512
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
+#: ``ANCHOR_STRIDE`` of ``RouteBorder.resampled``, which gives the distances alone: they do
+#: not depend on the seeds (a window that cannot settle a point hands it to the exact
+#: search), and on Town01's detections the narrow and wide windows settle as many points
+#: from seeds interpolated over this many points as over ``ANCHOR_STRIDE``, at a quarter
+#: of the look-ups.
+RESAMPLED_ANCHOR_STRIDE: Final = 80
 #: Arc length either side of an interpolated seed searched first for the nearest sample,
 #: m (on Town01's noise-free detections all but about one seed in 2000 lie within it of
 #: the nearest sample).
@@ -526,7 +532,8 @@ class RouteBorder:
         """Per lane (points ``(N >= 2, 2)``, world frame, driving order), the distances (m)
         of its points to the samples: ``distances(points, exact=False, others=False)`` of
         each lane in turn, bit for bit (seeds from each lane's own anchors, the KD-tree from
-        the same call on), in one pass over the points of up to ``BLOCK_POINTS`` of them."""
+        the same call on; every ``RESAMPLED_ANCHOR_STRIDE``-th point an anchor), in one pass
+        over the points of up to ``BLOCK_POINTS`` of them."""
         found: list[NDArrayFloat] = []
         group: list[NDArrayFloat] = []
         size = 0
@@ -545,7 +552,7 @@ class RouteBorder:
         anchors, by_tree = [], []
         for start, count in zip(starts.tolist(), counts):
             self._calls += 1
-            anchors.extend(range(start, start + count - 1, ANCHOR_STRIDE))
+            anchors.extend(range(start, start + count - 1, RESAMPLED_ANCHOR_STRIDE))
             anchors.append(start + count - 1)
             by_tree.append(self._uses_tree())
         points = lanes[0] if len(lanes) == 1 else np.concatenate(lanes)
