@@ -239,7 +239,8 @@ class _SharedNearest:
 
     def __init__(self, centres: list[NDArrayFloat]) -> None:
         self._points = np.concatenate(centres)
-        self._splits = np.cumsum([len(centre) for centre in centres])[:-1]
+        ends = np.cumsum([len(centre) for centre in centres]).tolist()
+        self._bounds = list(zip([0, *ends[:-1]], ends))
         self._found: dict[LaneletKey, list[tuple[NDArrayFloat, NDArrayInt]]] = {}
 
     def of(self, lane: int) -> CentreNearest:
@@ -248,9 +249,8 @@ class _SharedNearest:
             found = self._found.get(geometry.key)
             if found is None:
                 distances, index = geometry.centre_nearest(self._points)
-                found = self._found[geometry.key] = (list(zip(np.split(distances, self._splits),
-                                                              np.split(index, self._splits)))
-                                                     if len(self._splits) else [(distances, index)])
+                found = self._found[geometry.key] = [(distances[first:end], index[first:end])
+                                                     for first, end in self._bounds]
             return found[lane]
 
         return centre_nearest

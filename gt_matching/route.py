@@ -567,7 +567,8 @@ class RouteBorder:
             resampled[chunk] = self._by_method((points[chunk], resampled[chunk]),
                                                np.searchsorted(starts, chunk, side="right") - 1, by_tree,
                                                self._nearest)[0]
-        return [resampled] if len(lanes) == 1 else np.split(resampled, starts[1:-1])
+        bounds = starts.tolist()
+        return [resampled[first:end] for first, end in zip(bounds[:-1], bounds[1:])]
 
     def _by_method(self, arrays: tuple[Any, ...], lane: NDArrayInt, by_tree: list[bool],
                    method: Callable[..., tuple[Any, ...]]) -> tuple[Any, ...]:
