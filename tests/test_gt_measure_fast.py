@@ -15,9 +15,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, GroundTruthMeter,
-                                         Measurement, _end_direction, ahead_of_m, border_figures, covered_length_m,
-                                         gt_ends, points_past_ends)
+from cold_maps.groundtruth.meter import (FIGURE_BORDERS, GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M,
+                                         GroundTruthMeter, Measurement, _end_direction, ahead_of_m, border_figures,
+                                         covered_length_m, gt_ends, points_past_ends)
 from gt_matching.polyline import SegmentIndex, arc_lengths, closest_distances
 from conftest import bundled_map
 
@@ -106,11 +106,10 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
         assert points_past_ends(border, gt_ends(gt), distances, 0.02) == _past_reference(border, gt, distances, 0.02)
 
 
-@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.floats(0.001, 1.0), st.floats(0.0, 0.3))
-def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(seed: int, borders: int, scale: float,
-                                                                             far_share: float) -> None:
-    """Borders of 2 to 200 points, some ending at (or running past) an end of the GT, some
-    with points beyond the range threshold, with and without poses."""
+def _assert_figures_per_border(seed: int, borders: int, scale: float, far_share: float) -> None:
+    """``border_figures`` of ``borders`` borders of 2 to 200 points, some ending at (or
+    running past) an end of the GT, some with points beyond the range threshold, with and
+    without poses, equal their per-border figures bit for bit."""
     rng = np.random.default_rng(seed)
     gt = _polyline(seed + 1, 40, 0.3)
     lanes, errors, poses = [], [], []
@@ -129,6 +128,19 @@ def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(se
     for (_, covered, ahead), border, error, pose in zip(found, lanes, errors, poses):
         assert covered == covered_length_m(border, error)
         assert np.array_equal(ahead, ahead_of_m(border, pose))
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.floats(0.001, 1.0), st.floats(0.0, 0.3))
+def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(seed: int, borders: int, scale: float,
+                                                                             far_share: float) -> None:
+    """A few borders: one pass."""
+    _assert_figures_per_border(seed, borders, scale, far_share)
+
+
+@pytest.mark.parametrize("seed", [3, 17])
+def test_border_figures_in_several_passes_equal_the_per_border_ones_bit_for_bit(seed: int) -> None:
+    """More borders than ``FIGURE_BORDERS``: three passes, the last a short one."""
+    _assert_figures_per_border(seed, 2 * FIGURE_BORDERS + 3, 0.2, 0.1)
 
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
