@@ -324,9 +324,15 @@ class GroundTruthMeter:
         from gt_matching import MatchingError
 
         keys = []
+        made: dict[tuple[int, int, tuple[float, float, float]], tuple[bytes, bytes, tuple[float, float, float]]] = {}
         for left, right, pose in lanes:
             left, right = np.asarray(left, dtype=np.float64), np.asarray(right, dtype=np.float64)
-            keys.append(((left.tobytes(), right.tobytes(), tuple(pose)), (left, right, pose)))
+            # The scenarios of a frame pass the same reference arrays (alive in ``keys``: ids stay theirs).
+            ids = (id(left), id(right), tuple(pose))
+            key = made.get(ids)
+            if key is None:
+                key = made[ids] = (left.tobytes(), right.tobytes(), tuple(pose))
+            keys.append((key, (left, right, pose)))
         known = {key: self._matches[key] for key, _ in keys if key in self._matches}
         missing = {key: lane for key, lane in keys if key not in known}
         known.update(zip(missing, self.ground_truth.match_many(list(missing.values()))))
