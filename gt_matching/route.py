@@ -236,8 +236,9 @@ class RouteBorder:
     driving order) and its samples every ``step_m``, with what is needed to find each
     detected point's closest GT point and whether another lane's border is closer.
 
-    Assembly only joins the parts' arrays: clearances live in the parts; a KD-tree of the
-    samples is built only for long borders, on first use."""
+    Assembly only joins the parts' arrays: clearances live in the parts (and are joined on
+    first use, by the check for other lanes' borders); a KD-tree of the samples is built
+    only for long borders, on first use."""
 
     def __init__(self, lines: MapLines, parts: list[BorderPart], ignored: set[int], calls: int = 0) -> None:
         """``parts``: the lanelets' borders in driving order (same ``step_m``, reach and
@@ -286,17 +287,25 @@ class RouteBorder:
         self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
         self._widths = tuple(widths)
         """Samples in the narrow and in the wide window."""
-        self._checkpoint_arc = np.concatenate(
-            [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
+        self._arc_offsets = arc_offsets
+
+    @cached_property
+    def _clearances(self) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """Arc length (m) of each part's checkpoints along the border, and each one's
+        clearance to the lines that are not ignored (m, the parts' ``clearances``): built on
+        first use, by the check for other lanes' borders (distances to the samples alone
+        need none)."""
+        checkpoint_arc = np.concatenate(
+            [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(self._arc_offsets, self._parts)]
         )
-        ignored_slots = set(lines.slots(ignored).tolist())
+        ignored_slots = set(self._lines.slots(self._ignored).tolist())
         clearance = []
-        for part in parts:
+        for part in self._parts:
             slots, rows = part.clearances
             kept = rows[[slot not in ignored_slots for slot in slots.tolist()]]
             cap = np.full(rows.shape[1], part.clearance_cap_m)
             clearance.append(np.minimum(cap, kept.min(axis=0)) if len(kept) else cap)
-        self._clearance = np.concatenate(clearance)
+        return checkpoint_arc, np.concatenate(clearance)
 
     @cached_property
     def _near_others(self) -> tuple[NDArrayInt, cKDTree | None]:
@@ -513,8 +522,9 @@ class RouteBorder:
         arc = self.sample_arc[sample]
         other_closer = np.zeros(len(points), dtype=bool)
         if others:
-            after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
-            clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
+            checkpoint_arc, clearances = self._clearances
+            after = np.minimum(np.searchsorted(checkpoint_arc, arc), len(clearances) - 1)
+            clearance = np.minimum(clearances[after], clearances[np.maximum(after - 1, 0)])
             suspect = 2.0 * resampled > clearance + self.other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
             if np.any(suspect):
                 other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - self.other_margin_m)
