@@ -23,7 +23,7 @@ ZERO_LENGTH_M: Final = 1e-12
 #: Longest piece (m) of a segment in ``SegmentIndex``'s KD-tree of piece midpoints.
 INDEX_PIECE_M: Final = 0.5
 #: Nearest piece midpoints ``SegmentIndex.capped`` asks its KD-tree for at once (on
-#: Town01's tie-breaks all but a few points have fewer within their search radius).
+#: Town01's tie-breaks all but about 3 points in 1000 have fewer within their search radius).
 CAPPED_NEIGHBOURS: Final = 6
 #: Slack (m) on ``SegmentIndex.capped``'s search radius: covers the rounding of the
 #: distances it is built from, so the closest segment is never left out.

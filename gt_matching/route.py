@@ -43,9 +43,9 @@ NEAREST_CHUNK: Final = 512
 ANCHOR_STRIDE: Final = 20
 #: ``ANCHOR_STRIDE`` of ``RouteBorder.resampled``, which gives the distances alone: they do
 #: not depend on the seeds (a window that cannot settle a point hands it to the exact
-#: search), and on Town01's detections the narrow and wide windows settle as many points
-#: from seeds interpolated over this many points as over ``ANCHOR_STRIDE``, at a quarter
-#: of the look-ups.
+#: search), and on Town01's detections the narrow and wide windows settle about as many
+#: points from seeds interpolated over this many points as over ``ANCHOR_STRIDE``, at a
+#: quarter of the look-ups.
 RESAMPLED_ANCHOR_STRIDE: Final = 80
 #: Arc length either side of an interpolated seed searched first for the nearest sample,
 #: m (on Town01's noise-free detections all but about one seed in 2000 lie within it of
