@@ -11,6 +11,7 @@ import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import reduce
 from typing import Any, Final
 
 import numpy as np
@@ -239,7 +240,8 @@ class _SharedNearest:
 
     def __init__(self, centres: list[NDArrayFloat]) -> None:
         self._points = np.concatenate(centres)
-        self._splits = np.cumsum([len(centre) for centre in centres])[:-1]
+        ends = np.cumsum([len(centre) for centre in centres]).tolist()
+        self._bounds = list(zip([0, *ends[:-1]], ends))
         self._found: dict[LaneletKey, list[tuple[NDArrayFloat, NDArrayInt]]] = {}
 
     def of(self, lane: int) -> CentreNearest:
@@ -248,9 +250,8 @@ class _SharedNearest:
             found = self._found.get(geometry.key)
             if found is None:
                 distances, index = geometry.centre_nearest(self._points)
-                found = self._found[geometry.key] = (list(zip(np.split(distances, self._splits),
-                                                              np.split(index, self._splits)))
-                                                     if len(self._splits) else [(distances, index)])
+                found = self._found[geometry.key] = [(distances[first:end], index[first:end])
+                                                     for first, end in self._bounds]
             return found[lane]
 
         return centre_nearest
@@ -581,7 +582,7 @@ class GroundTruth:
             """Not taken yet, and near the detection or joined to the path near its end."""
             if any(geometry.key == g.key for g in taken):
                 return False
-            return float(np.min(centre_distances(geometry))) <= cap or float(np.hypot(*(joint - end))) <= reach
+            return float(centre_distances(geometry).min()) <= cap or float(np.hypot(*(joint - end))) <= reach
 
         start = candidate.geometry
         behind: list[LaneletGeometry] = []
@@ -595,7 +596,7 @@ class GroundTruth:
             ]
             if not previous:
                 break
-            chosen = min(previous, key=lambda g: float(np.sum(np.minimum(centre_distances(g), cap))))
+            chosen = min(previous, key=lambda g: float(np.minimum(centre_distances(g), cap).sum()))
             behind.insert(0, chosen)
             covered += chosen.length_m
         leaves: list[list[LaneletGeometry]] = []
@@ -619,13 +620,14 @@ class GroundTruth:
         scored = []
         for path in leaves:
             lanelets = tuple(behind + path)
-            distances = np.min([centre_distances(g) for g in lanelets], axis=0)
+            # np.mean's sums and quotients without its dispatch (a frame scores a handful of short arrays)
+            distances = reduce(np.minimum, [centre_distances(g) for g in lanelets])
             scored.append(
                 _Sequence(
                     lanelets=lanelets,
                     candidate=candidate,
-                    score_m=float(np.mean(np.minimum(distances, cap))),
-                    fit_share=float(np.mean(distances <= cap)),
+                    score_m=float(np.minimum(distances, cap).sum()) / len(distances),
+                    fit_share=int(np.count_nonzero(distances <= cap)) / len(distances),
                 )
             )
         return scored

@@ -22,6 +22,9 @@ NDArrayBool = npt.NDArray[np.bool_]
 ZERO_LENGTH_M: Final = 1e-12
 #: Longest piece (m) of a segment in ``SegmentIndex``'s KD-tree of piece midpoints.
 INDEX_PIECE_M: Final = 0.5
+#: Nearest piece midpoints ``SegmentIndex.capped`` asks its KD-tree for at once (on
+#: Town01's tie-breaks all but about 3 points in 1000 have fewer within their search radius).
+CAPPED_NEIGHBOURS: Final = 6
 #: Slack (m) on ``SegmentIndex.capped``'s search radius: covers the rounding of the
 #: distances it is built from, so the closest segment is never left out.
 CAP_MARGIN_M: Final = 1e-6
@@ -205,22 +208,38 @@ class SegmentIndex:
         """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
         is smaller, m. The closest segment is no farther than the segment of the nearest
         piece midpoint, so it has a piece midpoint within the smaller of ``cap_m`` and that
-        segment's distance, plus half a piece (and a micrometre for rounding), of the point;
-        those segments are measured by :func:`segment_distances` (each point's list padded
-        with its last); a point with none is farther than the cap."""
+        segment's distance, plus half a piece (and a micrometre for rounding), of the point:
+        the segments of the ``CAPPED_NEIGHBOURS`` nearest piece midpoints within that radius
+        are measured by :func:`segment_distances` (each point's list padded with its nearest:
+        a point with none within is farther than the cap from every segment), and of all the
+        piece midpoints within it (:meth:`_within`) for a point whose every one of those lies
+        within it."""
         by_piece, segment = self._index()
-        bound = segment_distances(points, self.vertices, segment[by_piece.query(points)[1]][:, None])[0]
+        count = min(CAPPED_NEIGHBOURS, len(segment))
+        gaps, nearest = by_piece.query(points, k=list(range(1, count + 1)))
+        bound = segment_distances(points, self.vertices, segment[nearest[:, :1]])[0]
         radius = np.minimum(bound, cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
-        near = by_piece.query_ball_point(points, r=radius)
-        counts, flat = _flattened(near)
-        capped = np.full(len(points), cap_m)
-        rows = np.flatnonzero(counts)  # the others are farther than the cap from every segment
+        within = gaps <= radius[:, None]
+        pieces = np.where(within, nearest, nearest[:, :1])
+        capped: NDArrayFloat = np.minimum(segment_distances(points, self.vertices, segment[pieces])[0], cap_m)
+        more = np.flatnonzero(within[:, -1]) if count < len(segment) else []
+        if len(more):
+            capped[more] = self._within(points[more], radius[more], cap_m)
+        return capped
+
+    def _within(self, points: NDArrayFloat, radius: NDArrayFloat, cap_m: float) -> NDArrayFloat:
+        """Per point, the smallest of ``cap_m`` and its distances (m) to the segments with a
+        piece midpoint within its ``radius`` (m): ``cap_m`` when none has."""
+        by_piece, segment = self._index()
+        counts, flat = _flattened(by_piece.query_ball_point(points, r=radius))
+        found = np.full(len(points), cap_m)
+        rows = np.flatnonzero(counts)
         if len(rows):
             counts = counts[rows]
             starts = np.cumsum(counts) - counts
             pieces = flat[np.minimum(starts[:, None] + np.arange(int(counts.max())), (starts + counts - 1)[:, None])]
-            capped[rows] = np.minimum(segment_distances(points[rows], self.vertices, segment[pieces])[0], cap_m)
-        return capped
+            found[rows] = np.minimum(segment_distances(points[rows], self.vertices, segment[pieces])[0], cap_m)
+        return found
 
 
 def nearest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:

@@ -41,6 +41,12 @@ NEAREST_CHUNK: Final = 512
 #: Every this many detected points look up their nearest sample; the others
 #: interpolate its sample index by point index.
 ANCHOR_STRIDE: Final = 20
+#: ``ANCHOR_STRIDE`` of ``RouteBorder.resampled``, which gives the distances alone: they do
+#: not depend on the seeds (a window that cannot settle a point hands it to the exact
+#: search), and on Town01's detections the narrow and wide windows settle about as many
+#: points from seeds interpolated over this many points as over ``ANCHOR_STRIDE``, at a
+#: quarter of the look-ups.
+RESAMPLED_ANCHOR_STRIDE: Final = 80
 #: Arc length either side of an interpolated seed searched first for the nearest sample,
 #: m (on Town01's noise-free detections all but about one seed in 2000 lie within it of
 #: the nearest sample).
@@ -89,6 +95,19 @@ def _coincidence_m(step_m: float, other_margin_m: float) -> float:
     """Samples of other lines this close to a border can never be closer than it by the
     margin to a point: d(p, o) >= d(p, border) - coincidence and d_resampled <= d + step / 2."""
     return (other_margin_m - step_m / 2.0) / 2.0
+
+
+def _interpolated(anchors: NDArrayInt, values: NDArrayFloat) -> NDArrayFloat:
+    """``values`` at the point indices ``anchors`` (ascending, the first 0) interpolated
+    linearly to every point index up to the last anchor: ``np.interp``'s up to rounding, in
+    fewer passes over the points."""
+    steps = np.diff(anchors)
+    slope = np.diff(values) / steps
+    found = np.empty(int(anchors[-1]) + 1)
+    found[:-1] = np.repeat(values[:-1] - anchors[:-1] * slope, steps)
+    found[:-1] += np.arange(len(found) - 1) * np.repeat(slope, steps)
+    found[-1] = values[-1]
+    return found
 
 
 @dataclass(frozen=True)
@@ -230,8 +249,9 @@ class RouteBorder:
     driving order) and its samples every ``step_m``, with what is needed to find each
     detected point's closest GT point and whether another lane's border is closer.
 
-    Assembly only joins the parts' arrays: clearances live in the parts; a KD-tree of the
-    samples is built only for long borders, on first use."""
+    Assembly only joins the parts' arrays: clearances live in the parts (and are joined on
+    first use, by the check for other lanes' borders); a KD-tree of the samples is built
+    only for long borders, on first use."""
 
     def __init__(self, lines: MapLines, parts: list[BorderPart], ignored: set[int], calls: int = 0) -> None:
         """``parts``: the lanelets' borders in driving order (same ``step_m``, reach and
@@ -280,17 +300,25 @@ class RouteBorder:
         self._sample_x, self._sample_y = padded_x[: len(self.samples)], padded_y[: len(self.samples)]
         self._widths = tuple(widths)
         """Samples in the narrow and in the wide window."""
-        self._checkpoint_arc = np.concatenate(
-            [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(arc_offsets, parts)]
+        self._arc_offsets = arc_offsets
+
+    @cached_property
+    def _clearances(self) -> tuple[NDArrayFloat, NDArrayFloat]:
+        """Arc length (m) of each part's checkpoints along the border, and each one's
+        clearance to the lines that are not ignored (m, the parts' ``clearances``): built on
+        first use, by the check for other lanes' borders (distances to the samples alone
+        need none)."""
+        checkpoint_arc = np.concatenate(
+            [offset + part.sample_arc_m[part.checkpoints] for offset, part in zip(self._arc_offsets, self._parts)]
         )
-        ignored_slots = set(lines.slots(ignored).tolist())
+        ignored_slots = set(self._lines.slots(self._ignored).tolist())
         clearance = []
-        for part in parts:
+        for part in self._parts:
             slots, rows = part.clearances
             kept = rows[[slot not in ignored_slots for slot in slots.tolist()]]
             cap = np.full(rows.shape[1], part.clearance_cap_m)
             clearance.append(np.minimum(cap, kept.min(axis=0)) if len(kept) else cap)
-        self._clearance = np.concatenate(clearance)
+        return checkpoint_arc, np.concatenate(clearance)
 
     @cached_property
     def _near_others(self) -> tuple[NDArrayInt, cKDTree | None]:
@@ -507,8 +535,9 @@ class RouteBorder:
         arc = self.sample_arc[sample]
         other_closer = np.zeros(len(points), dtype=bool)
         if others:
-            after = np.minimum(np.searchsorted(self._checkpoint_arc, arc), len(self._clearance) - 1)
-            clearance = np.minimum(self._clearance[after], self._clearance[np.maximum(after - 1, 0)])
+            checkpoint_arc, clearances = self._clearances
+            after = np.minimum(np.searchsorted(checkpoint_arc, arc), len(clearances) - 1)
+            clearance = np.minimum(clearances[after], clearances[np.maximum(after - 1, 0)])
             suspect = 2.0 * resampled > clearance + self.other_margin_m - (self.step_m + CLEARANCE_SPACING_M)
             if np.any(suspect):
                 other_closer[suspect] = self._other_closer(points[suspect], resampled[suspect] - self.other_margin_m)
@@ -526,7 +555,8 @@ class RouteBorder:
         """Per lane (points ``(N >= 2, 2)``, world frame, driving order), the distances (m)
         of its points to the samples: ``distances(points, exact=False, others=False)`` of
         each lane in turn, bit for bit (seeds from each lane's own anchors, the KD-tree from
-        the same call on), in one pass over the points of up to ``BLOCK_POINTS`` of them."""
+        the same call on; every ``RESAMPLED_ANCHOR_STRIDE``-th point an anchor), in one pass
+        over the points of up to ``BLOCK_POINTS`` of them."""
         found: list[NDArrayFloat] = []
         group: list[NDArrayFloat] = []
         size = 0
@@ -545,14 +575,14 @@ class RouteBorder:
         anchors, by_tree = [], []
         for start, count in zip(starts.tolist(), counts):
             self._calls += 1
-            anchors.extend(range(start, start + count - 1, ANCHOR_STRIDE))
+            anchors.extend(range(start, start + count - 1, RESAMPLED_ANCHOR_STRIDE))
             anchors.append(start + count - 1)
             by_tree.append(self._uses_tree())
         points = lanes[0] if len(lanes) == 1 else np.concatenate(lanes)
         anchors_ = np.array(anchors)
         seeds = self._by_method((points[anchors_],), np.searchsorted(starts, anchors_, side="right") - 1, by_tree,
                                 lambda chosen, tree: (self._seed_sample(chosen, tree),))[0]
-        seed = np.interp(np.arange(len(points)), anchors_, seeds)
+        seed = _interpolated(anchors_, seeds)
         resampled, sample, settled = self._nearest_samples(points, seed)
         redo = np.flatnonzero(~settled | (resampled > REFINE_DISTANCE_M))
         for first in range(0, len(redo), NEAREST_CHUNK):
@@ -560,7 +590,8 @@ class RouteBorder:
             resampled[chunk] = self._by_method((points[chunk], resampled[chunk]),
                                                np.searchsorted(starts, chunk, side="right") - 1, by_tree,
                                                self._nearest)[0]
-        return [resampled] if len(lanes) == 1 else np.split(resampled, starts[1:-1])
+        bounds = starts.tolist()
+        return [resampled[first:end] for first, end in zip(bounds[:-1], bounds[1:])]
 
     def _by_method(self, arrays: tuple[Any, ...], lane: NDArrayInt, by_tree: list[bool],
                    method: Callable[..., tuple[Any, ...]]) -> tuple[Any, ...]:

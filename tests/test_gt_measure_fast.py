@@ -15,10 +15,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cold_maps.groundtruth.meter import (GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M, GroundTruthMeter,
-                                         Measurement, _end_direction, ahead_of_m, border_figures, covered_length_m,
-                                         gt_ends, points_past_ends)
-from gt_matching.polyline import SegmentIndex, arc_lengths, closest_distances
+from cold_maps.groundtruth.meter import (FIGURE_BORDERS, GT_END_TOLERANCE_M, RANGE_CHORD_M, RANGE_ERROR_THRESHOLD_M,
+                                         GroundTruthMeter, Measurement, _end_direction, ahead_of_m, border_figures,
+                                         covered_length_m, gt_ends, points_past_ends)
+from gt_matching.polyline import CAPPED_NEIGHBOURS, INDEX_PIECE_M, SegmentIndex, arc_lengths, closest_distances
 from conftest import bundled_map
 
 
@@ -39,6 +39,20 @@ def test_capped_distances_equal_the_brute_force_bit_for_bit(seed: int, count: in
     low, high = vertices.min(axis=0) - 2.0 * cap - 1.0, vertices.max(axis=0) + 2.0 * cap + 1.0
     points = rng.uniform(low, high, (40, 2))
     points[:10] = vertices[rng.integers(0, count, 10)] + rng.normal(0.0, 0.01, (10, 2))
+    expected = np.minimum(closest_distances(points, vertices)[0], cap)
+    assert np.array_equal(SegmentIndex(vertices).capped(points, cap), expected)
+
+
+@pytest.mark.parametrize("cap", [0.05, 1.5])
+def test_capped_distances_among_more_pieces_than_asked_for_at_once_equal_the_brute_force(cap: float) -> None:
+    """A zigzag of 5 cm segments: every point near it has more than ``CAPPED_NEIGHBOURS``
+    piece midpoints within its search radius (the segments past the nearest ones are found
+    too)."""
+    vertices = np.column_stack((np.arange(60) * 0.05, 0.03 * (np.arange(60) % 2)))
+    points = np.random.default_rng(5).uniform((0.3, -0.05), (2.7, 0.08), (50, 2))
+    middles = 0.5 * (vertices[1:] + vertices[:-1])
+    within = np.hypot(*(points[:, None, :] - middles[None]).transpose(2, 0, 1)) <= INDEX_PIECE_M / 2.0
+    assert np.all(within.sum(axis=1) > CAPPED_NEIGHBOURS)
     expected = np.minimum(closest_distances(points, vertices)[0], cap)
     assert np.array_equal(SegmentIndex(vertices).capped(points, cap), expected)
 
@@ -106,11 +120,10 @@ def test_border_figures_equal_the_first_written_ones_bit_for_bit(seed: int, coun
         assert points_past_ends(border, gt_ends(gt), distances, 0.02) == _past_reference(border, gt, distances, 0.02)
 
 
-@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.floats(0.001, 1.0), st.floats(0.0, 0.3))
-def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(seed: int, borders: int, scale: float,
-                                                                             far_share: float) -> None:
-    """Borders of 2 to 200 points, some ending at (or running past) an end of the GT, some
-    with points beyond the range threshold, with and without poses."""
+def _assert_figures_per_border(seed: int, borders: int, scale: float, far_share: float) -> None:
+    """``border_figures`` of ``borders`` borders of 2 to 200 points, some ending at (or
+    running past) an end of the GT, some with points beyond the range threshold, with and
+    without poses, equal their per-border figures bit for bit."""
     rng = np.random.default_rng(seed)
     gt = _polyline(seed + 1, 40, 0.3)
     lanes, errors, poses = [], [], []
@@ -129,6 +142,19 @@ def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(se
     for (_, covered, ahead), border, error, pose in zip(found, lanes, errors, poses):
         assert covered == covered_length_m(border, error)
         assert np.array_equal(ahead, ahead_of_m(border, pose))
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.floats(0.001, 1.0), st.floats(0.0, 0.3))
+def test_border_figures_of_many_borders_equal_the_per_border_ones_bit_for_bit(seed: int, borders: int, scale: float,
+                                                                             far_share: float) -> None:
+    """A few borders: one pass."""
+    _assert_figures_per_border(seed, borders, scale, far_share)
+
+
+@pytest.mark.parametrize("seed", [3, 17])
+def test_border_figures_in_several_passes_equal_the_per_border_ones_bit_for_bit(seed: int) -> None:
+    """More borders than ``FIGURE_BORDERS``: three passes, the last a short one."""
+    _assert_figures_per_border(seed, 2 * FIGURE_BORDERS + 3, 0.2, 0.1)
 
 
 def _captured_calls(map_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
