@@ -24,7 +24,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING, Callable, Final, Iterator
+from typing import TYPE_CHECKING, Callable, Final, Iterator, NamedTuple
 
 import numpy as np
 
@@ -130,6 +130,19 @@ class _Names:
     prefixes: tuple[str, str]
 
 
+class _Worst(NamedTuple):
+    """A scenario's frame with the largest error so far, not yet drawn as its :class:`Overlay`
+    (:meth:`MapEvaluator._draw_overlays`): ``frame`` its index, ``max_error_m`` that error (m),
+    ``measured`` its lane's measurement, ``detections`` the senders' detections by name,
+    ``fused`` the fused borders by name (world frame)."""
+
+    frame: int
+    max_error_m: float
+    measured: Measurement
+    detections: dict[str, fusion.LaneDetection]
+    fused: dict[str, NDArrayFloat]
+
+
 _NO_ERRORS: Final[NDArrayFloat] = np.empty(0)
 _NO_ERRORS.flags.writeable = False
 """The error samples of every record without a lane (read-only, shared)."""
@@ -170,6 +183,8 @@ class MapEvaluator:
         self._relations: dict[str, tuple[bool, str]] = {}
         """The frame's :meth:`_relation` by vehicle name."""
         self._true_lanes: dict[str, tuple[NDArrayFloat, NDArrayFloat]] = {}
+        self._worst: dict[tuple[str, str], _Worst] = {}
+        """Per (map, scenario label) the drive's frame that is to be its overlay, not yet drawn."""
         """The frame's :meth:`true_lane` by vehicle name."""
 
     @property
@@ -305,26 +320,34 @@ class MapEvaluator:
         collector.drives[(self.plan.name, drive_index)] = (frame_offset, drive.frames)
         if frames.start == 0:
             LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-        lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
         with _older_objects_frozen():
-            for first in range(frames.start, frames.stop, BLOCK_FRAMES):
-                block = range(first, min(first + BLOCK_FRAMES, frames.stop))
-                sensed = sense_block(drive.states_block(block), self.sensor, self.plan.errors,
-                                     self.drive_rngs[drive_index],
-                                     stamps_s=[(frame_offset + frame) / FRAME_RATE_HZ for frame in block],
-                                     neighbours=self.neighbours, lane_error=lane_error)
-                fused = [self._fuse_frame(collector, drive_index, frame_offset + frame, frame_sensed)
-                         for frame, frame_sensed in zip(block, sensed)]
-                measured = iter(self._measure_many([lane for frame in fused for _, lane, _ in frame.steps
-                                                    if lane is not None]))
-                for frame in fused:
-                    self._finish_frame(frame, measured, recorder)
-                    collector.frames_done += 1
-                    if on_frame is not None:
-                        on_frame()
-                del sensed
-                release_free_heap()
+            try:
+                self._run_blocks(drive, drive_index, frames, collector, recorder, frame_offset, on_frame)
+            finally:
+                self._draw_overlays(collector)
         return frame_offset + frames.stop
+
+    def _run_blocks(self, drive: Drive, drive_index: int, frames: range, collector: Collector,
+                    recorder: Recorder | None, frame_offset: int, on_frame: Callable[[], None] | None) -> None:
+        """The frame loop of :meth:`run_drive`: its ``frames`` in blocks of :data:`BLOCK_FRAMES`."""
+        lane_error = None if self.lane_errors is None else self.lane_errors[drive_index]
+        for first in range(frames.start, frames.stop, BLOCK_FRAMES):
+            block = range(first, min(first + BLOCK_FRAMES, frames.stop))
+            sensed = sense_block(drive.states_block(block), self.sensor, self.plan.errors,
+                                 self.drive_rngs[drive_index],
+                                 stamps_s=[(frame_offset + frame) / FRAME_RATE_HZ for frame in block],
+                                 neighbours=self.neighbours, lane_error=lane_error)
+            fused = [self._fuse_frame(collector, drive_index, frame_offset + frame, frame_sensed)
+                     for frame, frame_sensed in zip(block, sensed)]
+            measured = iter(self._measure_many([lane for frame in fused for _, lane, _ in frame.steps
+                                                if lane is not None]))
+            for frame in fused:
+                self._finish_frame(frame, measured, recorder)
+                collector.frames_done += 1
+                if on_frame is not None:
+                    on_frame()
+            del sensed
+            release_free_heap()
 
     @property
     def frames_independent(self) -> bool:
@@ -642,18 +665,25 @@ class MapEvaluator:
 
     def _keep_overlay(self, collector: Collector, scenario: Scenario, index: int, measured: Measurement,
                       detections: dict[str, fusion.LaneDetection], fused: dict[str, NDArrayFloat]) -> None:
-        """Keeps this frame (the senders' detections drawn in the world frame) as the
-        scenario's overlay when its error is the largest so far."""
+        """Keeps this frame as the scenario's overlay when its error is the largest so far
+        (drawn when the drive ends, :meth:`_draw_overlays`)."""
         largest = np.maximum.reduce
         worst = float(max(largest(measured.left_errors_m), largest(measured.right_errors_m)))
         label = self._names(scenario).label
-        kept = collector.overlays.get(label)
+        kept = self._worst.get(label) or collector.overlays.get(label)
         if kept is None or worst > kept.max_error_m:
+            self._worst[label] = _Worst(index, worst, measured, detections, fused)
+
+    def _draw_overlays(self, collector: Collector) -> None:
+        """The kept frames as the scenarios' overlays in ``collector`` (the senders' detections
+        drawn in the world frame, the GT cropped around them and the fused lane)."""
+        for label, (index, worst, measured, detections, fused) in self._worst.items():
             borders = {name: world_borders(detection) for name, detection in detections.items()}
             shown = np.vstack([*fused.values(), *(b for pair in borders.values() for b in pair)])
             low, high = shown.min(axis=0) - OVERLAY_MARGIN_M, shown.max(axis=0) + OVERLAY_MARGIN_M
             gt = {"left": _crop(measured.left_gt, low, high), "right": _crop(measured.right_gt, low, high)}
             collector.overlays[label] = Overlay(index, worst, gt, borders, fused)
+        self._worst.clear()
 
 
 GROUND_TRUTHS: Final[dict[str, str]] = {
