@@ -87,6 +87,11 @@ BLOCK_FRAMES: Final[int] = 25
 :meth:`GroundTruthMeter.measure_many`; the fusion stays per frame. A block's detections,
 fused lanes and their temporary arrays are held together (on Town04 1 to 2 MB per
 frame): the block size bounds that, not the results, which are the same for any size."""
+FRAME_LOOP_GC_THRESHOLD: Final[int] = 10_000
+"""Allocations of objects the cyclic garbage collector tracks (net of those freed) between
+two collections of its young generation while a drive's frames run (Python's default: 700).
+A block of frames holds about 9 000 such objects until it is recorded (Town01, the default
+scenarios): the default collected them about once a frame in vain."""
 Finish = Callable[[Measurement | str | None], dict[str, NDArrayFloat]]
 """Records a frame's scenario from its lane's measurement (None when it has no lane to
 measure) and gives the lines the MCAP shows for it (name → ``(N, 2)`` world frame)."""
@@ -128,6 +133,69 @@ class _Names:
     label: tuple[str, str]
     lines: tuple[str, str]
     prefixes: tuple[str, str]
+
+
+class _PairStep:
+    """What records the fusion of one pair in one scenario (:meth:`MapEvaluator._pair`) once its
+    lane is measured: a :data:`Finish`, one object where closures made a cell per name they
+    held (most of the objects a frame left to the cyclic garbage collector).
+
+    Fields:
+        evaluator, collector: what records it, and where.
+        scenario, names: the scenario and its :class:`_Names`.
+        index, stamp: global frame index and its time, s.
+        ego, other: the pair's detections as sensed.
+        truth, relation, detected: ``FrameRecord.truly_fusible``, ``relation`` and
+            ``detected_fusible`` of the pair.
+        metrics: the frame's MCAP metrics, for the scenario's coop (None: a distractor).
+        runtime, result: the fusion's runtime (ms) and result (None: not fused).
+        refused: (reason, predicted, runtime ms, confidence) of a pair rejected before any lane
+            was measured (a detection missing, a pair the fusion refused), else None.
+    """
+
+    __slots__ = ("evaluator", "collector", "scenario", "names", "index", "stamp", "ego", "other", "truth",
+                 "relation", "detected", "metrics", "runtime", "result", "refused")
+
+    def __init__(self, evaluator: MapEvaluator, collector: Collector, scenario: Scenario, index: int, stamp: float,
+                 ego: Sensed, other: Sensed, truth: bool, relation: str, detected: bool | None) -> None:
+        self.evaluator, self.collector, self.scenario = evaluator, collector, scenario
+        self.names = evaluator._names(scenario)
+        self.index, self.stamp, self.ego, self.other = index, stamp, ego, other
+        self.truth, self.relation, self.detected = truth, relation, detected
+        self.metrics: dict[str, float | None] | None = None
+        self.runtime = math.nan
+        self.result: fusion.FusionResult | None = None
+        self.refused: tuple[str, bool | None, float, float] | None = None
+
+    def __call__(self, measured: Measurement | str | None) -> dict[str, NDArrayFloat]:
+        """Records the pair from its lane's measurement (None when it has none); the MCAP
+        lines of the fused lane."""
+        if self.refused is not None:
+            return self.reject(*self.refused)
+        result = self.result
+        assert measured is not None and result is not None
+        if isinstance(measured, str) or measured.gt_unmatched:
+            rejected, why = _rejection(measured)
+            return self.reject(rejected, True, self.runtime, result.confidence, why)
+        evaluator, collector, scenario, name = self.evaluator, self.collector, self.scenario, self.other.state.name
+        evaluator._record(collector, scenario, self.names.keys, measured, self.index, self.stamp, "ego", name,
+                          self.runtime, True, self.truth, self.metrics, relation=self.relation,
+                          confidence=result.confidence, sigmas=(result.left_sigma, result.right_sigma),
+                          detected=self.detected)
+        evaluator._keep_overlay(collector, scenario, self.index, measured,
+                                {"ego": self.ego.detection, name: self.other.detection},  # type: ignore[dict-item]
+                                {"left": result.left, "right": result.right})
+        return dict(zip(self.names.lines, (result.left, result.right)))
+
+    def reject(self, reason: str, predicted: bool | None = None, runtime: float = math.nan,
+               confidence: float = math.nan, why: str = "") -> dict[str, NDArrayFloat]:
+        """Records the pair without a lane, ``FrameRecord.rejected`` ``reason``; no MCAP lines."""
+        for key in self.names.keys:
+            self.collector.add(key, FrameRecord(
+                self.index, self.stamp, "ego", self.other.state.name, _NO_ERRORS, runtime_ms=runtime, rejected=reason,
+                predicted_fusible=predicted, truly_fusible=self.truth, gt_unmatched=why, relation=self.relation,
+                confidence=confidence, stopping=self.evaluator.stopping, detected_fusible=self.detected))
+        return {}
 
 
 class _Worst(NamedTuple):
@@ -320,7 +388,7 @@ class MapEvaluator:
         collector.drives[(self.plan.name, drive_index)] = (frame_offset, drive.frames)
         if frames.start == 0:
             LOG.info("%s: route %s (%.0f m)", self.plan.name, [tuple(k) for k in drive.ego.lanes], drive.ego.length)
-        with _older_objects_frozen():
+        with _frame_loop_gc():
             try:
                 self._run_blocks(drive, drive_index, frames, collector, recorder, frame_offset, on_frame)
             finally:
@@ -474,24 +542,13 @@ class MapEvaluator:
         """The fusion of ``other`` into the ego: the fused lane to measure (None when there is
         none) and what records its measurement, giving the fused lines of the MCAP."""
         plan = self.plan
-        names = self._names(scenario)
-        keys = names.keys
         truth, relation = self._relation(ego.state, other.state)
-        detected = self._detected(truth, ego, other, scenario.fusion)
-        main = other.state.role == "coop"
-
-        def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
-                   confidence: float = math.nan, why: str = "") -> dict[str, NDArrayFloat]:
-            for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", other.state.name, _NO_ERRORS, runtime_ms=runtime,
-                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               gt_unmatched=why, relation=relation, confidence=confidence,
-                                               stopping=self.stopping, detected_fusible=detected))
-            return {}
-
+        step = _PairStep(self, collector, scenario, index, stamp, ego, other, truth, relation,
+                         self._detected(truth, ego, other, scenario.fusion))
         if ego.detection is None or other.detection is None:
-            return None, lambda _: reject(ego.missing("ego") if ego.detection is None else other.missing("coop"))
-        ego_detection, other_detection = ego.detection, other.detection
+            step.refused = (ego.missing("ego") if ego.detection is None else other.missing("coop"), None, math.nan,
+                            math.nan)
+            return None, step
         mode = scenario.fusion
         interpolation = scenario.interpolation or "paper"
         start = time.perf_counter()
@@ -503,29 +560,18 @@ class MapEvaluator:
         else:
             result = fusion.fuse(ego.detection, other.detection, mode=mode, interpolation=interpolation,
                                  params=plan.params)
-        runtime = (time.perf_counter() - start) * 1e3
-        if main:
+        step.runtime = (time.perf_counter() - start) * 1e3
+        step.result = result
+        if other.state.role == "coop":
+            step.metrics = metrics
             start = time.perf_counter()
             fusion.is_fusible(ego.detection, other.detection, plan.params, mode=mode)
-            collector.add_check_ms(names.label, (time.perf_counter() - start) * 1e3)
+            collector.add_check_ms(step.names.label, (time.perf_counter() - start) * 1e3)
         if result.kind == "none":
-            return None, lambda _: reject(reason_category(result.reason), False, runtime, 0.0)
-
-        def finish(measured: Measurement | str | None) -> dict[str, NDArrayFloat]:
-            assert measured is not None
-            if isinstance(measured, str) or measured.gt_unmatched:
-                rejected, why = _rejection(measured)
-                return reject(rejected, True, runtime, result.confidence, why)
-            self._record(collector, scenario, keys, measured, index, stamp, "ego", other.state.name, runtime, True,
-                         truth, metrics if main else None, relation=relation, confidence=result.confidence,
-                         sigmas=(result.left_sigma, result.right_sigma), detected=detected)
-            self._keep_overlay(collector, scenario, index, measured,
-                               {"ego": ego_detection, other.state.name: other_detection},
-                               {"left": result.left, "right": result.right})
-            return dict(zip(names.lines, (result.left, result.right)))
-
+            step.refused = (reason_category(result.reason), False, step.runtime, 0.0)
+            return None, step
         return ((result.left, result.right, detection_pose(ego.detection),
-                 self._frame_true_lane(ego.state, other.state)), finish)
+                 self._frame_true_lane(ego.state, other.state)), step)
 
     def _chain(self, collector: Collector, scenario: Scenario, sensed: dict[str, Sensed], index: int, stamp: float,
                sent: dict[str, int]) -> tuple[Lane | None, Finish]:
@@ -694,19 +740,22 @@ GROUND_TRUTHS: Final[dict[str, str]] = {
 
 
 @contextmanager
-def _older_objects_frozen() -> Iterator[None]:
-    """Moves the objects alive on entry (the lane graph, the ground truth, ...) out of the
-    cyclic garbage collector's reach until exit (``gc.freeze``, then ``gc.unfreeze``): the
-    collections a drive's temporary objects trigger then scan those alone, not the map's
-    objects each time (on Town01 that took 0.4 ms per frame). Nothing is frozen while some
-    caller already froze objects."""
+def _frame_loop_gc() -> Iterator[None]:
+    """The cyclic garbage collector set for a drive's frames until exit: the objects alive on
+    entry (the lane graph, the ground truth, ...) moved out of its reach (``gc.freeze``, then
+    ``gc.unfreeze``), so that its collections do not scan them each time (on Town01 that took
+    0.26 ms per frame), and its young generation collected every
+    :data:`FRAME_LOOP_GC_THRESHOLD` allocations. Left as it is while some caller froze objects."""
     if gc.get_freeze_count():
         yield
         return
+    threshold = gc.get_threshold()
     gc.freeze()
+    gc.set_threshold(FRAME_LOOP_GC_THRESHOLD, *threshold[1:])
     try:
         yield
     finally:
+        gc.set_threshold(*threshold)
         gc.unfreeze()
 
 
