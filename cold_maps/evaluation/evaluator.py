@@ -190,11 +190,12 @@ class _PairStep:
     def reject(self, reason: str, predicted: bool | None = None, runtime: float = math.nan,
                confidence: float = math.nan, why: str = "") -> dict[str, NDArrayFloat]:
         """Records the pair without a lane, ``FrameRecord.rejected`` ``reason``; no MCAP lines."""
-        for key in self.names.keys:
-            self.collector.add(key, FrameRecord(
-                self.index, self.stamp, "ego", self.other.state.name, _NO_ERRORS, runtime_ms=runtime, rejected=reason,
-                predicted_fusible=predicted, truly_fusible=self.truth, gt_unmatched=why, relation=self.relation,
-                confidence=confidence, stopping=self.evaluator.stopping, detected_fusible=self.detected))
+        record = FrameRecord(self.index, self.stamp, "ego", self.other.state.name, _NO_ERRORS, runtime_ms=runtime,
+                             rejected=reason, predicted_fusible=predicted, truly_fusible=self.truth, gt_unmatched=why,
+                             relation=self.relation, confidence=confidence, stopping=self.evaluator.stopping,
+                             detected_fusible=self.detected)
+        for key in self.names.keys:  # one record for both boundaries: immutable, and the same without a lane
+            self.collector.add(key, record)
         return {}
 
 
@@ -493,9 +494,10 @@ class MapEvaluator:
         keys = self._keys(scenario)
 
         def reject(rejected: str, why: str = "") -> dict[str, NDArrayFloat]:
+            record = FrameRecord(index, stamp, "ego", "", _NO_ERRORS, rejected=rejected, gt_unmatched=why,
+                                 end_reason=ego.end_reason, stopping=self.stopping)
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", "", _NO_ERRORS, rejected=rejected,
-                                               gt_unmatched=why, end_reason=ego.end_reason, stopping=self.stopping))
+                collector.add(key, record)
             return {}
 
         if ego.detection is None:
@@ -599,10 +601,11 @@ class MapEvaluator:
 
         def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
                    why: str = "") -> dict[str, NDArrayFloat]:
+            record = FrameRecord(index, stamp, "ego", last, _NO_ERRORS, runtime_ms=runtime, rejected=reason,
+                                 predicted_fusible=predicted, truly_fusible=truth, gt_unmatched=why,
+                                 stopping=self.stopping, detected_fusible=detected)
             for key in keys:
-                collector.add(key, FrameRecord(index, stamp, "ego", last, _NO_ERRORS, runtime_ms=runtime,
-                                               rejected=reason, predicted_fusible=predicted, truly_fusible=truth,
-                                               gt_unmatched=why, stopping=self.stopping, detected_fusible=detected))
+                collector.add(key, record)
             return {}
 
         if ego.detection is None or any(c.detection is None for c in coops):
