@@ -15,7 +15,8 @@ import numpy as np
 from fusion.association import Association, associate
 from fusion.convoy import OverlapStart, convoy_border, overlap_start
 from fusion.errors import InvalidDetectionError, InvalidParameterError
-from fusion.fusibility import LaneEnds, geometric_assessment, lane_ends, paper_check, relative_pose
+from fusion.fusibility import (EgoEnd, LaneEnds, ego_lane_end, geometric_assessment, lane_ends, paper_check,
+                               relative_pose)
 from fusion.geometry import to_world, transform
 from fusion.registration import registered
 from fusion.spline import EndFits, hermite_lane, hermite_turns, paper_pieces, sample_pieces
@@ -129,15 +130,40 @@ def assess(ego: LaneDetection, coop: LaneDetection, params: FusionParams = DEFAU
     return _decide(ego, coop, mode, params, borders, x_rel, end_fits(ego, coop, borders, params), ends)[1]
 
 
+class _EgoWork:
+    """What the pairs of one ego detection share: ``end`` (:func:`fusion.fusibility.ego_lane_end`
+    of its borders) and the ego lane alone (:meth:`refused`). Kept for the last
+    :data:`_MAX_EGOS` ego detections (:func:`_ego_work`): an evaluation fuses one ego detection
+    with every other vehicle of the frame."""
+
+    __slots__ = ("ego", "end", "_alone")
+
+    def __init__(self, ego: LaneDetection) -> None:
+        self.ego = ego  # held, so the id that keys the entry stays its
+        self.end: EgoEnd = ego_lane_end(ego.left, ego.right)
+        self._alone: FusionResult | None = None
+
+    def refused(self, gap_m: float, reason: str) -> FusionResult:
+        """:func:`ego_result` of the ego's whole borders with ``gap_m`` and ``reason``; every
+        such result shares its (read-only) arrays."""
+        alone = self._alone
+        if alone is None:
+            alone = self._alone = ego_result(self.ego, (self.ego.left, self.ego.right), gap_m, reason)
+            return alone
+        return FusionResult(alone.left, alone.right, alone.left_source, alone.right_source, "none", gap_m, reason,
+                            left_sigma=alone.left_sigma, right_sigma=alone.right_sigma)
+
+
 class _PairWork:
     """What :func:`fuse` and :func:`assess` work out of a pair before fusing it: ``framed``
-    (:func:`ego_frame_borders`), ``fits`` (:func:`end_fits`, each fit made on first use), the
-    decision per mode (:meth:`decision`) and the result of a refused pair (:meth:`refused`).
+    (:func:`ego_frame_borders`), ``fits`` (:func:`end_fits`, each fit made on first use),
+    ``ends`` (:func:`fusion.fusibility.lane_ends`), the decision per mode (:meth:`decision`)
+    and the result of a refused pair (:meth:`refused`).
     Kept for the last :data:`_MAX_PAIRS` pairs (:func:`_pair_work`): an evaluation fuses one
     pair with several interpolations and checks it again; a :class:`LaneDetection` is
     immutable (read-only arrays), so the work is the same."""
 
-    __slots__ = ("pair", "framed", "fits", "_decided", "_refused")
+    __slots__ = ("pair", "framed", "fits", "ends", "ego_work", "_decided", "_refused")
 
     def __init__(self, ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> None:
         self.pair = (ego, coop, params)  # held, so the ids that key the entry stay theirs
@@ -145,6 +171,8 @@ class _PairWork:
         for border in self.framed[0][2:]:
             border.flags.writeable = False  # shared by every call of the pair
         self.fits = end_fits(ego, coop, self.framed[0], params)
+        self.ego_work = _ego_work(ego)
+        self.ends = lane_ends(*self.framed[0], ego_end=self.ego_work.end)
         self._decided: dict[str, tuple[FusionKind, Association, LaneEnds, tuple[OverlapStart, OverlapStart] | None]] = {}
         self._refused: dict[str, FusionResult] = {}
 
@@ -153,7 +181,8 @@ class _PairWork:
         found = self._decided.get(mode)
         if found is None:
             ego, coop, params = self.pair
-            found = self._decided[mode] = _decide(ego, coop, mode, params, self.framed[0], self.framed[1][0], self.fits)
+            found = self._decided[mode] = _decide(ego, coop, mode, params, self.framed[0], self.framed[1][0], self.fits,
+                                                  self.ends)
         return found
 
     def refused(self, mode: str) -> FusionResult:
@@ -162,16 +191,29 @@ class _PairWork:
         found = self._refused.get(mode)
         if found is None:
             _, association, ends, _ = self.decision(mode)
-            el, er, _, _ = self.framed[0]
-            found = self._refused[mode] = ego_result(self.pair[0], (el, er), ends.gap_m, association.reason)
+            found = self._refused[mode] = self.ego_work.refused(ends.gap_m, association.reason)
         return found
 
 
 _PAIRS: dict[tuple[int, int, int], _PairWork] = {}
 _MAX_PAIRS: Final[int] = 32
+_EGOS: dict[int, _EgoWork] = {}
+_MAX_EGOS: Final[int] = 8
 _PAIRS_CHANGING = threading.Lock()
-"""Held while :data:`_PAIRS` drops and adds entries: fusing from several threads at once
-finds the oldest entry while no other thread adds one."""
+"""Held while :data:`_PAIRS` or :data:`_EGOS` drops and adds entries: fusing from several
+threads at once finds the oldest entry while no other thread adds one."""
+
+
+def _ego_work(ego: LaneDetection) -> _EgoWork:
+    """The :class:`_EgoWork` of ``ego``, made on first use, the oldest of :data:`_MAX_EGOS` dropped."""
+    work = _EGOS.get(id(ego))
+    if work is None:
+        work = _EgoWork(ego)
+        with _PAIRS_CHANGING:
+            if len(_EGOS) >= _MAX_EGOS:
+                _EGOS.pop(next(iter(_EGOS)))
+            _EGOS[id(ego)] = work
+    return work
 
 
 def _pair_work(ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> _PairWork:

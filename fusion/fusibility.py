@@ -77,13 +77,24 @@ def signed_gap_m(p_end: tuple[float, float], t_end: tuple[float, float], p_start
     return length if dx * t_end[0] + dy * t_end[1] > _MIN_GAP_M else -length
 
 
-def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArrayFloat,
-              coop_right: NDArrayFloat) -> LaneEnds:
-    """Centre-line end of the ego lane and start of the coop lane, in the borders' frame."""
+EgoEnd = tuple[tuple[float, float], tuple[float, float], float]
+"""``(point, tangent, width_m)`` of the ego lane at its end (:func:`ego_lane_end`)."""
+
+
+def ego_lane_end(ego_left: NDArrayFloat, ego_right: NDArrayFloat) -> EgoEnd:
+    """The ego lane's centre-line end point and tangent (:func:`lane_end`) and its width
+    there [m], in the borders' frame."""
     p_end, t_end = lane_end(ego_left, ego_right, True)
-    p_start, t_start = lane_end(coop_left, coop_right, False)
     (lx, ly), (rx, ry) = ego_left[-1].tolist(), ego_right[-1].tolist()
-    width = math.hypot(lx - rx, ly - ry)
+    return p_end, t_end, math.hypot(lx - rx, ly - ry)
+
+
+def lane_ends(ego_left: NDArrayFloat, ego_right: NDArrayFloat, coop_left: NDArrayFloat,
+              coop_right: NDArrayFloat, ego_end: EgoEnd | None = None) -> LaneEnds:
+    """Centre-line end of the ego lane and start of the coop lane, in the borders' frame;
+    ``ego_end`` the :func:`ego_lane_end` of the ego borders when the caller has it."""
+    p_end, t_end, width = ego_lane_end(ego_left, ego_right) if ego_end is None else ego_end
+    p_start, t_start = lane_end(coop_left, coop_right, False)
     return LaneEnds(p_end, p_start, t_end, t_start, width, signed_gap_m(p_end, t_end, p_start))
 
 

@@ -328,13 +328,15 @@ class EndFits:
         fits, and so do all when every end's curvature turns its border by more than
         :data:`_WHOLE_MAX_TURN_RAD` (a curve beyond the fit's model), or an end whose whole
         detection is no single arc in the fit's model."""
-        if self._arcs is None:
-            fits = self._arcs = self()
+        arcs = self._arcs
+        if arcs is None:  # set once, when made: another thread may read it meanwhile
+            arcs = fits = self()
             if _whole_fit_helps(fits, self._borders):
                 whole = fit_ends(self._borders, (True, True, False, False), (_WHOLE_WINDOW_M,), _NOISE_SAMPLE_M,
                                  self._sigmas)
-                self._arcs = tuple(_better_arc(end, fit) for end, fit in zip(fits, whole))
-        return self._arcs
+                arcs = tuple(_better_arc(end, fit) for end, fit in zip(fits, whole))
+            self._arcs = arcs
+        return arcs
 
 
 def _whole_fit_helps(fits: Sequence[EndFit], borders: Sequence[NDArrayFloat]) -> bool:

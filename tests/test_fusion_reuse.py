@@ -41,6 +41,7 @@ def same(a: fusion.FusionResult, b: fusion.FusionResult) -> bool:
 def fresh(call):
     """``call()`` with nothing kept from earlier calls."""
     fusion.api._PAIRS.clear()
+    fusion.api._EGOS.clear()
     fusion.geometry._DESIGNS.clear()
     return call()
 
@@ -66,6 +67,20 @@ def test_a_pair_fused_again_and_among_other_pairs_gives_the_fresh_values(gap_m: 
         fusion.fuse(egos[0], noisy(40.0, seed=100 + k), params=params)
     assert len(fusion.api._PAIRS) == fusion.api._MAX_PAIRS
     assert same(fusion.fuse(*calls[0][:2], mode=calls[0][2], interpolation=calls[0][3], params=params), expected[0])
+
+
+def test_pairs_refused_with_one_ego_keep_their_own_gap_and_reason() -> None:
+    """The refused pairs of one ego share the ego lane's arrays, each with its pair's gap and
+    reason: the values of fresh calls."""
+    ego = noisy(20.0, seed=1)
+    coops = [noisy(5.0, seed=2), noisy(62.0, seed=3, lane_m=3.5), noisy(120.0, seed=4)]  # behind, beside, too far
+    expected = [fresh(lambda: fusion.fuse(copy(ego), copy(c), mode="spline")) for c in coops]
+    assert [r.kind for r in expected] == ["none"] * 3 and len({r.reason for r in expected}) == 3
+    fusion.api._PAIRS.clear()
+    fusion.api._EGOS.clear()
+    found = [fusion.fuse(ego, c, mode="spline") for c in coops]
+    assert all(same(a, b) and a.gap_m == b.gap_m for a, b in zip(found, expected))
+    assert found[1].left is found[0].left
 
 
 def test_weighted_end_fits_are_the_same_kept_and_each_design_the_same_made_alone() -> None:

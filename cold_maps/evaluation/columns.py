@@ -52,9 +52,18 @@ def from_numpy(values: np.ndarray, arrow_type: pa.DataType, valid: np.ndarray | 
 
 
 def from_strings(values: Sequence[str | None]) -> pa.Array:
-    """A string column of ``values`` (None: null)."""
+    """A string column of ``values`` (None: null); ASCII strings without a null are encoded
+    in one piece (a character a byte: the offsets are the strings' lengths)."""
     import pyarrow as pa
 
+    if None not in values:
+        text = "".join(values)  # type: ignore[arg-type]  # no None
+        if text.isascii():
+            offsets = np.zeros(len(values) + 1, dtype=np.int32)
+            np.cumsum(list(map(len, values)), out=offsets[1:])  # type: ignore[arg-type]  # no None
+            return pa.Array.from_buffers(pa.string(), len(values),
+                                         [None, pa.py_buffer(offsets), pa.py_buffer(text.encode("ascii"))],
+                                         null_count=0)
     encoded = [b"" if v is None else v.encode("utf-8") for v in values]
     offsets = np.zeros(len(encoded) + 1, dtype=np.int32)
     np.cumsum([len(e) for e in encoded], out=offsets[1:])
@@ -93,8 +102,10 @@ def from_values(values: Sequence[Any], arrow_type: pa.DataType) -> pa.Array:
 
     if arrow_type == pa.string():
         return from_strings(values)
-    valid = np.array([v is not None for v in values], dtype=bool)
     dtype = bool if arrow_type == pa.bool_() else _NUMPY_TYPES[str(arrow_type)]
+    if None not in values:
+        return from_numpy(np.array(values, dtype=dtype), arrow_type)
+    valid = np.array([v is not None for v in values], dtype=bool)
     filled = np.array([0 if v is None else v for v in values], dtype=dtype)
     return from_numpy(filled, arrow_type, valid)
 
