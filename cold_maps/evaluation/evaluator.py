@@ -252,9 +252,9 @@ class MapEvaluator:
         self._relations: dict[str, tuple[bool, str]] = {}
         """The frame's :meth:`_relation` by vehicle name."""
         self._true_lanes: dict[str, tuple[NDArrayFloat, NDArrayFloat]] = {}
+        """The frame's :meth:`true_lane` by vehicle name."""
         self._worst: dict[tuple[str, str], _Worst] = {}
         """Per (map, scenario label) the drive's frame that is to be its overlay, not yet drawn."""
-        """The frame's :meth:`true_lane` by vehicle name."""
 
     @property
     def total_frames(self) -> int:
