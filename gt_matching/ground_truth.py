@@ -156,6 +156,9 @@ def _sequence_arc(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNea
     """Arc length (m) along the joined mid-lines of ``lanelets`` of each detection mid-line
     sample's closest mid-line vertex (the first lanelet wins a tie)."""
     found = [centre_nearest(g) for g in lanelets]
+    if len(found) == 1:
+        only: NDArrayFloat = lanelets[0].centre_arc_m[found[0][1]]
+        return only
     nearest = np.argmin([distance for distance, _ in found], axis=0)
     offsets = np.cumsum([0.0] + [g.length_m for g in lanelets[:-1]])
     along = np.array([offset + g.centre_arc_m[index] for offset, g, (_, index) in zip(offsets, lanelets, found)])
@@ -173,14 +176,16 @@ def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNeares
     ``cap_m``, either way: the mid-lines pass over themselves, a helical ramp whose turns
     lie on one another in 2-D), the samples are walked along the mid-lines instead
     (``_walked_arc``), so no sample jumps to the other turn."""
-    steps = np.diff(_sequence_arc(lanelets, centre_nearest))
+    arc = _sequence_arc(lanelets, centre_nearest)
+    steps = arc[1:] - arc[:-1]
     loop_m = float(sum(g.length_m for g in lanelets))
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
-    spacing = np.hypot(*np.diff(samples, axis=0).T)
-    if np.any(np.abs(steps) > 2.0 * spacing + cap_m):
+    between = samples[1:] - samples[:-1]
+    spacing = np.hypot(between[:, 0], between[:, 1])
+    if (np.abs(steps) > 2.0 * spacing + cap_m).any():
         steps = np.diff(_walked_arc(lanelets, samples, spacing, cap_m))
-    return float(np.sum(steps))
+    return float(steps.sum())
 
 
 def _walked_arc(lanelets: Sequence[LaneletGeometry], samples: NDArrayFloat, spacing: NDArrayFloat,

@@ -46,7 +46,9 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
     if not np.isfinite(array).all():
         bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
         raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
-    if float(np.abs(array - array[0]).max()) <= ZERO_LENGTH_M:
+    # The last point apart from the first settles it without a pass over the others.
+    apart = float(np.abs(array[-1] - array[0]).max()) > ZERO_LENGTH_M
+    if not apart and float(np.abs(array - array[0]).max()) <= ZERO_LENGTH_M:
         raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
     return array
 
@@ -190,6 +192,14 @@ class SegmentIndex:
     def __init__(self, vertices: NDArrayFloat) -> None:
         self.vertices = vertices
         self._trees: tuple[Any, NDArrayInt] | None = None
+        self._cum: NDArrayFloat | None = None
+
+    def _distances(self, points: NDArrayFloat, segments: NDArrayInt) -> NDArrayFloat:
+        """:func:`segment_distances` of ``points`` to ``segments`` (m; the vertices' arc
+        lengths it needs computed once per index)."""
+        if self._cum is None:
+            self._cum = arc_lengths(self.vertices)
+        return segment_distances(points, self.vertices, segments, self._cum)[0]
 
     def _index(self) -> tuple[Any, NDArrayInt]:
         """KD-tree of the piece midpoints, and each piece's segment."""
@@ -217,11 +227,11 @@ class SegmentIndex:
         by_piece, segment = self._index()
         count = min(CAPPED_NEIGHBOURS, len(segment))
         gaps, nearest = by_piece.query(points, k=list(range(1, count + 1)))
-        bound = segment_distances(points, self.vertices, segment[nearest[:, :1]])[0]
+        bound = self._distances(points, segment[nearest[:, :1]])
         radius = np.minimum(bound, cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
         within = gaps <= radius[:, None]
         pieces = np.where(within, nearest, nearest[:, :1])
-        capped: NDArrayFloat = np.minimum(segment_distances(points, self.vertices, segment[pieces])[0], cap_m)
+        capped: NDArrayFloat = np.minimum(self._distances(points, segment[pieces]), cap_m)
         more = np.flatnonzero(within[:, -1]) if count < len(segment) else []
         if len(more):
             capped[more] = self._within(points[more], radius[more], cap_m)
@@ -238,7 +248,7 @@ class SegmentIndex:
             counts = counts[rows]
             starts = np.cumsum(counts) - counts
             pieces = flat[np.minimum(starts[:, None] + np.arange(int(counts.max())), (starts + counts - 1)[:, None])]
-            found[rows] = np.minimum(segment_distances(points[rows], self.vertices, segment[pieces])[0], cap_m)
+            found[rows] = np.minimum(self._distances(points[rows], segment[pieces]), cap_m)
         return found
 
 
@@ -295,7 +305,10 @@ def at_fractions(polyline: NDArrayFloat, fractions: NDArrayFloat, cum: NDArrayFl
     ``arc_lengths`` if known)."""
     cum = arc_lengths(polyline) if cum is None else cum
     s = fractions * cum[-1]
-    return np.column_stack((np.interp(s, cum, polyline[:, 0]), np.interp(s, cum, polyline[:, 1])))
+    points = np.empty((len(s), 2))
+    points[:, 0] = np.interp(s, cum, polyline[:, 0])
+    points[:, 1] = np.interp(s, cum, polyline[:, 1])
+    return points
 
 
 def paired_fractions(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:
