@@ -164,14 +164,16 @@ def arc_lengths_many(polylines: list[NDArrayFloat], joined: NDArrayFloat | None 
     return cum
 
 
-def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:
+def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat], cum: NDArrayFloat | None = None
+                 ) -> tuple[NDArrayFloat, NDArrayFloat]:
     """``closest_distances`` of each point (``(L, 2)``) on its polyline (``L`` of them, at
-    least 2 vertices each), bit for bit, all in one pass: distance (m) and arc length (m)."""
+    least 2 vertices each), bit for bit, all in one pass: distance (m) and arc length (m)
+    (``cum``: the polylines' ``arc_lengths_many``, if at hand)."""
     counts = np.array([len(polyline) for polyline in polylines])
     starts = np.cumsum(counts) - counts
     segments = np.minimum(starts[:, None] + np.arange(int(counts.max()) - 1), (starts + counts - 2)[:, None])
     vertices = np.concatenate(polylines)
-    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices))
+    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices) if cum is None else cum)
 
 
 def _flattened(found: Any) -> tuple[NDArrayInt, NDArrayInt]:
