@@ -27,7 +27,7 @@ from gt_matching.polyline import (
     NDArrayFloat,
     NDArrayInt,
     angle_difference,
-    arc_lengths,
+    arc_lengths_many,
     as_polyline,
     closest_many,
     mid_line,
@@ -121,10 +121,12 @@ class _Route:
 @dataclass(frozen=True)
 class _Prepared:
     """What lanelet sequences are scored on, for one detected lane: its mid-line samples
-    every ``score_step_m`` (``(K, 2)``, m), the sender's distance to them (m) and arc length
-    along them (m), and each lanelet's ``centre_nearest`` of the samples."""
+    every ``score_step_m`` (``(K, 2)``, m) and their length (m), the sender's distance to
+    them (m) and arc length along them (m), and each lanelet's ``centre_nearest`` of the
+    samples."""
 
     centre: NDArrayFloat
+    length_m: float
     pose_gap_m: float
     pose_arc_m: float
     centre_nearest: CentreNearest
@@ -156,6 +158,9 @@ def _sequence_arc(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNea
     """Arc length (m) along the joined mid-lines of ``lanelets`` of each detection mid-line
     sample's closest mid-line vertex (the first lanelet wins a tie)."""
     found = [centre_nearest(g) for g in lanelets]
+    if len(found) == 1:
+        only: NDArrayFloat = lanelets[0].centre_arc_m[found[0][1]]
+        return only
     nearest = np.argmin([distance for distance, _ in found], axis=0)
     offsets = np.cumsum([0.0] + [g.length_m for g in lanelets[:-1]])
     along = np.array([offset + g.centre_arc_m[index] for offset, g, (_, index) in zip(offsets, lanelets, found)])
@@ -173,14 +178,16 @@ def _advance_m(lanelets: Sequence[LaneletGeometry], centre_nearest: CentreNeares
     ``cap_m``, either way: the mid-lines pass over themselves, a helical ramp whose turns
     lie on one another in 2-D), the samples are walked along the mid-lines instead
     (``_walked_arc``), so no sample jumps to the other turn."""
-    steps = np.diff(_sequence_arc(lanelets, centre_nearest))
+    arc = _sequence_arc(lanelets, centre_nearest)
+    steps = arc[1:] - arc[:-1]
     loop_m = float(sum(g.length_m for g in lanelets))
     if float(np.hypot(*(lanelets[-1].centre[-1] - lanelets[0].centre[0]))) <= join_m:
         steps = (steps + loop_m / 2) % loop_m - loop_m / 2
-    spacing = np.hypot(*np.diff(samples, axis=0).T)
-    if np.any(np.abs(steps) > 2.0 * spacing + cap_m):
+    between = samples[1:] - samples[:-1]
+    spacing = np.hypot(between[:, 0], between[:, 1])
+    if (np.abs(steps) > 2.0 * spacing + cap_m).any():
         steps = np.diff(_walked_arc(lanelets, samples, spacing, cap_m))
-    return float(np.sum(steps))
+    return float(steps.sum())
 
 
 def _walked_arc(lanelets: Sequence[LaneletGeometry], samples: NDArrayFloat, spacing: NDArrayFloat,
@@ -345,7 +352,9 @@ class GroundTruth:
         """``_Prepared`` of validated lanes: the poses' closest points on the mid-lines in one
         pass (``closest_many``); the lanes at one pose share one query per lanelet."""
         centres = [mid_line(left, right, self.config.score_step_m) for left, right, _ in lanes]
-        gaps, arcs = closest_many(np.array([pose[:2] for _, _, pose in lanes]), centres)
+        cum = arc_lengths_many(centres)
+        lengths = cum[np.cumsum([len(centre) for centre in centres]) - 1].tolist()
+        gaps, arcs = closest_many(np.array([pose[:2] for _, _, pose in lanes]), centres, cum)
         at_pose: dict[Pose, list[int]] = {}
         for index, (_, _, pose) in enumerate(lanes):
             at_pose.setdefault(pose, []).append(index)
@@ -353,8 +362,8 @@ class GroundTruth:
         for members in at_pose.values():
             shared = _SharedNearest([centres[index] for index in members])
             nearest.update((index, shared.of(rank)) for rank, index in enumerate(members))
-        return [_Prepared(centre, gap, arc, nearest[index])
-                for index, (centre, gap, arc) in enumerate(zip(centres, gaps.tolist(), arcs.tolist()))]
+        return [_Prepared(centre, length, gap, arc, nearest[index]) for index, (centre, length, gap, arc)
+                in enumerate(zip(centres, lengths, gaps.tolist(), arcs.tolist()))]
 
     def _match(self, left: NDArrayFloat, right: NDArrayFloat, pose: Pose,
                prepared: _Prepared | None = None) -> tuple[LaneMatch, _Route]:
@@ -524,7 +533,7 @@ class GroundTruth:
         config = self.config
         candidates = self._candidates(pose)
         centre, centre_nearest = prepared.centre, prepared.centre_nearest
-        ahead_m = arc_lengths(centre)[-1] - prepared.pose_arc_m + prepared.pose_gap_m + config.margin_m
+        ahead_m = prepared.length_m - prepared.pose_arc_m + prepared.pose_gap_m + config.margin_m
         behind_m = prepared.pose_arc_m + config.margin_m
 
         def centre_distances(geometry: LaneletGeometry) -> NDArrayFloat:

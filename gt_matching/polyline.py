@@ -46,7 +46,9 @@ def as_polyline(name: str, points: npt.ArrayLike) -> NDArrayFloat:
     if not np.isfinite(array).all():
         bad = int(np.argmax(~np.all(np.isfinite(array), axis=1)))
         raise MatchingError(f"{name}: point {bad} is not finite ({array[bad].tolist()})")
-    if float(np.abs(array - array[0]).max()) <= ZERO_LENGTH_M:
+    # The last point apart from the first settles it without a pass over the others.
+    apart = float(np.abs(array[-1] - array[0]).max()) > ZERO_LENGTH_M
+    if not apart and float(np.abs(array - array[0]).max()) <= ZERO_LENGTH_M:
         raise MatchingError(f"{name}: all {array.shape[0]} points coincide (zero length)")
     return array
 
@@ -121,6 +123,19 @@ def segment_distances(
     of each vertex, default ``arc_lengths(vertices)``).
     """
     cum = arc_lengths(vertices) if cum is None else cum
+    dist, t, length_sq = _candidate_distances(points, vertices, segments)
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(len(points))
+    best_seg = segments[rows, best]
+    s = cum[best_seg] + t[rows, best] * np.sqrt(length_sq[rows, best])
+    return dist[rows, best], s
+
+
+def _candidate_distances(points: NDArrayFloat, vertices: NDArrayFloat, segments: NDArrayInt
+                         ) -> tuple[NDArrayFloat, NDArrayFloat, NDArrayFloat]:
+    """Per point and candidate segment (``segments``: ``(N, K)``, as in
+    :func:`segment_distances`), ``(N, K)``: the distance to the segment (m), where its
+    closest point lies along it (0 at its start, 1 at its end) and its squared length (m²)."""
     start = vertices[segments]
     delta = vertices[segments + 1] - start
     length_sq = np.einsum("nkd,nkd->nk", delta, delta)
@@ -128,12 +143,8 @@ def segment_distances(
     dot = np.einsum("nkd,nkd->nk", rel, delta)
     t = np.clip(np.divide(dot, length_sq, out=np.zeros_like(dot), where=length_sq > 0.0), 0.0, 1.0)
     gap = rel - t[..., None] * delta
-    dist = np.hypot(gap[..., 0], gap[..., 1])
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(len(points))
-    best_seg = segments[rows, best]
-    s = cum[best_seg] + t[rows, best] * np.sqrt(length_sq[rows, best])
-    return dist[rows, best], s
+    dist: NDArrayFloat = np.hypot(gap[..., 0], gap[..., 1])
+    return dist, t, length_sq
 
 
 def closest_distances(points: NDArrayFloat, vertices: NDArrayFloat) -> tuple[NDArrayFloat, NDArrayFloat]:
@@ -162,14 +173,16 @@ def arc_lengths_many(polylines: list[NDArrayFloat], joined: NDArrayFloat | None 
     return cum
 
 
-def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat]) -> tuple[NDArrayFloat, NDArrayFloat]:
+def closest_many(points: NDArrayFloat, polylines: list[NDArrayFloat], cum: NDArrayFloat | None = None
+                 ) -> tuple[NDArrayFloat, NDArrayFloat]:
     """``closest_distances`` of each point (``(L, 2)``) on its polyline (``L`` of them, at
-    least 2 vertices each), bit for bit, all in one pass: distance (m) and arc length (m)."""
+    least 2 vertices each), bit for bit, all in one pass: distance (m) and arc length (m)
+    (``cum``: the polylines' ``arc_lengths_many``, if at hand)."""
     counts = np.array([len(polyline) for polyline in polylines])
     starts = np.cumsum(counts) - counts
     segments = np.minimum(starts[:, None] + np.arange(int(counts.max()) - 1), (starts + counts - 2)[:, None])
     vertices = np.concatenate(polylines)
-    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices))
+    return segment_distances(points, vertices, segments, arc_lengths_many(polylines, vertices) if cum is None else cum)
 
 
 def _flattened(found: Any) -> tuple[NDArrayInt, NDArrayInt]:
@@ -209,19 +222,19 @@ class SegmentIndex:
         is smaller, m. The closest segment is no farther than the segment of the nearest
         piece midpoint, so it has a piece midpoint within the smaller of ``cap_m`` and that
         segment's distance, plus half a piece (and a micrometre for rounding), of the point:
-        the segments of the ``CAPPED_NEIGHBOURS`` nearest piece midpoints within that radius
-        are measured by :func:`segment_distances` (each point's list padded with its nearest:
-        a point with none within is farther than the cap from every segment), and of all the
+        the segments of the ``CAPPED_NEIGHBOURS`` nearest piece midpoints are measured and
+        those of the midpoints within that radius kept, with the nearest's (a point with none
+        within is farther than the cap from every segment), and of all the
         piece midpoints within it (:meth:`_within`) for a point whose every one of those lies
         within it."""
         by_piece, segment = self._index()
         count = min(CAPPED_NEIGHBOURS, len(segment))
         gaps, nearest = by_piece.query(points, k=list(range(1, count + 1)))
-        bound = segment_distances(points, self.vertices, segment[nearest[:, :1]])[0]
+        to_pieces = _candidate_distances(points, self.vertices, segment[nearest])[0]
+        bound = to_pieces[:, 0]
         radius = np.minimum(bound, cap_m) + (INDEX_PIECE_M / 2.0 + CAP_MARGIN_M)
         within = gaps <= radius[:, None]
-        pieces = np.where(within, nearest, nearest[:, :1])
-        capped: NDArrayFloat = np.minimum(segment_distances(points, self.vertices, segment[pieces])[0], cap_m)
+        capped: NDArrayFloat = np.minimum(np.where(within, to_pieces, bound[:, None]).min(axis=1), cap_m)
         more = np.flatnonzero(within[:, -1]) if count < len(segment) else []
         if len(more):
             capped[more] = self._within(points[more], radius[more], cap_m)
@@ -238,7 +251,8 @@ class SegmentIndex:
             counts = counts[rows]
             starts = np.cumsum(counts) - counts
             pieces = flat[np.minimum(starts[:, None] + np.arange(int(counts.max())), (starts + counts - 1)[:, None])]
-            found[rows] = np.minimum(segment_distances(points[rows], self.vertices, segment[pieces])[0], cap_m)
+            found[rows] = np.minimum(_candidate_distances(points[rows], self.vertices, segment[pieces])[0].min(axis=1),
+                                     cap_m)
         return found
 
 
@@ -282,7 +296,7 @@ def windowed_distances(
     last = np.clip(np.searchsorted(cum, near_arc_m + reach_m, side="left"), 1, len(vertices) - 1) - 1
     span = int(np.max(last - first)) + 1
     segments = np.minimum(first[:, None] + np.arange(span), last[:, None])
-    return segment_distances(points, vertices, segments)
+    return segment_distances(points, vertices, segments, cum)
 
 
 def angle_difference(a: float, b: float) -> float:
@@ -295,7 +309,10 @@ def at_fractions(polyline: NDArrayFloat, fractions: NDArrayFloat, cum: NDArrayFl
     ``arc_lengths`` if known)."""
     cum = arc_lengths(polyline) if cum is None else cum
     s = fractions * cum[-1]
-    return np.column_stack((np.interp(s, cum, polyline[:, 0]), np.interp(s, cum, polyline[:, 1])))
+    points = np.empty((len(s), 2))
+    points[:, 0] = np.interp(s, cum, polyline[:, 0])
+    points[:, 1] = np.interp(s, cum, polyline[:, 1])
+    return points
 
 
 def paired_fractions(left: NDArrayFloat, right: NDArrayFloat, step_m: float) -> NDArrayFloat:

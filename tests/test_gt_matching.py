@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("lanelet2")
 
 from gt_matching import GroundTruth, MatchingConfig, MatchingError, evaluate_lane, match_lane
-from gt_matching.polyline import closest_distances
+from gt_matching.polyline import as_polyline, closest_distances
 from gt_matching.synthetic import LaneletMapBuilder, arc, offset_polyline, straight
 
 WIDTH_M = 3.5
@@ -302,6 +302,15 @@ def test_bad_input_raises_matching_error(
     with pytest.raises(MatchingError) as error:
         junction.gt.evaluate(good_left if left is None else left, good_right if right is None else right, pose)
     assert message in str(error.value)
+
+
+def test_as_polyline_tells_a_closed_ring_from_coinciding_points() -> None:
+    """A ring ends where it starts (its middle is 1 m away): accepted as it is; points all
+    within 1e-13 m of the first, the last farthest, coincide."""
+    ring = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    assert np.array_equal(as_polyline("ring", ring), ring)
+    with pytest.raises(MatchingError, match="dot: all 3 points coincide"):
+        as_polyline("dot", np.array([[0.0, 0.0], [5e-14, 0.0], [0.0, 1e-13]]))
 
 
 def test_match_many_equals_match_one_by_one(junction: JunctionMap) -> None:
