@@ -92,6 +92,7 @@ Every file is written to a temporary name and renamed, so none is ever half-writ
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import io
 import json
@@ -100,7 +101,7 @@ import os
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Iterable, Iterator, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Final, Iterable, Iterator, Literal, Mapping, Sequence
 
 import numpy as np
 
@@ -321,6 +322,21 @@ class FrameRecord:
             raise ReportError(f"frame {self.frame}: known_to_m must be a distance >= 0 m or NaN, got {self.known_to_m}")
         object.__setattr__(self, "errors_m", errors)
 
+    @classmethod
+    def trusted(cls, frame: int, stamp_s: float, ego: str, coop: str, errors_m: NDArrayFloat,
+                **fields: Any) -> FrameRecord:
+        """The record of values already valid (``errors_m`` and ``sigma_m`` float64 arrays,
+        the distances finite and >= 0 and the σ of the same shape, ``near_points`` and
+        ``known_to_m`` in range, no ``rejected`` with errors; optional fields by keyword):
+        equal to the constructor's, without its checks and conversions."""
+        values = _RECORD_DEFAULTS | fields
+        if len(values) != len(_RECORD_DEFAULTS):
+            raise TypeError(f"FrameRecord.trusted: unknown fields {sorted(set(fields) - set(_RECORD_DEFAULTS))}")
+        record = object.__new__(cls)
+        for put, value in zip(_RECORD_SETTERS, (frame, stamp_s, ego, coop, errors_m, *values.values())):
+            put(record, value)
+        return record
+
     @property
     def fused(self) -> bool:
         """Whether this evaluation produced a lane (it has error samples)."""
@@ -336,6 +352,15 @@ class FrameRecord:
         if self.near_points is None:
             return np.empty(0), np.empty(0)
         return self.errors_m[:self.near_points], self.errors_m[self.near_points:]
+
+
+_RECORD_DEFAULTS: Final[dict[str, Any]] = {field.name: field.default for field in dataclasses.fields(FrameRecord)
+                                           if field.default is not dataclasses.MISSING}
+"""The optional fields of a :class:`FrameRecord` and their defaults (:meth:`FrameRecord.trusted`)."""
+_RECORD_SETTERS: Final[tuple[Callable[[FrameRecord, Any], None], ...]] = tuple(
+    getattr(FrameRecord, field.name).__set__ for field in dataclasses.fields(FrameRecord))
+"""The slot setter of each field of a :class:`FrameRecord`, in field order (the optional
+fields in the order of ``_RECORD_DEFAULTS``)."""
 
 
 @dataclass(frozen=True, slots=True)
