@@ -203,6 +203,22 @@ def test_invalid_records_are_named(make, message):
         make()
 
 
+def test_a_trusted_record_equals_the_constructors():
+    """``FrameRecord.trusted`` of valid values holds what the constructor holds (its arrays
+    the same objects); an unknown field is refused."""
+    errors, sigma = np.array([0.1, 0.4, 0.2]), np.array([0.3, 0.3, 0.5])
+    fields = dict(perception_range_m=42.0, relation="convoy", near_points=2, known_to_m=12.5, sigma_m=sigma,
+                  detected_fusible=False)
+    trusted = FrameRecord.trusted(3, 0.3, "ego", "c", errors, **fields)
+    built = FrameRecord(3, 0.3, "ego", "c", errors, **fields)
+    assert trusted.errors_m is built.errors_m is errors and trusted.sigma_m is built.sigma_m is sigma
+    assert trusted == built  # the defaults (runtime_ms NaN, rejected "", stopping None) included
+    assert math.isnan(trusted.runtime_ms) and (trusted.rejected, trusted.stopping) == ("", None)
+    assert [part.tolist() for part in trusted.split_errors()] == [[0.1, 0.4], [0.2]]
+    with pytest.raises(TypeError, match="unknown fields \\['range_m'\\]"):
+        FrameRecord.trusted(3, 0.3, "ego", "c", errors, range_m=1.0)
+
+
 def test_broken_metrics_json_names_file_and_key(tmp_path):
     path = tmp_path / "metrics.json"
     path.write_text("{not json")

@@ -190,10 +190,11 @@ class _PairStep:
     def reject(self, reason: str, predicted: bool | None = None, runtime: float = math.nan,
                confidence: float = math.nan, why: str = "") -> dict[str, NDArrayFloat]:
         """Records the pair without a lane, ``FrameRecord.rejected`` ``reason``; no MCAP lines."""
-        record = FrameRecord(self.index, self.stamp, "ego", self.other.state.name, _NO_ERRORS, runtime_ms=runtime,
-                             rejected=reason, predicted_fusible=predicted, truly_fusible=self.truth, gt_unmatched=why,
-                             relation=self.relation, confidence=confidence, stopping=self.evaluator.stopping,
-                             detected_fusible=self.detected)
+        record = FrameRecord.trusted(self.index, self.stamp, "ego", self.other.state.name, _NO_ERRORS,
+                                     runtime_ms=runtime, rejected=reason, predicted_fusible=predicted,
+                                     truly_fusible=self.truth, gt_unmatched=why, relation=self.relation,
+                                     confidence=confidence, stopping=self.evaluator.stopping,
+                                     detected_fusible=self.detected)
         for key in self.names.keys:  # one record for both boundaries: immutable, and the same without a lane
             self.collector.add(key, record)
         return {}
@@ -494,8 +495,8 @@ class MapEvaluator:
         keys = self._keys(scenario)
 
         def reject(rejected: str, why: str = "") -> dict[str, NDArrayFloat]:
-            record = FrameRecord(index, stamp, "ego", "", _NO_ERRORS, rejected=rejected, gt_unmatched=why,
-                                 end_reason=ego.end_reason, stopping=self.stopping)
+            record = FrameRecord.trusted(index, stamp, "ego", "", _NO_ERRORS, rejected=rejected, gt_unmatched=why,
+                                         end_reason=ego.end_reason, stopping=self.stopping)
             for key in keys:
                 collector.add(key, record)
             return {}
@@ -601,9 +602,9 @@ class MapEvaluator:
 
         def reject(reason: str, predicted: bool | None = None, runtime: float = math.nan,
                    why: str = "") -> dict[str, NDArrayFloat]:
-            record = FrameRecord(index, stamp, "ego", last, _NO_ERRORS, runtime_ms=runtime, rejected=reason,
-                                 predicted_fusible=predicted, truly_fusible=truth, gt_unmatched=why,
-                                 stopping=self.stopping, detected_fusible=detected)
+            record = FrameRecord.trusted(index, stamp, "ego", last, _NO_ERRORS, runtime_ms=runtime, rejected=reason,
+                                         predicted_fusible=predicted, truly_fusible=truth, gt_unmatched=why,
+                                         stopping=self.stopping, detected_fusible=detected)
             for key in keys:
                 collector.add(key, record)
             return {}
@@ -702,11 +703,11 @@ class MapEvaluator:
         known = measured.known_to_m(LANE_ACCURACY_M)
         prefixes = self._names(scenario).prefixes
         for key, (errors, length), near, sigma, prefix in zip(keys, sides, measured.near_points(), sigmas, prefixes):
-            collector.add(key, FrameRecord(index, stamp, ego, coop, errors, perception_range_m=length,
-                                           runtime_ms=runtime, predicted_fusible=predicted, truly_fusible=truth,
-                                           relation=relation, confidence=confidence, end_reason=end_reason,
-                                           near_points=near, known_to_m=known, stopping=self.stopping,
-                                           sigma_m=sigma, detected_fusible=detected))
+            collector.add(key, FrameRecord.trusted(index, stamp, ego, coop, errors, perception_range_m=length,
+                                                   runtime_ms=runtime, predicted_fusible=predicted,
+                                                   truly_fusible=truth, relation=relation, confidence=confidence,
+                                                   end_reason=end_reason, near_points=near, known_to_m=known,
+                                                   stopping=self.stopping, sigma_m=sigma, detected_fusible=detected))
             if metrics is not None:  # np.mean and np.max as they compute them, without their wrappers
                 metrics[f"{prefix}_mean_error_m"] = float(np.add.reduce(errors)) / errors.size
                 metrics[f"{prefix}_max_error_m"] = float(np.maximum.reduce(errors))

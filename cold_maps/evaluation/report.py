@@ -92,15 +92,17 @@ Every file is written to a temporary name and renamed, so none is ever half-writ
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import io
 import json
 import math
+import operator
 import os
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Iterable, Iterator, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Final, Iterable, Iterator, Literal, Mapping, Sequence
 
 import numpy as np
 
@@ -321,6 +323,21 @@ class FrameRecord:
             raise ReportError(f"frame {self.frame}: known_to_m must be a distance >= 0 m or NaN, got {self.known_to_m}")
         object.__setattr__(self, "errors_m", errors)
 
+    @classmethod
+    def trusted(cls, frame: int, stamp_s: float, ego: str, coop: str, errors_m: NDArrayFloat,
+                **fields: Any) -> FrameRecord:
+        """The record of values already valid (``errors_m`` and ``sigma_m`` float64 arrays,
+        the distances finite and >= 0 and the σ of the same shape, ``near_points`` and
+        ``known_to_m`` in range, no ``rejected`` with errors; optional fields by keyword):
+        equal to the constructor's, without its checks and conversions."""
+        values = _RECORD_DEFAULTS | fields
+        if len(values) != len(_RECORD_DEFAULTS):
+            raise TypeError(f"FrameRecord.trusted: unknown fields {sorted(set(fields) - set(_RECORD_DEFAULTS))}")
+        record = object.__new__(cls)
+        for put, value in zip(_RECORD_SETTERS, (frame, stamp_s, ego, coop, errors_m, *values.values())):
+            put(record, value)
+        return record
+
     @property
     def fused(self) -> bool:
         """Whether this evaluation produced a lane (it has error samples)."""
@@ -336,6 +353,15 @@ class FrameRecord:
         if self.near_points is None:
             return np.empty(0), np.empty(0)
         return self.errors_m[:self.near_points], self.errors_m[self.near_points:]
+
+
+_RECORD_DEFAULTS: Final[dict[str, Any]] = {field.name: field.default for field in dataclasses.fields(FrameRecord)
+                                           if field.default is not dataclasses.MISSING}
+"""The optional fields of a :class:`FrameRecord` and their defaults (:meth:`FrameRecord.trusted`)."""
+_RECORD_SETTERS: Final[tuple[Callable[[FrameRecord, Any], None], ...]] = tuple(
+    getattr(FrameRecord, field.name).__set__ for field in dataclasses.fields(FrameRecord))
+"""The slot setter of each field of a :class:`FrameRecord`, in field order (the optional
+fields in the order of ``_RECORD_DEFAULTS``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -606,42 +632,58 @@ def record_schema() -> pa.Schema:
         ("detected_fusible", flag)])
 
 
-def _record_figures(record: FrameRecord) -> tuple[float, float, float, float]:
-    """(mean, max, near max, far max) error of a record (m), NaN where ``frames.csv`` is empty:
-    ``np.mean`` and ``np.max``, computed as they compute them (the sum's ufunc reduction over
-    the count; the errors are finite) without their Python wrappers."""
-    errors = record.errors_m
-    if not errors.size:
-        return math.nan, math.nan, math.nan, math.nan
-    near, far = record.split_errors()
-    largest = np.maximum.reduce
-    return (float(np.add.reduce(errors)) / errors.size, float(largest(errors)),
-            float(largest(near)) if near.size else math.nan, float(largest(far)) if far.size else math.nan)
+def _record_figures(errors: list[NDArrayFloat], near_points: Sequence[int | None]) -> tuple[NDArrayFloat, ...]:
+    """(mean, max, near max, far max) error (m) of each record of ``errors`` (its ``errors_m``,
+    finite) split at its ``near_points``, NaN where ``frames.csv`` is empty: the mean as
+    ``np.mean`` computes it (the sum's ufunc reduction over the count) record by record, the
+    maxima of all records in one segmented reduction (a maximum does not depend on the order)."""
+    count = len(errors)
+    sizes = np.fromiter(map(len, errors), dtype=np.int64, count=count)
+    mean, most, near_max, far_max = (np.full(count, math.nan) for _ in range(4))
+    fused = np.flatnonzero(sizes)
+    if not fused.size:
+        return mean, most, near_max, far_max
+    mean[fused] = [float(np.add.reduce(errors[i])) / errors[i].size for i in fused.tolist()]
+    # one element after the errors, so that every segment start indexes into the pool
+    pool = np.concatenate([*(errors[i] for i in fused.tolist()), np.zeros(1)])
+    starts = np.zeros(fused.size + 1, dtype=np.int64)
+    np.cumsum(sizes[fused], out=starts[1:])
+    largest = np.maximum.reduceat
+    most[fused] = largest(pool, starts)[:-1]
+    split = [near_points[i] for i in fused.tolist()]
+    known = np.array([n is not None for n in split], dtype=bool)  # the records whose errors are split
+    near = np.array([n or 0 for n in split], dtype=np.int64)
+    bounds = np.empty(2 * fused.size + 1, dtype=np.int64)
+    bounds[0::2], bounds[1::2] = starts, starts[:-1] + near  # near, far, near, far, ..., the pad
+    halves = largest(pool, bounds)[:-1]
+    near_max[fused] = np.where(known & (near > 0), halves[0::2], math.nan)
+    far_max[fused] = np.where(known & (near < sizes[fused]), halves[1::2], math.nan)
+    return mean, most, near_max, far_max
+
+
+#: The :func:`record_schema` columns read straight off a :class:`FrameRecord`'s fields.
+_PLAIN_COLUMNS: Final[tuple[str, ...]] = (
+    "frame", "stamp_s", "ego", "coop", "perception_range_m", "runtime_ms", "rejected", "predicted_fusible",
+    "truly_fusible", "gt_unmatched", "relation", "confidence", "end_reason", "near_points", "known_to_m",
+    "detected_fusible")
 
 
 def records_to_batch(records: Sequence[FrameRecord]) -> pa.RecordBatch:
     """The records as one batch of :func:`record_schema`."""
     import pyarrow as pa
 
+    plain = dict(zip(_PLAIN_COLUMNS, zip(*map(operator.attrgetter(*_PLAIN_COLUMNS), records))
+                     if records else [()] * len(_PLAIN_COLUMNS)))
     stop = [r.stopping for r in records]
-    figures = list(zip(*(_record_figures(r) for r in records))) or [(), (), (), ()]
+    errors = [r.errors_m for r in records]
+    figures = _record_figures(errors, plain["near_points"])
     columns: dict[str, Any] = {
-        "frame": [r.frame for r in records], "stamp_s": [r.stamp_s for r in records],
-        "ego": [r.ego for r in records], "coop": [r.coop for r in records],
-        "errors_m": from_lists([r.errors_m for r in records]),
-        "perception_range_m": [r.perception_range_m for r in records],
-        "runtime_ms": [r.runtime_ms for r in records], "rejected": [r.rejected for r in records],
-        "predicted_fusible": [r.predicted_fusible for r in records],
-        "truly_fusible": [r.truly_fusible for r in records], "gt_unmatched": [r.gt_unmatched for r in records],
-        "relation": [r.relation for r in records], "confidence": [r.confidence for r in records],
-        "end_reason": [r.end_reason for r in records], "near_points": [r.near_points for r in records],
-        "known_to_m": [r.known_to_m for r in records],
+        **plain, "errors_m": from_lists(errors), "sigma_m": from_lists([r.sigma_m for r in records]),
         "stopping_speed_mps": [None if s is None else s.speed_mps for s in stop],
         "stopping_reaction_time_s": [None if s is None else s.rule.reaction_time_s for s in stop],
         "stopping_deceleration_mps2": [None if s is None else s.rule.deceleration_mps2 for s in stop],
-        "sigma_m": from_lists([r.sigma_m for r in records]),
-        "mean_error_m": figures[0], "max_error_m": figures[1], "near_max_error_m": figures[2],
-        "far_max_error_m": figures[3], "detected_fusible": [r.detected_fusible for r in records],
+        **{name: from_numpy(values, pa.float64()) for name, values in zip(
+            ("mean_error_m", "max_error_m", "near_max_error_m", "far_max_error_m"), figures)},
     }
     schema = record_schema()
     return pa.RecordBatch.from_arrays([columns[name] if isinstance(columns[name], pa.Array)

@@ -143,8 +143,8 @@ class LaneStrip:
         one station, in scalars)."""
         clamped = min(max(float(station), 0.0), self.length)
         index = min(max(int(np.searchsorted(self.station, clamped, side="right")) - 1, 0), len(self.station) - 2)
-        before = self.station[index]
-        w = (clamped - before) / (self.station[index + 1] - before)
-        centre = self.centerline[index] * (1.0 - w) + self.centerline[index + 1] * w
+        before, after = self.station[index:index + 2].tolist()
+        w = (clamped - before) / (after - before)
+        (x0, y0), (x1, y1) = self.centerline[index:index + 2].tolist()
         yaw = float(np.interp(station, self.station, self.heading))
-        return float(centre[0]), float(centre[1]), float(np.arctan2(np.sin(yaw), np.cos(yaw)))
+        return x0 * (1.0 - w) + x1 * w, y0 * (1.0 - w) + y1 * w, float(np.arctan2(np.sin(yaw), np.cos(yaw)))

@@ -195,7 +195,7 @@ class Track:
 
     def lane_at(self, station: float) -> tuple[int, float]:
         """Index of the lane at ``station`` and the distance (m) driven in it."""
-        index = int(np.clip(np.searchsorted(self.lane_starts, station, side="right") - 1, 0, len(self.lanes) - 1))
+        index = min(max(int(np.searchsorted(self.lane_starts, station, side="right")) - 1, 0), len(self.lanes) - 1)
         return index, float(station - self.lane_starts[index])
 
 
