@@ -19,6 +19,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -342,6 +343,7 @@ def test_spinner_shows_elapsed_time_and_clears_its_line(monkeypatch: pytest.Monk
     terminal = Terminal()
     monkeypatch.setattr(sys, "stderr", terminal)
     configure_logging(1)
+    before = set(threading.enumerate())
     with Spinner("converting", stream=terminal, delay_s=0.0, interval_s=0.01):
         time.sleep(0.1)
         logging.getLogger("cold-test").info("crdesigner done")
@@ -349,6 +351,7 @@ def test_spinner_shows_elapsed_time_and_clears_its_line(monkeypatch: pytest.Monk
     assert "converting  00:00" in terminal.getvalue()
     shown = visible(terminal.getvalue())
     assert "INFO cold-test: crdesigner done" in shown and shown[-1].strip() == "", shown
+    assert set(threading.enumerate()) - before == set()  # its redraw thread joined, no tqdm monitor left
     silent = io.StringIO()
     with Spinner("converting", stream=silent, delay_s=0.0, interval_s=0.01):
         time.sleep(0.05)

@@ -36,8 +36,9 @@ class _ClosedOnExit:
 @functools.cache
 def _unmonitored_tqdm() -> type:
     """tqdm without its monitor thread, which only lowers a bar's ``miniters`` after a
-    stall (a :class:`ProgressBar` redraws at every step past its interval anyway): a
-    process stays single-threaded for the workers it forks once its bar is closed."""
+    stall (a :class:`ProgressBar` redraws at every step past its interval anyway, a
+    :class:`Spinner` from its own thread): a process stays single-threaded for the workers
+    it forks once its bar is closed."""
     from tqdm import tqdm
 
     return type("UnmonitoredTqdm", (tqdm,), {"monitor_interval": 0})
@@ -98,12 +99,10 @@ class Spinner(_ClosedOnExit):
                  interval_s: float = SPINNER_INTERVAL_S):
         import threading
 
-        from tqdm import tqdm
-
         self.stream = sys.stderr if stream is None else stream
         self.interval_s = interval_s
         enabled = is_terminal(self.stream)
-        self._bar = tqdm(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
+        self._bar = _unmonitored_tqdm()(total=None, desc=label, file=self.stream, disable=not enabled, leave=False,
                          bar_format="{desc}  {elapsed}", delay=delay_s, mininterval=0.0, miniters=0,
                          dynamic_ncols=False)
         self._stop = threading.Event()
