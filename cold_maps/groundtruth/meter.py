@@ -84,22 +84,18 @@ def covered_length_m(border: NDArrayFloat, errors_m: NDArrayFloat,
     (``errors_m``, per point), each measured along chords of about ``RANGE_CHORD_M`` so
     that detection noise does not lengthen it. Never negative; the whole length of a
     border that is everywhere within the threshold."""
-    return _covered(border, arc_lengths(border), errors_m, threshold_m)[0]
+    return _covered(border, arc_lengths(border), errors_m, threshold_m)
 
 
 def _covered(border: NDArrayFloat, arc: NDArrayFloat, errors_m: NDArrayFloat,
-             threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> tuple[float, tuple[NDArrayInt, NDArrayFloat] | None]:
-    """:func:`covered_length_m` of a border with arc lengths ``arc``, and the ``_chords`` of
-    all its points when all of it lies within the threshold."""
+             threshold_m: float = RANGE_ERROR_THRESHOLD_M) -> float:
+    """:func:`covered_length_m` of a border with arc lengths ``arc``."""
     within = errors_m <= threshold_m
-    if within.all():
-        whole = _chords(border, arc, 0, len(arc))
-        return float(whole[1].sum()), whole
     total = 0.0
     edges = np.flatnonzero(np.diff(np.concatenate(([False], within, [False])).astype(np.int8)))
     for first, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
         total += float(np.sum(_chords(border, arc, first, end)[1]))
-    return total, None
+    return total
 
 
 def _ahead(border: NDArrayFloat, arc: NDArrayFloat, chords: tuple[NDArrayInt, NDArrayFloat],
@@ -290,7 +286,7 @@ def _border_figures(borders: Sequence[NDArrayFloat], errors_m: Sequence[NDArrayF
         border_arc = arc[start:start + count]
         past = points_past_ends(border, gt, border_errors, step_m) if near_end[index] else 0
         chord_lengths = lengths[chord_start:chord_start + chord_count]
-        covered = _covered(border, border_arc, border_errors)[0] if beyond[index] else float(chord_lengths.sum())
+        covered = _covered(border, border_arc, border_errors) if beyond[index] else float(chord_lengths.sum())
         border_ends = ends[chord_start + index:chord_start + index + chord_count + 1] - start
         figures.append((past, covered, _ahead(border, border_arc, (border_ends, chord_lengths), pose)))
         chord_start += chord_count
