@@ -629,12 +629,12 @@ class GroundTruth:
         scored = []
         for path in leaves:
             lanelets = tuple(behind + path)
-            # np.mean's sums and quotients without its dispatch (a frame scores a handful of short arrays)
             distances = reduce(np.minimum, [centre_distances(g) for g in lanelets])
             scored.append(
                 _Sequence(
                     lanelets=lanelets,
                     candidate=candidate,
+                    # np.mean's sums and quotients without its dispatch (a frame scores a handful of short arrays)
                     score_m=float(np.minimum(distances, cap).sum()) / len(distances),
                     fit_share=int(np.count_nonzero(distances <= cap)) / len(distances),
                 )
