@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import Final, Sequence
+from typing import Any, Callable, Final, Sequence, TypeVar
 
 import numpy as np
 
@@ -195,6 +195,7 @@ class _PairWork:
         return found
 
 
+_Kept = TypeVar("_Kept")
 _PAIRS: dict[tuple[int, int, int], _PairWork] = {}
 _MAX_PAIRS: Final[int] = 32
 _EGOS: dict[int, _EgoWork] = {}
@@ -204,30 +205,27 @@ _PAIRS_CHANGING = threading.Lock()
 threads at once finds the oldest entry while no other thread adds one."""
 
 
-def _ego_work(ego: LaneDetection) -> _EgoWork:
-    """The :class:`_EgoWork` of ``ego``, made on first use, the oldest of :data:`_MAX_EGOS` dropped."""
-    work = _EGOS.get(id(ego))
-    if work is None:
-        work = _EgoWork(ego)
+def _kept(table: dict[Any, _Kept], key: Any, make: Callable[[], _Kept], size: int) -> _Kept:
+    """``table[key]``, made by ``make()`` on first use; the oldest of ``size`` entries dropped
+    to add it (under :data:`_PAIRS_CHANGING`)."""
+    found = table.get(key)
+    if found is None:
+        found = make()
         with _PAIRS_CHANGING:
-            if len(_EGOS) >= _MAX_EGOS:
-                _EGOS.pop(next(iter(_EGOS)))
-            _EGOS[id(ego)] = work
-    return work
+            if len(table) >= size:
+                table.pop(next(iter(table)))
+            table[key] = found
+    return found
+
+
+def _ego_work(ego: LaneDetection) -> _EgoWork:
+    """The :class:`_EgoWork` of ``ego``, kept for the last :data:`_MAX_EGOS` ego detections."""
+    return _kept(_EGOS, id(ego), lambda: _EgoWork(ego), _MAX_EGOS)
 
 
 def _pair_work(ego: LaneDetection, coop: LaneDetection, params: FusionParams) -> _PairWork:
-    """The :class:`_PairWork` of (``ego``, ``coop``, ``params``), made on first use, the
-    oldest of :data:`_MAX_PAIRS` dropped."""
-    key = (id(ego), id(coop), id(params))
-    work = _PAIRS.get(key)
-    if work is None:
-        work = _PairWork(ego, coop, params)
-        with _PAIRS_CHANGING:
-            if len(_PAIRS) >= _MAX_PAIRS:
-                _PAIRS.pop(next(iter(_PAIRS)))
-            _PAIRS[key] = work
-    return work
+    """The :class:`_PairWork` of (``ego``, ``coop``, ``params``), kept for the last :data:`_MAX_PAIRS` pairs."""
+    return _kept(_PAIRS, (id(ego), id(coop), id(params)), lambda: _PairWork(ego, coop, params), _MAX_PAIRS)
 
 
 def ego_frame_result(ego: LaneDetection, parts: Sequence[NDArrayFloat], sources: NDArrayInt8, kind: FusionKind,
