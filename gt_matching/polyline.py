@@ -219,14 +219,12 @@ class SegmentIndex:
 
     def capped(self, points: NDArrayFloat, cap_m: float) -> NDArrayFloat:
         """Per point, its exact closest-point distance to the polyline or ``cap_m`` if that
-        is smaller, m. The closest segment is no farther than the segment of the nearest
-        piece midpoint, so it has a piece midpoint within the smaller of ``cap_m`` and that
-        segment's distance, plus half a piece (and a micrometre for rounding), of the point:
-        the segments of the ``CAPPED_NEIGHBOURS`` nearest piece midpoints are measured and
-        those of the midpoints within that radius kept, with the nearest's (a point with none
-        within is farther than the cap from every segment), and of all the
-        piece midpoints within it (:meth:`_within`) for a point whose every one of those lies
-        within it."""
+        is smaller, m. The closest segment is no farther than the nearest piece midpoint's
+        segment, so it has a piece midpoint within a radius of the smaller of ``cap_m`` and
+        that segment's distance, plus half a piece (and a micrometre for rounding). The
+        segments of the ``CAPPED_NEIGHBOURS`` nearest piece midpoints are measured, those of
+        midpoints within the radius kept; a point whose every one of those lies within the
+        radius may have more there, and takes all of them (:meth:`_within`)."""
         by_piece, segment = self._index()
         count = min(CAPPED_NEIGHBOURS, len(segment))
         gaps, nearest = by_piece.query(points, k=list(range(1, count + 1)))
